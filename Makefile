@@ -1,0 +1,47 @@
+# Two entry points for a fresh machine: `make demo` and `make test`. Both bootstrap .venv (python3.11)
+# idempotently and build the native core through the normal package build (scikit-build-core + nanobind).
+PYTHON ?= python3.11
+VENV   := .venv
+BIN    := $(VENV)/bin
+PY     := $(BIN)/python
+STAMP  := $(VENV)/.render-budget-installed
+NATIVE_SOURCES := $(shell find sim_core -name '*.cpp' -o -name '*.h' -o -name 'CMakeLists.txt' 2>/dev/null) \
+                  CMakeLists.txt pyproject.toml
+PYTEST_ARGS ?=
+
+.PHONY: all venv test demo lint native-tests sanitize bench scenes clean
+
+all: venv
+
+$(PY):
+	$(PYTHON) -m venv $(VENV)
+
+# Build requirements are read from pyproject.toml so that versions stay pinned in one place.
+$(STAMP): $(PY) $(NATIVE_SOURCES)
+	flock $(VENV)/.lock sh -c '\
+	  $(PY) -m pip install -q $$($(PY) -c "import tomllib;print(\" \".join(tomllib.load(open(\"pyproject.toml\",\"rb\"))[\"build-system\"][\"requires\"]))") cmake==4.4.4 ninja==1.13.0 && \
+	  $(PY) -m pip install -q --no-build-isolation -e ".[test]"'
+	touch $(STAMP)
+
+venv: $(STAMP)
+
+test: venv
+	$(PY) -m pytest $(PYTEST_ARGS)
+
+demo: venv
+	$(PY) -m service.demo
+
+lint: venv
+	$(BIN)/ruff check .
+
+# Standalone C++ tests (no Python), optionally under AddressSanitizer + UBSan.
+native-tests: venv
+	$(BIN)/cmake -S . -B build/native -G Ninja -DCMAKE_BUILD_TYPE=Release -DCMAKE_MAKE_PROGRAM=$(abspath $(BIN)/ninja) && \
+	  $(BIN)/cmake --build build/native && cd build/native && $(abspath $(BIN))/ctest --output-on-failure
+
+sanitize: venv
+	$(BIN)/cmake -S . -B build/sanitize -G Ninja -DSIM_CORE_SANITIZE=ON -DCMAKE_MAKE_PROGRAM=$(abspath $(BIN)/ninja) && \
+	  $(BIN)/cmake --build build/sanitize && cd build/sanitize && $(abspath $(BIN))/ctest --output-on-failure
+
+clean:
+	rm -rf build out $(STAMP)
