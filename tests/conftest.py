@@ -1,0 +1,20 @@
+"""Shared test set-up: keep Blender's user files out of the home directory, find bundled assets."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import pytest
+
+# Must happen before any test module imports bpy (Blender reads it at import time).
+os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp(prefix="render-budget-blender-"))
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+MODELS_DIR = REPO_ROOT / "assets" / "models"
+
+
+@pytest.fixture(scope="session")
+def models_dir() -> Path:
+    return MODELS_DIR
