@@ -109,3 +109,4 @@ class SceneData:
     cameras: list[CameraData] = field(default_factory=list)
     environment: np.ndarray | tuple[float, float, float] | None = None  # constant RGB or (H, W, 3) map
     source: str = ""
+    object_names: list[str] = field(default_factory=list)  # indexed by object_ids (mesh instances)

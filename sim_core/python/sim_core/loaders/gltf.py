@@ -1,0 +1,584 @@
+"""glTF 2.0 loader (.glb and .gltf) for scenes exported by Blender, decoded with numpy.
+
+What it reads: triangle meshes (indexed or not, strips and fans too) placed by the node hierarchy,
+metallic-roughness materials with KHR_materials_transmission / _ior / _emissive_strength,
+KHR_lights_punctual lights and perspective cameras. Textures, skins, morph targets and animation are
+ignored: the simulator prices ray work, and those do not change what a ray hits in a static frame.
+
+Frames: glTF is Y-up, the project's world is Blender's Z-up. The conversion happens here, once, in
+:data:`GLTF_TO_BLENDER` (``(x, y, z)_gltf -> (x, -z, y)``), applied to every node's world matrix.
+
+Light units: Blender's exporter (lighting mode 'SPEC', its default) writes point and spot lights as
+``W / (4 pi) * 683`` candela and sun lights as ``W/m^2 * 683`` lux. The simulator works in radiometric
+units (W/sr for point and spot, W/m^2 for sun), so both become ``intensity / 683``
+(:data:`LUMENS_PER_WATT`): a 1000 W Blender point light loads as 1000 / (4 pi) = 79.6 W/sr.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import math
+import os
+import struct
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..scene_data import CameraData, Light, Material, SceneData
+
+#: glTF (Y-up) to Blender (Z-up) world frame: (x, y, z) -> (x, -z, y).
+GLTF_TO_BLENDER = np.array(
+    [[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, -1.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
+)
+#: Luminous efficacy Blender's glTF exporter assumes ('SPEC' mode): lm per W.
+LUMENS_PER_WATT = 683.0
+
+_GLB_MAGIC = 0x46546C67  # b"glTF"
+_CHUNK_JSON = 0x4E4F534A
+_CHUNK_BIN = 0x004E4942
+
+_COMPONENT_DTYPES = {
+    5120: np.dtype("<i1"),
+    5121: np.dtype("<u1"),
+    5122: np.dtype("<i2"),
+    5123: np.dtype("<u2"),
+    5125: np.dtype("<u4"),
+    5126: np.dtype("<f4"),
+}
+_NORMALIZE_DIVISORS = {5120: 127.0, 5121: 255.0, 5122: 32767.0, 5123: 65535.0}
+_TYPE_SIZES = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+_SUPPORTED_REQUIRED = {
+    "KHR_lights_punctual",
+    "KHR_materials_transmission",
+    "KHR_materials_ior",
+    "KHR_materials_emissive_strength",
+    "KHR_materials_specular",
+    "KHR_materials_volume",
+    "KHR_materials_clearcoat",
+    "KHR_materials_sheen",
+    "KHR_materials_unlit",
+    "KHR_texture_transform",
+    "KHR_mesh_quantization",
+}
+#: Scene extras key the blend_scenes generators use to name an environment (EXR path or RGB colour).
+ENVIRONMENT_EXTRAS_KEY = "render_budget_environment"
+
+
+@dataclass
+class _Document:
+    gltf: dict[str, Any]
+    buffers: list[bytes]
+    path: Path
+
+
+# --------------------------------------------------------------------------------------------------
+# Container
+# --------------------------------------------------------------------------------------------------
+
+
+def _read_document(path: Path) -> _Document:
+    if not path.is_file():
+        raise FileNotFoundError(f"glTF file not found: {path}")
+    data = path.read_bytes()
+    bin_chunk: bytes | None = None
+    if data[:4] == b"glTF":
+        if len(data) < 20:
+            raise ValueError(f"{path}: truncated GLB header")
+        magic, version, length = struct.unpack_from("<III", data, 0)
+        if magic != _GLB_MAGIC:
+            raise ValueError(f"{path}: not a GLB file")
+        if version != 2:
+            raise ValueError(f"{path}: GLB version {version} is not supported (only 2)")
+        if length > len(data):
+            raise ValueError(f"{path}: truncated GLB ({len(data)} bytes, header says {length})")
+        offset = 12
+        json_chunk: bytes | None = None
+        while offset + 8 <= length:
+            chunk_len, chunk_type = struct.unpack_from("<II", data, offset)
+            start, end = offset + 8, offset + 8 + chunk_len
+            if end > length:
+                raise ValueError(f"{path}: truncated GLB chunk at byte {offset}")
+            if chunk_type == _CHUNK_JSON and json_chunk is None:
+                json_chunk = data[start:end]
+            elif chunk_type == _CHUNK_BIN and bin_chunk is None:
+                bin_chunk = data[start:end]
+            offset = end + ((4 - chunk_len % 4) % 4 if end < length else 0)
+        if json_chunk is None:
+            raise ValueError(f"{path}: GLB has no JSON chunk")
+        text = json_chunk
+    else:
+        text = data
+    try:
+        gltf = json.loads(text.decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{path}: not a glTF file (JSON does not parse: {exc})") from None
+    if not isinstance(gltf, dict) or "asset" not in gltf:
+        raise ValueError(f"{path}: not a glTF file (no 'asset' object)")
+    version = str(gltf["asset"].get("version", ""))
+    if not version.startswith("2."):
+        raise ValueError(f"{path}: glTF version {version!r} is not supported (only 2.x)")
+    unsupported = set(gltf.get("extensionsRequired", [])) - _SUPPORTED_REQUIRED
+    if unsupported:
+        raise ValueError(f"{path}: requires unsupported glTF extensions {sorted(unsupported)}")
+
+    buffers: list[bytes] = []
+    for i, buf in enumerate(gltf.get("buffers", [])):
+        byte_length = int(buf.get("byteLength", 0))
+        uri = buf.get("uri")
+        if uri is None:
+            if i != 0 or bin_chunk is None:
+                raise ValueError(f"{path}: buffer {i} has no uri and there is no GLB binary chunk")
+            blob = bin_chunk
+        elif uri.startswith("data:"):
+            try:
+                blob = base64.b64decode(uri.split(",", 1)[1], validate=False)
+            except (IndexError, ValueError) as exc:
+                raise ValueError(f"{path}: buffer {i} has a bad data URI ({exc})") from None
+        else:
+            from urllib.parse import unquote
+
+            ext = path.parent / unquote(uri)
+            if not ext.is_file():
+                raise FileNotFoundError(f"{path}: buffer {i} file not found: {ext}")
+            blob = ext.read_bytes()
+        if len(blob) < byte_length:
+            raise ValueError(f"{path}: buffer {i} truncated ({len(blob)} bytes, expected {byte_length})")
+        buffers.append(blob[:byte_length])
+    return _Document(gltf, buffers, path)
+
+
+# --------------------------------------------------------------------------------------------------
+# Accessors
+# --------------------------------------------------------------------------------------------------
+
+
+def _buffer_view_bytes(doc: _Document, index: int) -> tuple[memoryview, int | None]:
+    views = doc.gltf.get("bufferViews", [])
+    if not 0 <= index < len(views):
+        raise ValueError(f"{doc.path}: bufferView {index} does not exist")
+    view = views[index]
+    buf_index = int(view["buffer"])
+    if not 0 <= buf_index < len(doc.buffers):
+        raise ValueError(f"{doc.path}: bufferView {index} refers to missing buffer {buf_index}")
+    buf = doc.buffers[buf_index]
+    start = int(view.get("byteOffset", 0))
+    length = int(view["byteLength"])
+    if start < 0 or length < 0 or start + length > len(buf):
+        raise ValueError(
+            f"{doc.path}: bufferView {index} (bytes {start}..{start + length}) exceeds buffer "
+            f"{buf_index} of {len(buf)} bytes (truncated file?)"
+        )
+    stride = view.get("byteStride")
+    return memoryview(buf)[start : start + length], (int(stride) if stride else None)
+
+
+def _strided(raw: memoryview, offset: int, count: int, ncomp: int, dtype: np.dtype, stride: int | None,
+             what: str) -> np.ndarray:
+    elem = ncomp * dtype.itemsize
+    stride = stride or elem
+    if stride < elem:
+        raise ValueError(f"{what}: byteStride {stride} smaller than the element size {elem}")
+    needed = offset + (stride * (count - 1) + elem if count else 0)
+    if offset < 0 or needed > len(raw):
+        raise ValueError(f"{what}: needs {needed} bytes but its bufferView has {len(raw)} (truncated file?)")
+    if count == 0:
+        return np.zeros((0, ncomp), dtype=dtype)
+    base = np.frombuffer(raw, dtype=np.uint8, count=needed - offset, offset=offset)
+    rows = np.lib.stride_tricks.as_strided(base, shape=(count, elem), strides=(stride, 1))
+    return np.ascontiguousarray(rows).view(dtype).reshape(count, ncomp)
+
+
+def _read_accessor(doc: _Document, index: int) -> np.ndarray:
+    """Decode one accessor to a (count, ncomp) array: float64 for normalized/float data, else integers."""
+    accessors = doc.gltf.get("accessors", [])
+    if not 0 <= index < len(accessors):
+        raise ValueError(f"{doc.path}: accessor {index} does not exist")
+    acc = accessors[index]
+    what = f"{doc.path}: accessor {index}"
+    ctype = int(acc["componentType"])
+    if ctype not in _COMPONENT_DTYPES:
+        raise ValueError(f"{what}: unknown componentType {ctype}")
+    dtype = _COMPONENT_DTYPES[ctype]
+    acc_type = acc.get("type")
+    if acc_type not in ("SCALAR", "VEC2", "VEC3", "VEC4"):
+        raise ValueError(f"{what}: type {acc_type!r} is not supported for geometry")
+    ncomp = _TYPE_SIZES[acc_type]
+    count = int(acc["count"])
+    if count < 0:
+        raise ValueError(f"{what}: negative count")
+    if "bufferView" in acc:
+        raw, stride = _buffer_view_bytes(doc, int(acc["bufferView"]))
+        out = _strided(raw, int(acc.get("byteOffset", 0)), count, ncomp, dtype, stride, what)
+    else:
+        out = np.zeros((count, ncomp), dtype=dtype)
+
+    sparse = acc.get("sparse")
+    if sparse:
+        scount = int(sparse["count"])
+        sidx = sparse["indices"]
+        itype = int(sidx["componentType"])
+        if itype not in (5121, 5123, 5125):
+            raise ValueError(f"{what}: sparse indices componentType {itype} not allowed")
+        raw_i, _ = _buffer_view_bytes(doc, int(sidx["bufferView"]))
+        idx = _strided(raw_i, int(sidx.get("byteOffset", 0)), scount, 1, _COMPONENT_DTYPES[itype], None,
+                       what + " sparse indices")[:, 0].astype(np.int64)
+        if scount and (idx.min() < 0 or idx.max() >= count):
+            raise ValueError(f"{what}: sparse index out of range [0, {count})")
+        svals = sparse["values"]
+        raw_v, _ = _buffer_view_bytes(doc, int(svals["bufferView"]))
+        vals = _strided(raw_v, int(svals.get("byteOffset", 0)), scount, ncomp, dtype, None,
+                        what + " sparse values")
+        out = out.copy()
+        out[idx] = vals
+
+    if acc.get("normalized", False):
+        if ctype not in _NORMALIZE_DIVISORS:
+            raise ValueError(f"{what}: normalized is only valid for integer components")
+        return np.maximum(out.astype(np.float64) / _NORMALIZE_DIVISORS[ctype], -1.0)
+    if ctype == 5126:
+        return out.astype(np.float64)
+    return out
+
+
+# --------------------------------------------------------------------------------------------------
+# Nodes
+# --------------------------------------------------------------------------------------------------
+
+
+def _quat_to_matrix(q: list[float]) -> np.ndarray:
+    x, y, z, w = (float(c) for c in q)
+    n = math.sqrt(x * x + y * y + z * z + w * w)
+    if n == 0.0 or not math.isfinite(n):
+        raise ValueError(f"node rotation quaternion {q} is invalid")
+    x, y, z, w = x / n, y / n, z / n, w / n
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def _local_matrix(node: dict[str, Any]) -> np.ndarray:
+    if "matrix" in node:
+        m = np.asarray(node["matrix"], dtype=np.float64)
+        if m.shape != (16,):
+            raise ValueError(f"node matrix must have 16 numbers, got {m.shape}")
+        m = m.reshape(4, 4).T  # glTF stores column-major
+    else:
+        t = np.asarray(node.get("translation", [0.0, 0.0, 0.0]), dtype=np.float64)
+        r = _quat_to_matrix(node.get("rotation", [0.0, 0.0, 0.0, 1.0]))
+        s = np.asarray(node.get("scale", [1.0, 1.0, 1.0]), dtype=np.float64)
+        if t.shape != (3,) or s.shape != (3,):
+            raise ValueError("node translation and scale must have 3 numbers")
+        m = np.eye(4)
+        m[:3, :3] = r * s[None, :]
+        m[:3, 3] = t
+    if not np.all(np.isfinite(m)):
+        raise ValueError(f"node {node.get('name', '')!r} has a non-finite transform")
+    return m
+
+
+def _walk_nodes(doc: _Document) -> list[tuple[int, np.ndarray]]:
+    """(node index, world matrix in the glTF frame) for every node of the default scene, depth first."""
+    gltf = doc.gltf
+    nodes = gltf.get("nodes", [])
+    scenes = gltf.get("scenes", [])
+    if scenes:
+        scene_index = int(gltf.get("scene", 0))
+        if not 0 <= scene_index < len(scenes):
+            raise ValueError(f"{doc.path}: default scene {scene_index} does not exist")
+        roots = list(scenes[scene_index].get("nodes", []))
+    else:  # no scene: every node that is nobody's child is a root
+        children = {c for n in nodes for c in n.get("children", [])}
+        roots = [i for i in range(len(nodes)) if i not in children]
+    out: list[tuple[int, np.ndarray]] = []
+    seen: set[int] = set()
+    stack = [(int(r), np.eye(4)) for r in reversed(roots)]
+    while stack:
+        index, parent = stack.pop()
+        if not 0 <= index < len(nodes):
+            raise ValueError(f"{doc.path}: node {index} does not exist")
+        if index in seen:
+            raise ValueError(f"{doc.path}: node {index} appears twice in the hierarchy (cycle or shared)")
+        seen.add(index)
+        world = parent @ _local_matrix(nodes[index])
+        out.append((index, world))
+        for child in reversed(nodes[index].get("children", [])):
+            stack.append((int(child), world))
+    return out
+
+
+# --------------------------------------------------------------------------------------------------
+# Meshes, materials, lights, cameras
+# --------------------------------------------------------------------------------------------------
+
+
+def _primitive_triangles(doc: _Document, prim: dict[str, Any], vcount: int, what: str) -> np.ndarray | None:
+    mode = int(prim.get("mode", 4))
+    if mode not in (4, 5, 6):
+        return None  # points and lines hold no surface
+    if "indices" in prim:
+        idx = _read_accessor(doc, int(prim["indices"]))
+        if idx.dtype.kind != "u" or idx.shape[1] != 1:
+            raise ValueError(f"{what}: indices must be unsigned integer scalars")
+        idx = idx[:, 0].astype(np.int64)
+        if idx.size and (idx.max() >= vcount):
+            raise ValueError(f"{what}: index {int(idx.max())} out of range (mesh has {vcount} vertices)")
+    else:
+        idx = np.arange(vcount, dtype=np.int64)
+    if mode == 4:
+        n = idx.size // 3
+        return idx[: n * 3].reshape(n, 3)
+    if idx.size < 3:
+        return np.zeros((0, 3), dtype=np.int64)
+    k = np.arange(idx.size - 2)
+    if mode == 5:  # strip: alternate winding so every triangle keeps the strip's orientation
+        a, b, c = idx[k], idx[k + 1], idx[k + 2]
+        odd = (k % 2) == 1
+        a2 = np.where(odd, b, a)
+        b2 = np.where(odd, a, b)
+        return np.stack([a2, b2, c], axis=1)
+    return np.stack([np.full(k.size, idx[0]), idx[k + 1], idx[k + 2]], axis=1)  # fan
+
+
+def _vertex_normals(positions: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """Area-weighted vertex normals for primitives that carry none."""
+    p0 = positions[tris[:, 0]]
+    face = np.cross(positions[tris[:, 1]] - p0, positions[tris[:, 2]] - p0)
+    normals = np.zeros_like(positions)
+    for k in range(3):
+        np.add.at(normals, tris[:, k], face)
+    length = np.linalg.norm(normals, axis=1, keepdims=True)
+    fallback = np.array([0.0, 0.0, 1.0])
+    return np.where(length > 0, normals / np.where(length > 0, length, 1.0), fallback)
+
+
+def _material(doc: _Document, index: int) -> Material:
+    mats = doc.gltf.get("materials", [])
+    if not 0 <= index < len(mats):
+        raise ValueError(f"{doc.path}: material {index} does not exist")
+    m = mats[index]
+    pbr = m.get("pbrMetallicRoughness", {})
+    ext = m.get("extensions", {})
+    base = list(pbr.get("baseColorFactor", [1.0, 1.0, 1.0, 1.0]))[:3]
+    emissive = np.asarray(m.get("emissiveFactor", [0.0, 0.0, 0.0]), dtype=np.float64)
+    emissive = emissive * float(ext.get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0))
+    transmission = float(ext.get("KHR_materials_transmission", {}).get("transmissionFactor", 0.0))
+    ior = float(ext.get("KHR_materials_ior", {}).get("ior", 1.5))
+    if ior == 0.0:  # KHR_materials_ior: 0 means "no refraction info"; keep the default
+        ior = 1.5
+    return Material(
+        base_color=tuple(float(np.clip(c, 0.0, 1.0)) for c in base),
+        metallic=float(np.clip(pbr.get("metallicFactor", 1.0), 0.0, 1.0)),
+        roughness=float(np.clip(pbr.get("roughnessFactor", 1.0), 0.0, 1.0)),
+        transmission=float(np.clip(transmission, 0.0, 1.0)),
+        ior=float(np.clip(ior, 1.0, 4.0)),
+        emission=tuple(float(c) for c in emissive),
+        name=str(m.get("name", f"material_{index}")),
+    )
+
+
+def _light(doc: _Document, index: int, world_b: np.ndarray, name: str) -> Light:
+    lights = doc.gltf.get("extensions", {}).get("KHR_lights_punctual", {}).get("lights", [])
+    if not 0 <= index < len(lights):
+        raise ValueError(f"{doc.path}: light {index} does not exist")
+    src = lights[index]
+    gtype = src.get("type")
+    kinds = {"point": "point", "spot": "spot", "directional": "sun"}
+    if gtype not in kinds:
+        raise ValueError(f"{doc.path}: light {index} has unknown type {gtype!r}")
+    direction = world_b[:3, :3] @ np.array([0.0, 0.0, -1.0])  # lights shine down their local -Z
+    norm = float(np.linalg.norm(direction))
+    direction = direction / norm if norm > 0 else np.array([0.0, 0.0, -1.0])
+    spot = src.get("spot", {})
+    return Light(
+        kind=kinds[gtype],  # type: ignore[arg-type]
+        position=tuple(world_b[:3, 3]),
+        direction=tuple(direction),
+        color=tuple(float(c) for c in src.get("color", [1.0, 1.0, 1.0])),
+        intensity=float(src.get("intensity", 1.0)) / LUMENS_PER_WATT,
+        spot_angle=float(spot.get("outerConeAngle", math.pi / 4)),
+        name=str(src.get("name", name)),
+    )
+
+
+def _read_exr_rgb(path: Path) -> np.ndarray:
+    """Read an EXR as (H, W, 3) float32 (OpenEXR 3 API)."""
+    import OpenEXR
+
+    with OpenEXR.File(str(path)) as f:
+        channels = f.channels()
+        if "RGB" in channels:
+            rgb = np.asarray(channels["RGB"].pixels, dtype=np.float32)
+        elif "RGBA" in channels:
+            rgb = np.asarray(channels["RGBA"].pixels, dtype=np.float32)[..., :3]
+        elif all(c in channels for c in "RGB"):
+            rgb = np.stack([np.asarray(channels[c].pixels, dtype=np.float32) for c in "RGB"], axis=-1)
+        else:
+            raise ValueError(f"{path}: EXR has no R, G, B channels ({sorted(channels)})")
+    if not np.all(np.isfinite(rgb)):
+        raise ValueError(f"{path}: environment map has non-finite pixels")
+    return np.ascontiguousarray(rgb)
+
+
+def _environment(doc: _Document) -> np.ndarray | tuple[float, float, float] | None:
+    scenes = doc.gltf.get("scenes", [])
+    if not scenes:
+        return None
+    extras = scenes[int(doc.gltf.get("scene", 0))].get("extras") or {}
+    value = extras.get(ENVIRONMENT_EXTRAS_KEY) if isinstance(extras, dict) else None
+    if value is None:
+        return None
+    if isinstance(value, str):
+        exr = doc.path.parent / value
+        if not exr.is_file():
+            raise FileNotFoundError(f"{doc.path}: environment map {value!r} not found next to the scene")
+        return _read_exr_rgb(exr)
+    rgb = np.asarray(value, dtype=np.float64).reshape(-1)
+    if rgb.shape != (3,) or not np.all(np.isfinite(rgb)):
+        raise ValueError(f"{doc.path}: environment colour must be 3 finite numbers, got {value!r}")
+    return (float(rgb[0]), float(rgb[1]), float(rgb[2]))
+
+
+def load_gltf(path: str | os.PathLike[str]) -> SceneData:
+    """Load a .glb/.gltf into flat arrays in Blender's world frame (Z up, metres).
+
+    One object id per mesh instance (node with a mesh), in depth-first node order; degenerate triangles
+    are kept (the core drops and counts them). Raises FileNotFoundError for missing files and ValueError
+    for anything malformed: not glTF, truncated buffers, NaN/Inf positions, out-of-range indices, or a
+    scene without a single triangle.
+    """
+    p = Path(path)
+    doc = _read_document(p)
+    gltf = doc.gltf
+    nodes = gltf.get("nodes", [])
+    meshes = gltf.get("meshes", [])
+
+    materials: list[Material] = [_material(doc, i) for i in range(len(gltf.get("materials", [])))]
+    default_material: int | None = None
+    pos_parts: list[np.ndarray] = []
+    nrm_parts: list[np.ndarray | None] = []
+    tri_parts: list[np.ndarray] = []
+    mat_parts: list[np.ndarray] = []
+    obj_parts: list[np.ndarray] = []
+    object_names: list[str] = []
+    lights: list[Light] = []
+    cameras: list[CameraData] = []
+    vbase = 0
+    decoded: dict[int, tuple[np.ndarray, np.ndarray | None]] = {}
+
+    for node_index, world_g in _walk_nodes(doc):
+        node = nodes[node_index]
+        name = str(node.get("name", f"node_{node_index}"))
+        world_b = GLTF_TO_BLENDER @ world_g
+        ext = node.get("extensions", {})
+        if "KHR_lights_punctual" in ext:
+            lights.append(_light(doc, int(ext["KHR_lights_punctual"]["light"]), world_b, name))
+        if "camera" in node:
+            cams = gltf.get("cameras", [])
+            ci = int(node["camera"])
+            if not 0 <= ci < len(cams):
+                raise ValueError(f"{doc.path}: camera {ci} does not exist")
+            persp = cams[ci].get("perspective")
+            if persp is not None:  # orthographic cameras are not modelled
+                yfov = float(persp["yfov"])
+                if not (0.0 < yfov < math.pi):
+                    raise ValueError(f"{doc.path}: camera {ci} yfov {yfov} outside (0, pi)")
+                cameras.append(
+                    CameraData(matrix_world=world_b.copy(), vfov=yfov,
+                               aspect=float(persp.get("aspectRatio", 16 / 9)), name=name)
+                )
+        if "mesh" not in node:
+            continue
+        mi = int(node["mesh"])
+        if not 0 <= mi < len(meshes):
+            raise ValueError(f"{doc.path}: mesh {mi} does not exist")
+        object_id = len(object_names)
+        object_names.append(name)
+        m3 = world_b[:3, :3]
+        normal_matrix = np.linalg.inv(m3).T if abs(np.linalg.det(m3)) > 1e-300 else m3
+        mirrored = np.linalg.det(m3) < 0.0
+        for pi, prim in enumerate(meshes[mi].get("primitives", [])):
+            what = f"{doc.path}: mesh {mi} ({meshes[mi].get('name', '')!r}) primitive {pi}"
+            attrs = prim.get("attributes", {})
+            if "POSITION" not in attrs:
+                raise ValueError(f"{what}: no POSITION attribute")
+            key = id(prim)
+            if key not in decoded:
+                pos = _read_accessor(doc, int(attrs["POSITION"]))
+                if pos.shape[1] != 3:
+                    raise ValueError(f"{what}: POSITION must be VEC3")
+                pos = pos.astype(np.float64)
+                if not np.all(np.isfinite(pos)):
+                    raise ValueError(f"{what}: POSITION contains NaN or Inf")
+                nrm = None
+                if "NORMAL" in attrs:
+                    nrm = _read_accessor(doc, int(attrs["NORMAL"])).astype(np.float64)
+                    if nrm.shape != pos.shape:
+                        raise ValueError(f"{what}: NORMAL count/shape differs from POSITION")
+                    if not np.all(np.isfinite(nrm)):
+                        raise ValueError(f"{what}: NORMAL contains NaN or Inf")
+                decoded[key] = (pos, nrm)
+            pos, nrm = decoded[key]
+            tris = _primitive_triangles(doc, prim, pos.shape[0], what)
+            if tris is None or tris.shape[0] == 0:
+                continue
+            world_pos = pos @ m3.T + world_b[:3, 3]
+            if not np.all(np.isfinite(world_pos)):
+                raise ValueError(f"{what}: transformed positions overflow to Inf")
+            if mirrored:
+                tris = tris[:, [0, 2, 1]]
+            if nrm is not None:
+                wn = nrm @ normal_matrix.T
+                length = np.linalg.norm(wn, axis=1, keepdims=True)
+                wn = np.where(length > 0, wn / np.where(length > 0, length, 1.0), 0.0)
+            else:
+                wn = None
+            if "material" in prim:
+                mat = int(prim["material"])
+                if not 0 <= mat < len(materials):
+                    raise ValueError(f"{what}: material {mat} does not exist")
+            else:
+                if default_material is None:
+                    default_material = len(materials)
+                    materials.append(Material(name="default"))
+                mat = default_material
+            pos_parts.append(world_pos)
+            nrm_parts.append(wn)
+            tri_parts.append(tris + vbase)
+            mat_parts.append(np.full(tris.shape[0], mat, dtype=np.uint32))
+            obj_parts.append(np.full(tris.shape[0], object_id, dtype=np.uint32))
+            vbase += world_pos.shape[0]
+
+    if not tri_parts:
+        raise ValueError(f"{doc.path}: the scene contains no triangles (empty scene)")
+
+    positions = np.concatenate(pos_parts)
+    triangles = np.concatenate(tri_parts)
+    normals: np.ndarray | None = None
+    if any(n is not None for n in nrm_parts):
+        filled = []
+        starts = np.cumsum([0] + [part.shape[0] for part in pos_parts[:-1]])
+        for part_pos, part_nrm, part_tri, start in zip(pos_parts, nrm_parts, tri_parts, starts, strict=True):
+            filled.append(part_nrm if part_nrm is not None else _vertex_normals(part_pos, part_tri - start))
+        normals = np.concatenate(filled).astype(np.float32)
+    if positions.shape[0] > np.iinfo(np.uint32).max:
+        raise ValueError(f"{doc.path}: too many vertices for 32-bit indices")
+    return SceneData(
+        positions=positions.astype(np.float32),
+        triangles=triangles.astype(np.uint32),
+        normals=normals,
+        material_ids=np.concatenate(mat_parts),
+        object_ids=np.concatenate(obj_parts),
+        materials=materials,
+        lights=lights,
+        cameras=cameras,
+        environment=_environment(doc),
+        source=str(p),
+        object_names=object_names,
+    )

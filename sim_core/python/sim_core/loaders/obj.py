@@ -1,0 +1,209 @@
+"""Wavefront OBJ loader (pure Python + numpy) for the bundled test meshes and simple exports.
+
+Reads ``v``, ``vn``, ``f`` (any polygon, fan-triangulated; ``v``, ``v/vt``, ``v//vn``, ``v/vt/vn``;
+negative indices), ``o``/``g`` (each starts a new object id), ``usemtl`` and ``mtllib`` (Kd, Ke, Ni, d/Tr,
+Ns, and the PBR extension Pr/Pm). OBJ files are Y-up by convention; like Blender's importer (forward -Z,
+up Y) the loader converts to the project's Z-up frame, ``(x, y, z) -> (x, -z, y)``, unless
+``up_axis="Z"`` says the file already is Z-up.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+from ..scene_data import Material, SceneData
+
+_Y_TO_Z = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+
+
+def _floats(parts: list[str], n: int, what: str, lineno: int, path: Path) -> list[float]:
+    try:
+        vals = [float(x) for x in parts[:n]]
+    except ValueError:
+        raise ValueError(f"{path}:{lineno}: malformed {what} line") from None
+    if len(vals) < n:
+        raise ValueError(f"{path}:{lineno}: {what} needs {n} numbers")
+    return vals
+
+
+def _parse_mtl(path: Path) -> dict[str, Material]:
+    """Materials of an MTL file; Blender's OBJ importer mapping (roughness = 1 - sqrt(Ns / 1000))."""
+    out: dict[str, Material] = {}
+    if not path.is_file():
+        raise FileNotFoundError(f"material library not found: {path}")
+    current: str | None = None
+    props: dict[str, object] = {}
+
+    def flush() -> None:
+        if current is None:
+            return
+        ns = float(props.get("Ns", 250.0))  # type: ignore[arg-type]
+        rough = float(props.get("Pr", 1.0 - math.sqrt(min(max(ns, 0.0), 1000.0) / 1000.0)))  # type: ignore[arg-type]
+        d = float(props.get("d", 1.0))  # type: ignore[arg-type]
+        out[current] = Material(
+            base_color=tuple(float(np.clip(c, 0, 1)) for c in props.get("Kd", (0.8, 0.8, 0.8))),  # type: ignore[attr-defined]
+            metallic=float(np.clip(float(props.get("Pm", 0.0)), 0.0, 1.0)),  # type: ignore[arg-type]
+            roughness=float(np.clip(rough, 0.0, 1.0)),
+            transmission=float(np.clip(1.0 - d, 0.0, 1.0)),
+            ior=float(np.clip(float(props.get("Ni", 1.5)), 1.0, 4.0)),  # type: ignore[arg-type]
+            emission=tuple(props.get("Ke", (0.0, 0.0, 0.0))),  # type: ignore[arg-type]
+            name=current,
+        )
+
+    for lineno, line in enumerate(path.read_text(errors="replace").splitlines(), 1):
+        parts = line.split()
+        if not parts or parts[0].startswith("#"):
+            continue
+        key, args = parts[0], parts[1:]
+        if key == "newmtl":
+            flush()
+            current, props = " ".join(args), {}
+        elif key in ("Kd", "Ke"):
+            props[key] = tuple(_floats(args, 3, key, lineno, path))
+        elif key in ("Ns", "Ni", "d", "Pr", "Pm"):
+            props[key] = _floats(args, 1, key, lineno, path)[0]
+        elif key == "Tr":
+            props["d"] = 1.0 - _floats(args, 1, key, lineno, path)[0]
+    flush()
+    return out
+
+
+def load_obj(path: str | os.PathLike[str], *, up_axis: Literal["Y", "Z"] = "Y") -> SceneData:
+    """Load an OBJ into flat arrays in the project's Z-up world frame.
+
+    Per-vertex normals are kept when the file gives them (vertices are split where a position carries
+    different normals). Raises FileNotFoundError / ValueError on missing or malformed files, NaN/Inf
+    coordinates, out-of-range indices and files without a single triangle.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"OBJ file not found: {p}")
+    if up_axis not in ("Y", "Z"):
+        raise ValueError(f"up_axis must be 'Y' or 'Z', got {up_axis!r}")
+    try:
+        text = p.read_text()
+    except UnicodeDecodeError:
+        raise ValueError(f"{p}: not a text OBJ file") from None
+
+    verts: list[list[float]] = []
+    vnormals: list[list[float]] = []
+    corners_v: list[int] = []  # triangle corners: position index (0-based)
+    corners_n: list[int] = []  # normal index or -1
+    tri_mat: list[int] = []
+    tri_obj: list[int] = []
+    materials: list[Material] = []
+    mat_index: dict[str, int] = {}
+    library: dict[str, Material] = {}
+    current_mat = -1
+    object_names: list[str] = []
+    current_obj = -1
+
+    def resolve(token: str, count: int, lineno: int, kind: str) -> int:
+        try:
+            i = int(token)
+        except ValueError:
+            raise ValueError(f"{p}:{lineno}: malformed face index {token!r}") from None
+        j = i - 1 if i > 0 else count + i
+        if i == 0 or not 0 <= j < count:
+            raise ValueError(f"{p}:{lineno}: {kind} index {i} out of range (have {count})")
+        return j
+
+    for lineno, line in enumerate(text.splitlines(), 1):
+        if not line or line[0] == "#":
+            continue
+        parts = line.split()
+        if not parts:
+            continue
+        key = parts[0]
+        if key == "v":
+            verts.append(_floats(parts[1:], 3, "v", lineno, p))
+        elif key == "vn":
+            vnormals.append(_floats(parts[1:], 3, "vn", lineno, p))
+        elif key == "f":
+            if len(parts) < 4:
+                raise ValueError(f"{p}:{lineno}: face needs at least 3 vertices")
+            if current_obj < 0:
+                object_names.append(p.stem)
+                current_obj = 0
+            if current_mat < 0:
+                current_mat = len(materials)
+                mat_index[""] = current_mat
+                materials.append(Material(name="default"))
+            fv, fn = [], []
+            for tok in parts[1:]:
+                sub = tok.split("/")
+                fv.append(resolve(sub[0], len(verts), lineno, "vertex"))
+                fn.append(resolve(sub[2], len(vnormals), lineno, "normal") if len(sub) > 2 and sub[2] else -1)
+            for k in range(1, len(fv) - 1):  # fan triangulation, as Blender's importer does for convex faces
+                corners_v.extend((fv[0], fv[k], fv[k + 1]))
+                corners_n.extend((fn[0], fn[k], fn[k + 1]))
+                tri_mat.append(current_mat)
+                tri_obj.append(current_obj)
+        elif key in ("o", "g"):
+            name = " ".join(parts[1:]) or f"object_{len(object_names)}"
+            current_obj = len(object_names)
+            object_names.append(name)
+        elif key == "mtllib":
+            for lib in parts[1:]:
+                library.update(_parse_mtl(p.parent / lib))
+        elif key == "usemtl":
+            name = " ".join(parts[1:])
+            if name not in mat_index:
+                mat_index[name] = len(materials)
+                materials.append(library.get(name, Material(name=name)))
+            current_mat = mat_index[name]
+
+    if not corners_v:
+        raise ValueError(f"{p}: the file contains no faces (empty scene)")
+    positions = np.asarray(verts, dtype=np.float64)
+    if not np.all(np.isfinite(positions)):
+        raise ValueError(f"{p}: vertex positions contain NaN or Inf")
+    cv = np.asarray(corners_v, dtype=np.int64)
+    cn = np.asarray(corners_n, dtype=np.int64)
+    normals: np.ndarray | None = None
+    if (cn >= 0).any():
+        nrm = np.asarray(vnormals, dtype=np.float64)
+        if not np.all(np.isfinite(nrm)):
+            raise ValueError(f"{p}: vertex normals contain NaN or Inf")
+        # Split positions that carry several normals: one output vertex per (position, normal) pair.
+        pairs = np.stack([cv, cn], axis=1)
+        uniq, inverse = np.unique(pairs, axis=0, return_inverse=True)
+        inverse = inverse.reshape(-1)
+        out_pos = positions[uniq[:, 0]]
+        has_n = uniq[:, 1] >= 0
+        out_nrm = np.zeros_like(out_pos)
+        out_nrm[has_n] = nrm[uniq[has_n, 1]]
+        tris = inverse.reshape(-1, 3)
+        if not has_n.all():  # corners without a normal: area-weighted normals of their faces
+            from .gltf import _vertex_normals
+
+            out_nrm[~has_n] = _vertex_normals(out_pos, tris)[~has_n]
+        length = np.linalg.norm(out_nrm, axis=1, keepdims=True)
+        out_nrm = np.where(length > 0, out_nrm / np.where(length > 0, length, 1.0), 0.0)
+        positions, normals = out_pos, out_nrm
+    else:
+        tris = cv.reshape(-1, 3)
+    # Drop objects without faces (an 'o' line followed by another 'o') and renumber the rest.
+    obj = np.asarray(tri_obj, dtype=np.int64)
+    used = np.unique(obj)
+    remap = np.full(len(object_names), -1, dtype=np.int64)
+    remap[used] = np.arange(used.size)
+    if up_axis == "Y":
+        positions = positions @ _Y_TO_Z.T
+        if normals is not None:
+            normals = normals @ _Y_TO_Z.T
+    return SceneData(
+        positions=positions.astype(np.float32),
+        triangles=tris.astype(np.uint32),
+        normals=None if normals is None else normals.astype(np.float32),
+        material_ids=np.asarray(tri_mat, dtype=np.uint32),
+        object_ids=remap[obj].astype(np.uint32),
+        materials=materials,
+        source=str(p),
+        object_names=[object_names[i] for i in used],
+    )
