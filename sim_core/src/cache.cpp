@@ -1,5 +1,6 @@
 #include "sim_core/cache.h"
 
+#include <algorithm>
 #include <stdexcept>
 
 namespace sim_core {

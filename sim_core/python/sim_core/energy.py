@@ -1,0 +1,407 @@
+"""Hardware energy and timing model: prices a render's activity counters with a hardware profile.
+
+Like the seeds' simulators (the adaptive-sampling seed, sec. 4): each hardware block's activity counter
+times its energy per event, plus static power; cycles per block from each block's throughput; frame time
+from the slowest unit and DRAM bandwidth. Power at a fixed frame rate is P = P_static + E_frame * fps, the
+way the power-budget paper measured it. Profiles are TOML data files (``profiles/*.toml``); every constant
+there carries its source or stated assumption.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    "COMPARATOR_TABLE",
+    "ComparatorStats",
+    "EnergyReport",
+    "Profile",
+    "comparator_stats",
+    "list_profiles",
+    "load_profile",
+    "price",
+]
+
+_PROFILE_DIR = Path(__file__).with_name("profiles")
+
+# Thesis Table 4.1 (24-bit comparator, 0.18 um TSMC, 1.8 V): compute chain (bits examined after the MSB)
+# -> (sync delay ns, sync energy pJ, async delay ns, async energy pJ). Rows between are interpolated
+# linearly; the measured points are exactly these.
+COMPARATOR_TABLE: tuple[tuple[int, float, float, float, float], ...] = (
+    (0, 0.59, 17.36, 0.55, 1.40),
+    (4, 1.23, 18.16, 1.69, 3.23),
+    (8, 1.85, 18.95, 2.87, 5.36),
+    (12, 2.46, 19.74, 4.04, 7.39),
+    (16, 3.08, 20.53, 5.20, 9.37),
+    (20, 3.69, 21.32, 6.37, 11.40),
+    (23, 4.16, 22.00, 7.24, 12.89),
+)
+
+# Counters the model prices (ARCHITECTURE.md); a missing counter counts as 0.
+COUNTERS: tuple[str, ...] = (
+    "rays_primary", "rays_shadow", "rays_reflection", "rays_refraction", "rays_ao", "rays_glossy",
+    "rays_total", "bvh_node_visits", "triangle_tests", "shading_evals", "raygen_evals",
+    "similarity_checks", "interpolations", "reprojections", "tile_buffer_reads", "tile_buffer_writes",
+    "framebuffer_bytes", "gbuffer_prefetch_bytes", "cache_accesses", "cache_misses", "dram_bytes_read",
+    "closest_hit_comparisons", "env_lookups", "env_filtered_lookups", "samples_traced",
+    "samples_interpolated", "samples_reused", "pixels",
+)
+
+# Which hardware unit each block runs on (units run concurrently; blocks on one unit add up, except the
+# T&I unit whose traversal and intersection pipelines overlap).
+BLOCK_UNIT: dict[str, str] = {
+    "raygen": "srp", "shading": "srp", "similarity": "srp", "interpolation": "srp",
+    "reprojection": "srp", "env_filter": "srp",
+    "traversal": "ti", "intersection": "ti", "comparator": "ti", "cache": "ti",
+    "tile_buffer": "tile_buffer",
+    "dram": "dram", "framebuffer_dma": "dram", "gbuffer_prefetch": "dram",
+}
+BLOCKS: tuple[str, ...] = tuple(BLOCK_UNIT)
+
+_SECTIONS: dict[str, tuple[str, ...]] = {
+    "clock": ("srp_hz", "ti_hz"),
+    "throughput": ("srp_ops_per_cycle", "ti_box_tests_per_cycle", "ti_triangle_tests_per_cycle",
+                   "cache_line_accesses_per_cycle", "tile_buffer_accesses_per_cycle", "dram_bytes_per_s"),
+    "ops": ("raygen", "shading", "similarity", "interpolation", "reprojection", "env_lookup",
+            "env_filtered_lookup"),
+    "energy_pj": ("srp_op", "traversal_step", "triangle_test", "tile_buffer_access", "cache_line_access",
+                  "env_texel_read", "dram_read_byte", "dram_write_byte", "dma_byte"),
+    "comparator": ("energy_scale",),
+    "cache": ("size_bytes", "line_bytes", "ways"),
+    "static": ("power_w",),
+}
+
+
+@dataclass(frozen=True)
+class Profile:
+    """A hardware profile: clocks, throughputs, per-event energies, cache geometry, static power."""
+
+    name: str
+    description: str
+    clock: Mapping[str, float]
+    throughput: Mapping[str, float]
+    ops: Mapping[str, float]
+    energy_pj: Mapping[str, float]
+    comparator_style: str
+    comparator_energy_scale: float
+    cache_size_bytes: int
+    cache_line_bytes: int
+    cache_ways: int
+    static_power_w: float
+    source: str = ""
+
+    @property
+    def cache(self) -> Any:
+        """The node/triangle cache geometry as the native ``CacheConfig`` (pass to ``render(cache=...)``)."""
+        from . import _core
+
+        return _core.CacheConfig(self.cache_size_bytes, self.cache_line_bytes, self.cache_ways)
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], source: str = "") -> Profile:
+        """Validate a parsed profile: every section and key present, numbers finite and in range."""
+        where = source or "profile"
+        for sec, keys in _SECTIONS.items():
+            if sec not in data or not isinstance(data[sec], Mapping):
+                raise ValueError(f"{where}: missing section [{sec}]")
+            for k in keys:
+                if k not in data[sec]:
+                    raise ValueError(f"{where}: missing [{sec}] {k}")
+                v = data[sec][k]
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                    raise ValueError(f"{where}: [{sec}] {k} must be a finite number, got {v!r}")
+                positive = sec in ("clock", "throughput", "cache") or (sec == "comparator")
+                if v < 0 or (positive and v <= 0):
+                    raise ValueError(f"{where}: [{sec}] {k} must be {'> 0' if positive else '>= 0'}, got {v}")
+        style = data["comparator"].get("style", "sync")
+        if style not in ("sync", "async"):
+            raise ValueError(f"{where}: [comparator] style must be 'sync' or 'async', got {style!r}")
+        cache = data["cache"]
+        for k in ("size_bytes", "line_bytes", "ways"):
+            v = cache[k]
+            if int(v) != v or int(v) & (int(v) - 1):
+                raise ValueError(f"{where}: [cache] {k} must be a power-of-two integer, got {v}")
+        if cache["size_bytes"] < cache["line_bytes"] * cache["ways"]:
+            raise ValueError(f"{where}: [cache] size_bytes must hold at least one set (line_bytes * ways)")
+        name = data.get("name")
+        if not isinstance(name, str) or not name:
+            raise ValueError(f"{where}: 'name' must be a non-empty string")
+        return cls(
+            name=name,
+            description=str(data.get("description", "")),
+            clock=dict(data["clock"]),
+            throughput=dict(data["throughput"]),
+            ops=dict(data["ops"]),
+            energy_pj=dict(data["energy_pj"]),
+            comparator_style=style,
+            comparator_energy_scale=float(data["comparator"]["energy_scale"]),
+            cache_size_bytes=int(cache["size_bytes"]),
+            cache_line_bytes=int(cache["line_bytes"]),
+            cache_ways=int(cache["ways"]),
+            static_power_w=float(data["static"]["power_w"]),
+            source=source,
+        )
+
+
+def list_profiles() -> list[str]:
+    """Names of the profiles shipped with the package (the TOML files in ``profiles/``)."""
+    return sorted(p.stem for p in _PROFILE_DIR.glob("*.toml"))
+
+
+def load_profile(name_or_path: str | Path) -> Profile:
+    """Load a shipped profile by name (``"mobile"``, ``"desktop"``) or any profile TOML file by path."""
+    if isinstance(name_or_path, Profile):
+        return name_or_path
+    p = Path(name_or_path)
+    if p.suffix != ".toml" and not p.exists():
+        p = _PROFILE_DIR / f"{name_or_path}.toml"
+        if not p.exists():
+            raise FileNotFoundError(
+                f"no hardware profile named {name_or_path!r}; shipped profiles: {', '.join(list_profiles())}"
+            )
+    if not p.is_file():
+        raise FileNotFoundError(f"hardware profile file not found: {p}")
+    with p.open("rb") as f:
+        try:
+            data = tomllib.load(f)
+        except tomllib.TOMLDecodeError as e:
+            raise ValueError(f"{p}: not valid TOML: {e}") from e
+    return Profile.from_dict(data, source=str(p))
+
+
+@dataclass(frozen=True)
+class ComparatorStats:
+    """Closest-hit comparisons priced with the synchronous and the asynchronous comparator (Table 4.1)."""
+
+    histogram: np.ndarray  # comparisons per compute-chain length 0..24 (24: equal over all 24 bits)
+    comparisons: int
+    average_chain_length: float
+    sync_energy_j: float
+    async_energy_j: float
+    async_to_sync_energy: float  # 0 comparisons -> nan
+    sync_delay_s: float  # total comparator latency if run back to back
+    async_delay_s: float
+
+
+def _table_columns() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    t = np.asarray(COMPARATOR_TABLE, dtype=np.float64)
+    return t[:, 0], t[:, 1], t[:, 2], t[:, 3], t[:, 4]
+
+
+def comparator_stats(histogram: np.ndarray | None, energy_scale: float = 1.0) -> ComparatorStats:
+    """Price a chain-length histogram with Table 4.1 (J, scaled by ``energy_scale`` for the process)."""
+    from . import _core
+
+    bits = int(_core.COMPARATOR_BITS)
+    if histogram is None:
+        h = np.zeros(bits + 1, dtype=np.int64)
+    else:
+        h = np.asarray(histogram)
+        if h.ndim != 1 or h.shape[0] != bits + 1:
+            raise ValueError(f"comparator histogram must have {bits + 1} entries, got shape {h.shape}")
+        if not np.issubdtype(h.dtype, np.integer) or (h < 0).any():
+            raise ValueError("comparator histogram must hold non-negative integer counts")
+        h = h.astype(np.int64)
+    n = int(h.sum())
+    lengths = np.arange(bits + 1, dtype=np.float64)
+    # Table 4.1 stops at 23 bits after the MSB (all 24 examined); "equal over all bits" costs the same.
+    chain = np.minimum(lengths, 23.0)
+    k, sd, se, ad, ae = _table_columns()
+    sync_e = np.interp(chain, k, se) * 1e-12 * energy_scale
+    async_e = np.interp(chain, k, ae) * 1e-12 * energy_scale
+    async_d = np.interp(chain, k, ad) * 1e-9
+    # The synchronous comparator's delay is its worst case whatever the operands (clock period, Table 4.1).
+    sync_total_e = float(h @ sync_e)
+    async_total_e = float(h @ async_e)
+    return ComparatorStats(
+        histogram=h,
+        comparisons=n,
+        average_chain_length=float(h @ lengths) / n if n else float("nan"),
+        sync_energy_j=sync_total_e,
+        async_energy_j=async_total_e,
+        async_to_sync_energy=async_total_e / sync_total_e if n else float("nan"),
+        sync_delay_s=n * float(sd[-1]) * 1e-9,
+        async_delay_s=float(h @ async_d),
+    )
+
+
+@dataclass(frozen=True)
+class EnergyReport:
+    """Energy, timing and power of one frame on one hardware profile at a target frame rate."""
+
+    profile: str
+    fps: float
+    energy_j: dict[str, float]  # by block, plus "static" (P_static / fps); sums to total_energy_j
+    cycles: dict[str, float]  # by block, in the cycles of the block's unit clock
+    unit_time_s: dict[str, float]  # busy time of each unit: srp, ti, tile_buffer, dram
+    bottleneck: str  # the unit that sets the frame time
+    dynamic_energy_j: float
+    total_energy_j: float
+    frame_time_s: float
+    deadline_met: bool
+    power_w: float  # at the target frame rate: P_static + E_dynamic * fps
+    max_fps: float  # 1 / frame_time_s
+    power_full_speed_w: float  # running flat out: P_static + E_dynamic / frame_time_s
+    mrays_per_s: float  # rays_total / frame_time_s / 1e6
+    perf_per_watt: float  # max_fps / power_full_speed_w (frames per joule at full speed)
+    rays_total: int
+    dram_bytes: int
+    comparator: ComparatorStats
+    blocks_used: tuple[str, ...] = field(default=())
+
+
+def _counters_of(result: Any) -> tuple[dict[str, int], np.ndarray | None, Any]:
+    if isinstance(result, Mapping):
+        counters, hist, settings = result, None, None
+    else:
+        counters = getattr(result, "counters", None)
+        if counters is None:
+            raise ValueError("price() needs a RenderResult (with .counters) or a mapping of counters")
+        hist = getattr(result, "comparator_histogram", None)
+        settings = getattr(result, "settings", None)
+    out: dict[str, int] = {}
+    for k, v in counters.items():
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
+            if isinstance(v, (float, np.floating)) and float(v).is_integer():
+                v = int(v)
+            else:
+                raise ValueError(f"counter {k!r} must be an integer, got {v!r}")
+        if v < 0:
+            raise ValueError(f"counter {k!r} is negative ({v})")
+        out[str(k)] = int(v)
+    return out, hist, settings
+
+
+def _filtered_reads_per_lookup(settings: Any) -> int:
+    """SAT reads of one filtered environment lookup: 4 corners (box) or 9 (Bartlett), times 3 channels."""
+    for name in ("glossy_filter", "env_filter", "glossy_env_filter", "environment_filter"):
+        v = getattr(settings, name, None)
+        if v is None:
+            continue
+        s = str(getattr(v, "value", v)).lower()
+        if s in ("1", "box") or "box" in s:
+            return 4 * 3
+        if s in ("2", "bartlett") or "bartlett" in s:
+            return 9 * 3
+    return 9 * 3  # unknown: price the dearer Bartlett lookup
+
+
+def price(result: Any, profile: Profile | str | Path, fps: float) -> EnergyReport:
+    """Price one rendered frame: energy and cycles by block, frame time, deadline, power, perf/W.
+
+    ``result`` is a ``RenderResult`` (its ``counters``, ``comparator_histogram`` and, when present,
+    ``settings``) or a plain mapping of counter names to counts. A block whose counters are 0 costs
+    exactly 0 J and 0 cycles.
+    """
+    prof = load_profile(profile) if not isinstance(profile, Profile) else profile
+    if isinstance(fps, bool) or not isinstance(fps, (int, float)) or not math.isfinite(fps) or fps <= 0:
+        raise ValueError(f"fps must be a finite positive number, got {fps!r}")
+    fps = float(fps)
+    c, hist, settings = _counters_of(result)
+
+    def n(name: str) -> int:
+        return c.get(name, 0)
+
+    ops, e, thr, clk = prof.ops, prof.energy_pj, prof.throughput, prof.clock
+    pj = 1e-12
+    energy: dict[str, float] = {}
+    cycles: dict[str, float] = {}
+
+    def srp_block(block: str, events: int, ops_per_event: float, extra_pj: float = 0.0) -> None:
+        energy[block] = events * ops_per_event * e["srp_op"] * pj + extra_pj * pj
+        cycles[block] = events * ops_per_event / thr["srp_ops_per_cycle"]
+
+    srp_block("raygen", n("raygen_evals"), ops["raygen"])
+    srp_block("shading", n("shading_evals"), ops["shading"])
+    srp_block("similarity", n("similarity_checks"), ops["similarity"])
+    srp_block("interpolation", n("interpolations"), ops["interpolation"])
+    srp_block("reprojection", n("reprojections"), ops["reprojection"])
+    env_reads = n("env_lookups") + n("env_filtered_lookups") * _filtered_reads_per_lookup(settings)
+    energy["env_filter"] = (
+        (n("env_lookups") * ops["env_lookup"] + n("env_filtered_lookups") * ops["env_filtered_lookup"])
+        * e["srp_op"] + env_reads * e["env_texel_read"]
+    ) * pj
+    cycles["env_filter"] = (
+        n("env_lookups") * ops["env_lookup"] + n("env_filtered_lookups") * ops["env_filtered_lookup"]
+    ) / thr["srp_ops_per_cycle"]
+
+    energy["traversal"] = n("bvh_node_visits") * e["traversal_step"] * pj
+    cycles["traversal"] = n("bvh_node_visits") / thr["ti_box_tests_per_cycle"]
+    energy["intersection"] = n("triangle_tests") * e["triangle_test"] * pj
+    cycles["intersection"] = n("triangle_tests") / thr["ti_triangle_tests_per_cycle"]
+    comp = comparator_stats(hist, prof.comparator_energy_scale)
+    if comp.comparisons == 0 and n("closest_hit_comparisons") > 0:
+        raise ValueError("closest_hit_comparisons > 0 but the render carries no comparator histogram")
+    energy["comparator"] = comp.async_energy_j if prof.comparator_style == "async" else comp.sync_energy_j
+    cycles["comparator"] = 0.0  # inside the intersection pipeline; its latency is hidden there
+    energy["cache"] = n("cache_accesses") * e["cache_line_access"] * pj
+    cycles["cache"] = n("cache_accesses") / thr["cache_line_accesses_per_cycle"]
+
+    tb = n("tile_buffer_reads") + n("tile_buffer_writes")
+    energy["tile_buffer"] = tb * e["tile_buffer_access"] * pj
+    cycles["tile_buffer"] = tb / thr["tile_buffer_accesses_per_cycle"]
+
+    bytes_per_srp_cycle = thr["dram_bytes_per_s"] / clk["srp_hz"]
+    energy["dram"] = n("dram_bytes_read") * e["dram_read_byte"] * pj
+    cycles["dram"] = n("dram_bytes_read") / bytes_per_srp_cycle
+    energy["framebuffer_dma"] = n("framebuffer_bytes") * (e["dram_write_byte"] + e["dma_byte"]) * pj
+    cycles["framebuffer_dma"] = n("framebuffer_bytes") / bytes_per_srp_cycle
+    energy["gbuffer_prefetch"] = n("gbuffer_prefetch_bytes") * (e["dram_read_byte"] + e["dma_byte"]) * pj
+    cycles["gbuffer_prefetch"] = n("gbuffer_prefetch_bytes") / bytes_per_srp_cycle
+
+    for k, v in energy.items():
+        if not math.isfinite(v):
+            raise ValueError(f"energy of block {k!r} is not finite")
+
+    unit_time = {
+        "srp": sum(cycles[b] for b in BLOCKS if BLOCK_UNIT[b] == "srp") / clk["srp_hz"],
+        # Traversal and intersection pipelines (and the cache ports feeding them) work concurrently.
+        "ti": max(cycles["traversal"], cycles["intersection"], cycles["cache"]) / clk["ti_hz"],
+        "tile_buffer": cycles["tile_buffer"] / clk["srp_hz"],
+        "dram": (n("dram_bytes_read") + n("framebuffer_bytes") + n("gbuffer_prefetch_bytes"))
+        / thr["dram_bytes_per_s"],
+    }
+    bottleneck = max(unit_time, key=lambda u: unit_time[u])
+    frame_time = unit_time[bottleneck]
+    dynamic = math.fsum(energy[b] for b in BLOCKS)
+    static_e = prof.static_power_w / fps
+    energy_all = {b: energy[b] for b in BLOCKS}
+    energy_all["static"] = static_e
+    total = math.fsum(energy_all.values())
+    power = prof.static_power_w + dynamic * fps
+    rays = n("rays_total")
+    if frame_time > 0:
+        max_fps = 1.0 / frame_time
+        power_full = prof.static_power_w + dynamic / frame_time
+        mrays = rays / frame_time / 1e6
+    else:
+        max_fps, power_full, mrays = math.inf, prof.static_power_w, 0.0
+    perf_per_watt = max_fps / power_full if power_full > 0 and math.isfinite(max_fps) else 0.0
+    return EnergyReport(
+        profile=prof.name,
+        fps=fps,
+        energy_j=energy_all,
+        cycles=cycles,
+        unit_time_s=unit_time,
+        bottleneck=bottleneck,
+        dynamic_energy_j=dynamic,
+        total_energy_j=total,
+        frame_time_s=frame_time,
+        deadline_met=frame_time <= 1.0 / fps,
+        power_w=power,
+        max_fps=max_fps,
+        power_full_speed_w=power_full,
+        mrays_per_s=mrays,
+        perf_per_watt=perf_per_watt,
+        rays_total=rays,
+        dram_bytes=n("dram_bytes_read") + n("framebuffer_bytes") + n("gbuffer_prefetch_bytes"),
+        comparator=comp,
+        blocks_used=tuple(b for b in BLOCKS if energy[b] > 0),
+    )
