@@ -1,0 +1,1 @@
+"""Pure logic of the add-on: no bpy imports, testable in plain Python."""

@@ -1,0 +1,85 @@
+"""Evaluate a camera path through the service: every frame with the fixed presets (max, max-mid, mid-min,
+min) and with the store's budget-driven settings (temporal filter included), as report rows."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .client import ServiceClient
+from .playback_logic import PlaybackDriver, validate_budget
+from .report import PRESET_LEVELS, FrameRow, preset_indices
+from .vendored import camera_path, pareto_store
+
+
+@dataclass(frozen=True)
+class EvalSpec:
+    scene_id: str
+    profile: str
+    resolution: tuple[int, int]
+    budget_mode: str
+    budget_value: float
+    filter_period_s: float = 2.0
+    frame_step: int = 1
+    modes: tuple[str, ...] = ("ours", "max", "max_mid", "mid_min", "min")
+
+
+def preset_settings(store: pareto_store.ParetoStore) -> dict[str, dict[str, Any]]:
+    """Settings (name -> value) of the paper's four fixed presets over the store's parameter space."""
+    counts = [len(p.values) for p in store.parameters]
+    mq = [p.max_quality for p in store.parameters]
+    return {name: store.settings_of(preset_indices(counts, mq, level))
+            for name, level in PRESET_LEVELS.items()}
+
+
+def camera_payload(frame: camera_path.CameraFrame, resolution: tuple[int, int]) -> dict[str, Any]:
+    m = np.asarray(frame.matrix_world, dtype=np.float64).copy()
+    m[3] = (0.0, 0.0, 0.0, 1.0)
+    return {"matrix_world": m.tolist(), "vfov": float(frame.vfov),
+            "width": int(resolution[0]), "height": int(resolution[1])}
+
+
+def budget_kept(mode: str, value: float, power_w: float, error: float) -> bool:
+    return power_w <= value if mode == "POWER" else error <= value
+
+
+def evaluate_path(client: ServiceClient, store: pareto_store.ParetoStore, path: camera_path.CameraPath,
+                  spec: EvalSpec, *, progress: Callable[[int, int], None] | None = None,
+                  frames: Sequence[int] | None = None) -> list[FrameRow]:
+    """Rows for every (sampled frame, mode); errors and power measured by the service, not predicted."""
+    validate_budget(spec.budget_mode, spec.budget_value)
+    presets = preset_settings(store)
+    driver = PlaybackDriver(store, spec.filter_period_s)
+    picked = list(range(0, len(path), max(1, spec.frame_step)))
+    numbers = list(frames) if frames is not None else picked
+    if len(numbers) != len(picked):
+        raise ValueError("frames must give one frame number per sampled path frame")
+    rows: list[FrameRow] = []
+    total = len(picked) * len(spec.modes)
+    done = 0
+    for number, i in zip(numbers, picked, strict=True):
+        f = path.frames[i]
+        cam = camera_payload(f, spec.resolution)
+        for mode in spec.modes:
+            if mode == "ours":
+                pf = driver.step(f.matrix_world, f.vfov, f.aspect, f.time, spec.budget_mode,
+                                 spec.budget_value)
+                settings = pf.active_settings
+            else:
+                settings = presets[mode]
+            res = client.evaluate({"scene_id": spec.scene_id, "camera": cam, "settings": settings,
+                                   "profile": spec.profile, "fps": path.fps})
+            p, e = float(res["power_w"]), float(res["error"])
+            kept = budget_kept(spec.budget_mode, spec.budget_value, p, e) if mode == "ours" else None
+            rows.append(FrameRow(number, f.time, mode, p, e, _settings_text(settings), kept))
+            done += 1
+            if progress:
+                progress(done, total)
+    return rows
+
+
+def _settings_text(settings: dict[str, Any]) -> str:
+    return ";".join(f"{k}={v}" for k, v in settings.items())

@@ -1,0 +1,137 @@
+"""Per-frame playback logic: store lookup for a camera pose and budget, then the temporal filter.
+
+Pure (no bpy); the Blender handler in `playback.py` only reads the camera and writes the result.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from .vendored import pareto_store
+
+BUDGET_MODES = ("POWER", "ERROR")
+
+
+def validate_budget(mode: str, value: float) -> float:
+    """Check a budget before it reaches the store: power in watts > 0, error in [0, 1], both finite."""
+    if mode not in BUDGET_MODES:
+        raise ValueError(f"budget mode must be one of {BUDGET_MODES}, got {mode!r}")
+    v = float(value)
+    if not math.isfinite(v):
+        raise ValueError(f"{mode.lower()} budget must be finite, got {value!r}")
+    if mode == "POWER" and v <= 0.0:
+        raise ValueError(f"power budget must be > 0 W, got {v}")
+    if mode == "ERROR" and not 0.0 <= v <= 1.0:
+        raise ValueError(f"error budget (1 - SSIM) must be in [0, 1], got {v}")
+    return v
+
+
+@dataclass(frozen=True)
+class PlaybackFrame:
+    """What the handler writes for one frame."""
+
+    active_indices: tuple[int, ...]  # after the temporal filter: what is applied
+    target_indices: tuple[int, ...]  # the store's choice for this pose and budget
+    active_settings: dict[str, Any]
+    predicted_power_w: float  # of the target settings (the store knows frontier points only)
+    predicted_error: float
+    clamped: bool
+    infeasible: bool
+
+    @property
+    def in_transition(self) -> bool:
+        return self.active_indices != self.target_indices
+
+    def settings_text(self) -> str:
+        return ", ".join(f"{k}={v}" for k, v in self.active_settings.items())
+
+
+class PlaybackDriver:
+    """Holds one parsed store and one temporal filter; `step()` is called once per frame change."""
+
+    def __init__(self, store: pareto_store.ParetoStore, period_s: float = 2.0) -> None:
+        self.store = store
+        self.filter = pareto_store.TemporalFilter(period_s)
+
+    @property
+    def period_s(self) -> float:
+        return self.filter.period_s
+
+    def set_period(self, period_s: float) -> None:
+        """Change T; restarts filtering from the next frame (the current target then holds)."""
+        if period_s != self.filter.period_s:
+            self.filter = pareto_store.TemporalFilter(period_s)
+
+    def step(self, matrix_world: Sequence[Sequence[float]], vfov: float, aspect: float, now_s: float,
+             budget_mode: str, budget_value: float) -> PlaybackFrame:
+        budget = validate_budget(budget_mode, budget_value)
+        kwargs = {"power_budget": budget} if budget_mode == "POWER" else {"error_budget": budget}
+        m = matrix_world
+        position = (m[0][3], m[1][3], m[2][3])
+        hit = self.store.lookup(position, matrix=m, fov=vfov, aspect=aspect, **kwargs)
+        active = self.filter.update(hit.indices, now_s)
+        settings = hit.settings if active == hit.indices else self.store.settings_of(active)
+        return PlaybackFrame(active, tuple(hit.indices), settings, hit.power_w, hit.error, hit.clamped,
+                             hit.infeasible)
+
+
+class StoreCache:
+    """Parse a store once per (datablock, revision): playback runs every frame, the store rarely changes."""
+
+    def __init__(self) -> None:
+        self._key: Any = None
+        self._driver: PlaybackDriver | None = None
+
+    def driver(self, key: Any, load_text: Callable[[], str], period_s: float) -> PlaybackDriver:
+        if key != self._key or self._driver is None:
+            self._driver = PlaybackDriver(pareto_store.ParetoStore.from_json(load_text()), period_s)
+            self._key = key
+        else:
+            self._driver.set_period(period_s)
+        return self._driver
+
+    def clear(self) -> None:
+        self._key, self._driver = None, None
+
+
+def predicted_path_summary(store: pareto_store.ParetoStore, frames: Sequence[Any], budget_mode: str,
+                           budget_value: float) -> dict[str, Any]:
+    """Store size and the power the store predicts along a path under a budget, against the
+    maximum-quality (least-error) point of the same frontiers: what the panel's summary shows.
+
+    `frames` are camera_path.CameraFrame objects (matrix_world, vfov, aspect).
+    """
+    validate_budget(budget_mode, budget_value)
+    kwargs = {"power_budget": budget_value} if budget_mode == "POWER" else {"error_budget": budget_value}
+    chosen = best = 0.0
+    infeasible = 0
+    for f in frames:
+        pos = f.matrix_world[:3, 3]
+        hit = store.lookup(pos, matrix=f.matrix_world, fov=f.vfov, aspect=f.aspect, **kwargs)
+        top = store.lookup(pos, matrix=f.matrix_world, fov=f.vfov, aspect=f.aspect, error_budget=0.0)
+        chosen += hit.power_w
+        best += top.power_w
+        infeasible += int(hit.infeasible)
+    stats = store.stats()
+    n = max(1, len(frames))
+    return {
+        "views": stats["views"],
+        "corners": stats["corners"],
+        "depth": stats["depth"],
+        "size_bytes": stats["size_bytes"],
+        "mean_power_w": chosen / n,
+        "mean_max_quality_power_w": best / n,
+        "predicted_saving": (1.0 - chosen / best) if best > 0 else 0.0,
+        "infeasible_frames": infeasible,
+        "frames": len(frames),
+    }
+
+
+def summary_text(summary: dict[str, Any]) -> str:
+    return (f"{summary['views']} views, {summary['corners']} corners, depth {summary['depth']}, "
+            f"{summary['size_bytes'] / 1024:.1f} KB; predicted {summary['mean_power_w']:.3f} W vs "
+            f"{summary['mean_max_quality_power_w']:.3f} W at max quality "
+            f"({100 * summary['predicted_saving']:.1f} % saved)")

@@ -1,0 +1,215 @@
+"""Path-evaluation report data: per-frame rows, the power-budget paper's Table 3, CSV and plots.
+
+Pure (stdlib + numpy). Plotting needs matplotlib, which a stock Blender lacks: `plot_over_time` raises
+ImportError there, and the module can be run as a script by another Python to draw the plots from the
+CSV (`python report.py plot per_frame.csv OUT_DIR`).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import sys
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+#: Fixed presets of the paper's comparison, as a quality level in [0, 1] (1 = every parameter at max).
+PRESET_LEVELS: dict[str, float] = {"max": 1.0, "max_mid": 0.75, "mid_min": 0.25, "min": 0.0}
+MODE_LABELS: dict[str, str] = {
+    "ours": "Ours",
+    "ours_power": "Ours (power budget)",
+    "ours_error": "Ours (error budget)",
+    "max": "Max",
+    "max_mid": "Max-Mid",
+    "mid_min": "Mid-Min",
+    "min": "Min",
+}
+CSV_FIELDS = ("frame", "time_s", "mode", "power_w", "error", "settings", "budget_kept")
+
+
+@dataclass(frozen=True)
+class FrameRow:
+    """Figures of one frame rendered in one mode."""
+
+    frame: int
+    time_s: float
+    mode: str
+    power_w: float
+    error: float
+    settings: str = ""  # human-readable or packed settings, for the CSV
+    budget_kept: bool | None = None  # only meaningful for budget-driven modes
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.power_w) and math.isfinite(self.error)):
+            raise ValueError(f"non-finite power/error at frame {self.frame} ({self.mode})")
+
+
+@dataclass(frozen=True)
+class ModeSummary:
+    mode: str
+    frames: int
+    mean_power_w: float
+    mean_error: float
+    saving_vs_max: float | None  # fraction of the max preset's mean power saved
+    budget_kept_fraction: float | None
+
+
+def preset_indices(value_counts: Sequence[int], max_quality: Sequence[int], level: float) -> list[int]:
+    """Parameter indices of a fixed preset: level 1 = every parameter at its maximum-quality value,
+    0 = at the opposite end of its value list, in between rounded per parameter (the paper's presets)."""
+    if len(value_counts) != len(max_quality):
+        raise ValueError("value_counts and max_quality differ in length")
+    if not 0.0 <= level <= 1.0:
+        raise ValueError(f"preset level must be in [0, 1], got {level}")
+    out = []
+    for n, mq in zip(value_counts, max_quality, strict=True):
+        if n < 1 or not 0 <= mq < n:
+            raise ValueError(f"bad parameter: {n} values, max-quality index {mq}")
+        lo = n - 1 if mq == 0 else 0
+        out.append(math.floor(lo + level * (mq - lo) + 0.5))
+    return out
+
+
+def summarise(rows: Iterable[FrameRow]) -> list[ModeSummary]:
+    """Average power and error per mode (Table 3), with the saving against the `max` preset."""
+    by_mode: dict[str, list[FrameRow]] = {}
+    for r in rows:
+        by_mode.setdefault(r.mode, []).append(r)
+    if not by_mode:
+        raise ValueError("no frames to summarise")
+    means = {m: (sum(r.power_w for r in rs) / len(rs), sum(r.error for r in rs) / len(rs))
+             for m, rs in by_mode.items()}
+    max_power = means["max"][0] if "max" in means else None
+    out = []
+    for mode, rs in by_mode.items():
+        p, e = means[mode]
+        saving = (1.0 - p / max_power) if max_power else None
+        kept = [r.budget_kept for r in rs if r.budget_kept is not None]
+        out.append(ModeSummary(mode, len(rs), p, e, saving, (sum(kept) / len(kept)) if kept else None))
+    order = list(MODE_LABELS)
+    out.sort(key=lambda s: order.index(s.mode) if s.mode in order else len(order))
+    return out
+
+
+def table3_markdown(summaries: Sequence[ModeSummary], title: str = "") -> str:
+    """Modes as columns, average power and error as rows: the layout of the paper's Table 3."""
+    labels = [MODE_LABELS.get(s.mode, s.mode) for s in summaries]
+    lines = []
+    if title:
+        lines += [f"### {title}", ""]
+    lines.append("| | " + " | ".join(labels) + " |")
+    lines.append("|---|" + "---|" * len(labels))
+    lines.append("| Avg. Power (W) | " + " | ".join(f"{s.mean_power_w:.3f}" for s in summaries) + " |")
+    lines.append("| Avg. Error (e) | " + " | ".join(f"{s.mean_error:.4f}" for s in summaries) + " |")
+    lines.append("| Power saved vs Max | " + " | ".join(
+        "" if s.saving_vs_max is None else f"{100.0 * s.saving_vs_max:.1f} %" for s in summaries) + " |")
+    if any(s.budget_kept_fraction is not None for s in summaries):
+        lines.append("| Budget kept | " + " | ".join(
+            "" if s.budget_kept_fraction is None else f"{100.0 * s.budget_kept_fraction:.1f} %"
+            for s in summaries) + " |")
+    lines.append("| Frames | " + " | ".join(str(s.frames) for s in summaries) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def write_csv(path: str | Path, rows: Iterable[FrameRow]) -> Path:
+    path = Path(path)
+    with path.open("w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(CSV_FIELDS)
+        for r in rows:
+            kept = "" if r.budget_kept is None else int(r.budget_kept)
+            w.writerow([r.frame, f"{r.time_s:.6f}", r.mode, f"{r.power_w:.6g}", f"{r.error:.6g}",
+                        r.settings, kept])
+    return path
+
+
+def read_csv(path: str | Path) -> list[FrameRow]:
+    rows = []
+    with Path(path).open(newline="", encoding="utf-8") as fh:
+        for rec in csv.DictReader(fh):
+            kept = rec.get("budget_kept", "")
+            rows.append(FrameRow(int(rec["frame"]), float(rec["time_s"]), rec["mode"], float(rec["power_w"]),
+                                 float(rec["error"]), rec.get("settings", ""),
+                                 None if kept == "" else bool(int(kept))))
+    return rows
+
+
+def plot_over_time(rows: Sequence[FrameRow], out_dir: str | Path, budget: tuple[str, float] | None = None
+                   ) -> list[Path]:
+    """Power and error over time per mode (the paper's Figures 9-11) as PNGs. Needs matplotlib."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    by_mode: dict[str, list[FrameRow]] = {}
+    for r in rows:
+        by_mode.setdefault(r.mode, []).append(r)
+    written = []
+    for quantity, ylabel, fname in (("power_w", "power (W)", "power_over_time.png"),
+                                    ("error", "error (1 - SSIM)", "error_over_time.png")):
+        fig, ax = plt.subplots(figsize=(8, 3.5), dpi=100)
+        for mode, rs in by_mode.items():
+            rs = sorted(rs, key=lambda r: r.time_s)
+            ax.plot([r.time_s for r in rs], [getattr(r, quantity) for r in rs],
+                    label=MODE_LABELS.get(mode, mode), linewidth=1.2)
+        if budget and ((budget[0] == "POWER" and quantity == "power_w")
+                       or (budget[0] == "ERROR" and quantity == "error")):
+            ax.axhline(budget[1], color="k", linestyle="--", linewidth=0.8, label="budget")
+        ax.set_xlabel("time (s)")
+        ax.set_ylabel(ylabel)
+        ax.legend(fontsize=7, ncol=3)
+        ax.grid(alpha=0.3)
+        fig.tight_layout()
+        target = out_dir / fname
+        fig.savefig(target)
+        plt.close(fig)
+        written.append(target)
+    return written
+
+
+def main(argv: Sequence[str]) -> int:
+    """`report.py plot CSV OUT_DIR`: draw the plots with a Python that has matplotlib."""
+    if len(argv) != 3 or argv[0] != "plot":
+        sys.stderr.write("usage: report.py plot PER_FRAME.csv OUT_DIR\n")
+        return 2
+    plot_over_time(read_csv(argv[1]), argv[2])
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main(sys.argv[1:]))
+
+
+def write_report(out_dir: str | Path, rows: Sequence[FrameRow], *, title: str, budget: tuple[str, float],
+                 notes: Sequence[str] = (), plot: bool = True) -> dict[str, Path | str]:
+    """Write report.md (Table 3 layout), per_frame.csv and, when matplotlib is importable, the plots.
+
+    Returns the written paths, plus 'plots_skipped' with the reason when plotting was not possible here.
+    """
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    written: dict[str, Path | str] = {"csv": write_csv(out_dir / "per_frame.csv", rows)}
+    if plot:
+        try:
+            for p in plot_over_time(rows, out_dir, budget):
+                written[p.stem] = p
+        except ImportError as err:
+            written["plots_skipped"] = f"matplotlib not available in this Python ({err})"
+    summaries = summarise(rows)
+    mode, value = budget
+    unit = "W" if mode == "POWER" else "(1 - SSIM)"
+    lines = [f"# Power budget report: {title}", "",
+             f"Budget: {mode.lower()} <= {value:g} {unit}. Error is 1 - SSIM against the maximum-quality "
+             "render of the same frame; power is the simulator's at the path's frame rate.", "",
+             table3_markdown(summaries), "",
+             "Files: `per_frame.csv` (every frame and mode), `power_over_time.png`, `error_over_time.png`, "
+             "`frames/` (sample frames).", ""]
+    lines += [f"- {n}" for n in notes]
+    report = out_dir / "report.md"
+    report.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    written["report"] = report
+    return written

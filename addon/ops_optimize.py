@@ -1,0 +1,358 @@
+"""Optimize power: export the scene (.glb) and the camera path, run a job on the service, keep the store.
+
+GUI (invoke): the export happens on the main thread, a worker thread does HTTP only, and a timer on the
+main thread drains a queue into the WindowManager progress properties. Background/batch (execute): the
+same steps synchronously. The store ends up in a text datablock that is saved with the .blend.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import queue
+import tempfile
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import bpy
+
+from . import playback, service_process
+from .camera_path import load_path, sample_animation, store_path
+from .core.client import ServiceClient
+from .core.job_runner import JobOptions, JobOutcome, JobUpdate, run_job
+from .core.playback_logic import predicted_path_summary, summary_text, validate_budget
+from .core.vendored import camera_path as path_format
+from .core.vendored import pareto_store
+
+log = logging.getLogger(__name__)
+STORE_TEXT_PREFIX = "power_budget_store"
+
+
+# -- main-thread preparation ----------------------------------------------------------------------------
+def check_scene(scene: bpy.types.Scene) -> None:
+    """Fail early with a clear message on scenes the service cannot optimise."""
+    if scene.camera is None:
+        raise ValueError("the scene has no active camera: add one or record a viewport path")
+    if not any(o.type in {"MESH", "CURVE", "SURFACE", "META", "FONT"} and not o.hide_render
+               for o in scene.objects):
+        raise ValueError("the scene has no renderable geometry (empty scene)")
+
+
+def job_options(scene: bpy.types.Scene) -> JobOptions:
+    props = scene.power_budget
+    enabled = [p.name for p in props.parameters if p.enabled and not p.inert]
+    return JobOptions(
+        profile=props.profile or _default_profile(),
+        parameters=tuple(enabled) if len(props.parameters) else None,
+        threshold_power_w=props.threshold_power,
+        threshold_error=props.threshold_error,
+        max_depth=props.max_depth,
+        population=props.population,
+        generations=props.generations,
+        seed=props.seed,
+        exhaustive_limit=props.exhaustive_limit,
+        resolution=(props.eval_width, props.eval_height),
+    )
+
+
+def _default_profile() -> str:
+    try:
+        from . import preferences
+
+        return preferences.get().default_profile or "mobile"
+    except RuntimeError:
+        return "mobile"
+
+
+def export_glb(scene: bpy.types.Scene, directory: str | Path) -> Path:
+    """The scene as glTF binary: modifiers applied, lights and cameras included, Y up (glTF's frame)."""
+    path = Path(directory) / "scene.glb"
+    window = bpy.context.window
+    with bpy.context.temp_override(scene=scene, **({"window": window} if window else {})):
+        if bpy.context.object is not None and bpy.context.object.mode != "OBJECT":
+            bpy.ops.object.mode_set(mode="OBJECT")
+        bpy.ops.export_scene.gltf(filepath=str(path), export_format="GLB", export_apply=True,
+                                  export_lights=True, export_cameras=True, export_yup=True,
+                                  use_active_scene=True)
+    if not path.is_file():
+        raise RuntimeError("glTF export produced no file")
+    return path
+
+
+def ensure_path(scene: bpy.types.Scene) -> path_format.CameraPath:
+    """The recorded path, recording it from the active camera's animation if there is none yet."""
+    path = load_path(scene)
+    if path is None:
+        path = sample_animation(scene, scene.camera, scene.power_budget.frame_step)
+        store_path(scene, path)
+    return path
+
+
+@dataclass
+class Prepared:
+    scene_name: str
+    glb: Path
+    path: path_format.CameraPath
+    options: JobOptions
+    tmpdir: tempfile.TemporaryDirectory = field(repr=False)
+
+
+def prepare(scene: bpy.types.Scene) -> Prepared:
+    check_scene(scene)
+    props = scene.power_budget
+    validate_budget(props.budget_mode,
+                    props.power_budget if props.budget_mode == "POWER" else props.error_budget)
+    options = job_options(scene)
+    path = ensure_path(scene)
+    tmp = tempfile.TemporaryDirectory(prefix="render-budget-export-")
+    try:
+        glb = export_glb(scene, tmp.name)
+    except Exception:
+        tmp.cleanup()
+        raise
+    return Prepared(scene.name, glb, path, options, tmp)
+
+
+def apply_outcome(scene: bpy.types.Scene, outcome: JobOutcome, path: path_format.CameraPath) -> str:
+    """Keep the store in the .blend (text datablock), record ids and the results summary."""
+    store = pareto_store.ParetoStore.from_json(outcome.store_text)  # validate before replacing anything
+    props = scene.power_budget
+    text = props.store_text
+    if text is None:
+        text = bpy.data.texts.new(f"{STORE_TEXT_PREFIX}_{scene.name}.json")
+        text.use_fake_user = True
+        props.store_text = text
+    text.from_string(outcome.store_text)
+    props.store_revision += 1
+    props.scene_id, props.job_id, props.store_id = outcome.scene_id, outcome.job_id, outcome.store_id
+    fill_parameters(scene, outcome.scene_info.get("inert_parameters") or {}, store)
+    mode = props.budget_mode
+    value = props.power_budget if mode == "POWER" else props.error_budget
+    props.summary = summary_text(predicted_path_summary(store, path.frames, mode, value))
+    playback.reset()
+    return props.summary
+
+
+def fill_parameters(scene: bpy.types.Scene, inert: dict[str, str],
+                    store: pareto_store.ParetoStore | None = None) -> None:
+    """Show the parameter space: the store's parameters with values, then inert ones with their reason."""
+    props = scene.power_budget
+    previous = {p.name: p.enabled for p in props.parameters}
+    props.parameters.clear()
+    for p in (store.parameters if store is not None else ()):
+        item = props.parameters.add()
+        item.name = p.name
+        item.values = ", ".join(str(v) for v in p.values)
+        item.value_count = len(p.values)
+        item.enabled = previous.get(p.name, True)
+    for name, reason in sorted(inert.items()):
+        if name in props.parameters:
+            continue
+        item = props.parameters.add()
+        item.name, item.inert, item.reason, item.enabled = name, True, reason, False
+
+
+def run_sync(scene: bpy.types.Scene, client: ServiceClient,
+             progress: Callable[[JobUpdate], None] | None = None, timeout_s: float | None = None) -> str:
+    """The whole optimisation on the calling (main) thread: for background mode, batch and tests."""
+    prep = prepare(scene)
+    try:
+        outcome = run_job(client, prep.glb, prep.path.to_dict(), prep.options, progress=progress,
+                          timeout_s=timeout_s)
+    finally:
+        prep.tmpdir.cleanup()
+    return apply_outcome(scene, outcome, prep.path)
+
+
+# -- GUI: worker thread + timer -------------------------------------------------------------------------
+@dataclass
+class _ActiveJob:
+    prep: Prepared
+    thread: threading.Thread
+    messages: queue.Queue = field(default_factory=queue.Queue)
+    cancel: threading.Event = field(default_factory=threading.Event)
+
+
+_active: _ActiveJob | None = None
+
+
+def job_running() -> bool:
+    return _active is not None and _active.thread.is_alive()
+
+
+def _worker(job: _ActiveJob, client: ServiceClient) -> None:
+    """HTTP only: never touches bpy. Posts ('progress'|'done'|'error', payload) messages."""
+    try:
+        outcome = run_job(client, job.prep.glb, job.prep.path.to_dict(), job.prep.options,
+                          progress=lambda u: job.messages.put(("progress", u)),
+                          should_cancel=job.cancel.is_set)
+        job.messages.put(("done", outcome))
+    except Exception as err:  # everything goes back to the main thread to be reported
+        job.messages.put(("error", err))
+
+
+def _redraw() -> None:
+    wm = bpy.context.window_manager
+    for window in wm.windows:
+        for area in window.screen.areas:
+            if area.type == "VIEW_3D":
+                area.tag_redraw()
+
+
+def _poll_queue() -> float | None:
+    """bpy.app.timers callback on the main thread: apply worker messages; stop when the job ends."""
+    global _active
+    job = _active
+    if job is None:
+        return None
+    rt = bpy.context.window_manager.power_budget_runtime
+    finished = False
+    while True:
+        try:
+            kind, payload = job.messages.get_nowait()
+        except queue.Empty:
+            break
+        if kind == "progress":
+            rt.job_progress, rt.job_status = payload.fraction, payload.text
+        elif kind == "done":
+            scene = bpy.data.scenes.get(job.prep.scene_name)
+            if scene is None:
+                rt.job_status = "finished, but the scene was removed; store not kept"
+            else:
+                try:
+                    rt.job_status = "done: " + apply_outcome(scene, payload, job.prep.path)
+                    rt.job_progress = 1.0
+                except ValueError as err:
+                    rt.job_status = f"failed: invalid store from service ({err})"
+            finished = True
+        else:
+            rt.job_status = f"failed: {payload}"
+            finished = True
+    _redraw()
+    if finished:
+        rt.job_running = False
+        job.prep.tmpdir.cleanup()
+        _active = None
+        return None
+    return 0.25
+
+
+class POWER_OT_optimize(bpy.types.Operator):
+    """Optimise render settings along the camera path on the render-budget service"""
+
+    bl_idname = "power.optimize"
+    bl_label = "Optimize Power"
+
+    @classmethod
+    def poll(cls, context: bpy.types.Context) -> bool:
+        return not job_running()
+
+    def execute(self, context: bpy.types.Context) -> set[str]:
+        wm = context.window_manager
+        rt = wm.power_budget_runtime
+        try:
+            client = service_process.client_for(context)
+            wm.progress_begin(0, 100)
+
+            def progress(u: JobUpdate) -> None:
+                rt.job_progress, rt.job_status = u.fraction, u.text
+                wm.progress_update(int(100 * u.fraction))
+                log.info("%s", u.text)
+
+            summary = run_sync(context.scene, client, progress)
+        except Exception as err:  # report every failure; the .blend keeps its previous store
+            rt.job_status = f"failed: {err}"
+            self.report({"ERROR"}, f"Optimize power failed: {err}")
+            return {"CANCELLED"}
+        finally:
+            wm.progress_end()
+        rt.job_status = "done: " + summary
+        self.report({"INFO"}, summary)
+        return {"FINISHED"}
+
+    def invoke(self, context: bpy.types.Context, event: bpy.types.Event) -> set[str]:
+        global _active
+        if bpy.app.background:
+            return self.execute(context)
+        rt = context.window_manager.power_budget_runtime
+        try:
+            client = service_process.client_for(context)
+            prep = prepare(context.scene)
+        except Exception as err:
+            self.report({"ERROR"}, f"Optimize power: {err}")
+            return {"CANCELLED"}
+        job = _ActiveJob(prep, threading.Thread(name="render-budget-job", daemon=True))
+        job.thread = threading.Thread(target=_worker, args=(job, client), name="render-budget-job",
+                                      daemon=True)
+        _active = job
+        rt.job_running, rt.job_progress, rt.job_status = True, 0.0, "starting"
+        job.thread.start()
+        bpy.app.timers.register(_poll_queue, first_interval=0.25)
+        return {"FINISHED"}
+
+
+class POWER_OT_cancel_job(bpy.types.Operator):
+    """Cancel the running optimisation (the service stops the job; nothing in the .blend changes)"""
+
+    bl_idname = "power.cancel_job"
+    bl_label = "Cancel"
+
+    @classmethod
+    def poll(cls, context: bpy.types.Context) -> bool:
+        return job_running()
+
+    def execute(self, context: bpy.types.Context) -> set[str]:
+        if _active is not None:
+            _active.cancel.set()
+            context.window_manager.power_budget_runtime.job_status = "cancelling"
+        return {"FINISHED"}
+
+
+class POWER_OT_load_store(bpy.types.Operator):
+    """Load a Pareto store from a JSON file (e.g. written by `render-budget optimize`) into the .blend"""
+
+    bl_idname = "power.load_store"
+    bl_label = "Load Store File"
+
+    filepath: bpy.props.StringProperty(subtype="FILE_PATH")  # type: ignore[valid-type]
+
+    def execute(self, context: bpy.types.Context) -> set[str]:
+        try:
+            text = Path(bpy.path.abspath(self.filepath)).read_text(encoding="utf-8")
+            json.loads(text)
+            pareto_store.ParetoStore.from_json(text)
+        except (OSError, ValueError) as err:
+            self.report({"ERROR"}, f"not a usable store: {err}")
+            return {"CANCELLED"}
+        scene = context.scene
+        path = load_path(scene)
+        if path is None:
+            self.report({"ERROR"}, "record a camera path first (the summary is computed along it)")
+            return {"CANCELLED"}
+        outcome = JobOutcome("", scene.power_budget.scene_id, "", text)
+        self.report({"INFO"}, apply_outcome(scene, outcome, path))
+        return {"FINISHED"}
+
+    def invoke(self, context: bpy.types.Context, event: bpy.types.Event) -> set[str]:
+        context.window_manager.fileselect_add(self)
+        return {"RUNNING_MODAL"}
+
+
+classes = (POWER_OT_optimize, POWER_OT_cancel_job, POWER_OT_load_store)
+_register, _unregister = bpy.utils.register_classes_factory(classes)
+
+
+def register() -> None:
+    _register()
+
+
+def unregister() -> None:
+    global _active
+    if _active is not None:
+        _active.cancel.set()
+        _active = None
+    if bpy.app.timers.is_registered(_poll_queue):
+        bpy.app.timers.unregister(_poll_queue)
+    _unregister()

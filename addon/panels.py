@@ -1,0 +1,121 @@
+"""The "Power Budget" sidebar panel in the 3D viewport (drawing only; every action is an operator)."""
+
+from __future__ import annotations
+
+import bpy
+
+from . import ops_optimize, service_process
+
+
+class POWER_UL_parameters(bpy.types.UIList):
+    """Parameter space: searchable parameters with their values; inert ones greyed out with the reason."""
+
+    def draw_item(self, context, layout, data, item, icon, active_data, active_propname, index=0):
+        row = layout.row(align=True)
+        row.active = not item.inert
+        if item.inert:
+            row.label(text=item.name, icon="CANCEL")
+            row.label(text=item.reason)
+        else:
+            row.prop(item, "enabled", text="")
+            row.label(text=item.name)
+            row.label(text=item.values)
+
+
+class VIEW3D_PT_power_budget(bpy.types.Panel):
+    bl_label = "Power Budget"
+    bl_idname = "VIEW3D_PT_power_budget"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "Power Budget"
+
+    def draw(self, context: bpy.types.Context) -> None:
+        layout = self.layout
+        props = context.scene.power_budget
+        rt = context.window_manager.power_budget_runtime
+
+        box = layout.box()
+        row = box.row(align=True)
+        row.operator("power.service_start", icon="URL")
+        if service_process.local_running():
+            row.operator("power.service_stop", text="", icon="X")
+        if rt.service_status:
+            box.label(text=rt.service_status)
+        box.prop_search(props, "profile", props, "profiles", text="Profile")
+
+        col = layout.column(align=True)
+        col.label(text="Camera path")
+        row = col.row(align=True)
+        row.operator("power.record_path_animation", icon="CAMERA_DATA")
+        row.operator("power.record_path_viewport", icon="REC")
+        col.prop(props, "path_text", text="")
+        col.prop(props, "frame_step")
+
+        layout.label(text="Parameter space")
+        layout.template_list("POWER_UL_parameters", "", props, "parameters", props, "parameters_index",
+                             rows=4)
+
+        col = layout.column(align=True)
+        col.label(text="Subdivision")
+        col.prop(props, "threshold_power")
+        col.prop(props, "threshold_error")
+        col.prop(props, "max_depth")
+        col = layout.column(align=True)
+        col.label(text="Optimiser")
+        col.prop(props, "population")
+        col.prop(props, "generations")
+        col.prop(props, "seed")
+        col.prop(props, "exhaustive_limit")
+        row = layout.row(align=True)
+        row.label(text="Evaluation")
+        row.prop(props, "eval_width", text="W")
+        row.prop(props, "eval_height", text="H")
+
+        col = layout.column(align=True)
+        col.prop(props, "budget_mode", expand=True)
+        col.prop(props, "power_budget" if props.budget_mode == "POWER" else "error_budget")
+        col.prop(props, "filter_period")
+
+        row = layout.row(align=True)
+        row.scale_y = 1.4
+        row.operator("power.optimize", icon="PLAY")
+        if ops_optimize.job_running():
+            row.operator("power.cancel_job", text="", icon="CANCEL")
+        if rt.job_running or rt.job_status:
+            layout.progress(factor=rt.job_progress, type="BAR", text=rt.job_status or "")
+
+        if props.store_text is not None:
+            box = layout.box()
+            box.label(text="Results", icon="INFO")
+            for chunk in _wrap(props.summary, 48):
+                box.label(text=chunk)
+            box.prop(props, "playback_enabled")
+            box.prop(props, "hud_enabled")
+            box.label(text=f"Power {props.predicted_power:.3f} W, error {props.predicted_error:.4f}")
+            for chunk in _wrap(props.active_settings, 48):
+                box.label(text=chunk)
+            if props.infeasible:
+                box.label(text="budget cannot be met here", icon="ERROR")
+            if props.clamped:
+                box.label(text="camera outside the optimised space", icon="ERROR")
+        row = layout.row(align=True)
+        row.operator("power.preview", icon="RENDER_STILL")
+        row.operator("power.evaluate_path", icon="GRAPH")
+        layout.operator("power.load_store", icon="FILE")
+
+
+def _wrap(text: str, width: int) -> list[str]:
+    out, line = [], ""
+    for word in (text or "").split():
+        if line and len(line) + 1 + len(word) > width:
+            out.append(line)
+            line = word
+        else:
+            line = f"{line} {word}".strip()
+    if line:
+        out.append(line)
+    return out
+
+
+classes = (POWER_UL_parameters, VIEW3D_PT_power_budget)
+register, unregister = bpy.utils.register_classes_factory(classes)

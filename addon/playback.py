@@ -1,0 +1,89 @@
+"""Drive the render settings during playback: a persistent frame_change_post handler looks the store up
+for the current camera pose and budget, applies the temporal filter on scene time and writes the result
+to the scene's properties (read by the panel, the HUD and batch playback)."""
+
+from __future__ import annotations
+
+import bpy
+from bpy.app.handlers import persistent
+
+from .camera_path import camera_vfov, render_resolution, scene_fps
+from .core.playback_logic import PlaybackFrame, StoreCache
+
+_cache = StoreCache()
+
+
+def scene_time(scene: bpy.types.Scene) -> float:
+    """Seconds since the first frame of the range (the temporal filter's clock)."""
+    return (scene.frame_current + scene.frame_subframe - scene.frame_start) / scene_fps(scene)
+
+
+def budget_of(props: bpy.types.PropertyGroup) -> tuple[str, float]:
+    mode = props.budget_mode
+    return mode, (props.power_budget if mode == "POWER" else props.error_budget)
+
+
+def update_scene(scene: bpy.types.Scene) -> PlaybackFrame | None:
+    """Look up, filter and write this frame's settings; returns what was written (None: nothing to do)."""
+    props = scene.power_budget
+    text = props.store_text
+    if text is None or not props.playback_enabled:
+        return None
+    cam = scene.camera
+    if cam is None:
+        props.playback_status = "no active camera"
+        return None
+    w, h = render_resolution(scene)
+    try:
+        driver = _cache.driver((text.as_pointer(), text.name, props.store_revision), text.as_string,
+                               props.filter_period)
+        mode, value = budget_of(props)
+        frame = driver.step(cam.matrix_world, camera_vfov(cam, scene), w / h, scene_time(scene), mode, value)
+    except ValueError as err:
+        props.playback_status = f"error: {err}"
+        return None
+    props.active_settings = frame.settings_text()
+    props.active_indices = " ".join(map(str, frame.active_indices))
+    props.target_indices = " ".join(map(str, frame.target_indices))
+    props.predicted_power = frame.predicted_power_w
+    props.predicted_error = frame.predicted_error
+    props.clamped = frame.clamped
+    props.infeasible = frame.infeasible
+    props.playback_status = "blending" if frame.in_transition else "on target"
+    return frame
+
+
+def reset() -> None:
+    """Forget the parsed store and the filter state (new file, new store)."""
+    _cache.clear()
+
+
+@persistent
+def on_frame_change(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph) -> None:
+    update_scene(scene)
+
+
+@persistent
+def on_load(*_args: object) -> None:
+    reset()
+
+
+_HANDLERS = ((bpy.app.handlers.frame_change_post, on_frame_change), (bpy.app.handlers.load_post, on_load))
+
+
+def _remove_by_name(handlers: list, fn: object) -> None:
+    for h in list(handlers):
+        if getattr(h, "__name__", None) == fn.__name__ and getattr(h, "__module__", None) == fn.__module__:
+            handlers.remove(h)
+
+
+def register() -> None:
+    for handlers, fn in _HANDLERS:
+        _remove_by_name(handlers, fn)  # a reload must not stack a second copy
+        handlers.append(fn)
+
+
+def unregister() -> None:
+    for handlers, fn in _HANDLERS:
+        _remove_by_name(handlers, fn)
+    reset()

@@ -1,0 +1,286 @@
+"""Pure logic of the add-on (no bpy): path maths, REST client edges, playback logic, report data."""
+
+from __future__ import annotations
+
+import math
+import socket
+import sys
+
+import numpy as np
+import pytest
+
+from addon.core import client as client_mod
+from addon.core.job_runner import JobOptions, describe
+from addon.core.local_service import free_port, serve_command
+from addon.core.path_sampling import build_path, camera_lens_from_viewport, frame_times, vertical_fov
+from addon.core.playback_logic import PlaybackDriver, StoreCache, predicted_path_summary, validate_budget
+from addon.core.report import (
+    FrameRow,
+    plot_over_time,
+    preset_indices,
+    read_csv,
+    summarise,
+    table3_markdown,
+    write_csv,
+    write_report,
+)
+from tests.addon_support import synthetic_store
+
+
+def test_core_imports_without_bpy() -> None:
+    import ast
+    from pathlib import Path
+
+    core = Path(__file__).resolve().parent.parent / "addon" / "core"
+    for f in core.glob("*.py"):
+        tree = ast.parse(f.read_text())
+        for node in ast.walk(tree):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else (
+                [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+            assert not any(n.split(".")[0] in {"bpy", "mathutils", "blf", "gpu"} for n in names), f
+
+
+# -- path maths -------------------------------------------------------------------------------------------
+def test_vertical_fov_matches_sensor_geometry() -> None:
+    # 50 mm on a 36 mm sensor, 16:9: horizontal fov from the width, vertical from the aspect
+    h = 2 * math.atan(18 / 50)
+    v = vertical_fov(50, 36, 24, "AUTO", 1920, 1080)
+    assert v == pytest.approx(2 * math.atan(math.tan(h / 2) * 1080 / 1920))
+    # portrait with AUTO: the sensor width fits the larger (vertical) side
+    assert vertical_fov(50, 36, 24, "AUTO", 1080, 1920) == pytest.approx(h)
+    assert vertical_fov(50, 36, 24, "VERTICAL", 1920, 1080) == pytest.approx(2 * math.atan(12 / 50))
+    assert vertical_fov(50, 36, 24, "HORIZONTAL", 1080, 1920) == pytest.approx(
+        2 * math.atan(math.tan(h / 2) * 1920 / 1080))
+    # non-square pixels widen the displayed image
+    square = vertical_fov(50, 36, 24, "AUTO", 1000, 1000)
+    assert vertical_fov(50, 36, 24, "AUTO", 1000, 1000, 2.0, 1.0) < square
+
+
+@pytest.mark.parametrize("bad", [dict(lens_mm=0), dict(lens_mm=math.nan), dict(width=0),
+                                 dict(sensor_fit="X")])
+def test_vertical_fov_rejects_bad_input(bad: dict) -> None:
+    args = dict(lens_mm=50, sensor_width_mm=36, sensor_height_mm=24, sensor_fit="AUTO", width=64, height=48)
+    args.update(bad)
+    with pytest.raises(ValueError):
+        vertical_fov(**args)
+
+
+def test_viewport_lens_and_frame_times() -> None:
+    assert camera_lens_from_viewport(50, 36) == pytest.approx(25)
+    assert frame_times(1, 4, 2.0) == [(1, 0.0), (2, 0.5), (3, 1.0), (4, 1.5)]
+    assert frame_times(1, 5, 1.0, step=2) == [(1, 0.0), (3, 2.0), (5, 4.0)]
+    with pytest.raises(ValueError):
+        frame_times(5, 1, 24)
+
+
+def test_build_path_round_trips_through_the_shared_format() -> None:
+    m = np.eye(4)
+    m[:3, 3] = (1, 2, 3)
+    path = build_path([(0.0, m, 0.7, (64, 48)), (0.5, m, 0.8, (64, 48))], 2.0)
+    doc = path.to_dict()
+    assert doc["version"] == 1 and doc["fps"] == 2.0 and len(doc["frames"]) == 2
+    assert doc["frames"][1]["matrix_world"][1][3] == 2
+    with pytest.raises(ValueError):
+        build_path([(0.0, np.full((4, 4), np.nan), 0.7, (64, 48))], 24)
+    with pytest.raises(ValueError):
+        build_path([], 24)
+
+
+# -- client edges -----------------------------------------------------------------------------------------
+def test_client_validates_urls() -> None:
+    assert client_mod.normalise_base_url("http://127.0.0.1:8765/") == "http://127.0.0.1:8765"
+    for bad in ("ftp://x", "127.0.0.1:80", "http://", "http://h/?q=1"):
+        with pytest.raises(ValueError):
+            client_mod.ServiceClient(bad)
+    assert client_mod.is_loopback("http://localhost:1") and not client_mod.is_loopback("http://10.0.0.2:1")
+
+
+def test_client_reports_a_service_that_is_down() -> None:
+    port = free_port()
+    c = client_mod.ServiceClient(f"http://127.0.0.1:{port}", timeout_s=2)
+    with pytest.raises(client_mod.ServiceUnavailable, match="no render-budget service"):
+        c.health()
+
+
+def test_client_reports_http_errors_with_the_service_message() -> None:
+    """A real socket server answering one request with the service's error shape."""
+    import threading
+
+    body = b'{"error": {"status": 404, "code": "not_found", "message": "job \'x\' not found"}}'
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(1)
+
+    def serve() -> None:
+        conn, _ = srv.accept()
+        conn.recv(65536)
+        conn.sendall(b"HTTP/1.1 404 Not Found\r\nContent-Type: application/json\r\nContent-Length: "
+                     + str(len(body)).encode() + b"\r\nConnection: close\r\n\r\n" + body)
+        conn.close()
+
+    t = threading.Thread(target=serve, daemon=True)
+    t.start()
+    c = client_mod.ServiceClient(f"http://127.0.0.1:{srv.getsockname()[1]}", timeout_s=5)
+    with pytest.raises(client_mod.ServiceError) as info:
+        c.job("x")
+    t.join(5)
+    srv.close()
+    assert info.value.status == 404 and "not found" in info.value.message
+
+
+def test_upload_refuses_non_glb(tmp_path) -> None:
+    f = tmp_path / "x.glb"
+    f.write_bytes(b"not a glb")
+    with pytest.raises(ValueError, match="not a binary glTF"):
+        client_mod.ServiceClient("http://127.0.0.1:9").upload_scene(f)
+
+
+def test_job_options_validate_and_build_the_payload() -> None:
+    o = JobOptions(profile="mobile", parameters=("max_depth",), max_depth=1, resolution=(32, 24))
+    body = o.payload("a" * 64, {"version": 1, "fps": 24.0, "frames": []})
+    assert body["parameters"] == ["max_depth"] and body["resolution"] == [32, 24]
+    assert body["thresholds"] == {"power_w": 0.05, "error": 0.01}
+    for bad in (dict(threshold_power_w=0), dict(threshold_error=2), dict(max_depth=9),
+                dict(resolution=(2, 2)), dict(parameters=())):
+        with pytest.raises(ValueError):
+            JobOptions(**bad)
+
+
+def test_describe_job_progress() -> None:
+    u = describe({"state": "running", "progress": {"views_done": 3, "views_planned": 12, "evaluations": 40}})
+    assert u.fraction == pytest.approx(0.25) and "3/12 views" in u.text
+    assert describe({"state": "done", "progress": {}}).fraction == 1.0
+
+
+def test_serve_command(tmp_path) -> None:
+    cmd = serve_command(sys.executable, 8123, tmp_path, token="t")
+    assert cmd[-9:] == ["serve", "--host", "127.0.0.1", "--port", "8123", "--data-dir", str(tmp_path),
+                        "--token", "t"]
+    with pytest.raises(FileNotFoundError):
+        serve_command(tmp_path / "nope", 8123, tmp_path)
+
+
+# -- playback logic --------------------------------------------------------------------------------------
+def _look(direction: tuple[float, float, float], pos=(0.0, 0.0, 0.0)) -> np.ndarray:
+    f = np.asarray(direction, dtype=float)
+    f /= np.linalg.norm(f)
+    up = np.array([0.0, 0.0, 1.0]) if abs(f[2]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    r = np.cross(f, up)
+    r /= np.linalg.norm(r)
+    u = np.cross(r, f)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = r, u, -f, pos
+    return m
+
+
+@pytest.mark.parametrize(("mode", "value"), [("POWER", 0.0), ("POWER", -1), ("ERROR", 1.5),
+                                             ("ERROR", math.nan), ("WATTS", 1.0), ("POWER", math.inf)])
+def test_invalid_budgets_are_rejected(mode: str, value: float) -> None:
+    with pytest.raises(ValueError):
+        validate_budget(mode, value)
+
+
+def test_playback_driver_matches_store_lookup_and_filters_changes() -> None:
+    store = synthetic_store()
+    drv = PlaybackDriver(store, period_s=2.0)
+    m_x, m_y = _look((1, 0, 0)), _look((0, 1, 0))
+    first = drv.step(m_x, 0.69, 16 / 9, 0.0, "ERROR", 0.01)
+    ref = store.lookup(m_x[:3, 3], matrix=m_x, fov=0.69, aspect=16 / 9, error_budget=0.01)
+    assert first.target_indices == ref.indices and first.active_indices == ref.indices
+    assert first.predicted_power_w == pytest.approx(ref.power_w)
+    # turn to another view: new target, the filter blends over T = 2 s
+    target = store.lookup(m_y[:3, 3], matrix=m_y, fov=0.69, aspect=16 / 9, error_budget=0.01).indices
+    assert target != ref.indices
+    seen = [drv.step(m_y, 0.69, 16 / 9, t, "ERROR", 0.01) for t in (0.1, 1.0, 1.9, 2.1, 3.0)]
+    assert seen[0].active_indices != target  # just after the change: still (mostly) the old settings
+    for s in seen:
+        assert s.target_indices == target
+    assert seen[-2].active_indices == target and not seen[-1].in_transition
+    for s in seen:  # each blended index lies between old and new
+        for a, o, n in zip(s.active_indices, ref.indices, target, strict=True):
+            assert min(o, n) <= a <= max(o, n)
+
+
+def test_budget_change_takes_effect_through_the_filter() -> None:
+    store = synthetic_store()
+    drv = PlaybackDriver(store, period_s=1.0)
+    m = _look((0, -1, 0))
+    a = drv.step(m, 0.69, 1.5, 0.0, "POWER", 10.0)  # generous: maximum quality
+    b = drv.step(m, 0.69, 1.5, 0.5, "POWER", 1.7)  # tight: cheapest points
+    assert a.target_indices[0] == 0 and a.predicted_error == 0.0  # quality level 0: maximum
+    assert b.target_indices != a.target_indices and b.predicted_power_w <= 1.7
+    assert b.in_transition
+    c = drv.step(m, 0.69, 1.5, 1.6, "POWER", 1.7)
+    assert c.active_indices == c.target_indices == b.target_indices
+    assert drv.step(m, 0.69, 1.5, 1.7, "POWER", 0.01).infeasible  # below the frontier: nearest, flagged
+
+
+def test_store_cache_parses_once_per_key() -> None:
+    text = synthetic_store().to_json()
+    cache = StoreCache()
+    calls = []
+
+    def load() -> str:
+        calls.append(1)
+        return text
+
+    d1 = cache.driver(("t", 1), load, 2.0)
+    assert cache.driver(("t", 1), load, 2.0) is d1 and len(calls) == 1
+    assert cache.driver(("t", 2), load, 2.0) is not d1 and len(calls) == 2
+    with pytest.raises(ValueError):
+        cache.driver(("t", 3), lambda: '{"format": "nope"}', 2.0)
+
+
+def test_predicted_summary_reports_savings() -> None:
+    from service.camera_path import CameraFrame
+
+    store = synthetic_store()
+    frames = [CameraFrame(i / 24, _look((math.cos(i / 5), math.sin(i / 5), 0), (i * 0.1, 0, 0)), 0.69,
+                          (64, 36)) for i in range(30)]
+    s = predicted_path_summary(store, frames, "ERROR", 0.01)
+    assert s["views"] == 48 and s["corners"] == 8 and s["frames"] == 30
+    assert 0.0 < s["predicted_saving"] < 1.0
+    assert s["mean_power_w"] < s["mean_max_quality_power_w"]
+    assert predicted_path_summary(store, frames, "ERROR", 0.0)["predicted_saving"] == pytest.approx(0.0)
+
+
+# -- report data ------------------------------------------------------------------------------------------
+def test_preset_indices_follow_each_parameters_quality_end() -> None:
+    counts, mq = [4, 3, 2, 1], [0, 2, 0, 0]
+    assert preset_indices(counts, mq, 1.0) == [0, 2, 0, 0]
+    assert preset_indices(counts, mq, 0.0) == [3, 0, 1, 0]
+    assert preset_indices(counts, mq, 0.5) == [2, 1, 1, 0]  # halfway rounds up the index
+    with pytest.raises(ValueError):
+        preset_indices([2], [2], 0.5)
+
+
+def _rows() -> list[FrameRow]:
+    rows = []
+    for f in range(10):
+        t = f / 10
+        rows += [FrameRow(f, t, "max", 4.0, 0.0), FrameRow(f, t, "min", 1.0, 0.2),
+                 FrameRow(f, t, "ours", 2.0 + (f % 2), 0.01, budget_kept=f % 2 == 0)]
+    return rows
+
+
+def test_table3_layout_and_savings() -> None:
+    s = {x.mode: x for x in summarise(_rows())}
+    assert s["ours"].mean_power_w == pytest.approx(2.5) and s["ours"].saving_vs_max == pytest.approx(0.375)
+    assert s["ours"].budget_kept_fraction == pytest.approx(0.5) and s["max"].budget_kept_fraction is None
+    md = table3_markdown(summarise(_rows()))
+    lines = md.splitlines()
+    assert lines[0].split("|")[2:5] == [" Ours ", " Max ", " Min "]
+    assert lines[2].startswith("| Avg. Power (W) | 2.500 | 4.000 | 1.000")
+    assert lines[3].startswith("| Avg. Error (e) | 0.0100 | 0.0000 | 0.2000")
+    with pytest.raises(ValueError):
+        FrameRow(0, 0.0, "max", math.nan, 0.0)
+
+
+def test_csv_round_trip_and_report_folder(tmp_path) -> None:
+    rows = _rows()
+    assert read_csv(write_csv(tmp_path / "a.csv", rows)) == rows
+    written = write_report(tmp_path / "rep", rows, title="t", budget=("POWER", 2.5))
+    assert (tmp_path / "rep" / "report.md").read_text().count("Avg. Power") == 1
+    assert (tmp_path / "rep" / "power_over_time.png").stat().st_size > 1000
+    assert "plots_skipped" not in written
+    assert len(plot_over_time(rows, tmp_path / "p")) == 2
