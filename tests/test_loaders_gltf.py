@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from sim_core.loaders import GLTF_TO_BLENDER, load_gltf
-from sim_core.loaders.gltf import LUMENS_PER_WATT
+from sim_core.loaders.gltf import LIGHT_RADIUS_EXTRAS_KEY, LUMENS_PER_WATT
 
 # --------------------------------------------------------------------------------------------------
 # A tiny glTF writer for hand-made test files
@@ -401,6 +401,7 @@ def test_blender_lights_radiometric_units(bpy_mod, tmp_path: Path) -> None:
     point = bpy.context.active_object
     point.data.energy = 1000.0
     point.data.color = (1.0, 0.5, 0.25)
+    point.data[LIGHT_RADIUS_EXTRAS_KEY] = 0.25  # exported as light extras (glTF has no light size)
     bpy.ops.object.light_add(type="SPOT", location=(-2.0, 0.0, 4.0), rotation=(0.4, 0.0, 0.3))
     spot = bpy.context.active_object
     spot.data.energy = 250.0
@@ -423,13 +424,14 @@ def test_blender_lights_radiometric_units(bpy_mod, tmp_path: Path) -> None:
     assert p.kind == "point" and p.intensity == pytest.approx(1000.0 / (4 * math.pi), rel=1e-6)
     assert np.allclose(p.position, [1.0, 2.0, 5.0], atol=1e-6)
     assert np.allclose(p.color, [1.0, 0.5, 0.25])
+    assert p.radius == pytest.approx(0.25)
     s = lights[spot.data.name]
     assert s.kind == "spot" and s.intensity == pytest.approx(250.0 / (4 * math.pi), rel=1e-6)
     assert s.spot_angle == pytest.approx(math.radians(25.0), rel=1e-5)
     assert np.allclose(s.position, [-2.0, 0.0, 4.0], atol=1e-6)
     assert np.allclose(s.direction, -np.array(spot.matrix_world.to_3x3().col[2]), atol=1e-5)
     d = lights[sun.data.name]
-    assert d.kind == "sun" and d.intensity == pytest.approx(3.5, rel=1e-6)
+    assert d.kind == "sun" and d.intensity == pytest.approx(3.5, rel=1e-6) and d.radius == 0.0
     assert np.allclose(d.direction, -np.array(sun.matrix_world.to_3x3().col[2]), atol=1e-5)
 
 

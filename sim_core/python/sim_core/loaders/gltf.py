@@ -12,6 +12,11 @@ Light units: Blender's exporter (lighting mode 'SPEC', its default) writes point
 ``W / (4 pi) * 683`` candela and sun lights as ``W/m^2 * 683`` lux. The simulator works in radiometric
 units (W/sr for point and spot, W/m^2 for sun), so both become ``intensity / 683``
 (:data:`LUMENS_PER_WATT`): a 1000 W Blender point light loads as 1000 / (4 pi) = 79.6 W/sr.
+A spot's ``spot_angle`` is glTF's outer cone half-angle (Blender's spot_size / 2).
+
+Two scene facts glTF cannot carry travel as extras (custom properties Blender exports with
+``export_extras=True``): the environment (:data:`ENVIRONMENT_EXTRAS_KEY` on the scene: an EXR file name
+next to the .glb, or an RGB colour) and light radii (:data:`LIGHT_RADIUS_EXTRAS_KEY`).
 """
 
 from __future__ import annotations
@@ -65,6 +70,9 @@ _SUPPORTED_REQUIRED = {
 }
 #: Scene extras key the blend_scenes generators use to name an environment (EXR path or RGB colour).
 ENVIRONMENT_EXTRAS_KEY = "render_budget_environment"
+#: Light extras key for the emitter size glTF cannot express: radius in metres for point and spot lights,
+#: angular radius in radians for sun lights (Blender's shadow_soft_size, and half its sun angle).
+LIGHT_RADIUS_EXTRAS_KEY = "render_budget_radius"
 
 
 @dataclass
@@ -396,6 +404,8 @@ def _light(doc: _Document, index: int, world_b: np.ndarray, name: str) -> Light:
     norm = float(np.linalg.norm(direction))
     direction = direction / norm if norm > 0 else np.array([0.0, 0.0, -1.0])
     spot = src.get("spot", {})
+    extras = src.get("extras") if isinstance(src.get("extras"), dict) else {}
+    radius = float(extras.get(LIGHT_RADIUS_EXTRAS_KEY, 0.0))
     return Light(
         kind=kinds[gtype],  # type: ignore[arg-type]
         position=tuple(world_b[:3, 3]),
@@ -403,6 +413,7 @@ def _light(doc: _Document, index: int, world_b: np.ndarray, name: str) -> Light:
         color=tuple(float(c) for c in src.get("color", [1.0, 1.0, 1.0])),
         intensity=float(src.get("intensity", 1.0)) / LUMENS_PER_WATT,
         spot_angle=float(spot.get("outerConeAngle", math.pi / 4)),
+        radius=radius,
         name=str(src.get("name", name)),
     )
 

@@ -1,0 +1,1 @@
+"""bpy generators for the test scenes (teapot, chess, lab, hall, valley, village) and their driver."""

@@ -1,0 +1,192 @@
+"""Build the test scenes: ``python -m blend_scenes.build [--scene NAME ...] [--out DIR] [--force]``.
+
+For each scene it writes ``<out>/<name>/{scene.blend, scene.glb, path.json, stats.json}`` (plus any extra
+file such as the valley's environment EXR). Builds are cached: a scene is rebuilt only when the hash of its
+generator, the shared helpers, this driver and the bundled models it names changes (stored in stats.json,
+which is written last, so an interrupted build is redone). Statistics are measured on the exported .glb
+through sim_core's own loader, so they describe exactly what the simulator will see.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import importlib
+import json
+import os
+import re
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+PACKAGE_DIR = Path(__file__).resolve().parent
+REPO_ROOT = PACKAGE_DIR.parent
+DEFAULT_OUT = PACKAGE_DIR / "build"
+SCENE_FILES = ("scene.blend", "scene.glb", "path.json", "stats.json")
+
+
+def _scene_names() -> tuple[str, ...]:
+    from .scenes import SCENES
+
+    return SCENES
+
+
+def generator_hash(name: str) -> str:
+    """Hash of everything that determines a scene's content (sources and the models it loads)."""
+    h = hashlib.sha256()
+    gen = PACKAGE_DIR / "scenes" / f"{name}.py"
+    sources = [gen, PACKAGE_DIR / "common.py", PACKAGE_DIR / "build.py"]
+    text = gen.read_text()
+    models = sorted(set(re.findall(r"[\w-]+\.obj", text)))
+    sources += [REPO_ROOT / "assets" / "models" / m for m in models]
+    for src in sources:
+        h.update(src.name.encode())
+        h.update(src.read_bytes())
+    return h.hexdigest()
+
+
+def is_cached(name: str, out_dir: Path) -> bool:
+    scene_dir = out_dir / name
+    stats_path = scene_dir / "stats.json"
+    if not all((scene_dir / f).is_file() for f in SCENE_FILES):
+        return False
+    try:
+        stats = json.loads(stats_path.read_text())
+    except (OSError, json.JSONDecodeError):
+        return False
+    if not all((scene_dir / f).is_file() for f in stats.get("extra_files", [])):
+        return False
+    return stats.get("generator_hash") == generator_hash(name)
+
+
+def scene_statistics(glb: Path) -> dict[str, Any]:
+    """Counts and effects of the exported scene, as sim_core's loader reads it."""
+    import numpy as np
+    from sim_core.loaders import load_gltf
+
+    sd = load_gltf(glb)
+    raw = _glb_json(glb)
+    mesh_nodes = [n for n in raw.get("nodes", []) if "mesh" in n]
+    unique_meshes = len({n["mesh"] for n in mesh_nodes})
+    used = sorted({int(i) for i in np.unique(sd.material_ids)})
+    mats = [sd.materials[i] for i in used]
+    effects = []
+    if sd.lights:
+        effects.append("shadows")
+    if any(lt.radius > 0 for lt in sd.lights):
+        effects.append("soft_shadows")
+    if len(sd.lights) > 1:
+        effects.append("multiple_lights")
+    if any(m.metallic >= 0.5 and m.roughness <= 0.2 for m in mats):
+        effects.append("mirror_reflection")
+    if any(m.metallic > 0.0 and 0.2 < m.roughness < 0.7 for m in mats) or any(
+        m.metallic < 0.5 and m.roughness < 0.3 and m.transmission == 0 for m in mats
+    ):
+        effects.append("glossy_reflection")
+    if any(m.transmission > 0 for m in mats):
+        effects.append("refraction")
+    if any(max(m.emission) > 0 for m in mats):
+        effects.append("emission")
+    if isinstance(sd.environment, np.ndarray):
+        effects.append("environment_map")
+    elif sd.environment is not None:
+        effects.append("constant_environment")
+    if unique_meshes < len(mesh_nodes):
+        effects.append("instancing")
+    return {
+        "triangles": int(sd.triangles.shape[0]),
+        "vertices": int(sd.positions.shape[0]),
+        "materials": len(used),
+        "lights": len(sd.lights),
+        "light_kinds": sorted({lt.kind for lt in sd.lights}),
+        "objects": len(sd.object_names),
+        "unique_meshes": unique_meshes,
+        "effects": effects,
+        "bounds": [sd.positions.min(axis=0).round(3).tolist(), sd.positions.max(axis=0).round(3).tolist()],
+    }
+
+
+def _glb_json(glb: Path) -> dict[str, Any]:
+    import struct
+
+    data = glb.read_bytes()
+    (length,) = struct.unpack_from("<I", data, 12)
+    return json.loads(data[20 : 20 + length])
+
+
+def stats_line(name: str, stats: dict[str, Any]) -> str:
+    return (f"{name}: {stats['triangles']:,} triangles, {stats['materials']} materials, "
+            f"{stats['lights']} lights, {stats['objects']} objects, {stats['frames']} frames "
+            f"({stats['duration_s']:.0f} s); effects: {', '.join(stats['effects'])}")
+
+
+def build_scene(name: str, out_dir: Path) -> dict[str, Any]:
+    """Run one generator in this process's bpy and write its files; returns the statistics."""
+    import bpy
+
+    from . import common
+
+    if name not in _scene_names():
+        raise ValueError(f"unknown scene {name!r}; choose from {', '.join(_scene_names())}")
+    scene_dir = out_dir / name
+    scene_dir.mkdir(parents=True, exist_ok=True)
+    (scene_dir / "stats.json").unlink(missing_ok=True)
+    start = time.perf_counter()
+    module = importlib.import_module(f"blend_scenes.scenes.{name}")
+    spec: common.SceneSpec = module.build(scene_dir)
+    path_doc = common.sample_camera_path(spec.camera)
+    common.write_camera_path(path_doc, scene_dir / "path.json")
+    common.export_glb(scene_dir / "scene.glb")
+    bpy.ops.wm.save_as_mainfile(filepath=str(scene_dir / "scene.blend"), compress=True, check_existing=False)
+    stats = {"name": name, "description": spec.description, **scene_statistics(scene_dir / "scene.glb")}
+    stats.update({
+        "frames": len(path_doc["frames"]),
+        "fps": path_doc["fps"],
+        "duration_s": path_doc["frames"][-1]["time"],
+        "resolution": path_doc["frames"][0]["resolution"],
+        "extra_files": [p.name for p in spec.extra_files],
+        "blender_version": bpy.app.version_string,
+        "build_seconds": round(time.perf_counter() - start, 2),
+        "generator_hash": generator_hash(name),
+    })
+    stats["summary"] = stats_line(name, stats)
+    (scene_dir / "stats.json").write_text(json.dumps(stats, indent=2) + "\n")
+    return stats
+
+
+def build(names: list[str] | None = None, out_dir: Path = DEFAULT_OUT, force: bool = False) -> list[dict]:
+    """Build (or reuse) the named scenes, all by default; returns their statistics."""
+    if "bpy" not in sys.modules:  # keep Blender's user config out of the home directory
+        os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp(prefix="blend-scenes-"))
+    results = []
+    for name in names or list(_scene_names()):
+        if name not in _scene_names():
+            raise ValueError(f"unknown scene {name!r}; choose from {', '.join(_scene_names())}")
+        if not force and is_cached(name, out_dir):
+            stats = json.loads((out_dir / name / "stats.json").read_text())
+            print(f"[cached] {stats['summary']}", flush=True)
+        else:
+            stats = build_scene(name, out_dir)
+            print(f"[built {stats['build_seconds']:.1f} s] {stats['summary']}", flush=True)
+        results.append(stats)
+    return results
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m blend_scenes.build", description=__doc__.splitlines()[0])
+    parser.add_argument("--scene", action="append", help="scene to build (repeatable); default: all")
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="output folder (default: %(default)s)")
+    parser.add_argument("--force", action="store_true", help="rebuild even when cached")
+    args = parser.parse_args(argv)
+    try:
+        build(args.scene, args.out, args.force)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,103 @@
+"""Scene generators: build the teapot scene with the real bpy, load it with sim_core's loader, and check
+its statistics, camera path and cache behaviour."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.blender
+
+
+@pytest.fixture(scope="module")
+def teapot_build(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
+    pytest.importorskip("bpy")
+    from blend_scenes.build import build
+
+    out = tmp_path_factory.mktemp("scenes")
+    (stats,) = build(["teapot"], out)
+    return out, stats
+
+
+def test_teapot_files_and_stats(teapot_build: tuple[Path, dict]) -> None:
+    from sim_core.loaders import load_gltf
+
+    out, stats = teapot_build
+    scene_dir = out / "teapot"
+    for name in ("scene.blend", "scene.glb", "path.json", "stats.json"):
+        assert (scene_dir / name).stat().st_size > 0, name
+    sd = load_gltf(scene_dir / "scene.glb")
+    # The real teapot (6,320 triangles) plus a 12-triangle floor slab.
+    assert stats["triangles"] == sd.triangles.shape[0] == 6320 + 12
+    assert stats["lights"] == 1 and sd.lights[0].kind == "point"
+    assert sd.lights[0].intensity == pytest.approx(2500.0 / (4 * math.pi), rel=1e-6)
+    assert stats["materials"] == 2
+    assert "mirror_reflection" in stats["effects"] and "refraction" not in stats["effects"]
+    assert json.loads((scene_dir / "stats.json").read_text()) == stats
+    # Normalised: about 2 m wide, standing on the floor at z = 0.
+    teapot = sd.positions[sd.triangles[sd.object_ids == sd.object_names.index("Teapot")].reshape(-1)]
+    extent = teapot.max(axis=0) - teapot.min(axis=0)
+    assert extent.max() == pytest.approx(2.0, rel=1e-4)
+    assert teapot[:, 2].min() == pytest.approx(0.0, abs=1e-5)
+
+
+def test_teapot_camera_path(teapot_build: tuple[Path, dict]) -> None:
+    import bpy
+    from sim_core.loaders import load_gltf
+
+    out, stats = teapot_build
+    doc = json.loads((out / "teapot" / "path.json").read_text())
+    assert doc["version"] == 1 and doc["fps"] == 30.0
+    frames = doc["frames"]
+    assert 50 * 30 <= len(frames) <= 60 * 30 + 1 and stats["frames"] == len(frames)
+    times = np.array([f["time"] for f in frames])
+    assert times[0] == 0.0 and np.allclose(np.diff(times), 1 / 30, atol=1e-5)
+    mats = np.array([f["matrix_world"] for f in frames])
+    assert mats.shape == (len(frames), 4, 4) and np.all(np.isfinite(mats))
+    assert np.allclose(mats[:, 3], [0, 0, 0, 1])
+    # Rotations are orthonormal, and the camera keeps looking at the teapot (looks down local -Z).
+    rot = mats[:, :3, :3]
+    assert np.allclose(rot @ rot.transpose(0, 2, 1), np.eye(3), atol=1e-5)
+    to_target = np.array([0.0, 0.0, 0.55]) - mats[:, :3, 3]
+    to_target /= np.linalg.norm(to_target, axis=1, keepdims=True)
+    forward = -rot[:, :, 2]
+    assert np.all(np.sum(forward * to_target, axis=1) > 0.99)
+    # Smooth: no jumps between consecutive frames.
+    assert np.linalg.norm(np.diff(mats[:, :3, 3], axis=0), axis=1).max() < 0.1
+    # Frame 1 of the path equals the camera saved in the .blend and the one in the .glb.
+    bpy.ops.wm.open_mainfile(filepath=str(out / "teapot" / "scene.blend"))
+    scene = bpy.context.scene
+    scene.frame_set(scene.frame_start + 300)
+    assert np.allclose(np.array(scene.camera.matrix_world), mats[300], atol=1e-5)
+    cam = load_gltf(out / "teapot" / "scene.glb").cameras[0]
+    assert np.allclose(cam.matrix_world, mats[0], atol=1e-5)
+    assert cam.vfov == pytest.approx(frames[0]["vfov"], rel=1e-5)
+
+
+def test_cache_skips_unchanged_scene(teapot_build: tuple[Path, dict], capsys: pytest.CaptureFixture) -> None:
+    from blend_scenes.build import build, generator_hash, is_cached
+
+    out, stats = teapot_build
+    assert is_cached("teapot", out)
+    assert stats["generator_hash"] == generator_hash("teapot")
+    mtime = (out / "teapot" / "scene.glb").stat().st_mtime_ns
+    build(["teapot"], out)
+    assert "[cached]" in capsys.readouterr().out
+    assert (out / "teapot" / "scene.glb").stat().st_mtime_ns == mtime
+    # A stale hash (as after editing the generator) invalidates the cache.
+    stats_path = out / "teapot" / "stats.json"
+    doc = json.loads(stats_path.read_text())
+    stats_path.write_text(json.dumps({**doc, "generator_hash": "0" * 64}))
+    assert not is_cached("teapot", out)
+    stats_path.write_text(json.dumps(doc))
+
+
+def test_unknown_scene_is_rejected(tmp_path: Path) -> None:
+    from blend_scenes.build import build
+
+    with pytest.raises(ValueError, match="unknown scene"):
+        build(["atlantis"], tmp_path)
