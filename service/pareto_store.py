@@ -1,0 +1,644 @@
+"""Runtime Pareto store: compact format, 4-bit settings packing, octree lookup and temporal filter.
+
+This one module is shared by the service (which writes stores) and the Blender add-on (which reads them
+during playback), so it depends on the standard library and numpy only and imports no other project
+module. The format is versioned JSON with numeric arrays carried as little-endian base64 blobs.
+
+Layout of a store (power-budget paper, sec. 4.2 and 6):
+
+- an octree over the camera path: ``root_min``/``root_size`` give the cubic root; every node is either a
+  leaf (``children[n] == -1``) or has eight consecutive children starting at ``children[n]``; child ``k``
+  covers the upper half along x if ``k & 1``, along y if ``k & 2``, along z if ``k & 4``;
+- corners on an integer lattice of ``2**lattice_depth`` cells per root side, each with six view
+  frontiers (view order :data:`VIEW_NAMES`);
+- frontiers: lists of (packed settings, error, power), power ascending and error descending, shared
+  between corners and views that inherit them. Error and power are quantised to 16 bits (error over
+  [0, 1], power over [0, ``power_scale``]); the quantisation step is reported by :meth:`ParetoStore.stats`.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+FORMAT_NAME = "render-budget/pareto-store"
+FORMAT_VERSION = 1
+
+BITS_PER_PARAM = 4
+MAX_VALUES_PER_PARAM = 1 << BITS_PER_PARAM
+MAX_PARAMS = 32 // BITS_PER_PARAM
+
+#: The six axis views of a corner's view cube, in storage order.
+VIEW_NAMES: tuple[str, ...] = ("+X", "-X", "+Y", "-Y", "+Z", "-Z")
+#: Forward direction of each view (world frame, Z up).
+VIEW_FORWARD = np.array(
+    [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=np.float64
+)
+#: Up vector used when rendering each view: world +Z for horizontal views, +Y when looking along Z.
+VIEW_UP = np.array(
+    [[0, 0, 1], [0, 0, 1], [0, 0, 1], [0, 0, 1], [0, 1, 0], [0, 1, 0]], dtype=np.float64
+)
+
+_QMAX = 65535
+
+
+# ----------------------------------------------------------------------------------------------------
+# 4-bit packing (the single implementation; service.params imports it)
+
+
+def pack_indices(indices: Sequence[int]) -> int:
+    """Pack per-parameter value indices into one 32-bit integer, 4 bits each, parameter 0 lowest."""
+    if len(indices) > MAX_PARAMS:
+        raise ValueError(f"at most {MAX_PARAMS} parameters fit in 32 bits, got {len(indices)}")
+    packed = 0
+    for i, v in enumerate(indices):
+        iv = int(v)
+        if iv != v or not 0 <= iv < MAX_VALUES_PER_PARAM:
+            raise ValueError(f"parameter {i} index {v!r} is outside 0..{MAX_VALUES_PER_PARAM - 1}")
+        packed |= iv << (BITS_PER_PARAM * i)
+    return packed
+
+
+def unpack_indices(packed: int, n_params: int) -> tuple[int, ...]:
+    """Inverse of :func:`pack_indices`; bits above the last parameter must be zero."""
+    if not 0 <= n_params <= MAX_PARAMS:
+        raise ValueError(f"n_params must be in 0..{MAX_PARAMS}, got {n_params}")
+    p = int(packed)
+    if p != packed or p < 0 or p >> (BITS_PER_PARAM * n_params):
+        raise ValueError(f"packed value {packed!r} does not fit {n_params} parameters of 4 bits")
+    mask = MAX_VALUES_PER_PARAM - 1
+    return tuple((p >> (BITS_PER_PARAM * i)) & mask for i in range(n_params))
+
+
+def pack_array(indices: np.ndarray) -> np.ndarray:
+    """Vectorised :func:`pack_indices` for an (N, P) integer array; returns uint32 (N,)."""
+    a = np.asarray(indices)
+    if a.ndim != 2 or a.shape[1] > MAX_PARAMS:
+        raise ValueError(f"expected (N, <= {MAX_PARAMS}) indices, got shape {a.shape}")
+    if a.size and (a.min() < 0 or a.max() >= MAX_VALUES_PER_PARAM):
+        raise ValueError("indices must be in 0..15")
+    shifts = (BITS_PER_PARAM * np.arange(a.shape[1])).astype(np.uint32)
+    out = np.zeros(a.shape[0], dtype=np.uint32)
+    for j in range(a.shape[1]):
+        out |= a[:, j].astype(np.uint32) << shifts[j]
+    return out
+
+
+def unpack_array(packed: np.ndarray, n_params: int) -> np.ndarray:
+    """Vectorised :func:`unpack_indices`; returns int64 (N, n_params)."""
+    p = np.asarray(packed, dtype=np.uint64).reshape(-1)
+    shifts = (BITS_PER_PARAM * np.arange(n_params)).astype(np.uint64)
+    return ((p[:, None] >> shifts) & np.uint64(MAX_VALUES_PER_PARAM - 1)).astype(np.int64)
+
+
+# ----------------------------------------------------------------------------------------------------
+# Parameter description carried inside the store (enough to name settings without service.params)
+
+
+@dataclass(frozen=True)
+class StoredParameter:
+    """Name, ordered values and the index of the maximum-quality value of one parameter."""
+
+    name: str
+    values: tuple[Any, ...]
+    max_quality: int
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"name": self.name, "values": list(self.values), "max_quality": self.max_quality}
+
+    @staticmethod
+    def from_dict(d: dict[str, Any]) -> StoredParameter:
+        values = tuple(_freeze(v) for v in d["values"])
+        mq = int(d["max_quality"])
+        if not values or not 0 <= mq < len(values):
+            raise ValueError(f"parameter {d.get('name')!r}: bad values or max_quality")
+        return StoredParameter(str(d["name"]), values, mq)
+
+
+def _freeze(v: Any) -> Any:
+    if isinstance(v, list):
+        return tuple(_freeze(x) for x in v)
+    if isinstance(v, dict):
+        return tuple(sorted((k, _freeze(x)) for k, x in v.items()))
+    return v
+
+
+def _thaw(v: Any) -> Any:
+    if isinstance(v, tuple):
+        return [_thaw(x) for x in v]
+    return v
+
+
+# ----------------------------------------------------------------------------------------------------
+# Frontier
+
+
+@dataclass(frozen=True)
+class Frontier:
+    """A Pareto frontier: packed settings with error and power, power ascending, error descending."""
+
+    packed: np.ndarray  # uint32 (N,)
+    error: np.ndarray  # float64 (N,)
+    power_w: np.ndarray  # float64 (N,)
+
+    @staticmethod
+    def from_points(packed: Iterable[int], error: Iterable[float], power_w: Iterable[float]) -> Frontier:
+        """Keep the non-dominated points (ties: first occurrence) and sort them by power."""
+        pk = np.asarray(list(packed), dtype=np.uint32)
+        e = np.asarray(list(error), dtype=np.float64)
+        p = np.asarray(list(power_w), dtype=np.float64)
+        if not (pk.shape == e.shape == p.shape) or pk.ndim != 1 or pk.size == 0:
+            raise ValueError("a frontier needs equally long, non-empty packed/error/power lists")
+        if not (np.all(np.isfinite(e)) and np.all(np.isfinite(p))):
+            raise ValueError("frontier error and power must be finite")
+        order = np.lexsort((e, p))  # by power, then error
+        keep: list[int] = []
+        best_e = math.inf
+        for i in order:
+            if e[i] < best_e:
+                keep.append(int(i))
+                best_e = e[i]
+        k = np.asarray(keep, dtype=np.int64)
+        return Frontier(pk[k], e[k], p[k])
+
+    def __len__(self) -> int:
+        return int(self.packed.size)
+
+    def under_power(self, budget: float) -> tuple[int, bool]:
+        """Index of the least error with power <= budget; (cheapest, True) when none fits."""
+        i = int(np.searchsorted(self.power_w, budget, side="right")) - 1
+        return (0, True) if i < 0 else (i, False)
+
+    def under_error(self, budget: float) -> tuple[int, bool]:
+        """Index of the least power with error <= budget; (most accurate, True) when none fits."""
+        # error is descending: search on the negated (ascending) array
+        i = int(np.searchsorted(-self.error, -budget, side="left"))
+        return (len(self) - 1, True) if i >= len(self) else (i, False)
+
+
+# ----------------------------------------------------------------------------------------------------
+# Base64 array helpers
+
+
+def _enc(arr: np.ndarray, dtype: str) -> str:
+    a = np.ascontiguousarray(np.asarray(arr).astype(dtype, copy=False))
+    return f"{dtype}:" + base64.b64encode(a.tobytes()).decode("ascii")
+
+
+def _dec(text: str) -> np.ndarray:
+    dtype, _, data = str(text).partition(":")
+    if dtype not in ("<u1", "<u2", "<u4", "<i4", "<f4", "<f8"):
+        raise ValueError(f"unsupported array dtype {dtype!r} in store")
+    try:
+        raw = base64.b64decode(data.encode("ascii"), validate=True)
+    except ValueError as exc:
+        raise ValueError(f"corrupt base64 array in store: {exc}") from exc
+    if len(raw) % np.dtype(dtype).itemsize:
+        raise ValueError("corrupt array length in store")
+    return np.frombuffer(raw, dtype=dtype)
+
+
+def _uint_dtype(max_value: int) -> str:
+    return "<u1" if max_value < 256 else "<u2" if max_value < 65536 else "<u4"
+
+
+# ----------------------------------------------------------------------------------------------------
+# Lookup result and the store
+
+
+@dataclass(frozen=True)
+class LookupResult:
+    """Settings chosen for one camera and budget, with their predicted error and power and flags."""
+
+    indices: tuple[int, ...]
+    packed: int
+    settings: dict[str, Any]
+    power_w: float
+    error: float
+    clamped: bool
+    infeasible: bool
+    corner: int = -1
+    view: int = -1
+    leaf: int = -1
+
+
+def _finite_vec3(v: Any, name: str) -> np.ndarray:
+    a = np.asarray(v, dtype=np.float64).reshape(-1)
+    if a.shape != (3,) or not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} must be 3 finite numbers, got {v!r}")
+    return a
+
+
+@dataclass
+class ParetoStore:
+    """Octree of camera samples with one Pareto frontier per (corner, view); see the module docstring."""
+
+    parameters: tuple[StoredParameter, ...]
+    root_min: np.ndarray
+    root_size: float
+    lattice_depth: int
+    children: np.ndarray  # int32 (n_nodes,)
+    corner_coords: np.ndarray  # int64 (C, 3) lattice coordinates
+    corner_views: np.ndarray  # int64 (C, 6) frontier ids
+    frontiers: list[Frontier]
+    vfov: float = 0.6911
+    aspect: float = 16 / 9
+    profile: str = "mobile"
+    fps: float = 30.0
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.root_min = _finite_vec3(self.root_min, "root_min")
+        self.root_size = float(self.root_size)
+        if not (math.isfinite(self.root_size) and self.root_size > 0):
+            raise ValueError("root_size must be positive and finite")
+        if not 0 <= self.lattice_depth <= 16:
+            raise ValueError("lattice_depth must be in 0..16")
+        self.children = np.asarray(self.children, dtype=np.int64).reshape(-1)
+        self.corner_coords = np.asarray(self.corner_coords, dtype=np.int64).reshape(-1, 3)
+        self.corner_views = np.asarray(self.corner_views, dtype=np.int64).reshape(-1, 6)
+        n_nodes = self.children.size
+        if n_nodes == 0:
+            raise ValueError("a store needs at least the root node")
+        ch = self.children
+        if np.any((ch != -1) & ((ch <= 0) | (ch + 8 > n_nodes))):
+            raise ValueError("children index out of range")
+        if self.corner_coords.shape[0] != self.corner_views.shape[0]:
+            raise ValueError("corner_coords and corner_views disagree on the corner count")
+        side = 1 << self.lattice_depth
+        if self.corner_coords.size and (self.corner_coords.min() < 0 or self.corner_coords.max() > side):
+            raise ValueError("corner lattice coordinates out of range")
+        if self.corner_views.size and (
+            self.corner_views.min() < 0 or self.corner_views.max() >= len(self.frontiers)
+        ):
+            raise ValueError("corner view refers to a missing frontier")
+        if len(self.parameters) > MAX_PARAMS:
+            raise ValueError(f"at most {MAX_PARAMS} parameters")
+        for prm in self.parameters:
+            if len(prm.values) > MAX_VALUES_PER_PARAM:
+                raise ValueError(f"parameter {prm.name!r} has more than 16 values")
+        self._index()
+
+    # -- derived tables ---------------------------------------------------------------------------
+
+    def _index(self) -> None:
+        """Precompute each leaf's eight corner ids so lookups are a short descent and table reads."""
+        key = {tuple(int(c) for c in xyz): i for i, xyz in enumerate(self.corner_coords)}
+        side = 1 << self.lattice_depth
+        self._leaf_corners: dict[int, np.ndarray] = {}
+        self._node_origin: dict[int, tuple[int, int, int, int]] = {}
+        stack = [(0, 0, 0, 0, side)]
+        while stack:
+            node, x, y, z, s = stack.pop()
+            self._node_origin[node] = (x, y, z, s)
+            c = int(self.children[node])
+            if c == -1:
+                ids = []
+                for k in range(8):
+                    xyz = (x + s * (k & 1), y + s * ((k >> 1) & 1), z + s * ((k >> 2) & 1))
+                    if xyz not in key:
+                        raise ValueError(f"leaf {node} misses its corner at lattice {xyz}")
+                    ids.append(key[xyz])
+                self._leaf_corners[node] = np.asarray(ids, dtype=np.int64)
+            else:
+                if s < 2:
+                    raise ValueError("octree deeper than the lattice")
+                h = s // 2
+                for k in range(8):
+                    stack.append((c + k, x + h * (k & 1), y + h * ((k >> 1) & 1), z + h * ((k >> 2) & 1), h))
+        self._frustum_cache: dict[tuple[float, float], np.ndarray] = {}
+
+    @property
+    def n_params(self) -> int:
+        return len(self.parameters)
+
+    def corner_positions(self) -> np.ndarray:
+        """World positions (C, 3) of the corners."""
+        cell = self.root_size / (1 << self.lattice_depth)
+        return self.root_min[None, :] + self.corner_coords.astype(np.float64) * cell
+
+    def frontier(self, corner: int, view: int) -> Frontier:
+        return self.frontiers[int(self.corner_views[corner, view])]
+
+    def leaf_depths(self) -> dict[int, int]:
+        """Depth of every leaf (root = 0)."""
+        side = 1 << self.lattice_depth
+        return {n: round(math.log2(side / o[3])) for n, o in self._node_origin.items()
+                if self.children[n] == -1}
+
+    # -- lookup -----------------------------------------------------------------------------------
+
+    def find_leaf(self, position: Any) -> tuple[int, np.ndarray, bool]:
+        """Leaf containing ``position`` (clamped into the root); returns (leaf, clamped position, clamped)."""
+        p = _finite_vec3(position, "position")
+        hi = self.root_min + self.root_size
+        q = np.minimum(np.maximum(p, self.root_min), hi)
+        clamped = bool(np.any(q != p))
+        side = 1 << self.lattice_depth
+        u = (q - self.root_min) * (side / self.root_size)
+        node = 0
+        x = y = z = 0
+        s = side
+        while self.children[node] != -1:
+            h = s // 2
+            k = (int(u[0] >= x + h)) | (int(u[1] >= y + h) << 1) | (int(u[2] >= z + h) << 2)
+            x += h * (k & 1)
+            y += h * ((k >> 1) & 1)
+            z += h * ((k >> 2) & 1)
+            s = h
+            node = int(self.children[node]) + k
+        return node, q, clamped
+
+    def _frustum_rays(self, vfov: float, aspect: float) -> np.ndarray:
+        key = (round(vfov, 6), round(aspect, 6))
+        rays = self._frustum_cache.get(key)
+        if rays is None:
+            n = 12
+            th = math.tan(vfov / 2)
+            v = (np.arange(n) + 0.5) / n * 2 - 1
+            uu, vv = np.meshgrid(v * th * aspect, v * th)
+            # camera frame: x right, y up, looking down -z; weight = pixel solid angle on the image plane
+            d = np.stack([uu.ravel(), vv.ravel(), -np.ones(n * n)], axis=1)
+            w = 1.0 / np.linalg.norm(d, axis=1) ** 3
+            rays = np.concatenate([d, w[:, None]], axis=1)
+            if len(self._frustum_cache) > 64:
+                self._frustum_cache.clear()
+            self._frustum_cache[key] = rays
+        return rays
+
+    def choose_view(self, leaf: int, position: np.ndarray, rotation: np.ndarray, vfov: float,
+                    aspect: float) -> int:
+        """Face of the leaf's cube that receives the largest (solid-angle weighted) part of the frustum.
+
+        Rays of the frustum leave the leaf cube from the camera position; each exits through one face.
+        """
+        rays = self._frustum_rays(vfov, aspect)
+        d = rays[:, :3] @ rotation.T  # world directions
+        x, y, z, s = self._node_origin[leaf]
+        cell = self.root_size / (1 << self.lattice_depth)
+        lo = self.root_min + np.array([x, y, z], dtype=np.float64) * cell
+        hi = lo + s * cell
+        with np.errstate(divide="ignore", invalid="ignore"):
+            bound = np.where(d > 0, hi, lo)
+            t = (bound - position) / d
+        t = np.where(d == 0, np.inf, t)
+        t = np.maximum(t, 0.0)
+        axis = np.argmin(t, axis=1)
+        sign_neg = d[np.arange(d.shape[0]), axis] < 0
+        face = axis * 2 + sign_neg
+        weights = np.bincount(face, weights=rays[:, 3], minlength=6)
+        return int(np.argmax(weights))
+
+    def lookup(self, position: Any, direction: Any = None, matrix: Any = None, fov: float | None = None,
+               power_budget: float | None = None, error_budget: float | None = None,
+               aspect: float | None = None, up: Any = None) -> LookupResult:
+        """Settings for a camera at ``position`` looking along ``direction`` (or oriented by ``matrix``,
+        Blender's 4x4 camera world matrix) with vertical field of view ``fov`` in radians, under exactly
+        one of ``power_budget`` (W) or ``error_budget`` (1 - SSIM)."""
+        if (power_budget is None) == (error_budget is None):
+            raise ValueError("give exactly one of power_budget or error_budget")
+        budget = float(power_budget if power_budget is not None else error_budget)  # type: ignore[arg-type]
+        if not math.isfinite(budget):
+            raise ValueError("budget must be finite")
+        rot = camera_rotation(direction, matrix, up)
+        vf = self.vfov if fov is None else float(fov)
+        if not (math.isfinite(vf) and 0 < vf < math.pi):
+            raise ValueError(f"fov must be in (0, pi) radians, got {fov!r}")
+        asp = self.aspect if aspect is None else float(aspect)
+        if not (math.isfinite(asp) and asp > 0):
+            raise ValueError("aspect must be positive")
+        leaf, q, clamped = self.find_leaf(position)
+        corners = self._leaf_corners[leaf]
+        pos = self.corner_positions_of(corners)
+        corner = int(corners[int(np.argmin(((pos - q) ** 2).sum(axis=1)))])
+        view = self.choose_view(leaf, q, rot, vf, asp)
+        fr = self.frontier(corner, view)
+        if power_budget is not None:
+            i, infeasible = fr.under_power(budget)
+        else:
+            i, infeasible = fr.under_error(budget)
+        packed = int(fr.packed[i])
+        indices = unpack_indices(packed, self.n_params)
+        return LookupResult(indices, packed, self.settings_of(indices), float(fr.power_w[i]),
+                            float(fr.error[i]), clamped, infeasible, corner, view, leaf)
+
+    def corner_positions_of(self, corners: np.ndarray) -> np.ndarray:
+        cell = self.root_size / (1 << self.lattice_depth)
+        return self.root_min[None, :] + self.corner_coords[corners].astype(np.float64) * cell
+
+    def settings_of(self, indices: Sequence[int]) -> dict[str, Any]:
+        """Parameter name -> value for value indices (JSON-friendly values)."""
+        return {p.name: _thaw(p.values[i]) for p, i in zip(self.parameters, indices, strict=True)}
+
+    # -- serialisation ----------------------------------------------------------------------------
+
+    def to_dict(self) -> dict[str, Any]:
+        """The versioned JSON document (see module docstring)."""
+        all_packed = np.concatenate([f.packed for f in self.frontiers]) if self.frontiers else np.zeros(0)
+        table, inverse = np.unique(all_packed.astype(np.uint32), return_inverse=True)
+        sizes = np.asarray([len(f) for f in self.frontiers], dtype=np.int64)
+        err = np.concatenate([f.error for f in self.frontiers]) if self.frontiers else np.zeros(0)
+        pw = np.concatenate([f.power_w for f in self.frontiers]) if self.frontiers else np.zeros(0)
+        if err.size and (err.min() < 0 or err.max() > 1):
+            raise ValueError("frontier errors must lie in [0, 1] to be stored")
+        if pw.size and pw.min() < 0:
+            raise ValueError("frontier power must be non-negative to be stored")
+        power_scale = float(pw.max()) if pw.size and pw.max() > 0 else 1.0
+        eq = np.rint(err * _QMAX).astype(np.int64)
+        pq = np.rint(pw / power_scale * _QMAX).astype(np.int64)
+        side = 1 << self.lattice_depth
+        return {
+            "format": FORMAT_NAME,
+            "version": FORMAT_VERSION,
+            "profile": self.profile,
+            "fps": self.fps,
+            "vfov": self.vfov,
+            "aspect": self.aspect,
+            "views": list(VIEW_NAMES),
+            "parameters": [p.to_dict() for p in self.parameters],
+            "root_min": [float(c) for c in self.root_min],
+            "root_size": self.root_size,
+            "lattice_depth": self.lattice_depth,
+            "children": _enc(self.children, "<i4"),
+            "corners": _enc(self.corner_coords, _uint_dtype(side)),
+            "corner_views": _enc(self.corner_views, _uint_dtype(max(len(self.frontiers), 1))),
+            "settings": _enc(table, "<u4"),
+            "frontier_sizes": _enc(sizes, _uint_dtype(int(sizes.max()) if sizes.size else 0)),
+            "frontier_settings": _enc(inverse, _uint_dtype(max(table.size, 1))),
+            "frontier_error": _enc(eq, "<u2"),
+            "frontier_power": _enc(pq, "<u2"),
+            "power_scale": power_scale,
+            "meta": self.meta,
+        }
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), separators=(",", ":"), allow_nan=False)
+
+    @staticmethod
+    def from_dict(d: dict[str, Any]) -> ParetoStore:
+        if not isinstance(d, dict) or d.get("format") != FORMAT_NAME:
+            raise ValueError("not a render-budget Pareto store")
+        if d.get("version") != FORMAT_VERSION:
+            raise ValueError(f"unsupported store version {d.get('version')!r} (reader: {FORMAT_VERSION})")
+        try:
+            params = tuple(StoredParameter.from_dict(p) for p in d["parameters"])
+            sizes = _dec(d["frontier_sizes"]).astype(np.int64)
+            table = _dec(d["settings"]).astype(np.uint32)
+            idx = _dec(d["frontier_settings"]).astype(np.int64)
+            eq = _dec(d["frontier_error"]).astype(np.float64) / _QMAX
+            pq = _dec(d["frontier_power"]).astype(np.float64) / _QMAX * float(d["power_scale"])
+            if not (idx.size == eq.size == pq.size == int(sizes.sum())):
+                raise ValueError("frontier arrays disagree in length")
+            if idx.size and idx.max() >= table.size:
+                raise ValueError("frontier refers to a missing settings entry")
+            frontiers = []
+            off = 0
+            for n in sizes:
+                sl = slice(off, off + int(n))
+                frontiers.append(Frontier(table[idx[sl]], eq[sl], pq[sl]))
+                off += int(n)
+            return ParetoStore(
+                parameters=params,
+                root_min=np.asarray(d["root_min"], dtype=np.float64),
+                root_size=float(d["root_size"]),
+                lattice_depth=int(d["lattice_depth"]),
+                children=_dec(d["children"]),
+                corner_coords=_dec(d["corners"]),
+                corner_views=_dec(d["corner_views"]),
+                frontiers=frontiers,
+                vfov=float(d["vfov"]),
+                aspect=float(d["aspect"]),
+                profile=str(d["profile"]),
+                fps=float(d["fps"]),
+                meta=dict(d.get("meta") or {}),
+            )
+        except (KeyError, TypeError) as exc:
+            raise ValueError(f"malformed store: missing or wrong field {exc}") from exc
+
+    @staticmethod
+    def from_json(text: str | bytes) -> ParetoStore:
+        try:
+            d = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"store is not valid JSON: {exc}") from exc
+        return ParetoStore.from_dict(d)
+
+    def stats(self) -> dict[str, Any]:
+        """Sizes and counts worth reporting (bytes of the JSON, nodes, corners, views, points)."""
+        depths = self.leaf_depths()
+        return {
+            "size_bytes": len(self.to_json().encode()),
+            "nodes": int(self.children.size),
+            "leaves": len(depths),
+            "depth": max(depths.values()) if depths else 0,
+            "corners": int(self.corner_coords.shape[0]),
+            "views": int(self.corner_coords.shape[0] * 6),
+            "unique_frontiers": len(self.frontiers),
+            "frontier_points": int(sum(len(f) for f in self.frontiers)),
+            "error_step": 1.0 / _QMAX,
+            "power_step_w": (max((float(f.power_w.max()) for f in self.frontiers), default=1.0)) / _QMAX,
+        }
+
+
+def root_cube(positions: Any, pad_fraction: float = 0.1, min_size: float = 1.0) -> tuple[np.ndarray, float]:
+    """Cubic root box around camera positions: the bounding box, padded by ``pad_fraction`` of its
+    largest side on every side, made cubic about its centre; at least ``min_size`` wide so that
+    degenerate paths (one point, a line, a plane) still get a proper cube. Returns (min corner, side)."""
+    p = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    if p.shape[0] == 0 or not np.all(np.isfinite(p)):
+        raise ValueError("need at least one finite position")
+    if not (pad_fraction >= 0 and min_size > 0):
+        raise ValueError("pad_fraction must be >= 0 and min_size > 0")
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    extent = float((hi - lo).max())
+    size = max(extent * (1.0 + 2.0 * pad_fraction), float(min_size))
+    centre = (lo + hi) / 2
+    return centre - size / 2, size
+
+
+def camera_rotation(direction: Any = None, matrix: Any = None, up: Any = None) -> np.ndarray:
+    """3x3 camera-to-world rotation (columns: right, up, backward; the camera looks down local -Z).
+
+    From Blender's 4x4 (or 3x3) ``matrix_world``, or from a view ``direction`` with ``up`` (default
+    world +Z, or +Y when looking straight along Z)."""
+    if (direction is None) == (matrix is None):
+        raise ValueError("give exactly one of direction or matrix")
+    if matrix is not None:
+        m = np.asarray(matrix, dtype=np.float64)
+        if m.shape not in ((4, 4), (3, 3)) or not np.all(np.isfinite(m)):
+            raise ValueError("matrix must be a finite 4x4 or 3x3 array")
+        r = m[:3, :3]
+        norms = np.linalg.norm(r, axis=0)
+        if np.any(norms < 1e-12):
+            raise ValueError("matrix has a degenerate rotation")
+        return r / norms  # remove scale
+    f = _finite_vec3(direction, "direction")
+    n = float(np.linalg.norm(f))
+    if n < 1e-12:
+        raise ValueError("direction must be non-zero")
+    f = f / n
+    u = np.array([0.0, 0.0, 1.0]) if up is None else _finite_vec3(up, "up")
+    if abs(float(np.dot(u, f))) > 0.999 * float(np.linalg.norm(u)):
+        u = np.array([0.0, 1.0, 0.0]) if up is None else u
+        if abs(float(np.dot(u, f))) > 0.999 * float(np.linalg.norm(u)):
+            raise ValueError("up must not be parallel to direction")
+    right = np.cross(f, u)
+    right /= np.linalg.norm(right)
+    true_up = np.cross(right, f)
+    return np.stack([right, true_up, -f], axis=1)
+
+
+class TemporalFilter:
+    """Eq. 8 of the power-budget paper: blend parameter indices from the old settings to a new target.
+
+    ``s = round((1 - t/T) * s_old + (t/T) * s_new)`` per parameter, with ``t`` the time since the target
+    changed; after ``T`` (``period_s``) the target holds. A target change in the middle of a transition
+    starts the next transition from the settings shown at that moment. Time going backwards (scrubbing
+    the timeline) snaps to the target; ``period_s = 0`` disables filtering.
+    """
+
+    def __init__(self, period_s: float = 2.0) -> None:
+        if not (math.isfinite(period_s) and period_s >= 0):
+            raise ValueError("period_s must be finite and >= 0")
+        self.period_s = float(period_s)
+        self.reset()
+
+    def reset(self) -> None:
+        self._old: tuple[int, ...] | None = None
+        self._target: tuple[int, ...] | None = None
+        self._t0 = 0.0
+        self._last_t = -math.inf
+
+    def _blend(self, now_s: float) -> tuple[int, ...]:
+        assert self._target is not None
+        if self._old is None or self.period_s == 0:
+            return self._target
+        a = (now_s - self._t0) / self.period_s
+        if a >= 1.0:
+            return self._target
+        return tuple(math.floor((1.0 - a) * o + a * n + 0.5) for o, n in zip(self._old, self._target,
+                                                                                strict=True))
+
+    def update(self, target_indices: Sequence[int], now_s: float) -> tuple[int, ...]:
+        """Settings to use at time ``now_s`` (seconds) given the current target indices."""
+        now = float(now_s)
+        if not math.isfinite(now):
+            raise ValueError("now_s must be finite")
+        target = tuple(int(v) for v in target_indices)
+        if any(v < 0 for v in target):
+            raise ValueError("indices must be non-negative")
+        if self._target is None or now < self._last_t:
+            self._old, self._target, self._t0 = None, target, now
+        elif target != self._target:
+            if len(target) != len(self._target):
+                raise ValueError("target changed its number of parameters")
+            shown = self._blend(now)
+            self._old, self._target, self._t0 = shown, target, now
+        self._last_t = now
+        return self._blend(now)

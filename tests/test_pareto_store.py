@@ -1,0 +1,323 @@
+"""Runtime Pareto store: packing, frontier search, lookup edge cases, temporal filter, serialisation."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from service.pareto_store import (
+    MAX_PARAMS,
+    VIEW_FORWARD,
+    VIEW_NAMES,
+    Frontier,
+    ParetoStore,
+    StoredParameter,
+    TemporalFilter,
+    camera_rotation,
+    pack_array,
+    pack_indices,
+    root_cube,
+    unpack_array,
+    unpack_indices,
+)
+
+PARAMS = (
+    StoredParameter("mode", ("under4", "under2", "1spp"), 2),
+    StoredParameter("depth", (0, 1, 2, 3), 3),
+    StoredParameter("scale", (0.7, 0.8, 0.9, 1.0), 3),
+)
+
+
+def _frontier(seed: int) -> Frontier:
+    rng = np.random.default_rng(seed)
+    n = 6
+    idx = rng.integers(0, [3, 4, 4], size=(n, 3))
+    power = np.sort(rng.uniform(0.5, 3.0, n))
+    err = np.sort(rng.uniform(0.0, 0.2, n))[::-1]
+    return Frontier.from_points(pack_array(idx), err, power)
+
+
+def _store(subdivide: bool = False, root_min=(0.0, 0.0, 0.0), size: float = 2.0) -> ParetoStore:
+    """A real store: root cube, optionally split once; every corner has its own frontiers per view."""
+    depth = 1 if subdivide else 0
+    side = 1 << depth
+    coords = [(x, y, z) for z in range(side + 1) for y in range(side + 1) for x in range(side + 1)]
+    if not subdivide:
+        coords = [(x, y, z) for z in (0, 1) for y in (0, 1) for x in (0, 1)]
+    frontiers = [_frontier(i) for i in range(len(coords) * 6)]
+    views = np.arange(len(coords) * 6).reshape(-1, 6)
+    children = [1] + [-1] * 8 if subdivide else [-1]
+    return ParetoStore(PARAMS, np.asarray(root_min), size, depth, np.asarray(children), np.asarray(coords),
+                       views, frontiers, vfov=math.radians(50), aspect=4 / 3)
+
+
+# ---------------------------------------------------------------------------------------------- packing
+
+
+@given(st.lists(st.integers(0, 15), min_size=0, max_size=MAX_PARAMS))
+def test_pack_roundtrip(idx: list[int]) -> None:
+    packed = pack_indices(idx)
+    assert 0 <= packed < 2**32
+    assert unpack_indices(packed, len(idx)) == tuple(idx)
+    arr = np.asarray([idx], dtype=np.int64).reshape(1, len(idx))
+    assert int(pack_array(arr)[0]) == packed
+    assert unpack_array(pack_array(arr), len(idx)).tolist() == [idx]
+
+
+def test_pack_layout_and_errors() -> None:
+    assert pack_indices([1, 2, 3]) == 0x321
+    assert pack_indices([15] * 8) == 0xFFFFFFFF
+    with pytest.raises(ValueError):
+        pack_indices([16])
+    with pytest.raises(ValueError):
+        pack_indices([-1])
+    with pytest.raises(ValueError):
+        pack_indices([0] * 9)
+    with pytest.raises(ValueError):
+        unpack_indices(0x100, 2)  # bits beyond the parameters
+
+
+# --------------------------------------------------------------------------------------------- frontier
+
+
+@given(st.lists(st.tuples(st.integers(0, 9), st.integers(0, 9)), min_size=1, max_size=30),
+       st.floats(-1, 11), st.floats(-1, 11))
+def test_frontier_search_equals_brute_force(pts: list[tuple[int, int]], pb: float, eb: float) -> None:
+    e = [a / 10 for a, _ in pts]
+    p = [float(b) for _, b in pts]
+    fr = Frontier.from_points(range(len(pts)), e, p)
+    # non-dominated, sorted
+    assert np.all(np.diff(fr.power_w) > 0) and np.all(np.diff(fr.error) < 0)
+    for ei, pi in zip(e, p, strict=True):
+        assert any(fe <= ei and fp <= pi for fe, fp in zip(fr.error, fr.power_w, strict=True))
+    i, inf = fr.under_power(pb)
+    feas = [(ei, pi) for ei, pi in zip(e, p, strict=True) if pi <= pb]
+    if feas:
+        assert not inf and fr.power_w[i] <= pb and fr.error[i] == min(f[0] for f in feas)
+    else:
+        assert inf and i == 0
+    j, inf = fr.under_error(eb)
+    feas = [(ei, pi) for ei, pi in zip(e, p, strict=True) if ei <= eb]
+    if feas:
+        assert not inf and fr.error[j] <= eb and fr.power_w[j] == min(f[1] for f in feas)
+    else:
+        assert inf and j == len(fr) - 1
+
+
+# ------------------------------------------------------------------------------------------------ lookup
+
+
+def test_lookup_inside_picks_nearest_corner_and_view() -> None:
+    s = _store()
+    r = s.lookup([0.2, 0.3, 1.9], direction=[1, 0, 0], power_budget=10.0)
+    pos = s.corner_positions()[r.corner]
+    assert np.allclose(pos, [0, 0, 2]) and not r.clamped and VIEW_NAMES[r.view] == "+X"
+    fr = s.frontier(r.corner, r.view)
+    assert r.packed == int(fr.packed[-1]) and r.error == pytest.approx(fr.error[-1])
+    assert r.indices == unpack_indices(r.packed, 3)
+    assert set(r.settings) == {"mode", "depth", "scale"}
+
+
+@pytest.mark.parametrize("view", range(6))
+def test_frustum_face_for_each_axis(view: int) -> None:
+    s = _store()
+    r = s.lookup([1.0, 1.0, 1.0], direction=VIEW_FORWARD[view], error_budget=1.0)
+    assert r.view == view
+    # a Blender matrix looking the same way gives the same face
+    rot = camera_rotation(direction=VIEW_FORWARD[view])
+    m = np.eye(4)
+    m[:3, :3] = rot
+    m[:3, 3] = 1.0
+    assert s.lookup([1, 1, 1], matrix=m, error_budget=1.0).view == view
+
+
+def test_frustum_face_depends_on_position_in_leaf() -> None:
+    s = _store()
+    d = np.array([1.0, 1.0, 0.0])
+    near_x = s.lookup([1.95, 0.2, 1.0], direction=d, fov=0.3, power_budget=5.0)
+    near_y = s.lookup([0.2, 1.95, 1.0], direction=d, fov=0.3, power_budget=5.0)
+    assert VIEW_NAMES[near_x.view] == "+X" and VIEW_NAMES[near_y.view] == "+Y"
+
+
+@pytest.mark.parametrize("pos,clamped", [
+    ([-1, 1, 1], True), ([5, 5, 5], True), ([1, 1, -0.001], True),
+    ([0, 0, 0], False), ([2, 2, 2], False), ([2, 1, 1], False), ([0, 2, 0], False), ([1, 1, 2], False),
+])
+def test_lookup_outside_faces_and_corners(pos, clamped: bool) -> None:
+    for s in (_store(), _store(subdivide=True)):
+        r = s.lookup(pos, direction=[0, 1, 0], power_budget=2.0)
+        assert r.clamped is clamped
+        q = np.clip(pos, 0, 2)
+        dists = np.linalg.norm(s.corner_positions() - q, axis=1)
+        leaf_corners = s._leaf_corners[r.leaf]
+        assert dists[r.corner] == pytest.approx(dists[leaf_corners].min())
+
+
+def test_lookup_finds_the_leaf_of_a_subdivided_root() -> None:
+    s = _store(subdivide=True)
+    r = s.lookup([1.6, 0.1, 1.7], direction=[0, 0, -1], power_budget=1.0)
+    assert r.leaf == 1 + (1 | 4)
+    assert np.allclose(s.corner_positions()[r.corner], [2, 0, 2])
+
+
+@pytest.mark.parametrize("positions", [
+    [[1.0, 2.0, 3.0]] * 5,  # all points equal
+    [[0.0, 0.0, 0.0], [4.0, 0.0, 0.0], [2.0, 0.0, 0.0]],  # a straight line along x
+])
+def test_degenerate_paths_get_a_cube(positions) -> None:
+    lo, size = root_cube(positions, 0.1, 1.0)
+    assert size > 0
+    p = np.asarray(positions)
+    assert np.all(p >= lo) and np.all(p <= lo + size)
+    s = _store(root_min=lo, size=size)
+    for q in positions:
+        r = s.lookup(q, direction=[1, 0, 0], power_budget=1.5)
+        assert not r.clamped
+
+
+def test_budget_below_and_above_the_frontier() -> None:
+    s = _store()
+    args = dict(position=[1, 1, 1], direction=[1, 0, 0])
+    fr = s.frontier(s.lookup(**args, power_budget=1.0).corner, 0)
+    low = s.lookup(**args, power_budget=float(fr.power_w.min()) / 2)
+    assert low.infeasible and low.power_w == pytest.approx(fr.power_w.min())
+    high = s.lookup(**args, power_budget=1e9)
+    assert not high.infeasible and high.error == pytest.approx(fr.error.min())
+    tight = s.lookup(**args, error_budget=float(fr.error.min()) / 2 - 1e-3)
+    assert tight.infeasible and tight.error == pytest.approx(fr.error.min())
+    loose = s.lookup(**args, error_budget=1.0)
+    assert not loose.infeasible and loose.power_w == pytest.approx(fr.power_w.min())
+
+
+def test_lookup_rejects_bad_input() -> None:
+    s = _store()
+    with pytest.raises(ValueError):
+        s.lookup([0, 0, 0], direction=[1, 0, 0])
+    with pytest.raises(ValueError):
+        s.lookup([0, 0, 0], direction=[1, 0, 0], power_budget=1, error_budget=1)
+    with pytest.raises(ValueError):
+        s.lookup([np.nan, 0, 0], direction=[1, 0, 0], power_budget=1)
+    with pytest.raises(ValueError):
+        s.lookup([0, 0, 0], direction=[0, 0, 0], power_budget=1)
+    with pytest.raises(ValueError):
+        s.lookup([0, 0, 0], direction=[1, 0, 0], fov=4.0, power_budget=1)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.floats(-3, 5), min_size=3, max_size=3), st.lists(st.floats(-1, 1), min_size=3,
+       max_size=3), st.floats(0.0, 4.0))
+def test_lookup_invariants(pos, d, budget) -> None:
+    if np.linalg.norm(d) < 1e-3:
+        d = [1.0, 0.0, 0.0]
+    s = _STORE
+    r = s.lookup(pos, direction=d, power_budget=budget)
+    assert r.clamped == bool(np.any((np.asarray(pos) < 0) | (np.asarray(pos) > 2)))
+    fr = s.frontier(r.corner, r.view)
+    if r.infeasible:
+        assert r.power_w == pytest.approx(fr.power_w.min()) and fr.power_w.min() > budget
+    else:
+        assert r.power_w <= budget + 1e-9
+        assert r.error == pytest.approx(fr.error[fr.power_w <= budget + 1e-12].min())
+
+
+_STORE = _store(subdivide=True)
+
+
+# ----------------------------------------------------------------------------------------- serialisation
+
+
+def test_json_roundtrip_and_size() -> None:
+    s = _store(subdivide=True)
+    text = s.to_json()
+    doc = json.loads(text)
+    assert doc["version"] == 1 and doc["views"] == list(VIEW_NAMES)
+    t = ParetoStore.from_json(text)
+    assert t.to_json() == text
+    for a, b in zip(s.frontiers, t.frontiers, strict=True):
+        assert np.array_equal(a.packed, b.packed)
+        assert np.allclose(a.error, b.error, atol=1.0 / 65535)
+        assert np.allclose(a.power_w, b.power_w, atol=a.power_w.max() / 65535 + 1e-12)
+    r1 = s.lookup([0.3, 1.2, 0.5], direction=[0, -1, 0.2], power_budget=2.0)
+    r2 = t.lookup([0.3, 1.2, 0.5], direction=[0, -1, 0.2], power_budget=2.0)
+    assert (r1.corner, r1.view) == (r2.corner, r2.view)
+    assert s.stats()["size_bytes"] == len(text)
+
+
+@pytest.mark.parametrize("mutate", [
+    lambda d: d.update(version=99),
+    lambda d: d.update(format="x"),
+    lambda d: d.pop("children"),
+    lambda d: d.update(frontier_error="<u2:!!"),
+    lambda d: d.update(children="<i4:" + "AAAAAA=="),
+])
+def test_corrupt_store_is_rejected(mutate) -> None:
+    d = json.loads(_store().to_json())
+    mutate(d)
+    with pytest.raises(ValueError):
+        ParetoStore.from_json(json.dumps(d))
+
+
+# ------------------------------------------------------------------------------------------ temporal filter
+
+
+def test_filter_endpoints_and_midpoint() -> None:
+    f = TemporalFilter(2.0)
+    assert f.update([0, 0, 0], 10.0) == (0, 0, 0)
+    assert f.update([4, 2, 1], 11.0) == (0, 0, 0)  # t = 0: the old settings
+    assert f.update([4, 2, 1], 12.0) == (2, 1, 1)  # t = T/2: round(0.5 * new), halves round up
+    assert f.update([4, 2, 1], 13.0) == (4, 2, 1)  # t = T
+    assert f.update([4, 2, 1], 50.0) == (4, 2, 1)
+
+
+def test_filter_change_mid_transition_starts_from_shown() -> None:
+    f = TemporalFilter(2.0)
+    f.update([0], 0.0)
+    f.update([8], 1.0)
+    assert f.update([8], 2.0) == (4,)
+    assert f.update([0], 2.0) == (4,)  # new target: continue from what is shown
+    assert f.update([0], 3.0) == (2,)
+    assert f.update([0], 4.0) == (0,)
+
+
+def test_filter_time_backwards_and_zero_period() -> None:
+    f = TemporalFilter(2.0)
+    f.update([0], 5.0)
+    f.update([6], 5.0)
+    assert f.update([6], 1.0) == (6,)  # scrubbing back snaps to the target
+    g = TemporalFilter(0.0)
+    g.update([0], 0.0)
+    assert g.update([3], 0.0) == (3,)
+    with pytest.raises(ValueError):
+        TemporalFilter(-1)
+    with pytest.raises(ValueError):
+        g.update([1], math.nan)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.tuples(st.lists(st.integers(0, 15), min_size=3, max_size=3), st.floats(0, 1.5)),
+                min_size=1, max_size=12), st.floats(0.1, 5.0))
+def test_filter_values_stay_between_old_and_new(steps, period) -> None:
+    f = TemporalFilter(period)
+    now = 0.0
+    shown = None
+    prev_target = None
+    seen = []
+    for target, dt in steps:
+        now += dt
+        prev = shown
+        shown = f.update(target, now)
+        seen.append(target)
+        lo, hi = np.min(seen, axis=0), np.max(seen, axis=0)
+        assert all(lo[i] <= v <= hi[i] for i, v in enumerate(shown))  # valid, never overshoots
+        if prev is not None and target == prev_target:
+            # same target: every index keeps moving towards it
+            for s, p, t in zip(shown, prev, target, strict=True):
+                assert abs(s - t) <= abs(p - t)
+        prev_target = target
+    # hold the last target for T: it is reached
+    assert f.update(steps[-1][0], now + period) == tuple(steps[-1][0])
