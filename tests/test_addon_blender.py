@@ -1,0 +1,316 @@
+"""The add-on inside real Blender (the bpy 5.0.1 module): registration, path recording, playback from a
+store saved in the .blend, and bad input. The extension is staged (with its vendored modules) into a temp
+folder and loaded from there as a dev extension repository."""
+
+from __future__ import annotations
+
+import importlib
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.addon_support import EXT_MODULE, disable_dev, enable_dev, stage_extension, synthetic_store
+
+pytestmark = pytest.mark.blender
+bpy = pytest.importorskip("bpy")
+
+
+@pytest.fixture(scope="module")
+def ext(tmp_path_factory: pytest.TempPathFactory):
+    repo = stage_extension(tmp_path_factory.mktemp("ext"))
+    mod = enable_dev(bpy, repo)
+    yield mod
+    disable_dev()
+
+
+@pytest.fixture
+def scene(ext):
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    sc = bpy.context.scene
+    sc.render.resolution_x, sc.render.resolution_y, sc.render.resolution_percentage = 320, 180, 100
+    sc.render.fps, sc.render.fps_base = 24, 1.0
+    return sc
+
+
+def add_camera(sc, name="Cam", lens=35.0):
+    cam = bpy.data.objects.new(name, bpy.data.cameras.new(name))
+    cam.data.lens = lens
+    sc.collection.objects.link(cam)
+    sc.camera = cam
+    return cam
+
+
+def add_cube(sc, size=2.0):
+    import bmesh
+
+    me = bpy.data.meshes.new("Cube")
+    bm = bmesh.new()
+    bmesh.ops.create_cube(bm, size=size)
+    bm.to_mesh(me)
+    bm.free()
+    ob = bpy.data.objects.new("Cube", me)
+    sc.collection.objects.link(ob)
+    return ob
+
+
+def turning_camera(sc, frames=48):
+    """A camera orbiting the origin (keyframed), looking through every side of the view cube."""
+    cam = add_camera(sc)
+    sc.frame_start, sc.frame_end = 1, frames
+    for f, ang in ((1, 0.0), (frames // 2, math.pi), (frames, 2 * math.pi - 0.01)):
+        cam.location = (6 * math.cos(ang), 6 * math.sin(ang), 1.0)
+        cam.rotation_euler = (math.radians(85), 0.0, ang + math.pi / 2)
+        cam.keyframe_insert("location", frame=f)
+        cam.keyframe_insert("rotation_euler", frame=f)
+    return cam
+
+
+def ext_module(name: str):
+    return importlib.import_module(f"{EXT_MODULE}.{name}")
+
+
+# -- registration --------------------------------------------------------------------------------------
+def _leftovers() -> list[str]:
+    found = [n for n in dir(bpy.types) if n.startswith(("POWER_", "VIEW3D_PT_power"))]
+    if hasattr(bpy.types.Scene, "power_budget"):
+        found.append("Scene.power_budget")
+    if hasattr(bpy.types.WindowManager, "power_budget_runtime"):
+        found.append("WindowManager.power_budget_runtime")
+    for hs in (bpy.app.handlers.frame_change_post, bpy.app.handlers.load_post):
+        found += [h.__name__ for h in hs if (getattr(h, "__module__", "") or "").startswith(EXT_MODULE)]
+    try:
+        bpy.ops.power.optimize.get_rna_type()
+        found.append("operator power.optimize")
+    except KeyError:
+        pass
+    return found
+
+
+def test_enable_disable_reenable_leaves_nothing_behind(ext) -> None:
+    hud = ext_module("hud")
+    assert not hud.is_registered()  # background mode: no draw handler at all
+    assert "POWER_OT_optimize" in dir(bpy.types) and hasattr(bpy.types.Scene, "power_budget")
+    disable_dev()
+    assert _leftovers() == []
+    assert EXT_MODULE not in bpy.context.preferences.addons
+    enable_dev(bpy, Path())  # the dev repo is still registered; re-enable from it
+    handlers = [h for h in bpy.app.handlers.frame_change_post if h.__module__.startswith(EXT_MODULE)]
+    assert len(handlers) == 1  # re-enabling does not stack handlers
+    assert "POWER_OT_optimize" in dir(bpy.types)
+    assert not ext_module("hud").is_registered()
+
+
+# -- camera paths ---------------------------------------------------------------------------------------
+def test_recorded_path_matches_matrix_world_with_parent_and_lens_animation(scene) -> None:
+    sc = scene
+    parent = bpy.data.objects.new("Rig", None)
+    sc.collection.objects.link(parent)
+    cam = add_camera(sc)
+    cam.parent = parent
+    sc.frame_start, sc.frame_end = 3, 27
+    for f, (x, rz, lens, cy) in {3: (0.0, 0.0, 24.0, 0.0), 15: (4.0, 1.2, 70.0, 1.0), 27: (-2.0, 2.5, 35.0, -1.0)}.items():
+        parent.location = (x, 0.5 * x, 1.0)
+        parent.rotation_euler = (0.0, 0.0, rz)
+        parent.keyframe_insert("location", frame=f)
+        parent.keyframe_insert("rotation_euler", frame=f)
+        cam.location = (0.0, cy, 0.3)
+        cam.rotation_euler = (1.2, 0.0, 0.2 * cy)
+        cam.keyframe_insert("location", frame=f)
+        cam.keyframe_insert("rotation_euler", frame=f)
+        cam.data.lens = lens
+        cam.data.keyframe_insert("lens", frame=f)
+    sc.frame_set(10)
+    assert bpy.ops.power.record_path_animation() == {"FINISHED"}
+    assert sc.frame_current == 10  # restored
+    from service.camera_path import CameraPath
+
+    path = CameraPath.from_json(sc.power_budget.path_text.as_string())
+    assert len(path) == 25 and path.fps == 24.0 and path.frames[-1].time == pytest.approx(24 / 24)
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    lenses = set()
+    for i, f in enumerate(range(3, 28)):
+        sc.frame_set(f)
+        direct = np.array(cam.matrix_world)
+        fr = path.frames[i]
+        assert np.abs(fr.matrix_world - direct).max() < 1e-5
+        # vfov against Blender's own projection matrix: P[1][1] = 1 / tan(vfov / 2)
+        proj = cam.calc_matrix_camera(depsgraph, x=320, y=180)
+        assert fr.vfov == pytest.approx(2 * math.atan(1 / proj[1][1]), rel=1e-5)
+        assert fr.resolution == (320, 180)
+        lenses.add(round(cam.data.lens, 3))
+    assert len(lenses) > 10  # the lens really was animated
+    # the parent's motion is in the recorded matrices
+    assert np.abs(path.frames[0].matrix_world[:3, 3] - path.frames[12].matrix_world[:3, 3]).max() > 1.0
+
+
+@pytest.mark.parametrize("fit", ["HORIZONTAL", "VERTICAL"])
+def test_vfov_follows_sensor_fit(scene, fit: str) -> None:
+    cam = add_camera(scene, lens=40)
+    cam.data.sensor_fit = fit
+    scene.render.resolution_x, scene.render.resolution_y = 200, 300
+    cp = ext_module("camera_path")
+    proj = cam.calc_matrix_camera(bpy.context.evaluated_depsgraph_get(), x=200, y=300)
+    assert cp.camera_vfov(cam, scene) == pytest.approx(2 * math.atan(1 / proj[1][1]), rel=1e-6)
+
+
+def test_viewport_keyframes_reproduce_the_sampled_poses(scene) -> None:
+    """The modal recorder's keyframing step: poses written at frames come back from the animation."""
+    from mathutils import Euler, Matrix
+
+    cp = ext_module("camera_path")
+    cam = add_camera(scene, "Rec")
+    poses = [Matrix.LocRotScale((i, 2 - i, 1 + 0.1 * i), Euler((1.2, 0.1 * i, 3.0 + 0.7 * i)), None)
+             for i in range(5)]  # yaw crosses +-pi: Euler continuity matters
+    for i, m in enumerate(poses):
+        cp.keyframe_pose(cam, 1 + i, m, 30.0 + i)
+    for i, m in enumerate(poses):
+        scene.frame_set(1 + i)
+        assert np.abs(np.array(cam.matrix_world) - np.array(m)).max() < 1e-5
+        assert cam.data.lens == pytest.approx(30.0 + i)
+
+
+def test_record_without_camera_is_reported(scene) -> None:
+    with pytest.raises(RuntimeError, match="no active camera"):
+        bpy.ops.power.record_path_animation()
+
+
+# -- playback from a store in the .blend ------------------------------------------------------------------
+def _load_store(tmp_path: Path):
+    f = tmp_path / "store.json"
+    f.write_text(synthetic_store().to_json())
+    assert bpy.ops.power.load_store(filepath=str(f)) == {"FINISHED"}
+
+
+def test_playback_follows_store_and_filter_and_survives_save_reload(scene, tmp_path) -> None:
+    from addon.core.playback_logic import PlaybackDriver
+
+    sc = scene
+    cam = turning_camera(sc)
+    add_cube(sc)
+    bpy.ops.power.record_path_animation()
+    _load_store(tmp_path)
+    props = sc.power_budget
+    assert "views" in props.summary and props.store_text is not None
+    props.budget_mode, props.error_budget, props.filter_period = "ERROR", 0.01, 0.5
+
+    def play() -> list[tuple[str, str, float]]:
+        out = []
+        for f in range(sc.frame_start, sc.frame_end + 1):
+            sc.frame_set(f)
+            out.append((props.active_indices, props.target_indices, props.predicted_power))
+        return out
+
+    seen = play()
+    # the same poses through the pure driver (same store, same filter, scene time)
+    store = synthetic_store()
+    drv = PlaybackDriver(store, 0.5)
+    expected = []
+    for f in range(sc.frame_start, sc.frame_end + 1):
+        sc.frame_set(f)
+        fr = drv.step(np.array(cam.matrix_world), ext_module("camera_path").camera_vfov(cam, sc), 320 / 180,
+                      (f - 1) / 24, "ERROR", 0.01)
+        expected.append((" ".join(map(str, fr.active_indices)), " ".join(map(str, fr.target_indices))))
+    assert [s[:2] for s in seen] == expected
+    assert len({s[1] for s in seen}) >= 3  # settings change along the path
+    assert any(a != t for a, t, _ in seen)  # and the filter blends between targets
+    # save, reload: store and path are in the .blend; playback gives the same answers
+    blend = tmp_path / "played.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    assert bpy.context.scene.power_budget.store_text is None
+    bpy.ops.wm.open_mainfile(filepath=str(blend))
+    sc = bpy.context.scene
+    props = sc.power_budget
+    assert props.store_text is not None and props.path_text is not None
+    assert props.store_text.as_string() == synthetic_store().to_json()
+    assert play() == seen
+
+
+def test_budget_change_during_playback_goes_through_the_filter(scene, tmp_path) -> None:
+    sc = scene
+    turning_camera(sc)
+    add_cube(sc)
+    bpy.ops.power.record_path_animation()
+    _load_store(tmp_path)
+    props = sc.power_budget
+    props.budget_mode, props.power_budget, props.filter_period = "POWER", 10.0, 1.0
+    sc.frame_set(1)
+    generous = props.target_indices
+    props.power_budget = 1.7
+    sc.frame_set(2)
+    assert props.target_indices != generous and props.active_indices != props.target_indices
+    assert props.predicted_power <= 1.7
+    sc.frame_set(2 + 26)  # more than T = 1 s later (24 fps)
+    assert props.playback_status in ("on target", "blending")
+    # invalid budget: reported in the status, nothing written
+    before = props.active_indices
+    props.budget_mode = "POWER"
+    props.power_budget = 0.0
+    sc.frame_set(30)
+    assert props.playback_status.startswith("error: power budget must be > 0")
+    assert props.active_indices == before
+
+
+# -- bad input for the operators ----------------------------------------------------------------------------
+def _point_at_dead_service() -> None:
+    from addon.core.local_service import free_port
+
+    prefs = ext_module("preferences").get()
+    prefs.service_mode = "URL"
+    prefs.url = f"http://127.0.0.1:{free_port()}"
+    prefs.timeout_s = 2
+
+
+def test_optimize_with_service_down_keeps_the_blend_intact(scene, tmp_path) -> None:
+    sc = scene
+    turning_camera(sc, 12)
+    add_cube(sc)
+    bpy.ops.power.record_path_animation()
+    _load_store(tmp_path)
+    store_before = sc.power_budget.store_text.as_string()
+    path_before = sc.power_budget.path_text.as_string()
+    _point_at_dead_service()
+    with pytest.raises(RuntimeError, match="no render-budget service"):
+        bpy.ops.power.optimize()
+    assert sc.power_budget.store_text.as_string() == store_before
+    assert sc.power_budget.path_text.as_string() == path_before
+    assert bpy.context.window_manager.power_budget_runtime.job_status.startswith("failed")
+    with pytest.raises(RuntimeError, match="no render-budget service"):
+        bpy.ops.power.preview()
+
+
+@pytest.mark.parametrize(("mode", "field", "value", "message"),
+                         [("POWER", "power_budget", 0.0, "power budget must be > 0"),
+                          ("ERROR", "threshold_error", 0.0, "threshold_error must be a positive number")])
+def test_optimize_rejects_invalid_settings(scene, mode, field, value, message) -> None:
+    turning_camera(scene, 6)
+    add_cube(scene)
+    _point_at_dead_service()
+    props = scene.power_budget
+    props.budget_mode = mode
+    setattr(props, field, value)
+    with pytest.raises(RuntimeError, match=message):
+        bpy.ops.power.optimize()
+    assert props.store_text is None
+
+
+def test_optimize_refuses_empty_scene_and_missing_camera(scene) -> None:
+    _point_at_dead_service()
+    add_camera(scene)
+    with pytest.raises(RuntimeError, match="empty scene"):
+        bpy.ops.power.optimize()
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    add_cube(bpy.context.scene)
+    with pytest.raises(RuntimeError, match="no active camera"):
+        bpy.ops.power.optimize()
+
+
+def test_evaluate_without_store_is_reported(scene) -> None:
+    turning_camera(scene, 6)
+    add_cube(scene)
+    _point_at_dead_service()
+    with pytest.raises(RuntimeError, match="no Pareto store"):
+        bpy.ops.power.evaluate_path(directory=str(Path(sys.prefix)))
