@@ -111,7 +111,8 @@ def test_recorded_path_matches_matrix_world_with_parent_and_lens_animation(scene
     cam = add_camera(sc)
     cam.parent = parent
     sc.frame_start, sc.frame_end = 3, 27
-    for f, (x, rz, lens, cy) in {3: (0.0, 0.0, 24.0, 0.0), 15: (4.0, 1.2, 70.0, 1.0), 27: (-2.0, 2.5, 35.0, -1.0)}.items():
+    keys = {3: (0.0, 0.0, 24.0, 0.0), 15: (4.0, 1.2, 70.0, 1.0), 27: (-2.0, 2.5, 35.0, -1.0)}
+    for f, (x, rz, lens, cy) in keys.items():
         parent.location = (x, 0.5 * x, 1.0)
         parent.rotation_euler = (0.0, 0.0, rz)
         parent.keyframe_insert("location", frame=f)
