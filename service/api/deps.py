@@ -1,0 +1,94 @@
+"""Shared objects of a running app, handed to routes as ``Annotated`` dependencies."""
+
+from __future__ import annotations
+
+import threading
+from collections import OrderedDict
+from dataclasses import dataclass
+from typing import Annotated, Any
+
+from fastapi import Depends, Request
+
+from service.jobs import JobManager, SceneCache
+from service.storage import Storage, StoreRecord
+
+from .config import Settings
+from .errors import ApiError
+
+
+class StoreCache:
+    """Parsed Pareto stores by id, so a query costs a lookup, not a JSON parse."""
+
+    def __init__(self, storage: Storage, *, capacity: int = 64) -> None:
+        self._storage = storage
+        self._capacity = capacity
+        self._stores: OrderedDict[str, Any] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def get(self, store_id: str) -> Any:
+        with self._lock:
+            store = self._stores.get(store_id)
+            if store is not None:
+                self._stores.move_to_end(store_id)
+                return store
+        record = self._storage.get_store(store_id=store_id)
+        if record is None:
+            raise ApiError(404, f"store {store_id!r} not found")
+        from service.pareto_store import ParetoStore
+
+        store = ParetoStore.from_json(record.body)
+        with self._lock:
+            self._stores[store_id] = store
+            while len(self._stores) > self._capacity:
+                self._stores.popitem(last=False)
+        return store
+
+
+@dataclass
+class AppState:
+    settings: Settings
+    storage: Storage
+    scenes: SceneCache
+    jobs: JobManager
+    stores: StoreCache
+
+
+def get_state(request: Request) -> AppState:
+    return request.app.state.render_budget  # type: ignore[no-any-return]
+
+
+def get_settings(request: Request) -> Settings:
+    return get_state(request).settings
+
+
+def get_storage(request: Request) -> Storage:
+    return get_state(request).storage
+
+
+def get_jobs(request: Request) -> JobManager:
+    return get_state(request).jobs
+
+
+def get_scenes(request: Request) -> SceneCache:
+    return get_state(request).scenes
+
+
+def get_stores(request: Request) -> StoreCache:
+    return get_state(request).stores
+
+
+SettingsDep = Annotated[Settings, Depends(get_settings)]
+StorageDep = Annotated[Storage, Depends(get_storage)]
+JobsDep = Annotated[JobManager, Depends(get_jobs)]
+ScenesDep = Annotated[SceneCache, Depends(get_scenes)]
+StoresDep = Annotated[StoreCache, Depends(get_stores)]
+
+
+def store_record(store_id: str, storage: StorageDep) -> StoreRecord:
+    record = storage.get_store(store_id=store_id)
+    if record is None:
+        raise ApiError(404, f"store {store_id!r} not found")
+    return record
+
+
+StoreRecordDep = Annotated[StoreRecord, Depends(store_record)]

@@ -1,0 +1,1 @@
+"""One router per resource: health, scenes, jobs, stores, render (render + evaluate)."""

@@ -1,0 +1,145 @@
+"""POST /render (a preview image with counters and energy report) and POST /evaluate (error and power)."""
+
+from __future__ import annotations
+
+import base64
+import dataclasses
+import io
+import math
+import time
+from typing import Any
+
+import numpy as np
+from fastapi import APIRouter
+
+from service.storage import Storage
+
+from ..deps import ScenesDep, SettingsDep, StorageDep
+from ..errors import ApiError, ErrorResponse
+from ..schemas import CameraIn, EvaluateRequest, EvaluateResponse, RenderRequest, RenderResponse
+from .jobs import check_profile
+
+router = APIRouter(tags=["render"])
+_ERRORS: dict[int | str, dict[str, Any]] = {404: {"model": ErrorResponse}, 422: {"model": ErrorResponse}}
+
+
+def scene_or_404(storage: Storage, scenes: Any, scene_id: str) -> Any:
+    if storage.get_scene(scene_id=scene_id) is None:
+        raise ApiError(404, f"scene {scene_id!r} not found")
+    return scenes.get(scene_id)
+
+
+def make_camera(cam: CameraIn, max_pixels: int) -> Any:
+    import sim_core
+
+    if cam.width * cam.height > max_pixels:
+        raise ApiError(422, f"camera resolution {cam.width}x{cam.height} exceeds the preview limit of "
+                            f"{max_pixels} pixels")
+    try:
+        return sim_core.Camera.from_blender(np.asarray(cam.matrix_world, dtype=np.float64), cam.vfov,
+                                            cam.width, cam.height)
+    except ValueError as exc:
+        raise ApiError(422, f"camera: {exc}") from exc
+
+
+def make_settings(values: dict[str, Any] | None) -> Any:
+    import sim_core
+
+    if not values:
+        return sim_core.RenderSettings.max_quality()
+    fields = {f.name for f in dataclasses.fields(sim_core.RenderSettings)}
+    unknown = sorted(set(values) - fields)
+    if unknown:
+        raise ApiError(422, f"unknown render settings {unknown}; known: {sorted(fields)}")
+    try:
+        return dataclasses.replace(sim_core.RenderSettings.max_quality(), **values)
+    except (TypeError, ValueError) as exc:
+        raise ApiError(422, f"settings: {exc}") from exc
+
+
+def _jsonable(value: Any) -> Any:
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: _jsonable(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _jsonable(value.tolist())
+    if isinstance(value, bool | str) or value is None:
+        return value
+    if isinstance(value, int | np.integer):
+        return int(value)
+    if isinstance(value, float | np.floating):
+        f = float(value)
+        return f if math.isfinite(f) else None
+    return str(value)
+
+
+def encode_png(image: np.ndarray) -> bytes:
+    """Linear float RGB -> 8-bit sRGB PNG."""
+    from PIL import Image
+
+    x = np.clip(np.nan_to_num(image, nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
+    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+    buf = io.BytesIO()
+    Image.fromarray((srgb * 255.0 + 0.5).astype(np.uint8), "RGB").save(buf, format="PNG")
+    return buf.getvalue()
+
+
+def encode_exr(image: np.ndarray, storage: Storage) -> bytes:
+    """Linear float RGB -> half-float-free 32-bit EXR (OpenEXR writes files, so go through tmp/)."""
+    import OpenEXR
+
+    tmp = storage.new_temp_path(".exr")
+    try:
+        header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+        with OpenEXR.File(header, {"RGB": np.ascontiguousarray(image, dtype=np.float32)}) as f:
+            f.write(str(tmp))
+        return tmp.read_bytes()
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+@router.post("/render", response_model=RenderResponse, responses=_ERRORS)
+def render_preview(body: RenderRequest, storage: StorageDep, scenes: ScenesDep,
+                   settings: SettingsDep) -> RenderResponse:
+    """Render one frame with the simulator; the image comes back base64-encoded next to its counters and
+    the energy report of the chosen hardware profile."""
+    import sim_core
+
+    check_profile(body.profile)
+    scene = scene_or_404(storage, scenes, body.scene_id)
+    camera = make_camera(body.camera, settings.max_render_pixels)
+    rs = make_settings(body.settings)
+    t0 = time.perf_counter()
+    profile = sim_core.load_profile(body.profile)
+    result = sim_core.render(scene, camera, rs, threads=settings.render_threads)
+    report = sim_core.price(result, profile, body.fps)
+    elapsed = time.perf_counter() - t0
+    image = np.asarray(result.image, dtype=np.float32)
+    data = encode_png(image) if body.format == "png" else encode_exr(image, storage)
+    return RenderResponse(
+        format=body.format, media_type="image/png" if body.format == "png" else "image/x-exr",
+        width=int(image.shape[1]), height=int(image.shape[0]), image_base64=base64.b64encode(data).decode(),
+        counters={str(k): int(v) for k, v in dict(result.counters).items()}, energy=_jsonable(report),
+        render_time_s=elapsed,
+    )
+
+
+@router.post("/evaluate", response_model=EvaluateResponse, responses=_ERRORS)
+def evaluate_settings(body: EvaluateRequest, storage: StorageDep, scenes: ScenesDep,
+                      settings: SettingsDep) -> EvaluateResponse:
+    """Error (1 - SSIM against the maximum-quality render of the same camera) and power of settings."""
+    from service.evaluation import evaluate
+
+    check_profile(body.profile)
+    scene = scene_or_404(storage, scenes, body.scene_id)
+    camera = make_camera(body.camera, settings.max_render_pixels)
+    rs = make_settings(body.settings)
+    try:
+        ev = evaluate(scene, camera, rs, profile=body.profile, fps=body.fps)
+    except ValueError as exc:
+        raise ApiError(422, str(exc)) from exc
+    return EvaluateResponse(error=float(ev.error), power_w=float(ev.power_w),
+                            frame_time_s=float(ev.frame_time_s), breakdown=_jsonable(ev.breakdown))

@@ -1,0 +1,146 @@
+"""POST /scenes (streamed, size-limited .glb upload) and GET /scenes/{id}."""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import struct
+from pathlib import Path
+from typing import Any
+
+from fastapi import APIRouter, Request, status
+from starlette.concurrency import run_in_threadpool
+
+from service.storage import SceneRecord, Storage
+
+from ..deps import ScenesDep, SettingsDep, StorageDep
+from ..errors import ApiError, ErrorResponse
+from ..schemas import ScenePublic
+
+log = logging.getLogger("render_budget.api")
+router = APIRouter(prefix="/scenes", tags=["scenes"])
+
+GLB_MAGIC = b"glTF"
+ACCEPTED_TYPES = ("model/gltf-binary", "application/octet-stream")
+
+_ERRORS: dict[int | str, dict[str, Any]] = {
+    400: {"model": ErrorResponse, "description": "not a glTF binary, truncated, or unreadable"},
+    413: {"model": ErrorResponse, "description": "upload larger than the configured limit"},
+    415: {"model": ErrorResponse, "description": "wrong Content-Type"},
+    422: {"model": ErrorResponse, "description": "geometry the simulator rejects (NaN, bad indices, empty)"},
+}
+
+
+def public(record: SceneRecord) -> ScenePublic:
+    return ScenePublic(id=record.id, size=record.size, content_hash=record.content_hash, stats=record.stats,
+                       inert_parameters=record.inert, cameras=record.cameras, created=record.created)
+
+
+def check_glb_header(path: Path, size: int) -> None:
+    """Cheap structural checks before the real loader: magic, version, declared length, first chunk."""
+    if size < 20:
+        raise ApiError(400, f"not a glTF binary (.glb): only {size} bytes")
+    with open(path, "rb") as f:
+        head = f.read(20)
+    magic, version, length = struct.unpack_from("<4sII", head, 0)
+    if magic != GLB_MAGIC:
+        raise ApiError(400, f"not a glTF binary (.glb): magic is {magic!r}, expected b'glTF'")
+    if version != 2:
+        raise ApiError(400, f"unsupported glTF binary version {version} (need 2)")
+    if length != size:
+        raise ApiError(400, f"truncated or padded .glb: header says {length} bytes, received {size}")
+    chunk_len, chunk_type = struct.unpack_from("<I4s", head, 12)
+    if chunk_type != b"JSON":
+        raise ApiError(400, f"malformed .glb: first chunk is {chunk_type!r}, expected b'JSON'")
+    if 20 + chunk_len > size:
+        raise ApiError(400, f"truncated .glb: JSON chunk of {chunk_len} bytes does not fit")
+
+
+def default_space_mapping() -> dict[str, list[Any]]:
+    """RenderSettings field -> candidate values of the default parameter space (for inert parameters)."""
+    from service.params import default_space
+
+    return default_space().as_render_space()
+
+
+def analyse_scene(path: Path) -> tuple[Any, dict[str, Any], dict[str, str]]:
+    """Load with the real loader (the only judge of validity) and ask the simulator what is inert."""
+    import sim_core
+
+    def private(exc: BaseException) -> str:  # the server's file names are nobody's business
+        return str(exc).replace(str(path), "upload.glb").replace(path.name, "upload.glb")
+
+    try:
+        scene = sim_core.Scene.from_gltf(str(path))
+    except ValueError as exc:
+        raise ApiError(422, f"scene rejected: {private(exc)}") from exc
+    except MemoryError as exc:
+        raise ApiError(413, "scene too large to load") from exc
+    except Exception as exc:  # the file is untrusted; any parser failure is the client's problem
+        raise ApiError(400, f"could not read glTF: {type(exc).__name__}: {private(exc)}") from exc
+    stats = {k: (v if isinstance(v, int | float | str | bool | list | dict) else str(v))
+             for k, v in dict(scene.stats).items()}
+    inert = {str(k): str(v) for k, v in sim_core.inert_parameters(scene, default_space_mapping()).items()}
+    return scene, stats, inert
+
+
+async def receive_upload(request: Request, storage: Storage, limit: int) -> tuple[Path, str, int]:
+    """Stream the body into tmp/ while hashing; stop at the limit (never buffer it all in memory)."""
+    declared = request.headers.get("content-length")
+    if declared is not None:
+        try:
+            if int(declared) > limit:
+                raise ApiError(413, f"upload of {int(declared)} bytes exceeds the limit of {limit} bytes")
+        except ValueError as exc:
+            raise ApiError(400, "invalid Content-Length header") from exc
+    tmp = storage.new_temp_path(".glb")
+    digest = hashlib.sha256()
+    size = 0
+    try:
+        with open(tmp, "wb") as f:
+            async for chunk in request.stream():
+                size += len(chunk)
+                if size > limit:
+                    raise ApiError(413, f"upload exceeds the limit of {limit} bytes")
+                digest.update(chunk)
+                f.write(chunk)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return tmp, digest.hexdigest(), size
+
+
+@router.post(
+    "", status_code=status.HTTP_201_CREATED, response_model=ScenePublic, responses=_ERRORS,
+    openapi_extra={"requestBody": {"required": True, "content": {
+        t: {"schema": {"type": "string", "format": "binary"}} for t in ACCEPTED_TYPES}}},
+)
+async def upload_scene(request: Request, storage: StorageDep, scenes: ScenesDep,
+                       settings: SettingsDep) -> ScenePublic:
+    """Upload a .glb as the raw request body; its SHA-256 becomes the scene id."""
+    ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
+    if ctype not in ACCEPTED_TYPES:
+        raise ApiError(415, f"send the .glb as the raw body with Content-Type {ACCEPTED_TYPES[0]} "
+                            f"(got {ctype or 'none'!r})")
+    tmp, scene_id, size = await receive_upload(request, storage, settings.max_upload_bytes)
+    try:
+        existing = storage.get_scene(scene_id=scene_id)
+        if existing is not None:
+            return public(existing)
+        check_glb_header(tmp, size)
+        scene, stats, inert = await run_in_threadpool(analyse_scene, tmp)
+        storage.adopt_scene_file(temp_path=tmp, scene_id=scene_id)
+        record = storage.add_scene(scene_id=scene_id, size=size, content_hash=str(scene.content_hash),
+                                   stats=stats, inert=inert, cameras=len(scene.cameras))
+        scenes.put(scene_id, scene)
+        return public(record)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+@router.get("/{scene_id}", response_model=ScenePublic, responses={404: {"model": ErrorResponse}})
+def get_scene(scene_id: str, storage: StorageDep) -> ScenePublic:
+    record = storage.get_scene(scene_id=scene_id)
+    if record is None:
+        raise ApiError(404, f"scene {scene_id!r} not found")
+    return public(record)

@@ -1,0 +1,259 @@
+"""Request and response models, one family per resource (SceneXxx, JobXxx, StoreXxx, RenderXxx).
+
+All inputs are strict at the edge: unknown fields are rejected, numbers must be finite, vectors have fixed
+lengths, budgets and sizes are range-checked, so a bad request is a 422 that names the field.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, StringConstraints, model_validator
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+Vec3 = tuple[Finite, Finite, Finite]
+Row4 = tuple[Finite, Finite, Finite, Finite]
+Matrix4 = tuple[Row4, Row4, Row4, Row4]
+SceneId = Annotated[str, StringConstraints(pattern=r"^[0-9a-f]{64}$")]
+Name = Annotated[str, StringConstraints(pattern=r"^[A-Za-z0-9_.-]{1,64}$")]
+Scalar = bool | int | Finite | Annotated[str, StringConstraints(max_length=64)]
+Vfov = Annotated[float, Field(gt=0.0, lt=math.pi, allow_inf_nan=False,
+                              description="vertical field of view, radians")]
+Pixels = Annotated[int, Field(ge=1, le=8192)]
+
+
+class StrictModel(BaseModel):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+
+def _check_affine(m: Matrix4, name: str) -> None:
+    if tuple(m[3]) != (0.0, 0.0, 0.0, 1.0):
+        raise ValueError(f"{name} must be an affine 4x4 matrix with last row [0, 0, 0, 1]")
+    det = (
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+        - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    )
+    if not math.isfinite(det) or abs(det) < 1e-12:
+        raise ValueError(f"{name} must have an invertible 3x3 part")
+
+
+# -- scenes --------------------------------------------------------------------------------------------
+class ScenePublic(BaseModel):
+    id: str = Field(description="SHA-256 of the uploaded .glb bytes")
+    size: int
+    content_hash: str = Field(description="the simulator's hash of the loaded scene (keys the eval cache)")
+    stats: dict[str, Any]
+    inert_parameters: dict[str, str] = Field(description="settings that cannot change this scene, and why")
+    cameras: int
+    created: float
+
+
+# -- camera path and jobs ----------------------------------------------------------------------------------
+class CameraFrame(StrictModel):
+    """One frame: ``matrix_world``, or ``position`` with ``rotation_quaternion`` (w, x, y, z) or
+    ``direction`` (+ optional ``up``, default +Z)."""
+
+    time: Annotated[float, Field(ge=0.0, le=1e7)]
+    matrix_world: Matrix4 | None = None
+    position: Vec3 | None = None
+    rotation_quaternion: tuple[Finite, Finite, Finite, Finite] | None = None
+    direction: Vec3 | None = None
+    up: Vec3 | None = None
+    vfov: Vfov
+    resolution: tuple[Pixels, Pixels]
+
+    @model_validator(mode="after")
+    def _orientation(self) -> CameraFrame:
+        if self.matrix_world is not None:
+            if any(v is not None for v in (self.position, self.rotation_quaternion, self.direction)):
+                raise ValueError("give matrix_world or position + orientation, not both")
+            _check_affine(self.matrix_world, "matrix_world")
+        elif self.position is None:
+            raise ValueError("a frame needs matrix_world or position")
+        elif (self.rotation_quaternion is None) == (self.direction is None):
+            raise ValueError("position needs exactly one of rotation_quaternion and direction")
+        elif self.rotation_quaternion is not None and math.hypot(*self.rotation_quaternion) < 1e-9:
+            raise ValueError("rotation_quaternion must be non-zero")
+        elif self.direction is not None and math.hypot(*self.direction) < 1e-9:
+            raise ValueError("direction must be non-zero")
+        return self
+
+
+class CameraPathIn(StrictModel):
+    """The camera-path JSON (ARCHITECTURE.md): Blender camera matrices, vfov in radians, seconds."""
+
+    version: Literal[1] = 1
+    fps: Annotated[float, Field(gt=0.0, le=1000.0)]
+    frames: Annotated[list[CameraFrame], Field(min_length=1, max_length=20_000)]
+
+    @model_validator(mode="after")
+    def _times(self) -> CameraPathIn:
+        times = [f.time for f in self.frames]
+        if any(b < a for a, b in itertools.pairwise(times)):
+            raise ValueError("frame times must not decrease")
+        return self
+
+
+class Thresholds(StrictModel):
+    """Octree subdivision thresholds tau_p (watts) and tau_e (1 - SSIM)."""
+
+    power_w: Annotated[float, Field(gt=0.0, le=1e4)] = 0.05
+    error: Annotated[float, Field(gt=0.0, le=1.0)] = 0.01
+
+
+class OptimizerOptions(StrictModel):
+    max_depth: Annotated[int, Field(ge=0, le=8)] = 1
+    population: Annotated[int, Field(ge=4, le=512)] = 24
+    generations: Annotated[int, Field(ge=1, le=500)] = 25
+    seed: Annotated[int, Field(ge=0, le=2**31 - 1)] = 0
+    exhaustive_limit: Annotated[int, Field(ge=0, le=65536)] = 512
+
+
+class JobCreate(StrictModel):
+    scene_id: SceneId
+    camera_path: CameraPathIn
+    parameters: Annotated[list[Name], Field(min_length=1, max_length=8)] | None = Field(
+        default=None, description="subset of the default parameter space (default: all, minus inert)"
+    )
+    space: dict[Name, Annotated[list[Scalar], Field(min_length=1, max_length=16)]] | None = Field(
+        default=None, description="explicit candidate values per parameter, maximum quality first"
+    )
+    thresholds: Thresholds = Thresholds()
+    options: OptimizerOptions = OptimizerOptions()
+    profile: Name = "mobile"
+    resolution: tuple[Annotated[int, Field(ge=4, le=1024)], Annotated[int, Field(ge=4, le=1024)]] = Field(
+        default=(64, 48), description="evaluation resolution (width, height)"
+    )
+
+    @model_validator(mode="after")
+    def _space(self) -> JobCreate:
+        if self.space is not None and len(self.space) > 8:
+            raise ValueError("space has more than 8 parameters (settings pack into 32 bits)")
+        return self
+
+
+class JobProgress(BaseModel):
+    model_config = ConfigDict(extra="allow")
+
+    views_done: int = 0
+    views_planned: int = 0
+    evaluations: int = 0
+    cache_hits: int = 0
+    elapsed_s: float = 0.0
+    estimate_s: float | None = None
+
+
+class JobPublic(BaseModel):
+    id: str
+    scene_id: str
+    state: Literal["queued", "running", "done", "failed", "cancelled"]
+    progress: JobProgress
+    error: str | None
+    store_id: str | None
+    cancel_requested: bool
+    attempts: int
+    created: float
+    started: float | None
+    finished: float | None
+
+
+# -- stores ------------------------------------------------------------------------------------------
+class PreviousSettings(StrictModel):
+    """The settings in use and how long ago the target changed, for the temporal filter (Eq. 8)."""
+
+    indices: Annotated[list[Annotated[int, Field(ge=0, le=15)]], Field(min_length=1, max_length=8)]
+    elapsed_s: Annotated[float, Field(ge=0.0, le=1e7)]
+    period_s: Annotated[float, Field(gt=0.0, le=3600.0)] = 2.0
+
+
+class StoreQuery(StrictModel):
+    position: Vec3
+    direction: Vec3 | None = None
+    matrix: Matrix4 | None = Field(default=None, description="camera world matrix (looks down local -Z)")
+    fov: Vfov | None = None
+    power_budget_w: Annotated[float, Field(gt=0.0, le=1e4)] | None = None
+    error_budget: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
+    previous: PreviousSettings | None = None
+
+    @model_validator(mode="after")
+    def _one_budget(self) -> StoreQuery:
+        if (self.power_budget_w is None) == (self.error_budget is None):
+            raise ValueError("give exactly one of power_budget_w and error_budget")
+        if self.direction is not None and math.hypot(*self.direction) == 0.0:
+            raise ValueError("direction must be non-zero")
+        if self.matrix is not None:
+            _check_affine(self.matrix, "matrix")
+        return self
+
+
+class QueryResult(BaseModel):
+    settings: dict[str, Any]
+    indices: list[int]
+    packed: int
+    power_w: float
+    error: float
+    clamped: bool
+    infeasible: bool
+    filtered: bool = Field(description="indices come from the temporal filter, not the raw target")
+
+
+# -- render and evaluate -----------------------------------------------------------------------------
+class CameraIn(StrictModel):
+    matrix_world: Matrix4
+    vfov: Vfov
+    width: Annotated[int, Field(ge=1, le=4096)]
+    height: Annotated[int, Field(ge=1, le=4096)]
+
+    @model_validator(mode="after")
+    def _affine(self) -> CameraIn:
+        _check_affine(self.matrix_world, "matrix_world")
+        return self
+
+
+class RenderRequest(StrictModel):
+    scene_id: SceneId
+    camera: CameraIn
+    settings: dict[Name, Scalar] | None = Field(
+        default=None, description="RenderSettings fields by name (default: maximum quality)"
+    )
+    profile: Name = "mobile"
+    fps: Annotated[float, Field(gt=0.0, le=1000.0)] = 30.0
+    format: Literal["png", "exr"] = "png"
+
+
+class RenderResponse(BaseModel):
+    format: Literal["png", "exr"]
+    media_type: str
+    width: int
+    height: int
+    image_base64: str
+    counters: dict[str, int]
+    energy: dict[str, Any]
+    render_time_s: float
+
+
+class EvaluateRequest(StrictModel):
+    scene_id: SceneId
+    camera: CameraIn
+    settings: dict[Name, Scalar] | None = None
+    profile: Name = "mobile"
+    fps: Annotated[float, Field(gt=0.0, le=1000.0)] = 30.0
+
+
+class EvaluateResponse(BaseModel):
+    error: float
+    power_w: float
+    frame_time_s: float
+    breakdown: dict[str, Any]
+
+
+# -- health ------------------------------------------------------------------------------------------
+class Health(BaseModel):
+    status: Literal["ok"]
+    version: str
+    profiles: list[str]
+    executor: str
+    jobs: dict[str, int]

@@ -1,0 +1,360 @@
+"""Background optimisation jobs: durable state in SQLite, resume after a restart, cancellation, events.
+
+A job is a row in ``jobs`` (the request as JSON, its state and last progress) plus an ordered list of
+``job_events`` that the API streams as server-sent events. Worker threads take queued jobs and call
+``service.optimize.optimize_path`` with the shared persistent evaluation cache, so a job that was running
+when the process died is simply queued again at the next start: its finished evaluations come back from
+the cache and, the optimiser being deterministic for a seed, the final store equals an uninterrupted run.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import queue
+import threading
+import time
+from collections import OrderedDict
+from collections.abc import Callable
+from typing import Any
+
+from .storage import TERMINAL_STATES, JobRecord, Storage
+
+log = logging.getLogger("render_budget.jobs")
+
+
+class JobCancelled(Exception):
+    """Raised inside a job when its cancel flag (or the service's stop flag) is seen."""
+
+
+class SceneCache:
+    """Loaded ``sim_core.Scene`` objects by scene id (building a BVH is the expensive part)."""
+
+    def __init__(self, storage: Storage, *, capacity: int = 8) -> None:
+        self._storage = storage
+        self._capacity = capacity
+        self._scenes: OrderedDict[str, Any] = OrderedDict()
+        self._lock = threading.Lock()
+        self._loading: dict[str, threading.Lock] = {}
+
+    def put(self, scene_id: str, scene: Any) -> None:
+        with self._lock:
+            self._scenes[scene_id] = scene
+            while len(self._scenes) > self._capacity:
+                self._scenes.popitem(last=False)
+
+    def get(self, scene_id: str) -> Any:
+        with self._lock:
+            if scene_id in self._scenes:
+                self._scenes.move_to_end(scene_id)
+                return self._scenes[scene_id]
+            gate = self._loading.setdefault(scene_id, threading.Lock())
+        with gate:  # one loader per scene; others wait for it
+            with self._lock:
+                if scene_id in self._scenes:
+                    return self._scenes[scene_id]
+            import sim_core
+
+            scene = sim_core.Scene.from_gltf(str(self._storage.scene_path(scene_id)))
+            with self._lock:
+                self._scenes[scene_id] = scene
+                while len(self._scenes) > self._capacity:
+                    self._scenes.popitem(last=False)
+                self._loading.pop(scene_id, None)
+            return scene
+
+
+def _plain(value: Any) -> Any:
+    """JSON-friendly copy of a progress value (dataclasses, numpy scalars, tuples)."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: _plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    if isinstance(value, bool | str) or value is None:
+        return value
+    if isinstance(value, int):
+        return int(value)
+    try:
+        f = float(value)
+    except (TypeError, ValueError):
+        return str(value)
+    return f if math.isfinite(f) else None
+
+
+def progress_dict(progress: Any, *, elapsed_s: float) -> dict[str, Any]:
+    """The optimiser's progress report as the API's JobProgress fields plus whatever else it carries."""
+    raw = _plain(progress)
+    if not isinstance(raw, dict):
+        raw = {"detail": raw}
+    aliases = {
+        "views_done": ("views_done", "samples_done", "done"),
+        "views_planned": ("views_planned", "samples_planned", "planned", "total"),
+        "evaluations": ("evaluations", "evaluated", "renders"),
+        "cache_hits": ("cache_hits", "hits"),
+    }
+    out: dict[str, Any] = {k: v for k, v in raw.items() if k not in ("elapsed_s", "estimate_s")}
+    for key, names in aliases.items():
+        for n in names:
+            if isinstance(raw.get(n), int | float):
+                out[key] = int(raw[n])
+                break
+    out["elapsed_s"] = round(float(elapsed_s), 3)
+    done, planned = out.get("views_done", 0), out.get("views_planned", 0)
+    out["estimate_s"] = (
+        round(elapsed_s * (planned - done) / done, 3) if done > 0 and planned >= done else None
+    )
+    return out
+
+
+class JobManager:
+    """Queue, worker threads and bookkeeping for optimisation jobs.
+
+    ``start()`` re-queues every job left queued or running by a previous process (that is the resume
+    path); ``stop()`` asks running jobs to stop at their next check and leaves them queued in the
+    database, so a clean shutdown resumes exactly like a crash.
+    """
+
+    def __init__(
+        self, storage: Storage, scenes: SceneCache, *, workers: int = 2, dask_scheduler: str | None = None,
+        render_threads: int | None = None,
+    ) -> None:
+        self.storage = storage
+        self.scenes = scenes
+        self.workers = workers
+        self.dask_scheduler = dask_scheduler
+        self.render_threads = render_threads
+        self._queue: queue.Queue[str | None] = queue.Queue()
+        self._threads: list[threading.Thread] = []
+        self._cancel: dict[str, threading.Event] = {}
+        self._cancel_lock = threading.Lock()
+        self._stopping = threading.Event()
+        self._executor: Any = None
+        self._executor_lock = threading.Lock()
+        self._cache: Any = None
+        self._cache_lock = threading.Lock()
+        # Monotonic per-process counter the SSE endpoint watches instead of polling the database.
+        self.version = 0
+        self._version_cond = threading.Condition()
+
+    # -- lifecycle ---------------------------------------------------------------------------------
+    @property
+    def executor_description(self) -> str:
+        return f"dask:{self.dask_scheduler}" if self.dask_scheduler else "in-process"
+
+    def start(self) -> None:
+        for job in self.storage.list_jobs(states=("queued", "running")):
+            if job.cancel_requested:
+                self._finish(job.id, "cancelled", error=None)
+                continue
+            if job.state == "running":
+                self.storage.update_job(
+                    job_id=job.id, state="queued",
+                    event=("resumed", {"state": "queued", "attempts": job.attempts}),
+                )
+            self._queue.put(job.id)
+        for i in range(self.workers):
+            t = threading.Thread(target=self._worker, name=f"render-budget-job-{i}", daemon=True)
+            t.start()
+            self._threads.append(t)
+
+    def stop(self, timeout: float = 30.0) -> None:
+        self._stopping.set()
+        with self._cancel_lock:
+            for ev in self._cancel.values():
+                ev.set()
+        for _ in self._threads:
+            self._queue.put(None)
+        deadline = time.monotonic() + timeout
+        for t in self._threads:
+            t.join(max(0.0, deadline - time.monotonic()))
+        self._threads.clear()
+        with self._executor_lock:
+            if self._executor is not None and hasattr(self._executor, "close"):
+                try:
+                    self._executor.close()
+                except Exception:  # closing a remote client must not block shutdown
+                    log.exception("closing the executor failed")
+            self._executor = None
+        with self._cache_lock:
+            if self._cache is not None and hasattr(self._cache, "close"):
+                self._cache.close()
+            self._cache = None
+
+    def _bump(self) -> None:
+        with self._version_cond:
+            self.version += 1
+            self._version_cond.notify_all()
+
+    def wait_change(self, seen: int, timeout: float) -> int:
+        """Block up to ``timeout`` seconds for any job event after ``seen``; returns the new version."""
+        with self._version_cond:
+            if self.version == seen:
+                self._version_cond.wait(timeout)
+            return self.version
+
+    # -- requests from the API -----------------------------------------------------------------------
+    def submit(self, *, scene_id: str, spec: dict[str, Any]) -> JobRecord:
+        job = self.storage.create_job(scene_id=scene_id, spec=spec)
+        self._queue.put(job.id)
+        self._bump()
+        return job
+
+    def cancel(self, *, job_id: str) -> JobRecord | None:
+        job = self.storage.request_cancel(job_id=job_id)
+        if job is not None:
+            with self._cancel_lock:
+                ev = self._cancel.get(job_id)
+            if ev is not None:
+                ev.set()
+            self._bump()
+        return job
+
+    # -- shared resources ----------------------------------------------------------------------------
+    def executor(self) -> Any:
+        """One executor for the whole service (a Dask client is expensive to make)."""
+        with self._executor_lock:
+            if self._executor is None:
+                from service import executors
+
+                if self.dask_scheduler:
+                    self._executor = executors.DaskExecutor(self.dask_scheduler)
+                else:
+                    self._executor = executors.InProcessExecutor(threads=self.render_threads)
+            return self._executor
+
+    def eval_cache(self) -> Any:
+        with self._cache_lock:
+            if self._cache is None:
+                from service.eval_cache import EvalCache
+
+                self._cache = EvalCache(self.storage.eval_cache_path)
+            return self._cache
+
+    # -- the worker ----------------------------------------------------------------------------------
+    def _worker(self) -> None:
+        while not self._stopping.is_set():
+            job_id = self._queue.get()
+            if job_id is None:
+                return
+            job = self.storage.get_job(job_id=job_id)
+            if job is None or job.state != "queued":
+                continue
+            try:
+                self._run(job)
+            except Exception:  # keep the worker alive whatever one job does
+                log.exception("job %s crashed the worker", job_id)
+                self._finish(job_id, "failed", error="internal error while running the job")
+
+    def _finish(self, job_id: str, state: str, *, error: str | None, store_id: str | None = None,
+                elapsed_s: float | None = None) -> None:
+        data: dict[str, Any] = {"state": state}
+        if error is not None:
+            data["error"] = error
+        if store_id is not None:
+            data["store_id"] = store_id
+        self.storage.update_job(job_id=job_id, state=state, error=error, store_id=store_id,
+                                finished=time.time(), elapsed_s=elapsed_s, event=(state, data))
+        self._bump()
+
+    def _run(self, job: JobRecord) -> None:
+        cancel = threading.Event()
+        with self._cancel_lock:
+            self._cancel[job.id] = cancel
+        t0 = time.monotonic()
+        base_elapsed = job.elapsed_s
+        self.storage.update_job(job_id=job.id, state="running", started=time.time(), bump_attempts=True,
+                                event=("started", {"state": "running", "attempt": job.attempts + 1}))
+        self._bump()
+
+        def elapsed() -> float:
+            return base_elapsed + (time.monotonic() - t0)
+
+        def should_cancel() -> bool:
+            return cancel.is_set() or self._stopping.is_set()
+
+        def on_progress(progress: Any) -> None:
+            p = progress_dict(progress, elapsed_s=elapsed())
+            self.storage.update_job(job_id=job.id, progress=p, elapsed_s=elapsed(), event=("progress", p))
+            self._bump()
+            if should_cancel():
+                raise JobCancelled
+
+        try:
+            store = run_optimisation(
+                job.spec, scene=self.scenes.get(job.scene_id), cache=self.eval_cache(),
+                executor=self.executor(), progress=on_progress, should_cancel=should_cancel,
+            )
+            if should_cancel():
+                raise JobCancelled
+        except JobCancelled:
+            self._after_stop(job.id, elapsed())
+            return
+        except Exception as exc:
+            if should_cancel() and _looks_cancelled(exc):
+                self._after_stop(job.id, elapsed())
+                return
+            log.exception("job %s failed", job.id)
+            self._finish(job.id, "failed", error=f"{type(exc).__name__}: {exc}", elapsed_s=elapsed())
+            return
+        finally:
+            with self._cancel_lock:
+                self._cancel.pop(job.id, None)
+        body = store.to_json()
+        store_id = self.storage.put_store(scene_id=job.scene_id, job_id=job.id, body=body)
+        self._finish(job.id, "done", error=None, store_id=store_id, elapsed_s=elapsed())
+
+    def _after_stop(self, job_id: str, elapsed_s: float) -> None:
+        current = self.storage.get_job(job_id=job_id)
+        if current is not None and current.cancel_requested:
+            self._finish(job_id, "cancelled", error=None, elapsed_s=elapsed_s)
+        else:  # the service is shutting down: leave it queued so the next start resumes it
+            self.storage.update_job(job_id=job_id, state="queued", elapsed_s=elapsed_s,
+                                    event=("interrupted", {"state": "queued"}))
+            self._bump()
+
+
+def _looks_cancelled(exc: BaseException) -> bool:
+    return "cancel" in type(exc).__name__.lower() or "cancel" in str(exc).lower()
+
+
+def is_terminal(state: str) -> bool:
+    return state in TERMINAL_STATES
+
+
+# -- the bridge to the optimiser (service.optimize and friends) ------------------------------------------
+def validate_job_spec(spec: dict[str, Any]) -> None:
+    """Checks that need the optimiser's definitions; raises ValueError naming the problem."""
+    from service.camera_path import CameraPath
+
+    CameraPath.from_dict(spec["camera_path"])
+
+
+def run_optimisation(
+    spec: dict[str, Any], *, scene: Any, cache: Any, executor: Any,
+    progress: Callable[[Any], None], should_cancel: Callable[[], bool],
+) -> Any:
+    """Turn a stored job request into the optimiser's inputs and run it; returns a ParetoStore."""
+    from service.camera_path import CameraPath
+    from service.optimize import OptimizeOptions, optimize_path
+    from service.params import ParameterSpace
+
+    path = CameraPath.from_dict(spec["camera_path"])
+    space = ParameterSpace.default()
+    if spec.get("parameters"):
+        space = space.subset(spec["parameters"])
+    options = OptimizeOptions(
+        max_depth=spec["options"]["max_depth"],
+        population=spec["options"]["population"],
+        generations=spec["options"]["generations"],
+        seed=spec["options"]["seed"],
+        exhaustive_limit=spec["options"]["exhaustive_limit"],
+        threshold_power=spec["thresholds"]["power_w"],
+        threshold_error=spec["thresholds"]["error"],
+        profile=spec["profile"],
+        resolution=tuple(spec["resolution"]),
+    )
+    return optimize_path(scene, path, space, options, cache=cache, executor=executor, progress=progress,
+                         should_cancel=should_cancel)

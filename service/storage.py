@@ -1,0 +1,392 @@
+"""Durable state of the REST service: content-addressed scene files plus SQLite (WAL) tables.
+
+Everything lives under one data directory so a restart (or a SIGKILL) loses nothing that was committed:
+
+- ``scenes/<sha256>.glb``: uploaded scenes, named by the hash of their bytes (never by a client name);
+- ``service.sqlite3``: tables ``scenes``, ``jobs``, ``job_events`` (the ordered progress stream served
+  as server-sent events) and ``stores`` (Pareto stores, keyed by the hash of their JSON);
+- ``eval_cache.sqlite3``: the optimiser's evaluation cache (its own file, so its writes never wait on
+  the job tables' and vice versa);
+- ``tmp/``: uploads and previews in flight (emptied at start).
+
+Connections are per thread (SQLite objects must not cross threads); WAL lets the API read while the job
+runner writes.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import sqlite3
+import threading
+import time
+import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+SCHEMA_VERSION = 1
+DB_NAME = "service.sqlite3"
+EVAL_CACHE_NAME = "eval_cache.sqlite3"
+
+JOB_STATES = ("queued", "running", "done", "failed", "cancelled")
+TERMINAL_STATES = frozenset({"done", "failed", "cancelled"})
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS scenes (
+    id TEXT PRIMARY KEY,
+    size INTEGER NOT NULL,
+    content_hash TEXT NOT NULL,
+    stats TEXT NOT NULL,
+    inert TEXT NOT NULL,
+    cameras INTEGER NOT NULL,
+    created REAL NOT NULL
+);
+CREATE TABLE IF NOT EXISTS jobs (
+    id TEXT PRIMARY KEY,
+    scene_id TEXT NOT NULL REFERENCES scenes(id),
+    spec TEXT NOT NULL,
+    state TEXT NOT NULL,
+    progress TEXT NOT NULL DEFAULT '{}',
+    error TEXT,
+    store_id TEXT,
+    cancel_requested INTEGER NOT NULL DEFAULT 0,
+    attempts INTEGER NOT NULL DEFAULT 0,
+    created REAL NOT NULL,
+    started REAL,
+    finished REAL,
+    elapsed_s REAL NOT NULL DEFAULT 0
+);
+CREATE INDEX IF NOT EXISTS jobs_state ON jobs(state);
+CREATE TABLE IF NOT EXISTS job_events (
+    job_id TEXT NOT NULL REFERENCES jobs(id),
+    seq INTEGER NOT NULL,
+    kind TEXT NOT NULL,
+    data TEXT NOT NULL,
+    created REAL NOT NULL,
+    PRIMARY KEY (job_id, seq)
+);
+CREATE TABLE IF NOT EXISTS stores (
+    id TEXT PRIMARY KEY,
+    scene_id TEXT NOT NULL,
+    job_id TEXT NOT NULL,
+    body TEXT NOT NULL,
+    size INTEGER NOT NULL,
+    created REAL NOT NULL
+);
+"""
+
+
+class UploadTooLarge(Exception):
+    """The streamed body passed the configured size limit."""
+
+
+@dataclass(frozen=True)
+class SceneRecord:
+    id: str
+    size: int
+    content_hash: str
+    stats: dict[str, Any]
+    inert: dict[str, str]
+    cameras: int
+    created: float
+
+
+@dataclass(frozen=True)
+class JobRecord:
+    id: str
+    scene_id: str
+    spec: dict[str, Any]
+    state: str
+    progress: dict[str, Any]
+    error: str | None
+    store_id: str | None
+    cancel_requested: bool
+    attempts: int
+    created: float
+    started: float | None
+    finished: float | None
+    elapsed_s: float
+
+    @property
+    def terminal(self) -> bool:
+        return self.state in TERMINAL_STATES
+
+
+@dataclass(frozen=True)
+class JobEvent:
+    job_id: str
+    seq: int
+    kind: str
+    data: dict[str, Any]
+    created: float
+
+
+@dataclass(frozen=True)
+class StoreRecord:
+    id: str
+    scene_id: str
+    job_id: str
+    body: str
+    size: int
+    created: float
+
+
+def _dumps(value: object) -> str:
+    # allow_nan=False: a NaN that reached this far is a bug upstream; fail loudly rather than store it.
+    return json.dumps(value, sort_keys=True, separators=(",", ":"), allow_nan=False)
+
+
+class Storage:
+    """Scene files and the service tables in one data directory; safe to share between threads."""
+
+    def __init__(self, data_dir: Path | str) -> None:
+        self.data_dir = Path(data_dir).resolve()
+        self.scenes_dir = self.data_dir / "scenes"
+        self.tmp_dir = self.data_dir / "tmp"
+        self.db_path = self.data_dir / DB_NAME
+        self.eval_cache_path = self.data_dir / EVAL_CACHE_NAME
+        for d in (self.data_dir, self.scenes_dir, self.tmp_dir):
+            d.mkdir(parents=True, exist_ok=True)
+        for leftover in self.tmp_dir.iterdir():  # half-written uploads from a killed process
+            if leftover.is_dir():
+                shutil.rmtree(leftover, ignore_errors=True)
+            else:
+                leftover.unlink(missing_ok=True)
+        self._local = threading.local()
+        self._all: list[sqlite3.Connection] = []
+        self._all_lock = threading.Lock()
+        # Serialises writers inside this process (SQLite would, too, but with busy waits).
+        self._write_lock = threading.Lock()
+        with self._write_lock:
+            conn = self._connection()
+            conn.executescript(_SCHEMA)  # runs in its own transaction
+            conn.execute(
+                "INSERT OR IGNORE INTO meta(key, value) VALUES ('schema_version', ?)", (str(SCHEMA_VERSION),)
+            )
+
+    # -- connections -------------------------------------------------------------------------------
+    def _connection(self) -> sqlite3.Connection:
+        conn = getattr(self._local, "conn", None)
+        if conn is None:
+            conn = sqlite3.connect(self.db_path, timeout=30.0, isolation_level=None, check_same_thread=False)
+            conn.execute("PRAGMA journal_mode=WAL")
+            conn.execute("PRAGMA synchronous=NORMAL")
+            conn.execute("PRAGMA busy_timeout=30000")
+            conn.execute("PRAGMA foreign_keys=ON")
+            conn.row_factory = sqlite3.Row
+            self._local.conn = conn
+            with self._all_lock:
+                self._all.append(conn)
+        return conn
+
+    @contextmanager
+    def _conn(self) -> Iterator[sqlite3.Connection]:
+        conn = self._connection()
+        conn.execute("BEGIN IMMEDIATE")
+        try:
+            yield conn
+        except BaseException:
+            conn.execute("ROLLBACK")
+            raise
+        else:
+            conn.execute("COMMIT")
+
+    def close(self) -> None:
+        """Close every connection this object opened (call once, at shutdown)."""
+        with self._all_lock:
+            for conn in self._all:
+                try:
+                    conn.close()
+                except sqlite3.Error:
+                    pass
+            self._all.clear()
+        self._local = threading.local()
+
+    def journal_mode(self) -> str:
+        return str(self._connection().execute("PRAGMA journal_mode").fetchone()[0])
+
+    # -- scene files -------------------------------------------------------------------------------
+    def new_temp_path(self, suffix: str = "") -> Path:
+        """A fresh file name inside the data directory's tmp/ (nothing is created)."""
+        return self.tmp_dir / f"{uuid.uuid4().hex}{suffix}"
+
+    def scene_path(self, scene_id: str) -> Path:
+        if not is_hex_id(scene_id, 64):
+            raise ValueError(f"scene id must be 64 lowercase hex characters, got {scene_id!r}")
+        return self.scenes_dir / f"{scene_id}.glb"
+
+    def adopt_scene_file(self, *, temp_path: Path, scene_id: str) -> Path:
+        """Move a verified upload to its content address (a no-op if the same bytes are already there)."""
+        target = self.scene_path(scene_id)
+        if target.exists():
+            temp_path.unlink(missing_ok=True)
+        else:
+            os.replace(temp_path, target)
+        return target
+
+    def add_scene(
+        self, *, scene_id: str, size: int, content_hash: str, stats: dict[str, Any], inert: dict[str, str],
+        cameras: int,
+    ) -> SceneRecord:
+        now = time.time()
+        with self._write_lock, self._conn() as conn:
+            conn.execute(
+                "INSERT OR IGNORE INTO scenes(id, size, content_hash, stats, inert, cameras, created)"
+                " VALUES (?, ?, ?, ?, ?, ?, ?)",
+                (scene_id, size, content_hash, _dumps(stats), _dumps(inert), cameras, now),
+            )
+        record = self.get_scene(scene_id=scene_id)
+        assert record is not None
+        return record
+
+    def get_scene(self, *, scene_id: str) -> SceneRecord | None:
+        row = self._connection().execute("SELECT * FROM scenes WHERE id = ?", (scene_id,)).fetchone()
+        if row is None:
+            return None
+        return SceneRecord(
+            id=row["id"], size=row["size"], content_hash=row["content_hash"], stats=json.loads(row["stats"]),
+            inert=json.loads(row["inert"]), cameras=row["cameras"], created=row["created"],
+        )
+
+    # -- jobs --------------------------------------------------------------------------------------
+    def create_job(self, *, scene_id: str, spec: dict[str, Any]) -> JobRecord:
+        job_id = uuid.uuid4().hex
+        now = time.time()
+        with self._write_lock, self._conn() as conn:
+            conn.execute(
+                "INSERT INTO jobs(id, scene_id, spec, state, created) VALUES (?, ?, ?, 'queued', ?)",
+                (job_id, scene_id, _dumps(spec), now),
+            )
+            self._append_event(conn, job_id=job_id, kind="queued", data={"state": "queued"})
+        record = self.get_job(job_id=job_id)
+        assert record is not None
+        return record
+
+    @staticmethod
+    def _job(row: sqlite3.Row) -> JobRecord:
+        return JobRecord(
+            id=row["id"], scene_id=row["scene_id"], spec=json.loads(row["spec"]), state=row["state"],
+            progress=json.loads(row["progress"]), error=row["error"], store_id=row["store_id"],
+            cancel_requested=bool(row["cancel_requested"]), attempts=row["attempts"], created=row["created"],
+            started=row["started"], finished=row["finished"], elapsed_s=row["elapsed_s"],
+        )
+
+    def get_job(self, *, job_id: str) -> JobRecord | None:
+        row = self._connection().execute("SELECT * FROM jobs WHERE id = ?", (job_id,)).fetchone()
+        return None if row is None else self._job(row)
+
+    def list_jobs(self, *, states: tuple[str, ...] | None = None) -> list[JobRecord]:
+        conn = self._connection()
+        if states is None:
+            rows = conn.execute("SELECT * FROM jobs ORDER BY created").fetchall()
+        else:
+            marks = ",".join("?" * len(states))
+            rows = conn.execute(f"SELECT * FROM jobs WHERE state IN ({marks}) ORDER BY created",
+                                states).fetchall()
+        return [self._job(r) for r in rows]
+
+    def count_jobs(self) -> dict[str, int]:
+        rows = self._connection().execute("SELECT state, COUNT(*) FROM jobs GROUP BY state").fetchall()
+        counts = dict.fromkeys(JOB_STATES, 0)
+        counts.update({r[0]: r[1] for r in rows})
+        return counts
+
+    def update_job(
+        self, *, job_id: str, state: str | None = None, progress: dict[str, Any] | None = None,
+        error: str | None = None, store_id: str | None = None, started: float | None = None,
+        finished: float | None = None, elapsed_s: float | None = None, bump_attempts: bool = False,
+        event: tuple[str, dict[str, Any]] | None = None,
+    ) -> None:
+        """Change some columns and (optionally) append one event, atomically."""
+        sets: list[str] = []
+        args: list[object] = []
+        for column, value in (
+            ("state", state), ("error", error), ("store_id", store_id), ("started", started),
+            ("finished", finished), ("elapsed_s", elapsed_s),
+        ):
+            if value is not None:
+                sets.append(f"{column} = ?")
+                args.append(value)
+        if progress is not None:
+            sets.append("progress = ?")
+            args.append(_dumps(progress))
+        if bump_attempts:
+            sets.append("attempts = attempts + 1")
+        with self._write_lock, self._conn() as conn:
+            if sets:
+                conn.execute(f"UPDATE jobs SET {', '.join(sets)} WHERE id = ?", (*args, job_id))
+            if event is not None:
+                self._append_event(conn, job_id=job_id, kind=event[0], data=event[1])
+
+    def request_cancel(self, *, job_id: str) -> JobRecord | None:
+        """Flag a job for cancellation; a queued job is cancelled at once. Returns the new record."""
+        with self._write_lock, self._conn() as conn:
+            row = conn.execute("SELECT state FROM jobs WHERE id = ?", (job_id,)).fetchone()
+            if row is None:
+                return None
+            if row["state"] == "queued":
+                conn.execute(
+                    "UPDATE jobs SET state = 'cancelled', cancel_requested = 1, finished = ? WHERE id = ?",
+                    (time.time(), job_id),
+                )
+                self._append_event(conn, job_id=job_id, kind="cancelled", data={"state": "cancelled"})
+            elif row["state"] == "running":
+                conn.execute("UPDATE jobs SET cancel_requested = 1 WHERE id = ?", (job_id,))
+        return self.get_job(job_id=job_id)
+
+    # -- events ------------------------------------------------------------------------------------
+    @staticmethod
+    def _append_event(conn: sqlite3.Connection, *, job_id: str, kind: str, data: dict[str, Any]) -> int:
+        seq = conn.execute(
+            "SELECT COALESCE(MAX(seq), 0) + 1 FROM job_events WHERE job_id = ?", (job_id,)
+        ).fetchone()[0]
+        conn.execute(
+            "INSERT INTO job_events(job_id, seq, kind, data, created) VALUES (?, ?, ?, ?, ?)",
+            (job_id, seq, kind, _dumps(data), time.time()),
+        )
+        return int(seq)
+
+    def append_event(self, *, job_id: str, kind: str, data: dict[str, Any]) -> int:
+        with self._write_lock, self._conn() as conn:
+            return self._append_event(conn, job_id=job_id, kind=kind, data=data)
+
+    def events_after(self, *, job_id: str, after_seq: int = 0, limit: int = 1000) -> list[JobEvent]:
+        rows = self._connection().execute(
+            "SELECT * FROM job_events WHERE job_id = ? AND seq > ? ORDER BY seq LIMIT ?",
+            (job_id, after_seq, limit),
+        ).fetchall()
+        return [
+            JobEvent(job_id=r["job_id"], seq=r["seq"], kind=r["kind"], data=json.loads(r["data"]),
+                     created=r["created"])
+            for r in rows
+        ]
+
+    # -- stores ------------------------------------------------------------------------------------
+    def put_store(self, *, scene_id: str, job_id: str, body: str) -> str:
+        """Keep a store's JSON under the hash of its bytes (equal stores share one id)."""
+        store_id = hashlib.sha256(body.encode()).hexdigest()[:32]
+        with self._write_lock, self._conn() as conn:
+            conn.execute(
+                "INSERT OR IGNORE INTO stores(id, scene_id, job_id, body, size, created)"
+                " VALUES (?, ?, ?, ?, ?, ?)",
+                (store_id, scene_id, job_id, body, len(body.encode()), time.time()),
+            )
+        return store_id
+
+    def get_store(self, *, store_id: str) -> StoreRecord | None:
+        row = self._connection().execute("SELECT * FROM stores WHERE id = ?", (store_id,)).fetchone()
+        if row is None:
+            return None
+        return StoreRecord(id=row["id"], scene_id=row["scene_id"], job_id=row["job_id"], body=row["body"],
+                           size=row["size"], created=row["created"])
+
+
+def is_hex_id(value: str, length: int) -> bool:
+    """True for exactly ``length`` lowercase hex digits (ids are never paths)."""
+    return len(value) == length and all(c in "0123456789abcdef" for c in value)
