@@ -1,0 +1,140 @@
+"""Executors: where batches of evaluations run (in-process, a local process pool, a Dask cluster).
+
+All three run ``fn(shared, item)`` for every item of a batch and return the results in order, so the
+optimiser's results do not depend on the executor. ``shared`` (e.g. the scene reference and the
+evaluation settings) travels once per worker and batch rather than once per item: in chunks for the
+process pool, scattered and broadcast for Dask. ``fn`` must be a module-level (picklable) function.
+
+Dask: start ``dask scheduler`` on one machine and ``dask worker tcp://HOST:8786`` on each render node
+(or dask-jobqueue on a farm), then pass the scheduler address; workers need this package installed.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import multiprocessing
+import os
+from collections.abc import Callable, Sequence
+from typing import Any, Protocol, TypeVar
+
+T = TypeVar("T")
+R = TypeVar("R")
+
+
+class Executor(Protocol):
+    """Runs a batch of independent tasks; results come back in input order."""
+
+    name: str
+
+    def map(self, fn: Callable[[Any, Any], R], shared: Any, items: Sequence[Any]) -> list[R]: ...
+
+    def close(self) -> None: ...
+
+
+def _run_chunk(fn: Callable[[Any, Any], R], shared: Any, chunk: Sequence[Any]) -> list[R]:
+    return [fn(shared, x) for x in chunk]
+
+
+def _chunks(items: Sequence[T], n: int) -> list[Sequence[T]]:
+    n = max(1, min(n, len(items)))
+    size = -(-len(items) // n)
+    return [items[i:i + size] for i in range(0, len(items), size)]
+
+
+class InProcessExecutor:
+    """Runs tasks in the calling thread (the default; the tracer itself is multithreaded)."""
+
+    name = "in-process"
+
+    def map(self, fn: Callable[[Any, Any], R], shared: Any, items: Sequence[Any]) -> list[R]:
+        return [fn(shared, x) for x in items]
+
+    def close(self) -> None:
+        pass
+
+    def __enter__(self) -> InProcessExecutor:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class ProcessPoolExecutor:
+    """A pool of local worker processes (spawned: safe with threads and native state)."""
+
+    name = "process-pool"
+
+    def __init__(self, workers: int | None = None) -> None:
+        self.workers = workers or max(1, (os.cpu_count() or 1))
+        if self.workers < 1:
+            raise ValueError("workers must be >= 1")
+        self._pool = cf.ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn"))
+
+    def map(self, fn: Callable[[Any, Any], R], shared: Any, items: Sequence[Any]) -> list[R]:
+        if not items:
+            return []
+        futures = [self._pool.submit(_run_chunk, fn, shared, c) for c in _chunks(items, 2 * self.workers)]
+        out: list[R] = []
+        for f in futures:
+            out.extend(f.result())
+        return out
+
+    def close(self) -> None:
+        self._pool.shutdown(wait=True, cancel_futures=True)
+
+    def __enter__(self) -> ProcessPoolExecutor:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class DaskExecutor:
+    """Tasks on a Dask distributed cluster, given a scheduler address or an existing ``Client``."""
+
+    name = "dask"
+
+    def __init__(self, address: str | None = None, client: Any = None, timeout_s: float = 30.0) -> None:
+        from distributed import Client
+
+        if (address is None) == (client is None):
+            raise ValueError("give a scheduler address or a client")
+        self._own = client is None
+        self.client = Client(address, timeout=timeout_s) if client is None else client
+        self.address = address or getattr(client.scheduler, "address", "client")
+
+    def _n_workers(self) -> int:
+        try:
+            return max(1, len(self.client.scheduler_info(n_workers=-1).get("workers", {})))
+        except TypeError:  # older signature
+            return max(1, len(self.client.scheduler_info().get("workers", {})))
+
+    def map(self, fn: Callable[[Any, Any], R], shared: Any, items: Sequence[Any]) -> list[R]:
+        if not items:
+            return []
+        shared_f = self.client.scatter(shared, broadcast=True)
+        chunks = _chunks(items, 2 * self._n_workers())
+        futures = [self.client.submit(_run_chunk, fn, shared_f, c, pure=False) for c in chunks]
+        out: list[R] = []
+        for part in self.client.gather(futures):
+            out.extend(part)
+        return out
+
+    def close(self) -> None:
+        if self._own:
+            self.client.close()
+
+    def __enter__(self) -> DaskExecutor:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def make_executor(dask_scheduler: str | None = None, workers: int | None = None) -> Executor:
+    """Dask when a scheduler address is given, a process pool for ``workers > 1``, else in-process."""
+    if dask_scheduler:
+        return DaskExecutor(dask_scheduler)
+    if workers and workers > 1:
+        return ProcessPoolExecutor(workers)
+    return InProcessExecutor()
