@@ -1,0 +1,278 @@
+"""Headless batch runs of the add-on: optimize, evaluate, playback.
+
+    blender -b scene.blend --python-exit-code 1 -P addon/batch.py -- optimize --url http://127.0.0.1:8765
+    python -m addon.batch --blend scene.blend optimize --serve          # the same through the bpy module
+
+Prints a text progress bar; exits non-zero (with the reason on stderr) on any failure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import importlib
+import sys
+import tempfile
+import time
+from pathlib import Path
+from types import ModuleType
+
+EXT_ID = "render_budget"
+
+
+# -- text progress -------------------------------------------------------------------------------------
+class ProgressBar:
+    """One line that fills up; redrawn in place on a terminal, one line per change otherwise."""
+
+    def __init__(self, label: str, width: int = 30, stream=None) -> None:
+        self.label, self.width = label, width
+        self.stream = stream or sys.stdout
+        self.tty = self.stream.isatty()
+        self.last = ""
+
+    def __call__(self, fraction: float, text: str = "") -> None:
+        fraction = min(1.0, max(0.0, fraction))
+        filled = round(self.width * fraction)
+        line = f"{self.label} [{'#' * filled}{'.' * (self.width - filled)}] {100 * fraction:5.1f}% {text}"
+        if line == self.last:
+            return
+        self.last = line
+        self.stream.write(("\r" + line) if self.tty else (line + "\n"))
+        self.stream.flush()
+
+    def done(self) -> None:
+        if self.tty:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+# -- extension loading ---------------------------------------------------------------------------------
+def ensure_extension(bpy: ModuleType) -> str:
+    """The enabled extension's module name: an installed copy if enabled, else stage it from the source
+    tree (with its vendored service modules) and enable it as a dev repository."""
+    for name in bpy.context.preferences.addons.keys():
+        if name.endswith("." + EXT_ID):
+            return name
+    import addon_utils
+
+    for mod in addon_utils.modules(refresh=False):
+        if mod.__name__.endswith("." + EXT_ID):
+            addon_utils.enable(mod.__name__, default_set=True, handle_error=_raise)
+            return mod.__name__
+    repo_root = Path(__file__).resolve().parent.parent
+    tools = repo_root / "tools"
+    if not (tools / "build_extension.py").is_file():
+        raise RuntimeError("the render_budget extension is not installed and no source tree is next to this "
+                           "script: install the zip first")
+    sys.path.insert(0, str(tools))
+    try:
+        build_extension = importlib.import_module("build_extension")
+    finally:
+        sys.path.remove(str(tools))
+    stage_dir = Path(tempfile.mkdtemp(prefix="render-budget-batch-"))
+    build_extension.stage(stage_dir)
+    repos = bpy.context.preferences.extensions.repos
+    repos.new(name="render_budget_batch", module="render_budget_batch", custom_directory=str(stage_dir),
+              source="USER")
+    name = f"bl_ext.render_budget_batch.{EXT_ID}"
+    addon_utils.enable(name, default_set=True, handle_error=_raise)
+    return name
+
+
+def _raise(exc: BaseException) -> None:
+    raise exc
+
+
+# -- arguments -----------------------------------------------------------------------------------------
+def parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="batch", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--blend", help="open this .blend first (needed with the bpy module)")
+    svc = ap.add_argument_group("service")
+    svc.add_argument("--url", default="http://127.0.0.1:8765")
+    svc.add_argument("--token", default="")
+    svc.add_argument("--serve", action="store_true", help="start a local service for this run")
+    svc.add_argument("--python", help="Python of a render-budget environment (default: this one)")
+    svc.add_argument("--data-dir", help="data folder of the local service")
+    svc.add_argument("--timeout", type=float, default=3600.0, help="seconds before giving up on a job")
+    sub = ap.add_subparsers(dest="command", required=True)
+
+    def budget(p: argparse.ArgumentParser) -> None:
+        p.add_argument("--budget-mode", choices=("power", "error"))
+        p.add_argument("--budget", type=float, help="watts (power) or 1 - SSIM (error)")
+        p.add_argument("--filter-period", type=float, help="temporal filter T in seconds")
+
+    opt = sub.add_parser("optimize", help="record the path if needed, optimise, keep the store, save")
+    budget(opt)
+    opt.add_argument("--profile")
+    opt.add_argument("--max-depth", type=int)
+    opt.add_argument("--population", type=int)
+    opt.add_argument("--generations", type=int)
+    opt.add_argument("--seed", type=int)
+    opt.add_argument("--threshold-power", type=float)
+    opt.add_argument("--threshold-error", type=float)
+    opt.add_argument("--resolution", help="evaluation resolution WxH, e.g. 64x36")
+    opt.add_argument("--frame-step", type=int)
+    opt.add_argument("--record", action="store_true", help="re-record the path from the camera animation")
+    opt.add_argument("--save-as", help="save the .blend here (default: overwrite the opened file)")
+    opt.add_argument("--no-save", action="store_true")
+    opt.add_argument("--store-out", help="also write the store JSON here")
+
+    ev = sub.add_parser("evaluate", help="evaluate the path against the presets; write a report folder")
+    budget(ev)
+    ev.add_argument("--out", required=True)
+    ev.add_argument("--frame-step", type=int)
+    ev.add_argument("--resolution", help="evaluation resolution WxH")
+    ev.add_argument("--no-samples", action="store_true", help="skip the sample frames")
+
+    pb = sub.add_parser("playback", help="play the frame range through the store; per-frame CSV")
+    budget(pb)
+    pb.add_argument("--out", help="CSV of the per-frame settings and predictions")
+    return ap
+
+
+def _apply_scene_options(ext: str, props, args: argparse.Namespace) -> None:
+    if getattr(args, "budget_mode", None):
+        props.budget_mode = args.budget_mode.upper()
+    if getattr(args, "budget", None) is not None:
+        # checked before Blender's property limits would silently clamp the value
+        importlib.import_module(f"{ext}.core.playback_logic").validate_budget(props.budget_mode, args.budget)
+        if props.budget_mode == "POWER":
+            props.power_budget = args.budget
+        else:
+            props.error_budget = args.budget
+    for arg, prop in (("filter_period", "filter_period"), ("profile", "profile"), ("max_depth", "max_depth"),
+                      ("population", "population"), ("generations", "generations"), ("seed", "seed"),
+                      ("threshold_power", "threshold_power"), ("threshold_error", "threshold_error"),
+                      ("frame_step", "frame_step")):
+        value = getattr(args, arg, None)
+        if value is not None:
+            setattr(props, prop, value)
+    if getattr(args, "resolution", None):
+        try:
+            w, h = (int(v) for v in args.resolution.lower().split("x"))
+        except ValueError:
+            raise ValueError(f"--resolution must look like 64x36, got {args.resolution!r}") from None
+        props.eval_width, props.eval_height = w, h
+
+
+def _configure_service(bpy: ModuleType, ext: str, args: argparse.Namespace) -> None:
+    prefs = importlib.import_module(f"{ext}.preferences").get(bpy.context)
+    prefs.token = args.token
+    prefs.timeout_s = 120
+    if args.serve:
+        from_local = importlib.import_module(f"{ext}.core.local_service")
+        prefs.service_mode = "LOCAL"
+        prefs.python_path = args.python or sys.executable
+        prefs.local_port = from_local.free_port()
+        prefs.data_dir = args.data_dir or ""
+    else:
+        prefs.service_mode = "URL"
+        prefs.url = args.url
+
+
+# -- commands ------------------------------------------------------------------------------------------
+def cmd_optimize(bpy: ModuleType, ext: str, args: argparse.Namespace) -> int:
+    scene = bpy.context.scene
+    ops = importlib.import_module(f"{ext}.ops_optimize")
+    cp = importlib.import_module(f"{ext}.camera_path")
+    sp = importlib.import_module(f"{ext}.service_process")
+    if args.record:
+        if scene.camera is None:
+            raise ValueError("the scene has no active camera")
+        cp.store_path(scene, cp.sample_animation(scene, scene.camera, scene.power_budget.frame_step))
+    client = sp.client_for(bpy.context)
+    bar = ProgressBar("optimize")
+    t0 = time.monotonic()
+    summary = ops.run_sync(scene, client, progress=lambda u: bar(u.fraction, u.text), timeout_s=args.timeout)
+    bar.done()
+    sys.stdout.write(f"store: {summary} ({time.monotonic() - t0:.1f} s)\n")
+    if args.store_out:
+        Path(args.store_out).write_text(scene.power_budget.store_text.as_string(), encoding="utf-8")
+    if not args.no_save:
+        target = args.save_as or bpy.data.filepath
+        if not target:
+            raise ValueError("nothing to save to: pass --save-as or --no-save")
+        bpy.ops.wm.save_as_mainfile(filepath=str(Path(target).resolve()))
+        sys.stdout.write(f"saved {target}\n")
+    return 0
+
+
+def cmd_evaluate(bpy: ModuleType, ext: str, args: argparse.Namespace) -> int:
+    rep = importlib.import_module(f"{ext}.ops_report")
+    sp = importlib.import_module(f"{ext}.service_process")
+    client = sp.client_for(bpy.context)
+    bar = ProgressBar("evaluate")
+    written = rep.evaluate_scene(bpy.context.scene, client, args.out,
+                                 progress=lambda d, t: bar(d / max(t, 1), f"{d}/{t} renders"),
+                                 frame_step=args.frame_step, samples=not args.no_samples)
+    bar.done()
+    sys.stdout.write(Path(written["report"]).read_text(encoding="utf-8"))
+    if "plots_skipped" in written:
+        sys.stdout.write(f"plots skipped: {written['plots_skipped']}\n")
+    return 0
+
+
+def cmd_playback(bpy: ModuleType, ext: str, args: argparse.Namespace) -> int:
+    scene = bpy.context.scene
+    props = scene.power_budget
+    if props.store_text is None:
+        raise ValueError("no Pareto store in this .blend: run optimize first")
+    if scene.camera is None:
+        raise ValueError("the scene has no active camera")
+    pb = importlib.import_module(f"{ext}.playback")
+    pb.reset()
+    rows = []
+    frames = range(scene.frame_start, scene.frame_end + 1)
+    bar = ProgressBar("playback")
+    t0 = time.perf_counter()
+    for i, f in enumerate(frames):
+        scene.frame_set(f)  # the persistent handler does the work
+        if props.playback_status.startswith("error"):
+            raise ValueError(f"frame {f}: {props.playback_status}")
+        rows.append((f, pb.scene_time(scene), props.active_indices, props.target_indices,
+                     props.predicted_power, props.predicted_error, props.active_settings))
+        bar((i + 1) / len(frames), f"frame {f}")
+    bar.done()
+    elapsed = time.perf_counter() - t0
+    if args.out:
+        with open(args.out, "w", newline="", encoding="utf-8") as fh:
+            w = csv.writer(fh)
+            w.writerow(("frame", "time_s", "active_indices", "target_indices", "predicted_power_w",
+                        "predicted_error", "settings"))
+            w.writerows(rows)
+    n = max(1, len(rows))
+    sys.stdout.write(f"{len(rows)} frames, mean predicted power {sum(r[4] for r in rows) / n:.3f} W, "
+                     f"mean predicted error {sum(r[5] for r in rows) / n:.4f}, "
+                     f"{len({r[2] for r in rows})} distinct settings, {1e3 * elapsed / n:.3f} ms/frame "
+                     f"(frame_set included)\n")
+    return 0
+
+
+COMMANDS = {"optimize": cmd_optimize, "evaluate": cmd_evaluate, "playback": cmd_playback}
+
+
+def main(argv: list[str] | None = None) -> int:
+    if argv is None:
+        argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:]
+    args = parser().parse_args(argv)
+    import bpy
+
+    ext = ""
+    try:
+        if args.blend:
+            bpy.ops.wm.open_mainfile(filepath=str(Path(args.blend).resolve()))
+        ext = ensure_extension(bpy)
+        _configure_service(bpy, ext, args)
+        _apply_scene_options(ext, bpy.context.scene.power_budget, args)
+        return COMMANDS[args.command](bpy, ext, args)
+    except Exception as err:  # batch contract: one clear line and a non-zero status
+        sys.stderr.write(f"render-budget batch {args.command} failed: {err}\n")
+        return 1
+    finally:
+        if ext:
+            importlib.import_module(f"{ext}.service_process").stop_local()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
