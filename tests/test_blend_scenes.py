@@ -34,7 +34,7 @@ def test_teapot_files_and_stats(teapot_build: tuple[Path, dict]) -> None:
     # The real teapot (6,320 triangles) plus a 12-triangle floor slab.
     assert stats["triangles"] == sd.triangles.shape[0] == 6320 + 12
     assert stats["lights"] == 1 and sd.lights[0].kind == "point"
-    assert sd.lights[0].intensity == pytest.approx(2500.0 / (4 * math.pi), rel=1e-6)
+    assert sd.lights[0].intensity == pytest.approx(1000.0 / (4 * math.pi), rel=1e-6)
     assert stats["materials"] == 2
     assert "mirror_reflection" in stats["effects"] and "refraction" not in stats["effects"]
     assert json.loads((scene_dir / "stats.json").read_text()) == stats

@@ -19,7 +19,7 @@ def build(out_dir: Path) -> c.SceneSpec:
     teapot = c.import_obj(c.MODELS_DIR / "teapot.obj", "Teapot", glaze)
     c.normalise(teapot, 2.0)  # about 2 m wide, standing on z = 0
     c.add_object("Floor", c.box_mesh("Floor", (24.0, 24.0, 0.1), floor), (0.0, 0.0, -0.05))
-    c.point_light("KeyLight", (3.0, -2.5, 5.0), watts=2500.0, radius=0.15)
+    c.point_light("KeyLight", (3.0, -2.5, 5.0), watts=1000.0, radius=0.15)
     c.world_color((0.05, 0.06, 0.08))
 
     def eye(t: float) -> np.ndarray:  # slow orbit with a gentle dolly and rise
