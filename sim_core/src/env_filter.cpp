@@ -34,12 +34,14 @@ Vec3 equirect_direction(float column, float row, int width, int height) {
               static_cast<float>(std::cos(theta)));
 }
 
-EnvironmentFilter::EnvironmentFilter(const float* rgb, int width, int height, int order)
+EnvironmentFilter::EnvironmentFilter(const float* rgb, int width, int height, int order, int table_bits)
     : width_(width), height_(height), order_(order) {
   if (rgb == nullptr) throw std::invalid_argument("EnvironmentFilter: null map");
   if (width < 2 || height < 2) throw std::invalid_argument("EnvironmentFilter: map must be at least 2x2");
   if (order != 1 && order != 2)
     throw std::invalid_argument("EnvironmentFilter: order must be 1 (box) or 2 (Bartlett), got " + std::to_string(order));
+  if (table_bits != 0 && table_bits != 32 && table_bits != 64)
+    throw std::invalid_argument("EnvironmentFilter: table_bits must be 0 (auto), 32 or 64");
   const std::size_t n = static_cast<std::size_t>(width) * height * 3;
   rgb_.assign(rgb, rgb + n);
   for (const float v : rgb_)
@@ -63,7 +65,20 @@ EnvironmentFilter::EnvironmentFilter(const float* rgb, int width, int height, in
       dst[0] = src[0]; dst[1] = src[1]; dst[2] = src[2];
     }
   }
-  table_ = std::make_unique<SummedAreaTable<float>>(padded.data(), pw, ph, 3, order, /*offset=*/true);
+  if (table_bits == 64 || (table_bits == 0 && order == 2))
+    table64_ = std::make_unique<SummedAreaTable<double>>(padded.data(), pw, ph, 3, order, /*offset=*/true);
+  else
+    table_ = std::make_unique<SummedAreaTable<float>>(padded.data(), pw, ph, 3, order, /*offset=*/true);
+}
+
+void EnvironmentFilter::box_sum(int x0, int y0, int x1, int y1, double* out) const {
+  if (table_) table_->box_sum(x0, y0, x1, y1, out);
+  else table64_->box_sum(x0, y0, x1, y1, out);
+}
+
+void EnvironmentFilter::bartlett_sum(int cx, int cy, int rx, int ry, double* out) const {
+  if (table_) table_->bartlett_sum(cx, cy, rx, ry, out);
+  else table64_->bartlett_sum(cx, cy, rx, ry, out);
 }
 
 Vec3 EnvironmentFilter::texel(Vec3 direction) const {
@@ -94,7 +109,7 @@ Vec3 EnvironmentFilter::lookup(Vec3 direction, float cone_half_angle) const {
     const int hx = std::min(static_cast<int>(std::lround(rx)), (width_ - 1) / 2);
     const int hy = std::min(static_cast<int>(std::lround(ry)), pad_y_);
     if (hx == 0 && hy == 0) return texel(direction);
-    table_->box_sum(cx - hx, cy - hy, cx + hx + 1, cy + hy + 1, out);
+    box_sum(cx - hx, cy - hy, cx + hx + 1, cy + hy + 1, out);
     const double area = static_cast<double>(2 * hx + 1) * (2 * hy + 1);
     return {static_cast<float>(out[0] / area), static_cast<float>(out[1] / area), static_cast<float>(out[2] / area)};
   }
@@ -103,7 +118,7 @@ Vec3 EnvironmentFilter::lookup(Vec3 direction, float cone_half_angle) const {
   const int by = std::min(static_cast<int>(std::lround(std::sqrt(2.0 * ry * (ry + 1.0) + 1.0))), pad_y_);
   if (bx <= 1 && by <= 1) return texel(direction);
   const int Rx = std::max(bx, 1), Ry = std::max(by, 1);
-  table_->bartlett_sum(cx, cy, Rx, Ry, out);
+  bartlett_sum(cx, cy, Rx, Ry, out);
   const double norm = static_cast<double>(Rx) * Rx * static_cast<double>(Ry) * Ry;
   auto clamp0 = [](double v) { return static_cast<float>(std::max(0.0, v)); };  // rounding can dip below 0
   return {clamp0(out[0] / norm), clamp0(out[1] / norm), clamp0(out[2] / norm)};

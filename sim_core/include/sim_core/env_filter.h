@@ -1,8 +1,11 @@
 // Glossy filtering of an equirectangular environment map with summed-area tables (thesis ch. 2).
 // A glossy reflection lobe is approximated by a cone around the reflected direction; the cone's footprint
 // on the map is filtered in constant time: order 1 = box filter (first-order offset SAT, 4 reads per
-// channel), order 2 = Bartlett filter (second-order offset SAT, 9 reads). Tables are float32 offset tables
-// (the hardware-like choice); sat.h explains why the offset keeps them precise.
+// channel), order 2 = Bartlett filter (second-order offset SAT, 9 reads). sat.h explains the offset.
+// Table precision (measured on a 2048x1024 HDR map against float64, see bench/RESULTS.md): a float32
+// first-order offset table is within ~1 % for cones >= 0.03 rad, so the box filter uses float32 (the
+// hardware-like choice); a float32 second-order table is unusable for cones < ~0.3 rad (its entries reach
+// ~1e11, the 9-tap second difference loses every significant bit), so the Bartlett filter defaults to float64.
 //
 // Map convention (Blender/Cycles "Environment Texture", equirectangular, world frame Z up):
 //   u = 0.5 - atan2(d.y, d.x) / (2 pi),  v = 1 - acos(d.z) / pi   (v = 1 at the top)
@@ -30,7 +33,8 @@ class EnvironmentFilter {
 
   // rgb: (height, width, 3) float32 linear, row 0 at the top; copied. order in {1, 2}.
   // Throws std::invalid_argument on bad sizes/order or non-finite/negative values.
-  EnvironmentFilter(const float* rgb, int width, int height, int order);
+  // table_bits: 32 or 64 forces the table precision; 0 picks float32 for box and float64 for Bartlett.
+  EnvironmentFilter(const float* rgb, int width, int height, int order, int table_bits = 0);
 
   // Mean radiance over the cone footprint of `direction` (need not be normalised; zero -> throws).
   // cone_half_angle <= 0 (or a footprint under one texel) returns the texel under the direction.
@@ -41,6 +45,7 @@ class EnvironmentFilter {
   int width() const { return width_; }
   int height() const { return height_; }
   int order() const { return order_; }
+  int table_bits() const { return table_ ? 32 : 64; }
   // Table reads of the last kind of lookup: 4 per channel for box, 9 for Bartlett (for the energy model).
   int reads_per_lookup() const { return order_ == 1 ? 4 * 3 : 9 * 3; }
 
@@ -48,7 +53,10 @@ class EnvironmentFilter {
   int width_, height_, order_;
   int pad_x_, pad_y_;                       // wrapped columns / across-the-pole rows around the map
   std::vector<float> rgb_;                  // the map itself, for texel()
-  std::unique_ptr<SummedAreaTable<float>> table_;  // built over the padded map
+  std::unique_ptr<SummedAreaTable<float>> table_;     // built over the padded map (float32, the default)
+  std::unique_ptr<SummedAreaTable<double>> table64_;  // or float64 (reference)
+  void box_sum(int x0, int y0, int x1, int y1, double* out) const;
+  void bartlett_sum(int cx, int cy, int rx, int ry, double* out) const;
 };
 
 }  // namespace sim_core

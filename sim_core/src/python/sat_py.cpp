@@ -84,12 +84,13 @@ void bind_sat(nb::module_& m) {
   nb::class_<sim_core::EnvironmentFilter>(m, "EnvironmentFilter")
       .def("__init__",
            [](sim_core::EnvironmentFilter* self, nb::ndarray<const float, nb::ndim<3>, nb::c_contig, nb::device::cpu> rgb,
-              int order) {
+              int order, int table_bits) {
              if (rgb.shape(2) != 3) throw std::invalid_argument("environment map must be (H, W, 3) float32");
              new (self) sim_core::EnvironmentFilter(rgb.data(), static_cast<int>(rgb.shape(1)),
-                                                    static_cast<int>(rgb.shape(0)), order);
+                                                    static_cast<int>(rgb.shape(0)), order, table_bits);
            },
-           "rgb"_a, "order"_a = 1)
+           "rgb"_a, "order"_a = 1, "table_bits"_a = 0)
+      .def_prop_ro("table_bits", &sim_core::EnvironmentFilter::table_bits)
       .def_prop_ro("width", &sim_core::EnvironmentFilter::width)
       .def_prop_ro("height", &sim_core::EnvironmentFilter::height)
       .def_prop_ro("order", &sim_core::EnvironmentFilter::order)

@@ -1,0 +1,134 @@
+"""Energy and timing model: profiles, pricing invariants on counter sets (render-based ones are in
+test_energy_render.py)."""
+
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sim_core.energy as energy
+from sim_core.energy import BLOCKS, list_profiles, load_profile, price
+
+COUNTERS = {
+    "rays_primary": 2_000_000, "rays_shadow": 1_500_000, "rays_total": 3_500_000,
+    "raygen_evals": 2_000_000, "shading_evals": 2_000_000, "bvh_node_visits": 90_000_000,
+    "triangle_tests": 20_000_000, "cache_accesses": 50_000_000, "cache_misses": 900_000,
+    "dram_bytes_read": 57_600_000, "tile_buffer_reads": 4_000_000, "tile_buffer_writes": 2_000_000,
+    "framebuffer_bytes": 8_388_608, "pixels": 2_097_152,
+}
+
+
+def test_shipped_profiles_load_and_are_listed() -> None:
+    names = list_profiles()
+    assert {"mobile", "desktop"} <= set(names)
+    for name in names:
+        p = load_profile(name)
+        assert p.name == name and p.static_power_w > 0
+        cfg = p.cache
+        assert cfg.size_bytes == p.cache_size_bytes and cfg.ways == p.cache_ways
+    mobile = load_profile("mobile")
+    assert 0.5e9 <= mobile.clock["srp_hz"] <= 1.5e9  # "~1 GHz" SGRT-like
+
+
+def test_every_profile_constant_carries_a_comment() -> None:
+    for path in Path(energy.__file__).with_name("profiles").glob("*.toml"):
+        for i, line in enumerate(path.read_text().splitlines(), 1):
+            if re.match(r"^\s*[a-z_0-9]+\s*=\s*[-0-9.]", line):
+                assert "#" in line, f"{path.name}:{i} has no source/assumption comment: {line!r}"
+
+
+def test_load_profile_by_path_and_errors(tmp_path: Path) -> None:
+    src = Path(energy.__file__).with_name("profiles") / "mobile.toml"
+    assert load_profile(src).name == "mobile"
+    with pytest.raises(FileNotFoundError):
+        load_profile("no-such-profile")
+    broken = tmp_path / "broken.toml"
+    broken.write_text(src.read_text().replace("traversal_step = 24.0", "traversal_step = -1.0"))
+    with pytest.raises(ValueError, match="traversal_step"):
+        load_profile(broken)
+    missing = tmp_path / "missing.toml"
+    missing.write_text(src.read_text().replace("ways = 4", ""))
+    with pytest.raises(ValueError, match="ways"):
+        load_profile(missing)
+    odd = tmp_path / "odd.toml"
+    odd.write_text(src.read_text().replace("line_bytes = 64", "line_bytes = 48"))
+    with pytest.raises(ValueError, match="power-of-two"):
+        load_profile(odd)
+
+
+@pytest.mark.parametrize("profile", ["mobile", "desktop"])
+@pytest.mark.parametrize("fps", [24.0, 60.0])
+def test_total_is_sum_of_blocks_and_power_is_static_plus_e_fps(profile: str, fps: float) -> None:
+    r = price(COUNTERS, profile, fps)
+    assert set(r.energy_j) == set(BLOCKS) | {"static"}
+    assert r.total_energy_j == pytest.approx(math.fsum(r.energy_j.values()), rel=1e-12)
+    assert r.dynamic_energy_j == pytest.approx(r.total_energy_j - r.energy_j["static"], rel=1e-12)
+    p = load_profile(profile)
+    assert r.power_w == pytest.approx(p.static_power_w + r.dynamic_energy_j * fps, rel=1e-12)
+    assert r.power_w == pytest.approx(r.total_energy_j * fps, rel=1e-12)
+    assert r.frame_time_s == pytest.approx(max(r.unit_time_s.values()))
+    assert r.deadline_met == (r.frame_time_s <= 1 / fps)
+    assert r.mrays_per_s == pytest.approx(COUNTERS["rays_total"] / r.frame_time_s / 1e6)
+    assert r.perf_per_watt == pytest.approx(r.max_fps / r.power_full_speed_w)
+
+
+def test_unused_blocks_cost_exactly_zero() -> None:
+    r = price(COUNTERS, "mobile", 30.0)
+    unused = ("similarity", "interpolation", "reprojection", "env_filter", "gbuffer_prefetch", "comparator")
+    for block in unused:
+        assert r.energy_j[block] == 0.0 and r.cycles[block] == 0.0
+    assert set(r.blocks_used) == {"raygen", "shading", "traversal", "intersection", "cache", "tile_buffer",
+                                  "dram", "framebuffer_dma"}
+    nothing = price({}, "mobile", 30.0)
+    assert nothing.dynamic_energy_j == 0.0 and nothing.power_w == load_profile("mobile").static_power_w
+
+
+def test_each_counter_moves_only_its_block() -> None:
+    base = price(COUNTERS, "mobile", 30.0)
+    for counter, block in [("similarity_checks", "similarity"), ("interpolations", "interpolation"),
+                           ("reprojections", "reprojection"), ("gbuffer_prefetch_bytes", "gbuffer_prefetch"),
+                           ("env_lookups", "env_filter"), ("env_filtered_lookups", "env_filter")]:
+        r = price({**COUNTERS, counter: 1000}, "mobile", 30.0)
+        changed = {b for b in BLOCKS if r.energy_j[b] != base.energy_j[b]}
+        assert changed == {block}, (counter, changed)
+
+
+def test_dynamic_energy_is_linear_in_activity() -> None:
+    r1 = price(COUNTERS, "mobile", 30.0)
+    r2 = price({k: 2 * v for k, v in COUNTERS.items()}, "mobile", 30.0)
+    assert r2.dynamic_energy_j == pytest.approx(2 * r1.dynamic_energy_j, rel=1e-12)
+    assert r2.frame_time_s == pytest.approx(2 * r1.frame_time_s, rel=1e-12)
+
+
+def test_comparator_block_uses_the_profile_style() -> None:
+    hist = np.zeros(25, dtype=np.int64)
+    hist[[0, 3, 8]] = [100, 50, 25]
+
+    class Result:  # what the tracer's RenderResult exposes to the pricer
+        def __init__(self) -> None:
+            self.counters = {**COUNTERS, "closest_hit_comparisons": 175}
+            self.comparator_histogram = hist
+
+    mobile, desktop = load_profile("mobile"), load_profile("desktop")
+    rm, rd = price(Result(), mobile, 30), price(Result(), desktop, 30)
+    assert mobile.comparator_style == "async" and desktop.comparator_style == "sync"
+    assert rm.energy_j["comparator"] == pytest.approx(rm.comparator.async_energy_j)
+    assert rd.energy_j["comparator"] == pytest.approx(rd.comparator.sync_energy_j)
+    assert rm.comparator.comparisons == 175
+    assert rm.comparator.average_chain_length == pytest.approx((3 * 50 + 8 * 25) / 175)
+
+
+def test_bad_input_is_rejected() -> None:
+    with pytest.raises(ValueError):
+        price(COUNTERS, "mobile", 0.0)
+    with pytest.raises(ValueError):
+        price(COUNTERS, "mobile", float("nan"))
+    with pytest.raises(ValueError):
+        price({**COUNTERS, "rays_total": -1}, "mobile", 30)
+    with pytest.raises(ValueError):
+        price({**COUNTERS, "rays_total": 1.5}, "mobile", 30)
+    with pytest.raises(ValueError):  # comparisons counted but no histogram to price them
+        price({**COUNTERS, "closest_hit_comparisons": 10}, "mobile", 30)
