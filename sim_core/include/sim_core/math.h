@@ -39,3 +39,58 @@ inline float max_component(Vec3 a) { return std::max(a.x, std::max(a.y, a.z)); }
 inline bool is_finite(Vec3 a) { return std::isfinite(a.x) && std::isfinite(a.y) && std::isfinite(a.z); }
 
 }  // namespace sim_core
+
+// ---- Tracer helpers (shading, sampling, robust offsets) ----
+#include <cstring>
+
+namespace sim_core {
+
+inline constexpr float kPi = 3.14159265358979323846f;
+
+inline float max_abs_component(Vec3 a) {
+  return std::max(std::fabs(a.x), std::max(std::fabs(a.y), std::fabs(a.z)));
+}
+inline int max_abs_axis(Vec3 a) {
+  const float ax = std::fabs(a.x), ay = std::fabs(a.y), az = std::fabs(a.z);
+  return ax > ay ? (ax > az ? 0 : 2) : (ay > az ? 1 : 2);
+}
+inline Vec3 lerp(Vec3 a, Vec3 b, float t) { return a + (b - a) * t; }
+// Mirror reflection of incident direction d about unit normal n (d points towards the surface).
+inline Vec3 reflect(Vec3 d, Vec3 n) { return d - n * (2.f * dot(d, n)); }
+// Refraction of unit d through unit n (n faces the incident side, dot(d, n) < 0) with eta = n_i / n_t.
+// Returns false on total internal reflection.
+inline bool refract(Vec3 d, Vec3 n, float eta, Vec3* out) {
+  const float cosi = -dot(d, n);
+  const float k = 1.f - eta * eta * (1.f - cosi * cosi);
+  if (k < 0.f) return false;
+  *out = normalize(d * eta + n * (eta * cosi - std::sqrt(k)));
+  return true;
+}
+// Orthonormal basis around unit n (Duff et al. 2017, "Building an Orthonormal Basis, Revisited").
+inline void onb(Vec3 n, Vec3* t, Vec3* b) {
+  const float sign = std::copysign(1.f, n.z);
+  const float a = -1.f / (sign + n.z);
+  const float c = n.x * n.y * a;
+  *t = Vec3(1.f + sign * n.x * n.x * a, sign * c, -sign * n.x);
+  *b = Vec3(c, sign + n.y * n.y * a, -n.y);
+}
+
+inline std::int32_t float_as_int(float f) { std::int32_t i; std::memcpy(&i, &f, 4); return i; }
+inline float int_as_float(std::int32_t i) { float f; std::memcpy(&f, &i, 4); return f; }
+
+// Robust origin for a ray leaving a surface point p on the side of geometric normal n (Wächter & Binder,
+// "A Fast and Robust Method for Avoiding Self-Intersection", Ray Tracing Gems ch. 6): the offset is a
+// fixed number of ulps of p, so it scales with the point's magnitude, plus a tiny absolute offset near 0.
+inline Vec3 offset_ray_origin(Vec3 p, Vec3 n) {
+  constexpr float kOrigin = 1.f / 32.f, kFloatScale = 1.f / 65536.f, kIntScale = 256.f;
+  Vec3 out;
+  for (int i = 0; i < 3; ++i) {
+    const float pi = p[i], ni = n[i];
+    const std::int32_t off = static_cast<std::int32_t>(kIntScale * ni);
+    const float moved = int_as_float(float_as_int(pi) + (pi < 0.f ? -off : off));
+    out[i] = std::fabs(pi) < kOrigin ? pi + kFloatScale * ni : moved;
+  }
+  return out;
+}
+
+}  // namespace sim_core

@@ -1,0 +1,42 @@
+// What a ray that leaves the scene sees: a constant colour or an equirectangular map in the world frame
+// (Z up, Blender's convention, same mapping as env_filter.h). Glossy lookups can go through the
+// summed-area-table filter of env_filter.h (box or Bartlett), built lazily per filter order.
+#pragma once
+#include <memory>
+#include <mutex>
+#include <vector>
+
+#include "sim_core/env_filter.h"
+#include "sim_core/math.h"
+
+namespace sim_core {
+
+class Environment {
+ public:
+  Environment() = default;
+  explicit Environment(Vec3 constant) : constant_(constant), mean_(constant) {}
+  // rgb: (height, width, 3) float32 linear, row 0 at the top; copied.
+  Environment(const float* rgb, int width, int height);
+  ~Environment();
+  Environment(Environment&&) noexcept;
+  Environment& operator=(Environment&&) noexcept;
+
+  bool is_map() const { return width_ > 0; }
+  // Nearest-texel radiance in `direction` (any length > 0).
+  Vec3 radiance(Vec3 direction) const;
+  // Mean radiance over the whole sphere (solid-angle weighted): the ambient term.
+  Vec3 mean() const { return mean_; }
+  // Cone-filtered radiance (glossy reflection); order 1 box, 2 Bartlett. Requires the SAT filter.
+  Vec3 filtered(Vec3 direction, float cone_half_angle, int order) const;
+
+ private:
+  Vec3 constant_{0.f, 0.f, 0.f};
+  Vec3 mean_{0.f, 0.f, 0.f};
+  int width_ = 0, height_ = 0;
+  std::vector<float> rgb_;
+  mutable std::mutex filter_mutex_;
+  mutable std::unique_ptr<EnvironmentFilter> filters_[2];
+  const EnvironmentFilter* filter(int order) const;
+};
+
+}  // namespace sim_core

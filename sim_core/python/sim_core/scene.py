@@ -1,0 +1,291 @@
+"""Scenes for the native tracer: validated arrays in, a BVH-backed native scene out.
+
+Every array is checked here (dtype, shape, finite values, index ranges) before it crosses into C++, so a
+bad file gives a clear ValueError instead of a crash or a silently wrong image.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from . import _core
+from .scene_data import CameraData, Light, Material, SceneData
+
+# Blender's default world colour: what a scene without an environment sees.
+DEFAULT_ENVIRONMENT = (0.050876, 0.050876, 0.050876)
+_LIGHT_KINDS = {"point": 0, "spot": 1, "sun": 2}
+
+
+def smooth_normals(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Area-weighted per-vertex normals (for meshes that come without normals)."""
+    p = np.asarray(positions, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64)
+    fn = np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]])
+    vn = np.zeros_like(p)
+    for k in range(3):
+        np.add.at(vn, t[:, k], fn)
+    length = np.linalg.norm(vn, axis=1, keepdims=True)
+    vn = np.divide(vn, length, out=np.zeros_like(vn), where=length > 0)
+    return vn.astype(np.float32)
+
+
+def _as_array(value: Any, name: str, dtype: type, ncols: int | None) -> np.ndarray:
+    try:
+        arr = np.asarray(value)
+    except Exception as exc:  # pragma: no cover - numpy raises many types
+        raise ValueError(f"{name} is not array-like: {exc}") from None
+    if arr.dtype == object:
+        raise ValueError(f"{name} must be numeric, got object array")
+    if ncols is None:
+        if arr.ndim != 1:
+            raise ValueError(f"{name} must be 1-D, got shape {arr.shape}")
+    elif arr.ndim != 2 or arr.shape[1] != ncols:
+        raise ValueError(f"{name} must have shape (N, {ncols}), got {arr.shape}")
+    if np.issubdtype(dtype, np.integer):
+        if arr.size and not np.issubdtype(arr.dtype, np.integer):
+            if not np.issubdtype(arr.dtype, np.floating) or not np.all(np.isfinite(arr)):
+                raise ValueError(f"{name} must hold integers")
+            if not np.all(arr == np.round(arr)):
+                raise ValueError(f"{name} must hold integers")
+        if arr.size and arr.min() < 0:
+            raise ValueError(f"{name} must be non-negative, got {int(arr.min())}")
+    elif arr.size and not np.all(np.isfinite(arr.astype(np.float64))):
+        bad = np.argwhere(~np.isfinite(arr.astype(np.float64)))[0]
+        raise ValueError(f"{name} must be finite (NaN/Inf at index {tuple(int(i) for i in bad)})")
+    return np.ascontiguousarray(arr, dtype=dtype)
+
+
+def _environment(env: Any) -> tuple[np.ndarray, np.ndarray | None]:
+    if env is None:
+        return np.asarray(DEFAULT_ENVIRONMENT, dtype=np.float32), None
+    arr = np.asarray(env, dtype=np.float32)
+    if arr.shape == (3,):
+        if not np.all(np.isfinite(arr)) or np.any(arr < 0):
+            raise ValueError(f"environment colour must be finite and >= 0, got {arr.tolist()}")
+        return arr, None
+    if arr.ndim == 3 and arr.shape[2] == 3 and arr.shape[0] >= 1 and arr.shape[1] >= 1:
+        if not np.all(np.isfinite(arr)) or np.any(arr < 0):
+            raise ValueError("environment map must be finite and >= 0")
+        return np.zeros(3, np.float32), np.ascontiguousarray(arr)
+    raise ValueError(f"environment must be an RGB triple or an (H, W, 3) map, got shape {arr.shape}")
+
+
+def _material_table(materials: Sequence[Material]) -> np.ndarray:
+    rows = []
+    for m in materials:
+        if not isinstance(m, Material):
+            raise ValueError(f"materials must be sim_core.Material, got {type(m).__name__}")
+        rows.append([*m.base_color, m.metallic, m.roughness, m.transmission, m.ior, *m.emission])
+    return np.asarray(rows, dtype=np.float32).reshape(-1, 10)
+
+
+def _light_table(lights: Sequence[Light]) -> np.ndarray:
+    rows = []
+    for light in lights:
+        if not isinstance(light, Light):
+            raise ValueError(f"lights must be sim_core.Light, got {type(light).__name__}")
+        rows.append([_LIGHT_KINDS[light.kind], *light.position, *light.direction, *light.color,
+                     light.intensity, light.radius, light.spot_angle])
+    return np.asarray(rows, dtype=np.float32).reshape(-1, 13)
+
+
+class Scene:
+    """A triangle scene ready to trace: geometry in a binned-SAH BVH, materials, lights, environment.
+
+    World frame is Blender's (right-handed, Z up). Build with `from_arrays`, `from_obj` or `from_gltf`.
+    """
+
+    def __init__(self, native: Any, stats: dict[str, Any], content_hash: str,
+                 materials: list[Material], lights: list[Light], cameras: list[CameraData],
+                 source: str = "") -> None:
+        self._native = native
+        self._stats = stats
+        self._hash = content_hash
+        self.materials = materials
+        self.lights = lights
+        self.cameras = cameras
+        self.source = source
+
+    # ---- construction -------------------------------------------------------------------------
+    @classmethod
+    def from_arrays(
+        cls,
+        positions: Any,
+        triangles: Any,
+        *,
+        normals: Any = None,
+        material_ids: Any = None,
+        object_ids: Any = None,
+        materials: Sequence[Material] | None = None,
+        lights: Sequence[Light] | None = None,
+        environment: Any = None,
+        cameras: Sequence[CameraData] | None = None,
+        source: str = "",
+    ) -> Scene:
+        """Validate flat arrays and build the native scene.
+
+        positions (V, 3) floats; triangles (T, 3) vertex indices; normals (V, 3) per-vertex shading normals;
+        material_ids / object_ids (T,) per triangle. Degenerate (zero-area) triangles are dropped and
+        counted in `stats["degenerate_dropped"]`; `intersect` still reports original triangle indices.
+        Raises ValueError on NaN/Inf, out-of-range indices or an empty scene.
+        """
+        pos = _as_array(positions, "positions", np.float32, 3)
+        tri = _as_array(triangles, "triangles", np.int64, 3)
+        if pos.shape[0] == 0 or tri.shape[0] == 0:
+            raise ValueError(f"empty scene: {pos.shape[0]} vertices, {tri.shape[0]} triangles")
+        if tri.max() >= pos.shape[0]:
+            bad = int(np.argmax(tri.max(axis=1) >= pos.shape[0]))
+            raise ValueError(
+                f"triangle {bad} references vertex {int(tri[bad].max())} but there are only {pos.shape[0]}")
+        n_tri = tri.shape[0]
+        nrm = None
+        if normals is not None:
+            nrm = _as_array(normals, "normals", np.float32, 3)
+            if nrm.shape[0] != pos.shape[0]:
+                raise ValueError(
+                    f"normals must have one row per vertex ({pos.shape[0]}), got {nrm.shape[0]}")
+        mats = list(materials) if materials else [Material()]
+        mtab = _material_table(mats)
+        if material_ids is None:
+            mid = np.zeros(n_tri, np.uint32)
+        else:
+            mid = _as_array(material_ids, "material_ids", np.int64, None)
+            if mid.shape[0] != n_tri:
+                raise ValueError(
+                    f"material_ids must have one entry per triangle ({n_tri}), got {mid.shape[0]}")
+            if mid.size and mid.max() >= len(mats):
+                raise ValueError(f"material id {int(mid.max())} out of range (have {len(mats)} materials)")
+            mid = mid.astype(np.uint32)
+        if object_ids is None:
+            oid = np.zeros(n_tri, np.uint32)
+        else:
+            oid = _as_array(object_ids, "object_ids", np.int64, None)
+            if oid.shape[0] != n_tri:
+                raise ValueError(f"object_ids must have one entry per triangle ({n_tri}), got {oid.shape[0]}")
+            if oid.size and oid.max() >= 2**31:
+                raise ValueError("object ids must be < 2**31")
+            oid = oid.astype(np.uint32)
+        lts = list(lights) if lights else []
+        if len(lts) > 32:
+            raise ValueError(f"at most 32 lights are supported (one shadow bit each), got {len(lts)}")
+        ltab = _light_table(lts)
+        env_color, env_map = _environment(environment)
+
+        # Degenerate triangles: repeated vertices or zero area (computed in double precision).
+        p64 = pos.astype(np.float64)
+        e1 = p64[tri[:, 1]] - p64[tri[:, 0]]
+        e2 = p64[tri[:, 2]] - p64[tri[:, 0]]
+        area2 = np.linalg.norm(np.cross(e1, e2), axis=1)
+        keep = (area2 > 0) & (tri[:, 0] != tri[:, 1]) & (tri[:, 1] != tri[:, 2]) & (tri[:, 0] != tri[:, 2])
+        dropped = int(n_tri - np.count_nonzero(keep))
+        if not np.any(keep):
+            raise ValueError(f"empty scene: all {n_tri} triangles are degenerate (zero area)")
+        prim_ids = np.flatnonzero(keep).astype(np.int64)
+        native = _core.NativeScene.build(
+            pos, np.ascontiguousarray(tri[keep], dtype=np.uint32), prim_ids, nrm,
+            np.ascontiguousarray(mid[keep]), np.ascontiguousarray(oid[keep]), mtab, ltab, env_color, env_map)
+
+        h = hashlib.sha256()
+        for arr in (pos, tri.astype(np.uint32), nrm, mid, oid, mtab, ltab, env_color, env_map):
+            if arr is None:
+                h.update(b"<none>")
+            else:
+                h.update(str(arr.shape).encode())
+                h.update(np.ascontiguousarray(arr).tobytes())
+        effects = []
+        if lts:
+            effects.append("direct_light")
+        if any(m.is_reflective for m in mats):
+            effects.append("reflection")
+        if any(m.metallic > 0 and m.roughness > 0 for m in mats):
+            effects.append("glossy")
+        if any(m.is_refractive for m in mats):
+            effects.append("refraction")
+        if any(max(m.emission) > 0 for m in mats):
+            effects.append("emission")
+        if any(light.radius > 0 for light in lts):
+            effects.append("soft_shadows")
+        if env_map is not None:
+            effects.append("environment_map")
+        stats = {
+            "triangles": int(np.count_nonzero(keep)),
+            "degenerate_dropped": dropped,
+            "materials": len(mats),
+            "lights": len(lts),
+            "objects": int(np.unique(oid[keep]).size),
+            "effects": effects,
+        }
+        return cls(native, stats, h.hexdigest(), mats, lts, list(cameras or []), source)
+
+    @classmethod
+    def from_scene_data(cls, data: SceneData) -> Scene:
+        """Build from what a loader returns."""
+        return cls.from_arrays(
+            data.positions, data.triangles, normals=data.normals, material_ids=data.material_ids,
+            object_ids=data.object_ids, materials=data.materials, lights=data.lights,
+            environment=data.environment, cameras=data.cameras, source=data.source)
+
+    @classmethod
+    def from_obj(cls, path: str | os.PathLike[str]) -> Scene:
+        """Wavefront OBJ (Y-up files are converted to the Z-up world frame by the loader)."""
+        from .loaders.obj import load_obj
+
+        return cls.from_scene_data(load_obj(path))
+
+    @classmethod
+    def from_gltf(cls, path: str | os.PathLike[str]) -> Scene:
+        """glTF 2.0 (.glb/.gltf) as Blender exports it: meshes, materials, punctual lights, cameras."""
+        from .loaders.gltf import load_gltf
+
+        return cls.from_scene_data(load_gltf(path))
+
+    # ---- queries --------------------------------------------------------------------------------
+    def intersect(
+        self, origins: Any, directions: Any, threads: int | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Closest hit of N rays: (t float32, inf on miss; prim_id int64 original triangle index, -1 on miss).
+
+        t is in units of the direction's length. Multithreaded, GIL released.
+        """
+        o = _as_array(origins, "origins", np.float32, 3)
+        d = _as_array(directions, "directions", np.float32, 3)
+        if o.shape != d.shape:
+            raise ValueError(f"origins {o.shape} and directions {d.shape} must have the same shape")
+        if np.any(~np.any(d != 0, axis=1)):
+            raise ValueError("directions must be non-zero")
+        return self._native.intersect(o, d, _threads(threads))
+
+    @property
+    def stats(self) -> dict[str, Any]:
+        """triangles, degenerate_dropped, materials, lights, objects, effects."""
+        return dict(self._stats)
+
+    @property
+    def content_hash(self) -> str:
+        """sha256 over geometry, materials, lights and environment (stable across runs)."""
+        return self._hash
+
+    @property
+    def bounds(self) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+        return self._native.bounds
+
+    @property
+    def native(self) -> Any:
+        return self._native
+
+    def __repr__(self) -> str:
+        s = self._stats
+        return f"Scene({s['triangles']} triangles, {s['lights']} lights, {self._hash[:12]})"
+
+
+def _threads(threads: int | None) -> int:
+    if threads is None:
+        return max(1, os.cpu_count() or 1)
+    if isinstance(threads, bool) or not isinstance(threads, int | np.integer) or threads < 1:
+        raise ValueError(f"threads must be a positive integer, got {threads!r}")
+    return int(threads)

@@ -1,0 +1,175 @@
+#include "sim_core/bvh.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+namespace sim_core {
+namespace {
+
+constexpr int kMaxBins = 32;
+
+struct Aabb {
+  Vec3 lo{std::numeric_limits<float>::infinity(), std::numeric_limits<float>::infinity(),
+          std::numeric_limits<float>::infinity()};
+  Vec3 hi{-std::numeric_limits<float>::infinity(), -std::numeric_limits<float>::infinity(),
+          -std::numeric_limits<float>::infinity()};
+  void grow(Vec3 p) { lo = vmin(lo, p); hi = vmax(hi, p); }
+  void grow(const Aabb& b) { lo = vmin(lo, b.lo); hi = vmax(hi, b.hi); }
+  bool empty() const { return lo.x > hi.x; }
+  float area() const {
+    if (empty()) return 0.f;
+    const Vec3 e = hi - lo;
+    return 2.f * (e.x * e.y + e.y * e.z + e.z * e.x);
+  }
+};
+
+struct PrimInfo {
+  Aabb box;
+  Vec3 centroid;
+};
+
+struct Builder {
+  const BvhBuildOptions& opt;
+  std::vector<PrimInfo> prims;
+  std::vector<std::uint32_t> index;  // permutation being partitioned
+  std::vector<BvhNode> nodes;
+  int max_depth = 0;
+  int leaves = 0;
+
+  explicit Builder(const BvhBuildOptions& o) : opt(o) {}
+
+  void make_leaf(std::uint32_t node, std::uint32_t begin, std::uint32_t end) {
+    nodes[node].first = begin;
+    nodes[node].count = end - begin;
+    ++leaves;
+  }
+
+  void set_box(std::uint32_t node, std::uint32_t begin, std::uint32_t end) {
+    Aabb b;
+    for (std::uint32_t i = begin; i < end; ++i) b.grow(prims[index[i]].box);
+    // One ulp of outward padding: a ray lying exactly in a box face (axis-parallel, zero direction
+    // component) then sees the slab as open instead of as an empty interval 0 * (1 / tiny) = 0.
+    for (int a = 0; a < 3; ++a) {
+      nodes[node].lo[a] = std::nextafter(b.lo[a], -std::numeric_limits<float>::infinity());
+      nodes[node].hi[a] = std::nextafter(b.hi[a], std::numeric_limits<float>::infinity());
+    }
+  }
+
+  // Recursive build of node `node` over index[begin, end); the node's box is already set.
+  void build(std::uint32_t node, std::uint32_t begin, std::uint32_t end, int depth) {
+    max_depth = std::max(max_depth, depth);
+    const std::uint32_t n = end - begin;
+    if (n <= 1 || depth >= 60) { make_leaf(node, begin, end); return; }
+    Aabb cb;
+    for (std::uint32_t i = begin; i < end; ++i) cb.grow(prims[index[i]].centroid);
+    const Vec3 extent = cb.hi - cb.lo;
+    Aabb nb;
+    for (int a = 0; a < 3; ++a) { nb.lo[a] = nodes[node].lo[a]; nb.hi[a] = nodes[node].hi[a]; }
+    const float parent_area = nb.area();
+
+    int best_axis = -1, best_split = -1;
+    float best_cost = std::numeric_limits<float>::infinity();
+    const int bins = std::min(std::max(opt.bins, 2), kMaxBins);
+    std::array<Aabb, kMaxBins> bin_box;
+    std::array<std::uint32_t, kMaxBins> bin_count;
+    std::array<float, kMaxBins> right_area{};
+    std::array<std::uint32_t, kMaxBins> right_count{};
+    for (int axis = 0; axis < 3; ++axis) {
+      if (!(extent[axis] > 0.f)) continue;
+      const float scale = static_cast<float>(bins) / extent[axis];
+      std::fill(bin_box.begin(), bin_box.begin() + bins, Aabb{});
+      std::fill(bin_count.begin(), bin_count.begin() + bins, 0u);
+      for (std::uint32_t i = begin; i < end; ++i) {
+        const PrimInfo& p = prims[index[i]];
+        int b = static_cast<int>((p.centroid[axis] - cb.lo[axis]) * scale);
+        b = std::min(std::max(b, 0), bins - 1);
+        bin_box[b].grow(p.box);
+        ++bin_count[b];
+      }
+      Aabb acc;
+      std::uint32_t cnt = 0;
+      for (int b = bins - 1; b > 0; --b) {
+        acc.grow(bin_box[b]); cnt += bin_count[b];
+        right_area[b] = acc.area(); right_count[b] = cnt;
+      }
+      acc = Aabb{}; cnt = 0;
+      for (int b = 0; b < bins - 1; ++b) {
+        acc.grow(bin_box[b]); cnt += bin_count[b];
+        if (cnt == 0 || right_count[b + 1] == 0) continue;
+        const float cost = acc.area() * static_cast<float>(cnt) +
+                           right_area[b + 1] * static_cast<float>(right_count[b + 1]);
+        if (cost < best_cost) { best_cost = cost; best_axis = axis; best_split = b; }
+      }
+    }
+    const float leaf_cost = opt.intersection_cost * static_cast<float>(n);
+    const float split_cost = parent_area > 0.f
+        ? opt.traversal_cost + opt.intersection_cost * best_cost / parent_area
+        : std::numeric_limits<float>::infinity();
+    if (n <= static_cast<std::uint32_t>(opt.max_leaf_size) && leaf_cost <= split_cost) {
+      make_leaf(node, begin, end);
+      return;
+    }
+    std::uint32_t mid;
+    if (best_axis < 0) {
+      // Every centroid coincides: split by count so leaves stay small.
+      mid = begin + n / 2;
+    } else {
+      const float scale = static_cast<float>(bins) / extent[best_axis];
+      auto it = std::partition(index.begin() + begin, index.begin() + end, [&](std::uint32_t id) {
+        int b = static_cast<int>((prims[id].centroid[best_axis] - cb.lo[best_axis]) * scale);
+        b = std::min(std::max(b, 0), bins - 1);
+        return b <= best_split;
+      });
+      mid = static_cast<std::uint32_t>(it - index.begin());
+      if (mid == begin || mid == end) mid = begin + n / 2;
+    }
+    const std::uint32_t left = static_cast<std::uint32_t>(nodes.size());
+    nodes.push_back(BvhNode{});
+    nodes.push_back(BvhNode{});
+    nodes[node].first = left;
+    nodes[node].count = 0;
+    set_box(left, begin, mid);
+    set_box(left + 1, mid, end);
+    build(left, begin, mid, depth + 1);
+    build(left + 1, mid, end, depth + 1);
+  }
+};
+
+}  // namespace
+
+Bvh build_bvh(std::vector<TriRecord>& tris, std::vector<std::uint32_t>* order_out,
+              const BvhBuildOptions& options) {
+  if (tris.empty()) throw std::invalid_argument("cannot build a BVH over zero triangles");
+  if (tris.size() >= (1ull << 31)) throw std::invalid_argument("too many triangles");
+  Builder b(options);
+  const std::uint32_t n = static_cast<std::uint32_t>(tris.size());
+  b.prims.resize(n);
+  b.index.resize(n);
+  for (std::uint32_t i = 0; i < n; ++i) {
+    const float* v = tris[i].v;
+    PrimInfo& p = b.prims[i];
+    for (int k = 0; k < 3; ++k) p.box.grow(Vec3(v[3 * k], v[3 * k + 1], v[3 * k + 2]));
+    p.centroid = (p.box.lo + p.box.hi) * 0.5f;
+    b.index[i] = i;
+  }
+  b.nodes.reserve(2 * static_cast<std::size_t>(n) + 2);
+  b.nodes.push_back(BvhNode{});  // root
+  b.nodes.push_back(BvhNode{});  // padding: sibling pairs start at an even index (one 64-byte line)
+  b.set_box(0, 0, n);
+  b.build(0, 0, n, 0);
+
+  std::vector<TriRecord> sorted(n);
+  for (std::uint32_t i = 0; i < n; ++i) sorted[i] = tris[b.index[i]];
+  tris.swap(sorted);
+  if (order_out) *order_out = b.index;
+  Bvh out;
+  out.nodes = std::move(b.nodes);
+  out.depth = b.max_depth;
+  out.leaf_count = b.leaves;
+  return out;
+}
+
+}  // namespace sim_core

@@ -1,0 +1,122 @@
+#include "sim_core/scene.h"
+
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+namespace sim_core {
+
+Scene::Scene(const float* positions, std::size_t vertex_count, const std::uint32_t* triangles,
+             std::size_t triangle_count, const std::int64_t* prim_ids, const float* normals,
+             const std::uint32_t* material_ids, const std::uint32_t* object_ids, const float* materials,
+             std::size_t material_count, const float* lights, std::size_t light_count, Environment env)
+    : env_(std::move(env)) {
+  if (triangle_count == 0) throw std::invalid_argument("scene has no triangles");
+  if (vertex_count == 0) throw std::invalid_argument("scene has no vertices");
+  if (light_count > static_cast<std::size_t>(kMaxLights))
+    throw std::invalid_argument("at most " + std::to_string(kMaxLights) + " lights are supported");
+  for (std::size_t i = 0; i < vertex_count * 3; ++i)
+    if (!std::isfinite(positions[i])) throw std::invalid_argument("vertex positions must be finite");
+
+  materials_.resize(std::max<std::size_t>(material_count, 1));
+  for (std::size_t m = 0; m < material_count; ++m) {
+    const float* f = materials + m * kMaterialFields;
+    Material& mat = materials_[m];
+    mat.base_color = {f[0], f[1], f[2]};
+    mat.metallic = f[3]; mat.roughness = f[4]; mat.transmission = f[5]; mat.ior = f[6];
+    mat.emission = {f[7], f[8], f[9]};
+    for (int k = 0; k < kMaterialFields; ++k)
+      if (!std::isfinite(f[k])) throw std::invalid_argument("material values must be finite");
+    if (mat.ior < 1.f) throw std::invalid_argument("material ior must be >= 1");
+  }
+  for (const Material& m : materials_) {
+    has_refraction_ |= m.refracts();
+    has_reflection_ |= m.reflects();
+    has_emission_ |= max_component(m.emission) > 0.f;
+  }
+  lights_.resize(light_count);
+  for (std::size_t l = 0; l < light_count; ++l) {
+    const float* f = lights + l * kLightFields;
+    for (int k = 0; k < kLightFields; ++k)
+      if (!std::isfinite(f[k])) throw std::invalid_argument("light values must be finite");
+    const int kind = static_cast<int>(f[0]);
+    if (kind < 0 || kind > 2) throw std::invalid_argument("light kind must be 0 (point), 1 (spot) or 2 (sun)");
+    Light& L = lights_[l];
+    L.kind = static_cast<LightKind>(kind);
+    L.position = {f[1], f[2], f[3]};
+    L.direction = normalize(Vec3(f[4], f[5], f[6]));
+    L.color = {f[7], f[8], f[9]};
+    L.intensity = f[10]; L.radius = f[11]; L.spot_angle = f[12];
+    if (length(Vec3(f[4], f[5], f[6])) == 0.f) throw std::invalid_argument("light direction must be non-zero");
+  }
+
+  std::vector<TriRecord> recs(triangle_count);
+  lo_ = Vec3(kInf, kInf, kInf);
+  hi_ = Vec3(-kInf, -kInf, -kInf);
+  for (std::size_t i = 0; i < triangle_count; ++i) {
+    TriRecord& r = recs[i];
+    for (int k = 0; k < 3; ++k) {
+      const std::uint32_t vi = triangles[3 * i + k];
+      if (vi >= vertex_count) throw std::invalid_argument("triangle index out of range");
+      for (int c = 0; c < 3; ++c) r.v[3 * k + c] = positions[3 * vi + c];
+      const Vec3 p(r.v[3 * k], r.v[3 * k + 1], r.v[3 * k + 2]);
+      lo_ = vmin(lo_, p); hi_ = vmax(hi_, p);
+    }
+    r.prim = static_cast<std::uint32_t>(prim_ids ? prim_ids[i] : static_cast<std::int64_t>(i));
+    r.material = material_ids ? material_ids[i] : 0u;
+    r.object = object_ids ? object_ids[i] : 0u;
+    if (r.material >= materials_.size()) throw std::invalid_argument("material id out of range");
+  }
+  std::vector<std::uint32_t> order;
+  bvh_ = build_bvh(recs, &order);
+  tris_ = std::move(recs);
+  shading_.resize(triangle_count);
+  for (std::size_t i = 0; i < triangle_count; ++i) {
+    const std::size_t src = order[i];
+    TriShading& s = shading_[i];
+    const Vec3 ng = geometric_normal(static_cast<std::uint32_t>(i));
+    for (int k = 0; k < 3; ++k) {
+      if (normals) {
+        const std::uint32_t vi = triangles[3 * src + k];
+        Vec3 n(normals[3 * vi], normals[3 * vi + 1], normals[3 * vi + 2]);
+        const float len = length(n);
+        s.n[k] = (std::isfinite(len) && len > 0.f) ? n / len : ng;
+      } else {
+        s.n[k] = ng;
+      }
+    }
+  }
+}
+
+Vec3 Scene::geometric_normal(std::uint32_t i) const {
+  const float* v = tris_[i].v;
+  const Vec3 a(v[0], v[1], v[2]), b(v[3], v[4], v[5]), c(v[6], v[7], v[8]);
+  // Edges in double: far from the origin float edges of small triangles lose most of their bits.
+  const double e1[3] = {double(b.x) - a.x, double(b.y) - a.y, double(b.z) - a.z};
+  const double e2[3] = {double(c.x) - a.x, double(c.y) - a.y, double(c.z) - a.z};
+  double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]};
+  const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+  if (!(len > 0.0)) return Vec3(0.f, 0.f, 1.f);
+  return Vec3(static_cast<float>(n[0] / len), static_cast<float>(n[1] / len), static_cast<float>(n[2] / len));
+}
+
+void Scene::intersect_many(const float* origins, const float* directions, std::size_t n, float* t_out,
+                           std::int64_t* prim_out, int threads) const {
+  parallel_chunks(n, threads, 4096, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      Ray r;
+      r.origin = Vec3(origins[3 * i], origins[3 * i + 1], origins[3 * i + 2]);
+      r.dir = Vec3(directions[3 * i], directions[3 * i + 1], directions[3 * i + 2]);
+      if (!is_finite(r.origin) || !is_finite(r.dir) || dot(r.dir, r.dir) == 0.f) {
+        t_out[i] = kInf;
+        prim_out[i] = -1;
+        continue;
+      }
+      const Hit h = closest(r);
+      t_out[i] = h.t;
+      prim_out[i] = h.hit() ? static_cast<std::int64_t>(tris_[h.tri].prim) : -1;
+    }
+  });
+}
+
+}  // namespace sim_core
