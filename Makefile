@@ -9,7 +9,7 @@ NATIVE_SOURCES := $(shell find sim_core -name '*.cpp' -o -name '*.h' -o -name 'C
                   CMakeLists.txt pyproject.toml
 PYTEST_ARGS ?=
 
-.PHONY: all venv test demo lint native-tests sanitize bench scenes clean
+.PHONY: all venv test demo report lint native-tests sanitize bench scenes addon clean
 
 all: venv
 
@@ -30,6 +30,23 @@ test: venv
 
 demo: venv
 	$(PY) -m service.demo
+
+# Every test scene (cached: a scene is rebuilt only when its generator changed).
+scenes: venv
+	$(PY) -m blend_scenes.build
+
+# The installable Blender extension zip, built with Blender's own extension build.
+addon: venv
+	$(PY) tools/build_extension.py --out dist/
+
+# The main job on any scene: make report SCENE=chess
+SCENE ?= teapot
+report: venv
+	$(PY) -m service.demo --scene $(SCENE) --out out/$(SCENE)
+
+# Benchmarks print their tables; bench/RESULTS.md records the quoted ones with their commands.
+bench: venv
+	for b in bench/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
 
 lint: venv
 	$(BIN)/ruff check .
