@@ -42,10 +42,12 @@ def check_scene(scene: bpy.types.Scene) -> None:
 
 def job_options(scene: bpy.types.Scene) -> JobOptions:
     props = scene.power_budget
-    enabled = [p.name for p in props.parameters if p.enabled and not p.inert]
+    searchable = [p for p in props.parameters if not p.inert]
+    enabled = tuple(p.name for p in searchable if p.enabled)
     return JobOptions(
         profile=props.profile or _default_profile(),
-        parameters=tuple(enabled) if len(props.parameters) else None,
+        # None lets the service search its whole default space (minus what is inert for this scene)
+        parameters=enabled if searchable else None,
         threshold_power_w=props.threshold_power,
         threshold_error=props.threshold_error,
         max_depth=props.max_depth,

@@ -30,10 +30,15 @@ def active_settings(scene: bpy.types.Scene) -> dict[str, Any] | None:
 
 def upload_scene(scene: bpy.types.Scene, client: ServiceClient) -> str:
     """Export and upload (the service deduplicates by content hash); remember the id."""
-    with tempfile.TemporaryDirectory(prefix="render-budget-preview-") as tmp:
+    return str(upload_scene_info(scene, client)["id"])
+
+
+def upload_scene_info(scene: bpy.types.Scene, client: ServiceClient) -> dict[str, Any]:
+    """Export and upload; returns the service's answer (id, statistics, inert parameters)."""
+    with tempfile.TemporaryDirectory(prefix="render-budget-upload-") as tmp:
         info = client.upload_scene(export_glb(scene, tmp))
     scene.power_budget.scene_id = str(info["id"])
-    return scene.power_budget.scene_id
+    return info
 
 
 def render_preview(scene: bpy.types.Scene, client: ServiceClient, *, use_active: bool = True,
@@ -92,5 +97,31 @@ class POWER_OT_preview(bpy.types.Operator):
         return {"FINISHED"}
 
 
-classes = (POWER_OT_preview,)
+class POWER_OT_analyze_scene(bpy.types.Operator):
+    """Upload the scene and list the parameters that cannot change it (greyed out, with the reason)"""
+
+    bl_idname = "power.analyze_scene"
+    bl_label = "Analyse Scene"
+
+    def execute(self, context: bpy.types.Context) -> set[str]:
+        from .ops_optimize import fill_parameters
+
+        scene = context.scene
+        try:
+            check_scene(scene)
+            info = upload_scene_info(scene, service_process.client_for(context))
+        except Exception as err:  # report to the user; nothing changed
+            self.report({"ERROR"}, f"Analyse scene failed: {err}")
+            return {"CANCELLED"}
+        store = None
+        if scene.power_budget.store_text is not None:
+            store = pareto_store.ParetoStore.from_json(scene.power_budget.store_text.as_string())
+        fill_parameters(scene, info.get("inert_parameters") or {}, store)
+        stats = info.get("stats") or {}
+        self.report({"INFO"}, f"{stats.get('triangles', '?')} triangles, "
+                              f"{len(info.get('inert_parameters') or {})} inert parameters")
+        return {"FINISHED"}
+
+
+classes = (POWER_OT_preview, POWER_OT_analyze_scene)
 register, unregister = bpy.utils.register_classes_factory(classes)

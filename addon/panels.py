@@ -51,7 +51,9 @@ class VIEW3D_PT_power_budget(bpy.types.Panel):
         col.prop(props, "path_text", text="")
         col.prop(props, "frame_step")
 
-        layout.label(text="Parameter space")
+        row = layout.row()
+        row.label(text="Parameter space")
+        row.operator("power.analyze_scene", text="", icon="VIEWZOOM")
         layout.template_list("POWER_UL_parameters", "", props, "parameters", props, "parameters_index",
                              rows=4)
 
