@@ -219,10 +219,7 @@ class JobManager:
             if self._executor is None:
                 from service import executors
 
-                if self.dask_scheduler:
-                    self._executor = executors.DaskExecutor(self.dask_scheduler)
-                else:
-                    self._executor = executors.InProcessExecutor(threads=self.render_threads)
+                self._executor = executors.make_executor(self.dask_scheduler)
             return self._executor
 
     def eval_cache(self) -> Any:
@@ -325,11 +322,51 @@ def is_terminal(state: str) -> bool:
 
 
 # -- the bridge to the optimiser (service.optimize and friends) ------------------------------------------
+def same_value(a: Any, b: Any) -> bool:
+    """Equality that keeps True apart from 1 (JSON clients send both)."""
+    if isinstance(a, bool) or isinstance(b, bool):
+        return isinstance(a, bool) and isinstance(b, bool) and a == b
+    return bool(a == b)
+
+
+def build_space(spec: dict[str, Any]) -> Any:
+    """The job's ParameterSpace: the default space, each parameter named in ``space`` cut down to the
+    given values (kept in the default order), and only ``parameters`` searched (others fixed at their
+    maximum quality). Raises ValueError naming an unknown parameter or value."""
+    from service.params import Parameter, ParameterSpace, default_space
+
+    base = default_space()
+    wanted = spec.get("space") or {}
+    unknown = sorted(set(wanted) - set(base.names))
+    if unknown:
+        raise ValueError(f"space: unknown parameters {unknown}; known: {list(base.names)}")
+    params = []
+    for p in base.parameters:
+        if p.name not in wanted:
+            params.append(p)
+            continue
+        idx: list[int] = []
+        for v in wanted[p.name]:
+            hits = [i for i, pv in enumerate(p.values) if same_value(pv, v)]
+            if not hits:
+                raise ValueError(f"space: {v!r} is not a value of {p.name!r}; values: {list(p.values)}")
+            idx.append(hits[0])
+        idx = sorted(set(idx))
+        best = min(range(len(idx)), key=lambda k: abs(idx[k] - p.max_quality))
+        params.append(Parameter(p.name, tuple(p.values[i] for i in idx), best,
+                                tuple(p.fields[i] for i in idx)))
+    space = ParameterSpace(tuple(params))
+    if spec.get("parameters"):
+        space = space.subset(spec["parameters"])
+    return space
+
+
 def validate_job_spec(spec: dict[str, Any]) -> None:
     """Checks that need the optimiser's definitions; raises ValueError naming the problem."""
     from service.camera_path import CameraPath
 
     CameraPath.from_dict(spec["camera_path"])
+    build_space(spec)
 
 
 def run_optimisation(
@@ -339,12 +376,9 @@ def run_optimisation(
     """Turn a stored job request into the optimiser's inputs and run it; returns a ParetoStore."""
     from service.camera_path import CameraPath
     from service.optimize import OptimizeOptions, optimize_path
-    from service.params import ParameterSpace
 
     path = CameraPath.from_dict(spec["camera_path"])
-    space = ParameterSpace.default()
-    if spec.get("parameters"):
-        space = space.subset(spec["parameters"])
+    space = build_space(spec)
     options = OptimizeOptions(
         max_depth=spec["options"]["max_depth"],
         population=spec["options"]["population"],

@@ -148,6 +148,24 @@ def camera_path(n: int = 3, radius: float = 3.0, height: float = 1.5) -> dict[st
     return {"version": 1, "fps": 30.0, "frames": frames}
 
 
+def tiny_job(scene_id: str, *, resolution: tuple[int, int] = (16, 12), seed: int = 1,
+             depth_values: tuple[int, ...] = (0, 1)) -> dict[str, Any]:
+    """Two searched parameters (sampling x max ray depth, 2 x 2 = 4 settings, enumerated exactly),
+    everything else fixed cheap, octree depth 0, tiny evaluation images."""
+    return {
+        "scene_id": scene_id,
+        "camera_path": camera_path(3),
+        "space": {"sampling": ["undersample_2x2", "1spp"], "max_depth": list(depth_values),
+                  "shadow_samples": [1], "ao_samples": [0], "glossy_filter": ["off"],
+                  "resolution_scale": [1.0], "similarity_threshold": ["medium"], "multirate": [False]},
+        "parameters": ["sampling", "max_depth"],
+        "options": {"max_depth": 0, "population": 4, "generations": 2, "seed": seed, "exhaustive_limit": 64},
+        "thresholds": {"power_w": 0.05, "error": 0.01},
+        "profile": "mobile",
+        "resolution": list(resolution),
+    }
+
+
 def free_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))

@@ -204,8 +204,8 @@ class QueryResult(BaseModel):
 class CameraIn(StrictModel):
     matrix_world: Matrix4
     vfov: Vfov
-    width: Annotated[int, Field(ge=1, le=4096)]
-    height: Annotated[int, Field(ge=1, le=4096)]
+    width: Annotated[int, Field(ge=8, le=4096)]
+    height: Annotated[int, Field(ge=8, le=4096)]
 
     @model_validator(mode="after")
     def _affine(self) -> CameraIn:
@@ -217,7 +217,7 @@ class RenderRequest(StrictModel):
     scene_id: SceneId
     camera: CameraIn
     settings: dict[Name, Scalar] | None = Field(
-        default=None, description="RenderSettings fields by name (default: maximum quality)"
+        default=None, description="parameter -> value (as a store query returns them); others at max quality"
     )
     profile: Name = "mobile"
     fps: Annotated[float, Field(gt=0.0, le=1000.0)] = 30.0

@@ -42,19 +42,24 @@ def make_camera(cam: CameraIn, max_pixels: int) -> Any:
         raise ApiError(422, f"camera: {exc}") from exc
 
 
-def make_settings(values: dict[str, Any] | None) -> Any:
-    import sim_core
+def settings_indices(values: dict[str, Any] | None) -> tuple[Any, tuple[int, ...]]:
+    """The default parameter space and the index vector of ``{parameter: value}`` (the names and values a
+    store query returns); parameters left out stay at maximum quality."""
+    from service.jobs import same_value
+    from service.params import default_space
 
-    if not values:
-        return sim_core.RenderSettings.max_quality()
-    fields = {f.name for f in dataclasses.fields(sim_core.RenderSettings)}
-    unknown = sorted(set(values) - fields)
-    if unknown:
-        raise ApiError(422, f"unknown render settings {unknown}; known: {sorted(fields)}")
-    try:
-        return dataclasses.replace(sim_core.RenderSettings.max_quality(), **values)
-    except (TypeError, ValueError) as exc:
-        raise ApiError(422, f"settings: {exc}") from exc
+    space = default_space()
+    indices = list(space.max_quality_indices())
+    for name, value in (values or {}).items():
+        if name not in space.names:
+            raise ApiError(422, f"settings: unknown parameter {name!r}; known: {list(space.names)}")
+        k = space.names.index(name)
+        p = space.parameters[k]
+        hits = [i for i, v in enumerate(p.values) if same_value(v, value)]
+        if not hits:
+            raise ApiError(422, f"settings: {value!r} is not a value of {name!r}; values: {list(p.values)}")
+        indices[k] = hits[0]
+    return space, tuple(indices)
 
 
 def _jsonable(value: Any) -> Any:
@@ -111,7 +116,8 @@ def render_preview(body: RenderRequest, storage: StorageDep, scenes: ScenesDep,
     check_profile(body.profile)
     scene = scene_or_404(storage, scenes, body.scene_id)
     camera = make_camera(body.camera, settings.max_render_pixels)
-    rs = make_settings(body.settings)
+    space, indices = settings_indices(body.settings)
+    rs = space.to_settings(indices)
     t0 = time.perf_counter()
     profile = sim_core.load_profile(body.profile)
     result = sim_core.render(scene, camera, rs, threads=settings.render_threads)
@@ -130,15 +136,26 @@ def render_preview(body: RenderRequest, storage: StorageDep, scenes: ScenesDep,
 @router.post("/evaluate", response_model=EvaluateResponse, responses=_ERRORS)
 def evaluate_settings(body: EvaluateRequest, storage: StorageDep, scenes: ScenesDep,
                       settings: SettingsDep) -> EvaluateResponse:
-    """Error (1 - SSIM against the maximum-quality render of the same camera) and power of settings."""
-    from service.evaluation import evaluate
+    """Error (1 - SSIM against the maximum-quality render of the same camera) and power of settings
+    (``{parameter: value}`` of the default space, as a store query returns them)."""
+    from service.evaluation import CameraSpec, evaluate
 
     check_profile(body.profile)
     scene = scene_or_404(storage, scenes, body.scene_id)
-    camera = make_camera(body.camera, settings.max_render_pixels)
-    rs = make_settings(body.settings)
+    cam = body.camera
+    if cam.width * cam.height > settings.max_render_pixels:
+        raise ApiError(422, f"camera resolution {cam.width}x{cam.height} exceeds the limit of "
+                            f"{settings.max_render_pixels} pixels")
+    m = np.asarray(cam.matrix_world, dtype=np.float64)
     try:
-        ev = evaluate(scene, camera, rs, profile=body.profile, fps=body.fps)
+        spec = CameraSpec(eye=tuple(m[:3, 3]), forward=tuple(-m[:3, 2]), up=tuple(m[:3, 1]), vfov=cam.vfov,
+                          width=cam.width, height=cam.height)
+    except ValueError as exc:
+        raise ApiError(422, f"camera: {exc}") from exc
+    space, indices = settings_indices(body.settings)
+    try:
+        ev = evaluate(scene, spec, indices, space, profile=body.profile, fps=body.fps,
+                      threads=settings.render_threads)
     except ValueError as exc:
         raise ApiError(422, str(exc)) from exc
     return EvaluateResponse(error=float(ev.error), power_w=float(ev.power_w),

@@ -1,0 +1,101 @@
+"""Durability and scale on real processes: SIGKILL mid-job and resume, and a job on a Dask LocalCluster,
+each compared with an uninterrupted in-process run of the same request."""
+
+from __future__ import annotations
+
+import sqlite3
+import time
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+from api_support import ServerProcess, server_thread, sse_events, teapot_scene_glb, tiny_job
+
+from service.api import Settings
+
+pytestmark = pytest.mark.service
+
+GLB = {"Content-Type": "model/gltf-binary"}
+
+
+def cached_evaluations(data_dir: Path) -> int:
+    path = data_dir / "eval_cache.sqlite3"
+    if not path.exists():
+        return 0
+    with sqlite3.connect(path) as db:
+        return int(db.execute("SELECT COUNT(*) FROM evaluations").fetchone()[0])
+
+
+def job_state_on_disk(data_dir: Path, job_id: str) -> str:
+    with sqlite3.connect(data_dir / "service.sqlite3") as db:
+        return str(db.execute("SELECT state FROM jobs WHERE id = ?", (job_id,)).fetchone()[0])
+
+
+def durable_spec(scene_id: str) -> dict[str, Any]:
+    spec = tiny_job(scene_id, resolution=(24, 18), depth_values=(0, 1, 2))
+    spec["options"]["max_depth"] = 1
+    return spec
+
+
+def run_uninterrupted(data_dir: Path, spec_of: Any, **settings: Any) -> tuple[dict[str, Any], str, int]:
+    with server_thread(Settings(data_dir=data_dir, job_workers=1, **settings)) as url, \
+            httpx.Client(base_url=url, timeout=120) as c:
+        scene = c.post("/scenes", content=teapot_scene_glb(), headers=GLB).json()
+        job = c.post("/jobs", json=spec_of(scene["id"])).json()
+        events = sse_events(c, f"/jobs/{job['id']}/events", timeout=300)
+        assert events[-1][0] == "done", events[-1]
+        final = c.get(f"/jobs/{job['id']}").json()
+        body = c.get(f"/stores/{final['store_id']}").text
+    return final, body, cached_evaluations(data_dir)
+
+
+@pytest.mark.slow
+def test_sigkill_mid_job_resumes_without_redoing_work(tmp_path: Path) -> None:
+    crash_dir, ref_dir = tmp_path / "crash", tmp_path / "reference"
+    srv = ServerProcess(crash_dir).wait_healthy()
+    try:
+        c = httpx.Client(base_url=srv.base_url, timeout=60)
+        scene = c.post("/scenes", content=teapot_scene_glb(), headers=GLB).json()
+        job = c.post("/jobs", json=durable_spec(scene["id"])).json()
+        deadline = time.monotonic() + 120
+        while cached_evaluations(crash_dir) < 10:  # some evaluations are committed, the job is not done
+            assert time.monotonic() < deadline, srv.output()
+            assert c.get(f"/jobs/{job['id']}").json()["state"] in ("queued", "running")
+            time.sleep(0.02)
+    finally:
+        srv.kill()
+    assert job_state_on_disk(crash_dir, job["id"]) == "running"
+    done_before = cached_evaluations(crash_dir)
+
+    srv = ServerProcess(crash_dir).wait_healthy()
+    try:
+        c = httpx.Client(base_url=srv.base_url, timeout=60)
+        events = sse_events(c, f"/jobs/{job['id']}/events", timeout=300)
+        kinds = [k for k, _ in events]
+        assert "resumed" in kinds and kinds[-1] == "done", kinds
+        final = c.get(f"/jobs/{job['id']}").json()
+        assert final["attempts"] == 2
+        resumed_store = c.get(f"/stores/{final['store_id']}").text
+    finally:
+        srv.stop()
+
+    ref_job, ref_store, ref_evaluations = run_uninterrupted(ref_dir, durable_spec)
+    assert resumed_store == ref_store
+    assert final["store_id"] == ref_job["store_id"]
+    # Every evaluation is stored once: the resumed run rendered only what the first one had not.
+    assert cached_evaluations(crash_dir) == ref_evaluations
+    assert final["progress"]["cache_hits"] >= done_before
+
+
+@pytest.mark.slow
+def test_dask_local_cluster_gives_the_in_process_store(tmp_path: Path) -> None:
+    from distributed import LocalCluster
+
+    _, local_store, _ = run_uninterrupted(tmp_path / "local", tiny_job)
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        address = cluster.scheduler_address
+        _, dask_store, _ = run_uninterrupted(tmp_path / "dask", tiny_job, dask_scheduler=address)
+        with server_thread(Settings(data_dir=tmp_path / "dask", dask_scheduler=address)) as url:
+            assert httpx.get(f"{url}/health").json()["executor"] == f"dask:{address}"
+    assert dask_store == local_store
