@@ -1,0 +1,210 @@
+"""Command line: ``render-budget optimize | query | serve``.
+
+``optimize`` builds a Pareto store for a scene and a camera path (progress bar on stderr, resumable:
+evaluations persist in an SQLite cache). ``query`` looks a camera up in a store under a power or error
+budget. ``serve`` starts the REST service. Camera-path JSON: see :mod:`service.camera_path`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+
+def _default_cache() -> Path:
+    base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return base / "render-budget" / "eval-cache.sqlite"
+
+
+def _positive(text: str) -> float:
+    v = float(text)
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
+    return v
+
+
+def _finite(text: str) -> float:
+    v = float(text)
+    if not math.isfinite(v):
+        raise argparse.ArgumentTypeError(f"must be finite, got {text}")
+    return v
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="render-budget", description="Power-optimal ray-tracing settings along "
+                                "camera paths, from a simulated mobile ray-tracing GPU.")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    o = sub.add_parser("optimize", help="build a Pareto store for a scene and a camera path")
+    o.add_argument("scene", type=Path, help="scene file (.glb, .gltf or .obj)")
+    o.add_argument("--path", type=Path, required=True, help="camera-path JSON")
+    o.add_argument("--out", type=Path, required=True, help="where to write the store (JSON)")
+    o.add_argument("--profile", default="mobile", help="hardware profile name or file (default: mobile)")
+    o.add_argument("--fps", type=_positive, default=30.0, help="frame rate the power is measured at")
+    o.add_argument("--threshold-power", type=_positive, default=0.05, metavar="W",
+                   help="subdivide where neighbouring frontiers differ by more than W watts")
+    o.add_argument("--threshold-error", type=_positive, default=0.01, metavar="E",
+                   help="subdivide where neighbouring frontiers differ by more than E (1 - SSIM)")
+    o.add_argument("--max-depth", type=int, default=2, metavar="N")
+    o.add_argument("--population", type=int, default=24)
+    o.add_argument("--generations", type=int, default=25)
+    o.add_argument("--exhaustive-limit", type=int, default=512, metavar="N",
+                   help="enumerate every setting when the space has at most N")
+    o.add_argument("--eval-height", type=int, default=36, help="evaluation image height (pixels)")
+    o.add_argument("--eval-width", type=int, default=None, help="evaluation width (default: path aspect)")
+    o.add_argument("--metric", default="ssim", choices=("ssim", "ssim_gaussian", "flip"))
+    o.add_argument("--parameters", default=None, help="comma-separated parameters to search (default: all)")
+    o.add_argument("--seed", type=int, default=0)
+    o.add_argument("--cache", type=Path, default=None, help=f"evaluation cache (default {_default_cache()})")
+    o.add_argument("--dask-scheduler", default=None, metavar="ADDR", help="evaluate on a Dask cluster")
+    o.add_argument("--workers", type=int, default=1, help="local worker processes (default 1: in-process)")
+    o.add_argument("--threads", type=int, default=None, help="tracer threads per render")
+    o.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+    q = sub.add_parser("query", help="settings for a camera from a store under a budget")
+    q.add_argument("store", type=Path)
+    q.add_argument("--position", type=_finite, nargs=3, required=True, metavar=("X", "Y", "Z"))
+    g = q.add_mutually_exclusive_group(required=True)
+    g.add_argument("--direction", type=_finite, nargs=3, metavar=("DX", "DY", "DZ"))
+    g.add_argument("--matrix", type=_finite, nargs=16, metavar="M", help="Blender matrix_world, row-major")
+    q.add_argument("--fov", type=_positive, default=None, metavar="DEG", help="vertical field of view")
+    b = q.add_mutually_exclusive_group(required=True)
+    b.add_argument("--power-budget", type=_finite, metavar="W")
+    b.add_argument("--error-budget", type=_finite, metavar="E")
+    q.add_argument("--json", action="store_true", help="print JSON")
+
+    s = sub.add_parser("serve", help="run the REST service")
+    s.add_argument("--host", default="127.0.0.1")
+    s.add_argument("--port", type=int, default=8765)
+    s.add_argument("--data-dir", type=Path, default=None)
+    s.add_argument("--dask-scheduler", default=None, metavar="ADDR")
+    s.add_argument("--token", default=None, help="bearer token (required for a non-loopback bind)")
+    return p
+
+
+class _Bar:
+    """A one-line progress bar on stderr."""
+
+    def __init__(self, enabled: bool) -> None:
+        forced = os.environ.get("RENDER_BUDGET_BAR") == "1"
+        self.enabled = enabled and (sys.stderr.isatty() or forced)
+        self.last = 0.0
+
+    def __call__(self, p: Any) -> None:
+        now = time.monotonic()
+        if not self.enabled or (now - self.last < 0.2 and p.phase != "done"):
+            return
+        self.last = now
+        frac = p.views_done / p.views_planned if p.views_planned else 0.0
+        n = int(30 * frac)
+        eta = f"{p.estimate_s:6.0f}s left" if p.estimate_s is not None else "   ...    "
+        sys.stderr.write(f"\r[{'#' * n}{'.' * (30 - n)}] {p.views_done}/{p.views_planned} views, "
+                         f"{p.evaluations} renders, {p.cache_hits} cached, {eta} {p.phase[:28]:<28}")
+        sys.stderr.flush()
+
+    def close(self) -> None:
+        if self.enabled:
+            sys.stderr.write("\n")
+
+
+def _optimize(args: argparse.Namespace) -> int:
+    from service.camera_path import CameraPath
+    from service.eval_cache import EvalCache
+    from service.evaluation import load_scene
+    from service.executors import make_executor
+    from service.optimize import OptimizeOptions, optimize_path
+    from service.params import default_space
+
+    path = CameraPath.load(args.path)
+    space = default_space()
+    if args.parameters:
+        space = space.subset([n.strip() for n in args.parameters.split(",") if n.strip()])
+    options = OptimizeOptions(
+        threshold_power_w=args.threshold_power, threshold_error=args.threshold_error,
+        max_depth=args.max_depth, population=args.population, generations=args.generations,
+        exhaustive_limit=args.exhaustive_limit, eval_width=args.eval_width, eval_height=args.eval_height,
+        profile=args.profile, fps=args.fps, seed=args.seed, metric=args.metric, threads=args.threads,
+    )
+    handle = load_scene(args.scene, ship_bytes=bool(args.dask_scheduler))
+    bar = _Bar(not args.no_progress)
+    with EvalCache(args.cache or _default_cache()) as cache:
+        executor = make_executor(args.dask_scheduler, args.workers)
+        try:
+            store = optimize_path(handle, path, space, options, cache=cache, executor=executor, progress=bar)
+        finally:
+            bar.close()
+            executor.close()
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    text = store.to_json()
+    args.out.write_text(text, encoding="utf-8")
+    st = store.stats()
+    print(f"wrote {args.out}: {st['size_bytes'] / 1024:.1f} KB, depth {st['depth']}, "
+          f"{st['corners']} corners, {st['views']} views ({store.meta['views_optimised']} optimised), "
+          f"{store.meta['evaluations']} renders, {store.meta['cache_hits']} cache hits, "
+          f"{store.meta['elapsed_s']:.1f} s")
+    fixed = store.meta.get("fixed_parameters") or {}
+    for name, why in fixed.items():
+        print(f"  left out {name}: {why}")
+    return 0
+
+
+def _query(args: argparse.Namespace) -> int:
+    from service.pareto_store import ParetoStore
+
+    store = ParetoStore.from_json(args.store.read_bytes())
+    matrix = None
+    if args.matrix is not None:
+        matrix = [args.matrix[i * 4:(i + 1) * 4] for i in range(4)]
+    fov = math.radians(args.fov) if args.fov is not None else None
+    r = store.lookup(args.position, direction=args.direction, matrix=matrix, fov=fov,
+                     power_budget=args.power_budget, error_budget=args.error_budget)
+    out = {"settings": r.settings, "indices": list(r.indices), "packed": r.packed, "power_w": r.power_w,
+           "error": r.error, "clamped": r.clamped, "infeasible": r.infeasible, "corner": r.corner,
+           "view": r.view}
+    if args.json:
+        print(json.dumps(out))
+    else:
+        for k, v in r.settings.items():
+            print(f"{k:>22}: {v}")
+        print(f"{'predicted power':>22}: {r.power_w:.4f} W")
+        print(f"{'predicted error':>22}: {r.error:.5f} (1 - SSIM)")
+        if r.clamped:
+            print(f"{'note':>22}: clamped: camera outside the optimised region")
+        if r.infeasible:
+            print(f"{'note':>22}: infeasible: nothing meets the budget, nearest returned")
+    return 0
+
+
+def _serve(args: argparse.Namespace) -> int:
+    from service.api.server import run
+
+    run(args.host, args.port, args.data_dir, args.dask_scheduler, args.token)
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        if args.command == "optimize":
+            return _optimize(args)
+        if args.command == "query":
+            return _query(args)
+        return _serve(args)
+    except (ValueError, FileNotFoundError, IsADirectoryError) as exc:
+        print(f"render-budget {args.command}: error: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f"render-budget {args.command}: interrupted (finished evaluations are cached)",
+              file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,344 @@
+"""Error and power of one settings vector at one camera (power-budget paper, Eq. 1 and sec. 5.1.1).
+
+``error = 1 - SSIM(reference, image)`` where the reference is the maximum-quality render of the same
+camera; ``power`` is the energy model's power at the target frame rate. Both images go through one
+fixed display transform before SSIM: linear RGB clamped to [0, 1], then the sRGB transfer curve (so the
+error is measured on what a display shows, and highlights above 1 do not dominate). A render smaller
+than the reference (resolution scale) is upsampled bilinearly to the reference size first.
+
+:class:`Evaluator` is the driver side: it answers batches of (camera, settings) from the persistent
+cache and sends only the misses, as one batch, to an executor; workers keep their scene and each
+camera's reference image, so a reference is rendered once per worker and camera.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import threading
+import time
+from collections import OrderedDict
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from service.eval_cache import CacheKey, EvalCache, Evaluation
+from service.executors import Executor, InProcessExecutor
+from service.metrics import flip, ssim
+from service.params import Indices, ParameterSpace
+
+#: Bumped whenever the pipeline that turns renders into errors changes (part of every cache key).
+PIPELINE_VERSION = "v1"
+METRICS = ("ssim", "ssim_gaussian", "flip")
+
+__all__ = ["METRICS", "CameraSpec", "Evaluation", "Evaluator", "SceneHandle", "evaluate", "tone_map",
+           "upsample_bilinear"]
+
+
+def tone_map(image: np.ndarray) -> np.ndarray:
+    """Fixed display transform: clamp linear RGB to [0, 1], apply the sRGB OETF; float64 out."""
+    x = np.clip(np.asarray(image, dtype=np.float64), 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
+
+
+def upsample_bilinear(image: np.ndarray, height: int, width: int) -> np.ndarray:
+    """Bilinear resize of an (h, w[, c]) image to (height, width), pixel centres aligned."""
+    img = np.asarray(image, dtype=np.float64)
+    h, w = img.shape[:2]
+    if (h, w) == (height, width):
+        return img
+
+    def coords(n_out: int, n_in: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        x = (np.arange(n_out) + 0.5) * (n_in / n_out) - 0.5
+        x = np.clip(x, 0, n_in - 1)
+        x0 = np.floor(x).astype(np.int64)
+        x1 = np.minimum(x0 + 1, n_in - 1)
+        return x0, x1, x - x0
+
+    y0, y1, fy = coords(height, h)
+    x0, x1, fx = coords(width, w)
+    extra = (None,) * (img.ndim - 2)
+    fy = fy[(slice(None), None, *extra)]
+    fx = fx[(None, slice(None), *extra)]
+    top = img[y0][:, x0] * (1 - fx) + img[y0][:, x1] * fx
+    bot = img[y1][:, x0] * (1 - fx) + img[y1][:, x1] * fx
+    return top * (1 - fy) + bot * fy
+
+
+@dataclass(frozen=True)
+class CameraSpec:
+    """A pinhole camera for evaluation: eye, forward and up (world, Z up), vertical fov, resolution."""
+
+    eye: tuple[float, float, float]
+    forward: tuple[float, float, float]
+    up: tuple[float, float, float]
+    vfov: float
+    width: int
+    height: int
+
+    def __post_init__(self) -> None:
+        for name in ("eye", "forward", "up"):
+            v = np.asarray(getattr(self, name), dtype=np.float64).reshape(-1)
+            if v.shape != (3,) or not np.all(np.isfinite(v)):
+                raise ValueError(f"camera {name} must be 3 finite numbers")
+            object.__setattr__(self, name, tuple(float(c) for c in v))
+        if np.linalg.norm(self.forward) < 1e-12:
+            raise ValueError("camera forward must be non-zero")
+        if np.linalg.norm(np.cross(self.forward, self.up)) < 1e-9:
+            raise ValueError("camera up must not be parallel to forward")
+        if not (math.isfinite(self.vfov) and 0 < self.vfov < math.pi):
+            raise ValueError("vfov must be in (0, pi)")
+        if int(self.width) < 8 or int(self.height) < 8:
+            raise ValueError("evaluation images need at least 8x8 pixels")
+        object.__setattr__(self, "width", int(self.width))
+        object.__setattr__(self, "height", int(self.height))
+
+    def key(self) -> str:
+        """Stable text key (values rounded to 1e-6) used by caches."""
+        f = ",".join(f"{c:.6f}" for c in (*self.eye, *self.forward, *self.up, self.vfov))
+        return f"{f}|{self.width}x{self.height}"
+
+    def to_camera(self) -> Any:
+        import sim_core
+
+        target = tuple(e + f for e, f in zip(self.eye, self.forward, strict=True))
+        return sim_core.Camera.look_at(self.eye, target, self.up, self.vfov, self.width, self.height)
+
+
+class SceneHandle:
+    """A scene that can travel to worker processes: its content hash plus the file it was loaded from.
+
+    In the process that made it the handle holds the loaded scene; pickled, it carries the path (and
+    the file bytes when ``ship_bytes``, for workers without a shared file system) and loads the scene
+    once per worker process."""
+
+    def __init__(self, scene: Any = None, path: str | Path | None = None, *,
+                 ship_bytes: bool = False) -> None:
+        if scene is None and path is None:
+            raise ValueError("a scene handle needs a scene or a path")
+        if path is None and scene is not None:
+            src = str(getattr(scene, "source", "") or "")
+            path = src if src and Path(src).is_file() else None  # loaded from a file: workers reload it
+        self.path = None if path is None else str(path)
+        self._data: bytes | None = Path(path).read_bytes() if (ship_bytes and path is not None) else None
+        if scene is None:
+            scene = _load_scene(self.path, None)  # type: ignore[arg-type]
+        self.content_hash = str(scene.content_hash)
+        _SCENES[self.content_hash] = scene
+        self._scene = scene
+
+    def get(self) -> Any:
+        if self._scene is None:
+            with _LOCK:
+                s = _SCENES.get(self.content_hash)
+                if s is None:
+                    if self.path is None:
+                        raise RuntimeError("this scene has no file to load it from in a worker process")
+                    s = _load_scene(self.path, self._data)
+                    _SCENES[self.content_hash] = s
+            self._scene = s
+        return self._scene
+
+    def __getstate__(self) -> dict[str, Any]:
+        if self.path is None:
+            raise RuntimeError("a scene without a source file can only be evaluated in-process")
+        return {"path": self.path, "data": self._data, "content_hash": self.content_hash}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.path = state["path"]
+        self._data = state["data"]
+        self.content_hash = state["content_hash"]
+        self._scene = _SCENES.get(self.content_hash)
+
+
+def _load_scene(path: str, data: bytes | None) -> Any:
+    import sim_core
+
+    p = Path(path)
+    if data is not None and not p.exists():
+        import tempfile
+
+        tmp = Path(tempfile.mkdtemp(prefix="render-budget-scene-")) / p.name
+        tmp.write_bytes(data)
+        p = tmp
+    if p.suffix.lower() in (".glb", ".gltf"):
+        return sim_core.Scene.from_gltf(str(p))
+    if p.suffix.lower() == ".obj":
+        return sim_core.Scene.from_obj(str(p))
+    raise ValueError(f"unsupported scene file {p.name!r} (use .glb, .gltf or .obj)")
+
+
+def load_scene(path: str | Path, *, ship_bytes: bool = False) -> SceneHandle:
+    """Load a scene file into a handle usable by every executor."""
+    return SceneHandle(path=path, ship_bytes=ship_bytes)
+
+
+# worker-process state: scenes by content hash, profiles by name, reference images (LRU)
+_LOCK = threading.Lock()
+_SCENES: dict[str, Any] = {}
+_PROFILES: dict[str, Any] = {}
+_REFS: OrderedDict[tuple[str, ...], np.ndarray] = OrderedDict()
+_REF_CAPACITY = 96
+
+
+def _profile(name: str) -> Any:
+    import sim_core
+
+    p = _PROFILES.get(name)
+    if p is None:
+        p = sim_core.load_profile(name)
+        _PROFILES[name] = p
+    return p
+
+
+def _render(scene: Any, camera: CameraSpec, settings: Any, threads: int | None) -> Any:
+    import sim_core
+
+    return sim_core.render(scene, camera.to_camera(), settings, threads=threads)
+
+
+def _image(result: Any) -> np.ndarray:
+    img = np.asarray(result.image)
+    if img.ndim != 3 or img.shape[2] != 3 or not np.all(np.isfinite(img)):
+        raise ValueError("render returned a non-finite or malformed image")
+    return img
+
+
+def _error(metric: str, reference: np.ndarray, image: np.ndarray) -> float:
+    ref = tone_map(reference)
+    img = tone_map(upsample_bilinear(image, ref.shape[0], ref.shape[1]))
+    if metric == "ssim":
+        e = 1.0 - ssim(ref, img, data_range=1.0)
+    elif metric == "ssim_gaussian":
+        e = 1.0 - ssim(ref, img, data_range=1.0, gaussian_weights=True)
+    elif metric == "flip":
+        e = flip(ref, img)
+    else:
+        raise ValueError(f"unknown metric {metric!r} (choose from {METRICS})")
+    return float(min(max(e, 0.0), 1.0))
+
+
+def _price(result: Any, profile: str, fps: float) -> tuple[float, float, dict[str, float]]:
+    import sim_core
+
+    rep = sim_core.price(result, _profile(profile), fps)
+    breakdown = {f"energy_j.{k}": float(v) for k, v in dict(rep.energy_j).items()}
+    breakdown["rays_total"] = float(getattr(rep, "rays_total", 0))
+    return float(rep.power_w), float(rep.frame_time_s), breakdown
+
+
+def _reference(scene: Any, scene_hash: str, camera: CameraSpec, space: ParameterSpace,
+               threads: int | None) -> np.ndarray:
+    mq = space.max_quality_indices()
+    key = (scene_hash, camera.key(), repr(sorted(space.fields_of(mq).items())))
+    with _LOCK:
+        ref = _REFS.get(key)
+        if ref is not None:
+            _REFS.move_to_end(key)
+            return ref
+    ref = _image(_render(scene, camera, space.to_settings(mq), threads))
+    with _LOCK:
+        _REFS[key] = ref
+        while len(_REFS) > _REF_CAPACITY:
+            _REFS.popitem(last=False)
+    return ref
+
+
+def evaluate(scene: Any, camera: CameraSpec, indices: Sequence[int], space: ParameterSpace, *,
+             profile: str = "mobile", fps: float = 30.0, metric: str = "ssim", threads: int | None = None,
+             reference: np.ndarray | None = None) -> Evaluation:
+    """Render ``indices`` at ``camera``, compare with the max-quality reference, price the frame."""
+    if isinstance(scene, SceneHandle):
+        handle_hash, scene = scene.content_hash, scene.get()
+    else:
+        handle_hash = str(scene.content_hash)
+    if metric not in METRICS:
+        raise ValueError(f"unknown metric {metric!r} (choose from {METRICS})")
+    idx = tuple(int(i) for i in indices)
+    space.validate(idx)
+    if reference is None:
+        reference = _reference(scene, handle_hash, camera, space, threads)
+    result = _render(scene, camera, space.to_settings(idx), threads)
+    err = 0.0 if idx == space.max_quality_indices() else _error(metric, reference, _image(result))
+    power, frame_time, breakdown = _price(result, profile, fps)
+    return Evaluation(err, power, frame_time, breakdown)
+
+
+@dataclass(frozen=True)
+class EvalContext:
+    """What every task of a batch shares (sent once per worker and batch)."""
+
+    scene: SceneHandle
+    space: ParameterSpace
+    profile: str
+    fps: float
+    metric: str
+    threads: int | None
+
+
+def _eval_task(ctx: EvalContext, item: tuple[CameraSpec, Indices]) -> Evaluation:
+    camera, idx = item
+    return evaluate(ctx.scene, camera, idx, ctx.space, profile=ctx.profile, fps=ctx.fps, metric=ctx.metric,
+                    threads=ctx.threads)
+
+
+def space_fingerprint(space: ParameterSpace) -> str:
+    """Short hash of what packed settings mean (parameters and fields), for cache keys."""
+    text = repr([(p.name, p.values, [sorted(f.items()) for f in p.fields]) for p in space.parameters])
+    return hashlib.sha256(text.encode()).hexdigest()[:12]
+
+
+class Evaluator:
+    """Batches of (camera, settings) -> evaluations, through the cache and then the executor."""
+
+    def __init__(self, scene: SceneHandle | Any, space: ParameterSpace, *, cache: EvalCache,
+                 executor: Executor | None = None, profile: str = "mobile", fps: float = 30.0,
+                 metric: str = "ssim", threads: int | None = None) -> None:
+        if metric not in METRICS:
+            raise ValueError(f"unknown metric {metric!r} (choose from {METRICS})")
+        if not (math.isfinite(fps) and fps > 0):
+            raise ValueError("fps must be positive")
+        self.scene = scene if isinstance(scene, SceneHandle) else SceneHandle(scene)
+        self.space = space
+        self.cache = cache
+        self.executor = executor or InProcessExecutor()
+        self.ctx = EvalContext(self.scene, space, profile, float(fps), metric, threads)
+        self.metric_key = f"{metric}:{PIPELINE_VERSION}:{space_fingerprint(space)}"
+        self.evaluations = 0  # renders actually done
+        self.cache_hits = 0
+        self.render_time_s = 0.0
+
+    def _key(self, camera: CameraSpec) -> CacheKey:
+        return CacheKey(self.scene.content_hash, camera.key(), self.metric_key, self.ctx.profile,
+                        camera.width, camera.height, self.ctx.fps)
+
+    def evaluate(self, requests: Sequence[tuple[CameraSpec, Sequence[int]]]) -> list[Evaluation]:
+        """Evaluations in request order; cached ones are not rendered again."""
+        reqs = [(cam, tuple(int(i) for i in idx)) for cam, idx in requests]
+        by_cam: dict[str, tuple[CameraSpec, dict[int, Indices]]] = {}
+        for cam, idx in reqs:
+            by_cam.setdefault(cam.key(), (cam, {}))[1][self.space.pack(idx)] = idx
+        found: dict[tuple[str, int], Evaluation] = {}
+        todo: list[tuple[CameraSpec, Indices]] = []
+        for ck, (cam, packs) in by_cam.items():
+            hit = self.cache.get_many(self._key(cam), list(packs))
+            self.cache_hits += len(hit)
+            for p, ev in hit.items():
+                found[(ck, p)] = ev
+            todo.extend((cam, packs[p]) for p in packs if p not in hit)
+        if todo:
+            t0 = time.perf_counter()
+            results = self.executor.map(_eval_task, self.ctx, todo)
+            self.render_time_s += time.perf_counter() - t0
+            self.evaluations += len(todo)
+            grouped: dict[str, list[tuple[int, Evaluation]]] = {}
+            for (cam, idx), ev in zip(todo, results, strict=True):
+                p = self.space.pack(idx)
+                found[(cam.key(), p)] = ev
+                grouped.setdefault(cam.key(), []).append((p, ev))
+            for ck, items in grouped.items():
+                self.cache.put_many(self._key(by_cam[ck][0]), items)
+        return [found[(cam.key(), self.space.pack(idx))] for cam, idx in reqs]

@@ -1,0 +1,404 @@
+"""Adaptive octree over the camera path (power-budget paper, sec. 4.2, 5.2 and 5.3).
+
+The root is the path's bounding box, padded and made cubic. Every corner carries a view cube of six
+axis views; a camera sample is (corner, view), rendered with the path camera's vertical field of view
+and aspect at the evaluation resolution. Each root corner view gets a Pareto frontier from NSGA-II (or
+exhaustive enumeration when the space is small).
+
+A node is subdivided when, for some view, two corners joined by one of its edges have frontiers that
+differ by more than ``tau_e`` in error or ``tau_p`` in power (Eq. 4-7, :func:`frontier_distance`), as
+long as the node is within ``max_depth`` and the camera path passes through it (plus a margin). The 19
+new corners are handled in the paper's order: edge midpoints compare the edge's two corners; face
+centres pair their four edge-midpoint neighbours along the two face axes; the node centre pairs its six
+face-centre neighbours along the three axes. A view is optimised afresh (warm-started from the pair's
+frontiers) only when a pair differs for that view; otherwise it inherits the frontier of the first
+corner of the first pair. Corners shared with neighbouring nodes are created once.
+
+All searches of one stage run in lockstep, so every generation of every camera goes to the executor
+as one batch. Seeds derive from the run seed and the camera, and the evaluation cache answers every
+repeated render, so a rerun after an interruption replays the same decisions and resumes where it
+stopped.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import time
+import zlib
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from service.evaluation import CameraSpec, Evaluator
+from service.nsga import NSGA2, Archive, NSGAConfig, enumerate_space
+from service.params import Indices, ParameterSpace
+from service.pareto_store import VIEW_FORWARD, VIEW_UP, Frontier, ParetoStore, root_cube
+
+N_VIEWS = 6
+# The 12 edges of a cube as pairs of corner numbers (bit 0: +x, bit 1: +y, bit 2: +z).
+CUBE_EDGES: tuple[tuple[int, int], ...] = tuple(
+    (k, k | (1 << a)) for a in range(3) for k in range(8) if not k & (1 << a)
+)
+
+
+class Cancelled(Exception):
+    """The optimisation was cancelled through ``should_cancel``."""
+
+
+@dataclass
+class Progress:
+    """Where a run stands: views optimised of those planned so far, renders, cache hits, time."""
+
+    views_done: int = 0
+    views_planned: int = 0
+    evaluations: int = 0
+    cache_hits: int = 0
+    elapsed_s: float = 0.0
+    estimate_s: float | None = None
+    phase: str = "starting"
+
+
+@dataclass
+class FrontierRecord:
+    """A frontier as measured at one camera sample: full index vectors with error and power."""
+
+    corner: int
+    view: int
+    points: list[tuple[Indices, float, float]]
+
+    def settings(self) -> list[Indices]:
+        return [x for x, _, _ in self.points]
+
+
+@dataclass
+class OctreeConfig:
+    """Subdivision thresholds and search options of one octree build."""
+
+    threshold_power_w: float
+    threshold_error: float
+    max_depth: int = 2
+    margin: float = 0.1  # fraction of a node's side added around it for the "path passes through" test
+    pad_fraction: float = 0.1
+    min_size: float = 1.0
+    nsga: NSGAConfig = field(default_factory=NSGAConfig)
+    exhaustive_limit: int = 512
+    vfov: float = 0.6911
+    width: int = 64
+    height: int = 36
+
+    def __post_init__(self) -> None:
+        if not (self.threshold_power_w > 0 and self.threshold_error > 0):
+            raise ValueError("thresholds must be positive")
+        if not 0 <= self.max_depth <= 12:
+            raise ValueError("max_depth must be in 0..12")
+        if self.margin < 0:
+            raise ValueError("margin must be >= 0")
+
+
+def frontier_distance(projected: np.ndarray, target: np.ndarray, scale: tuple[float, float]
+                      ) -> tuple[float, float]:
+    """Half distances d_e, d_p (Eq. 6-7): for each projected (e, p) point, the nearest point of the
+    target frontier in the (e / scale_e, p / scale_p) plane; mean |e - e'| and mean |p - p'|."""
+    P = np.asarray(projected, dtype=np.float64).reshape(-1, 2)
+    T = np.asarray(target, dtype=np.float64).reshape(-1, 2)
+    if P.shape[0] == 0 or T.shape[0] == 0:
+        raise ValueError("frontiers must not be empty")
+    s = np.asarray(scale, dtype=np.float64)
+    d2 = (((P[:, None, :] - T[None, :, :]) / s) ** 2).sum(axis=2)
+    nearest = T[np.argmin(d2, axis=1)]
+    diff = np.abs(P - nearest)
+    return float(diff[:, 0].mean()), float(diff[:, 1].mean())
+
+
+def _camera_seed(seed: int, camera: CameraSpec) -> int:
+    return (int(seed) * 1_000_003 + zlib.crc32(camera.key().encode())) % (2**63)
+
+
+def densify(points: np.ndarray, step: float) -> np.ndarray:
+    """Points along the polyline with gaps no longer than ``step``."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    out = [p[:1]]
+    for a, b in itertools.pairwise(p):
+        n = max(1, math.ceil(float(np.linalg.norm(b - a)) / step))
+        t = (np.arange(1, n + 1) / n)[:, None]
+        out.append(a + (b - a) * t)
+    return np.concatenate(out)
+
+
+class OctreeBuilder:
+    """Builds the octree and its frontiers for one scene and path; see the module docstring."""
+
+    def __init__(self, evaluator: Evaluator, space: ParameterSpace, path_positions: np.ndarray,
+                 config: OctreeConfig, progress: Callable[[Progress], None] | None = None,
+                 should_cancel: Callable[[], bool] | None = None) -> None:
+        self.ev = evaluator
+        self.space = space
+        self.cfg = config
+        self._progress_cb = progress
+        self._should_cancel = should_cancel
+        self.root_min, self.root_size = root_cube(path_positions, config.pad_fraction, config.min_size)
+        self.side = 1 << config.max_depth
+        self.cell = self.root_size / self.side
+        self.path_points = densify(path_positions, self.cell / 2)
+        self.corner_index: dict[tuple[int, int, int], int] = {}
+        self.corner_coords: list[tuple[int, int, int]] = []
+        self.corner_views: list[list[int]] = []
+        self.frontiers: list[FrontierRecord] = []
+        # nodes: (lattice origin, lattice size, depth); children[n] = first child or -1
+        self.nodes: list[tuple[tuple[int, int, int], int, int]] = []
+        self.children: list[int] = []
+        self._dist: dict[tuple[int, int, int], tuple[float, float]] = {}
+        self.t0 = time.perf_counter()
+        self.state = Progress(phase="root")
+
+    # -- bookkeeping --------------------------------------------------------------------------------
+
+    def _report(self, phase: str | None = None) -> None:
+        if phase is not None:
+            self.state.phase = phase
+        s = self.state
+        s.evaluations = self.ev.evaluations
+        s.cache_hits = self.ev.cache_hits
+        s.elapsed_s = time.perf_counter() - self.t0
+        s.estimate_s = (s.elapsed_s / s.views_done * max(s.views_planned - s.views_done, 0)
+                        if s.views_done else None)
+        if self._progress_cb is not None:
+            self._progress_cb(Progress(**vars(s)))
+
+    def _check_cancel(self) -> None:
+        if self._should_cancel is not None and self._should_cancel():
+            self._report("cancelled")
+            raise Cancelled("optimisation cancelled")
+
+    def camera(self, corner: int, view: int) -> CameraSpec:
+        pos = self.root_min + np.asarray(self.corner_coords[corner], dtype=np.float64) * self.cell
+        return CameraSpec(tuple(pos), tuple(VIEW_FORWARD[view]), tuple(VIEW_UP[view]), self.cfg.vfov,
+                          self.cfg.width, self.cfg.height)
+
+    def _corner(self, xyz: tuple[int, int, int]) -> tuple[int, bool]:
+        c = self.corner_index.get(xyz)
+        if c is not None:
+            return c, False
+        c = len(self.corner_coords)
+        self.corner_index[xyz] = c
+        self.corner_coords.append(xyz)
+        self.corner_views.append([-1] * N_VIEWS)
+        return c, True
+
+    def _node_box(self, node: int) -> tuple[np.ndarray, np.ndarray]:
+        origin, size, _ = self.nodes[node]
+        lo = self.root_min + np.asarray(origin, dtype=np.float64) * self.cell
+        return lo, lo + size * self.cell
+
+    def _on_path(self, node: int) -> bool:
+        lo, hi = self._node_box(node)
+        m = self.cfg.margin * (hi[0] - lo[0])
+        inside = np.all((self.path_points >= lo - m) & (self.path_points <= hi + m), axis=1)
+        return bool(np.any(inside))
+
+    def _node_corners(self, node: int) -> list[int]:
+        (x, y, z), s, _ = self.nodes[node]
+        return [self.corner_index[(x + s * (k & 1), y + s * ((k >> 1) & 1), z + s * ((k >> 2) & 1))]
+                for k in range(8)]
+
+    # -- searches -----------------------------------------------------------------------------------
+
+    def _optimise(self, jobs: Sequence[tuple[int, int, list[Indices]]], phase: str) -> None:
+        """Frontiers for (corner, view, warm start) jobs, all searches in lockstep."""
+        if not jobs:
+            return
+        nv = self.space.free_n_values
+        cams = [self.camera(c, v) for c, v, _ in jobs]
+        archives: list[Archive]
+        if self.space.size <= self.cfg.exhaustive_limit:
+            xs = enumerate_space(nv)
+            archives = [Archive() for _ in jobs]
+            chunk = max(1, 256 // len(jobs))
+            for start in range(0, len(xs), chunk):
+                self._check_cancel()
+                part = xs[start:start + chunk]
+                reqs = [(cam, self.space.expand(x)) for cam in cams for x in part]
+                res = self.ev.evaluate(reqs)
+                for j in range(len(jobs)):
+                    for k, x in enumerate(part):
+                        ev = res[j * len(part) + k]
+                        archives[j].add(x, (ev.error, ev.power_w))
+                self._report(phase)
+        else:
+            algos = []
+            for (_, _, warm), cam in zip(jobs, cams, strict=True):
+                cfg = NSGAConfig(self.cfg.nsga.population, self.cfg.nsga.generations,
+                                 self.cfg.nsga.crossover_prob, self.cfg.nsga.mutation_prob,
+                                 _camera_seed(self.cfg.nsga.seed, cam))
+                init = list(dict.fromkeys(self.space.restrict(w) for w in warm))
+                algos.append(NSGA2(nv, cfg, init[: cfg.population]))
+            while True:
+                self._check_cancel()
+                asks = [(j, a.ask()) for j, a in enumerate(algos) if not a.done]
+                asks = [(j, b) for j, b in asks if b]
+                if not asks:
+                    break
+                reqs = [(cams[j], self.space.expand(x)) for j, b in asks for x in b]
+                res = self.ev.evaluate(reqs)
+                k = 0
+                for j, b in asks:
+                    algos[j].tell([(r.error, r.power_w) for r in res[k:k + len(b)]])
+                    k += len(b)
+                self._report(phase)
+            archives = [a.archive for a in algos]
+        for (c, v, _), arch in zip(jobs, archives, strict=True):
+            pts = [(self.space.expand(x), e, p) for x, e, p in arch.frontier()]
+            self.frontiers.append(FrontierRecord(c, v, pts))
+            self.corner_views[c][v] = len(self.frontiers) - 1
+            self.state.views_done += 1
+        self._report(phase)
+
+    def _distances(self, pairs: Sequence[tuple[int, int, int]]) -> list[tuple[float, float]]:
+        """D_e, D_p (Eq. 4-5) of (corner a, corner b, view) pairs, projections batched."""
+        todo = [p for p in dict.fromkeys(pairs) if p not in self._dist]
+        if todo:
+            self._check_cancel()
+            reqs = []
+            for a, b, v in todo:
+                fa = self.frontiers[self.corner_views[a][v]]
+                fb = self.frontiers[self.corner_views[b][v]]
+                reqs += [(self.camera(b, v), x) for x in fa.settings()]
+                reqs += [(self.camera(a, v), x) for x in fb.settings()]
+            res = self.ev.evaluate(reqs)
+            k = 0
+            for a, b, v in todo:
+                fa = self.frontiers[self.corner_views[a][v]]
+                fb = self.frontiers[self.corner_views[b][v]]
+                pa = np.asarray([(r.error, r.power_w) for r in res[k:k + len(fa.points)]])
+                k += len(fa.points)
+                pb = np.asarray([(r.error, r.power_w) for r in res[k:k + len(fb.points)]])
+                k += len(fb.points)
+                ta = np.asarray([(e, p) for _, e, p in fa.points])
+                tb = np.asarray([(e, p) for _, e, p in fb.points])
+                allp = np.concatenate([pa, pb, ta, tb])
+                scale = (max(float(np.ptp(allp[:, 0])), self.cfg.threshold_error),
+                         max(float(np.ptp(allp[:, 1])), self.cfg.threshold_power_w))
+                de1, dp1 = frontier_distance(pa, tb, scale)  # P_a projected to c_b against P_b
+                de2, dp2 = frontier_distance(pb, ta, scale)
+                self._dist[(a, b, v)] = (de1 + de2, dp1 + dp2)
+            self._report()
+        return [self._dist[p] for p in pairs]
+
+    def _differs(self, d: tuple[float, float]) -> bool:
+        return d[0] > self.cfg.threshold_error or d[1] > self.cfg.threshold_power_w
+
+    # -- the build ----------------------------------------------------------------------------------
+
+    def run(self) -> None:
+        self.nodes.append(((0, 0, 0), self.side, 0))
+        self.children.append(-1)
+        for k in range(8):
+            self._corner((self.side * (k & 1), self.side * ((k >> 1) & 1), self.side * ((k >> 2) & 1)))
+        self.state.views_planned = 8 * N_VIEWS
+        self._report("root")
+        self._optimise([(c, v, []) for c in range(8) for v in range(N_VIEWS)], "root")
+        level = [0]
+        while level:
+            depth = self.nodes[level[0]][2]
+            if depth >= self.cfg.max_depth:
+                break
+            cand = [n for n in level if self._on_path(n)]
+            pairs = []
+            for n in cand:
+                cs = self._node_corners(n)
+                pairs += [(cs[a], cs[b], v) for a, b in CUBE_EDGES for v in range(N_VIEWS)]
+            self._report(f"compare depth {depth}")
+            self._distances(pairs)
+            split = [n for n in cand if any(
+                self._differs(self._dist[(cs[a], cs[b], v)])
+                for cs in [self._node_corners(n)] for a, b in CUBE_EDGES for v in range(N_VIEWS))]
+            level = self._subdivide(split, depth + 1)
+        self._report("done")
+
+    def _subdivide(self, nodes: Sequence[int], child_depth: int) -> list[int]:
+        """Split ``nodes``; create their new corners stage by stage; return the children."""
+        stages: dict[int, list[tuple[int, list[tuple[int, int]]]]] = {1: [], 2: [], 3: []}
+        children = []
+        for n in nodes:
+            (x, y, z), s, _ = self.nodes[n]
+            h = s // 2
+            first = len(self.nodes)
+            self.children[n] = first
+            for k in range(8):
+                self.nodes.append(((x + h * (k & 1), y + h * ((k >> 1) & 1), z + h * ((k >> 2) & 1)), h,
+                                   child_depth))
+                self.children.append(-1)
+                children.append(first + k)
+            for i in range(3):
+                for j in range(3):
+                    for k in range(3):
+                        mids = (i == 1) + (j == 1) + (k == 1)
+                        if mids == 0:
+                            continue
+                        c, new = self._corner((x + h * i, y + h * j, z + h * k))
+                        if not new:
+                            continue
+                        pairs = []
+                        for axis, val in enumerate((i, j, k)):
+                            if val != 1:
+                                continue
+                            lo = [x + h * i, y + h * j, z + h * k]
+                            hi = list(lo)
+                            lo[axis] -= h
+                            hi[axis] += h
+                            pairs.append((tuple(lo), tuple(hi)))
+                        stages[mids].append((c, pairs))  # type: ignore[arg-type]
+        for mids in (1, 2, 3):
+            work = stages[mids]
+            if not work:
+                continue
+            resolved = [(c, [(self.corner_index[a], self.corner_index[b]) for a, b in prs])
+                        for c, prs in work]
+            all_pairs = [(a, b, v) for _, prs in resolved for a, b in prs for v in range(N_VIEWS)]
+            self._report(f"compare depth {child_depth} stage {mids}")
+            self._distances(all_pairs)
+            jobs = []
+            for c, prs in resolved:
+                for v in range(N_VIEWS):
+                    diff = [(a, b) for a, b in prs if self._differs(self._dist[(a, b, v)])]
+                    if diff:
+                        warm: list[Indices] = []
+                        for a, b in diff:
+                            warm += self.frontiers[self.corner_views[a][v]].settings()
+                            warm += self.frontiers[self.corner_views[b][v]].settings()
+                        jobs.append((c, v, warm))
+                    else:
+                        self.corner_views[c][v] = self.corner_views[prs[0][0]][v]
+            self.state.views_planned += len(jobs)
+            self._optimise(jobs, f"optimise depth {child_depth} stage {mids}")
+        return children
+
+    # -- result -------------------------------------------------------------------------------------
+
+    def to_store(self, *, profile: str, fps: float, aspect: float, meta: dict) -> ParetoStore:
+        """The runtime store: nodes in creation order (children consecutive), shared frontiers."""
+        used = sorted({f for views in self.corner_views for f in views})
+        remap = {f: i for i, f in enumerate(used)}
+        frontiers = []
+        for f in used:
+            rec = self.frontiers[f]
+            frontiers.append(Frontier.from_points([self.space.pack(x) for x, _, _ in rec.points],
+                                                  [min(max(e, 0.0), 1.0) for _, e, _ in rec.points],
+                                                  [p for _, _, p in rec.points]))
+        return ParetoStore(
+            parameters=self.space.to_stored(),
+            root_min=self.root_min,
+            root_size=self.root_size,
+            lattice_depth=self.cfg.max_depth,
+            children=np.asarray(self.children),
+            corner_coords=np.asarray(self.corner_coords, dtype=np.int64).reshape(-1, 3),
+            corner_views=np.asarray([[remap[f] for f in views] for views in self.corner_views]),
+            frontiers=frontiers,
+            vfov=self.cfg.vfov,
+            aspect=aspect,
+            profile=profile,
+            fps=fps,
+            meta=meta,
+        )

@@ -1,0 +1,131 @@
+"""The optimiser's entry point: camera path + scene + parameter space -> runtime Pareto store.
+
+Used by the command line, the REST jobs and the add-on's batch path. Steps: leave out parameters the
+scene cannot exercise (``sim_core.inert_parameters``), build the octree of per-camera Pareto frontiers
+along the path (:mod:`service.octree`), and pack the result into a :class:`ParetoStore`.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+from service.camera_path import CameraPath
+from service.eval_cache import EvalCache
+from service.evaluation import METRICS, Evaluator, SceneHandle
+from service.executors import Executor
+from service.nsga import NSGAConfig
+from service.octree import Cancelled, OctreeBuilder, OctreeConfig, Progress
+from service.params import ParameterSpace
+from service.pareto_store import ParetoStore
+
+__all__ = ["Cancelled", "OptimizeOptions", "Progress", "optimize_path"]
+
+
+@dataclass
+class OptimizeOptions:
+    """Options of one run (defaults follow the paper: population 24, 25 generations).
+
+    ``eval_width``/``eval_height`` set the evaluation resolution; a missing width follows the path's
+    aspect. ``margin`` widens nodes (as a fraction of their side) when testing whether the path passes
+    through them. ``skip_inert`` asks the simulator which parameters cannot matter for the scene."""
+
+    threshold_power_w: float = 0.05
+    threshold_error: float = 0.01
+    max_depth: int = 2
+    population: int = 24
+    generations: int = 25
+    exhaustive_limit: int = 512
+    eval_width: int | None = None
+    eval_height: int = 36
+    profile: str = "mobile"
+    fps: float = 30.0
+    seed: int = 0
+    margin: float = 0.1
+    pad_fraction: float = 0.1
+    min_size: float = 1.0
+    metric: str = "ssim"
+    threads: int | None = None
+    skip_inert: bool = True
+
+    def __post_init__(self) -> None:
+        for name in ("threshold_power_w", "threshold_error", "fps"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be a positive finite number, got {v!r}")
+        if not 0 <= self.max_depth <= 12:
+            raise ValueError("max_depth must be in 0..12")
+        if self.population < 2 or self.generations < 1:
+            raise ValueError("population must be >= 2 and generations >= 1")
+        if self.exhaustive_limit < 0:
+            raise ValueError("exhaustive_limit must be >= 0")
+        if self.eval_height < 8 or (self.eval_width is not None and self.eval_width < 8):
+            raise ValueError("evaluation resolution must be at least 8x8")
+        if self.metric not in METRICS:
+            raise ValueError(f"metric must be one of {METRICS}")
+        if not (self.margin >= 0 and self.pad_fraction >= 0 and self.min_size > 0):
+            raise ValueError("margin and pad_fraction must be >= 0, min_size > 0")
+
+
+def resolve_space(scene: Any, space: ParameterSpace, path: CameraPath) -> ParameterSpace:
+    """Fix the parameters the simulator reports inert for this scene (verified by rendering there)."""
+    import sim_core
+
+    inert = sim_core.inert_parameters(scene, space.as_render_space())
+    return space.fix_inert({str(k): str(v) for k, v in dict(inert).items()})
+
+
+def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, options: OptimizeOptions, *,
+                  cache: EvalCache, executor: Executor,
+                  progress: Callable[[Progress], None] | None = None,
+                  should_cancel: Callable[[], bool] | None = None) -> ParetoStore:
+    """Pareto store for ``path`` in ``scene`` (a ``sim_core.Scene`` or a :class:`SceneHandle`).
+
+    Raises :class:`Cancelled` when ``should_cancel`` returns true; everything evaluated so far stays in
+    ``cache``, so calling again with the same arguments resumes without re-rendering."""
+    t0 = time.perf_counter()
+    handle = scene if isinstance(scene, SceneHandle) else SceneHandle(scene)
+    if options.skip_inert:
+        space = resolve_space(handle.get(), space, path)
+    frames = path.frames
+    vfov = float(np.median([f.vfov for f in frames]))
+    aspect = float(np.median([f.aspect for f in frames]))
+    height = int(options.eval_height)
+    width = int(options.eval_width) if options.eval_width is not None else max(8, round(height * aspect))
+    evaluator = Evaluator(handle, space, cache=cache, executor=executor, profile=options.profile,
+                          fps=options.fps, metric=options.metric, threads=options.threads)
+    cfg = OctreeConfig(
+        threshold_power_w=options.threshold_power_w, threshold_error=options.threshold_error,
+        max_depth=options.max_depth, margin=options.margin, pad_fraction=options.pad_fraction,
+        min_size=options.min_size,
+        nsga=NSGAConfig(population=options.population, generations=options.generations, seed=options.seed),
+        exhaustive_limit=options.exhaustive_limit, vfov=vfov, width=width, height=height,
+    )
+    builder = OctreeBuilder(evaluator, space, path.positions(), cfg, progress, should_cancel)
+    builder.run()
+    meta = {
+        "thresholds": {"power_w": options.threshold_power_w, "error": options.threshold_error},
+        "max_depth": options.max_depth,
+        "eval_resolution": [width, height],
+        "metric": options.metric,
+        "seed": options.seed,
+        "population": options.population,
+        "generations": options.generations,
+        "fixed_parameters": dict(space.fixed_reasons),
+        "evaluations": evaluator.evaluations,
+        "cache_hits": evaluator.cache_hits,
+        "views_optimised": builder.state.views_done,
+        "elapsed_s": round(time.perf_counter() - t0, 3),
+        "scene": handle.content_hash,
+        "executor": getattr(executor, "name", type(executor).__name__),
+    }
+    return builder.to_store(profile=options.profile, fps=options.fps, aspect=aspect, meta=meta)
+
+
+def options_dict(options: OptimizeOptions) -> dict[str, Any]:
+    return asdict(options)

@@ -1,0 +1,257 @@
+"""The declarative search space: parameters, their ordered values, and how they map to RenderSettings.
+
+A parameter has a name, values ordered from cheapest to best (or the other way: ``max_quality`` says
+which index is the best), and for every value the ``sim_core.RenderSettings`` fields it sets. A
+settings vector is one value index per parameter, packed 4 bits per parameter into a 32-bit integer
+by :mod:`service.pareto_store` (the one packing implementation). Parameters found inert for a scene
+(``sim_core.inert_parameters``) are *fixed* at their maximum-quality value: they stay in the packed
+vector, so stores from different scenes read alike, but the search skips them.
+
+Adding a parameter: add a row to :func:`default_space` with the RenderSettings fields of each value.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from service.pareto_store import (
+    MAX_PARAMS,
+    MAX_VALUES_PER_PARAM,
+    StoredParameter,
+    pack_indices,
+    unpack_indices,
+)
+
+Indices = tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One search dimension. ``fields[i]`` are the RenderSettings keyword values for value ``i``
+    (default: ``{name: values[i]}``)."""
+
+    name: str
+    values: tuple[Any, ...]
+    max_quality: int
+    fields: tuple[Mapping[str, Any], ...] = ()
+
+    def __post_init__(self) -> None:
+        if not self.name:
+            raise ValueError("parameter needs a name")
+        vals = tuple(self.values)
+        if not 1 <= len(vals) <= MAX_VALUES_PER_PARAM:
+            raise ValueError(f"parameter {self.name!r}: 1..{MAX_VALUES_PER_PARAM} values, got {len(vals)}")
+        if len(set(map(repr, vals))) != len(vals):
+            raise ValueError(f"parameter {self.name!r}: duplicate values")
+        mq = self.max_quality
+        if not 0 <= mq < len(vals):
+            raise ValueError(f"parameter {self.name!r}: max_quality index {mq} out of range")
+        flds = tuple(dict(f) for f in self.fields) or tuple({self.name: v} for v in vals)
+        if len(flds) != len(vals):
+            raise ValueError(f"parameter {self.name!r}: one fields mapping per value")
+        object.__setattr__(self, "values", vals)
+        object.__setattr__(self, "fields", flds)
+
+    @property
+    def field_names(self) -> tuple[str, ...]:
+        return tuple(sorted({k for f in self.fields for k in f}))
+
+
+@dataclass(frozen=True)
+class ParameterSpace:
+    """Ordered parameters (at most 8, 16 values each) plus the ones fixed for a scene (name -> index)."""
+
+    parameters: tuple[Parameter, ...]
+    fixed: Mapping[str, int] = field(default_factory=dict)
+    fixed_reasons: Mapping[str, str] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        params = tuple(self.parameters)
+        if not 1 <= len(params) <= MAX_PARAMS:
+            raise ValueError(f"a space has 1..{MAX_PARAMS} parameters, got {len(params)}")
+        names = [p.name for p in params]
+        if len(set(names)) != len(names):
+            raise ValueError("parameter names must be unique")
+        fixed = {str(k): int(v) for k, v in dict(self.fixed).items()}
+        by = {p.name: p for p in params}
+        for k, v in fixed.items():
+            if k not in by or not 0 <= v < len(by[k].values):
+                raise ValueError(f"fixed parameter {k!r}={v} is not in the space")
+        object.__setattr__(self, "parameters", params)
+        object.__setattr__(self, "fixed", fixed)
+        object.__setattr__(self, "fixed_reasons", dict(self.fixed_reasons))
+
+    # -- shape --------------------------------------------------------------------------------------
+
+    @classmethod
+    def default(cls) -> ParameterSpace:
+        return default_space()
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(p.name for p in self.parameters)
+
+    @property
+    def free_positions(self) -> tuple[int, ...]:
+        return tuple(i for i, p in enumerate(self.parameters) if p.name not in self.fixed)
+
+    @property
+    def free_n_values(self) -> tuple[int, ...]:
+        return tuple(len(self.parameters[i].values) for i in self.free_positions)
+
+    @property
+    def size(self) -> int:
+        """Number of settings the search can reach (fixed parameters count once)."""
+        return math.prod(self.free_n_values)
+
+    def max_quality_indices(self) -> Indices:
+        return tuple(self.fixed.get(p.name, p.max_quality) for p in self.parameters)
+
+    def expand(self, free: Sequence[int]) -> Indices:
+        """Full index vector from the free parameters' indices (fixed ones filled in)."""
+        pos = self.free_positions
+        if len(free) != len(pos):
+            raise ValueError(f"expected {len(pos)} free indices, got {len(free)}")
+        out = list(self.max_quality_indices())
+        for i, v in zip(pos, free, strict=True):
+            out[i] = int(v)
+        self.validate(out)
+        return tuple(out)
+
+    def restrict(self, full: Sequence[int]) -> Indices:
+        """Free parameters' indices of a full index vector."""
+        self.validate(full)
+        return tuple(int(full[i]) for i in self.free_positions)
+
+    def validate(self, indices: Sequence[int]) -> None:
+        if len(indices) != len(self.parameters):
+            raise ValueError(f"expected {len(self.parameters)} indices, got {len(indices)}")
+        for p, i in zip(self.parameters, indices, strict=True):
+            if not 0 <= int(i) < len(p.values) or int(i) != i:
+                raise ValueError(f"index {i!r} out of range for parameter {p.name!r}")
+
+    # -- packing ------------------------------------------------------------------------------------
+
+    def pack(self, indices: Sequence[int]) -> int:
+        self.validate(indices)
+        return pack_indices(indices)
+
+    def unpack(self, packed: int) -> Indices:
+        idx = unpack_indices(packed, len(self.parameters))
+        self.validate(idx)
+        return idx
+
+    # -- meaning ------------------------------------------------------------------------------------
+
+    def values_of(self, indices: Sequence[int]) -> dict[str, Any]:
+        self.validate(indices)
+        return {p.name: p.values[i] for p, i in zip(self.parameters, indices, strict=True)}
+
+    def fields_of(self, indices: Sequence[int]) -> dict[str, Any]:
+        """RenderSettings keyword values of a settings vector (later parameters win on overlap)."""
+        self.validate(indices)
+        out: dict[str, Any] = {}
+        for p, i in zip(self.parameters, indices, strict=True):
+            out.update(p.fields[i])
+        return out
+
+    def to_settings(self, indices: Sequence[int]) -> Any:
+        """``sim_core.RenderSettings`` for a settings vector: max quality with this vector's fields."""
+        import sim_core
+
+        base = sim_core.RenderSettings.max_quality()
+        names = {f.name for f in dataclasses.fields(base)}
+        flds = self.fields_of(indices)
+        unknown = sorted(set(flds) - names)
+        if unknown:
+            raise ValueError(f"parameter fields {unknown} are not RenderSettings fields")
+        return dataclasses.replace(base, **flds)
+
+    def as_render_space(self) -> dict[str, list[Any]]:
+        """RenderSettings field -> candidate values (what ``sim_core.inert_parameters`` takes)."""
+        out: dict[str, list[Any]] = {}
+        for p in self.parameters:
+            for f in p.fields:
+                for k, v in f.items():
+                    vals = out.setdefault(k, [])
+                    if v not in vals:
+                        vals.append(v)
+        return out
+
+    # -- variants -----------------------------------------------------------------------------------
+
+    def subset(self, names: Iterable[str]) -> ParameterSpace:
+        """Only the named parameters are searched; the others are fixed at maximum quality."""
+        keep = set(names)
+        unknown = keep - set(self.names)
+        if unknown:
+            raise ValueError(f"unknown parameters {sorted(unknown)}")
+        fixed = dict(self.fixed)
+        reasons = dict(self.fixed_reasons)
+        for p in self.parameters:
+            if p.name not in keep and p.name not in fixed:
+                fixed[p.name] = p.max_quality
+                reasons[p.name] = "not searched"
+        return ParameterSpace(self.parameters, fixed, reasons)
+
+    def fix_inert(self, inert: Mapping[str, str]) -> ParameterSpace:
+        """Fix parameters all of whose RenderSettings fields are inert (``{field: reason}``)."""
+        fixed = dict(self.fixed)
+        reasons = dict(self.fixed_reasons)
+        for p in self.parameters:
+            if p.name in fixed:
+                continue
+            if p.name in inert or all(f in inert for f in p.field_names):
+                fixed[p.name] = p.max_quality
+                reasons[p.name] = str(inert.get(p.name) or "; ".join(str(inert[f]) for f in p.field_names))
+        return ParameterSpace(self.parameters, fixed, reasons)
+
+    def to_stored(self) -> tuple[StoredParameter, ...]:
+        """What a Pareto store carries to name settings (fixed parameters keep their single value)."""
+        return tuple(StoredParameter(p.name, tuple(p.values), p.max_quality) for p in self.parameters)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"parameters": [{"name": p.name, "values": list(p.values), "max_quality": p.max_quality,
+                                "fields": [dict(f) for f in p.fields]} for p in self.parameters],
+                "fixed": dict(self.fixed), "fixed_reasons": dict(self.fixed_reasons)}
+
+    @staticmethod
+    def from_dict(d: Mapping[str, Any]) -> ParameterSpace:
+        try:
+            params = tuple(Parameter(str(p["name"]), tuple(p["values"]), int(p["max_quality"]),
+                                     tuple(p.get("fields") or ())) for p in d["parameters"])
+        except (KeyError, TypeError) as exc:
+            raise ValueError(f"malformed parameter space: {exc}") from exc
+        return ParameterSpace(params, dict(d.get("fixed") or {}), dict(d.get("fixed_reasons") or {}))
+
+
+# Sampling modes of the tracer, cheapest first (DESIGN.md, "Settings"): each sets the mode and its block
+# or supersampling factor.
+_SAMPLING = (
+    ("undersample_4x4", {"sampling": "undersample", "block_size": 4}),
+    ("undersample_2x2", {"sampling": "undersample", "block_size": 2}),
+    ("1spp", {"sampling": "1spp", "block_size": 1}),
+    ("adaptive_supersample_2x2", {"sampling": "supersample", "block_size": 2}),
+    ("fsaa_2x2", {"sampling": "fsaa", "block_size": 2}),
+)
+
+
+def default_space() -> ParameterSpace:
+    """The DESIGN.md table mapped onto ``sim_core.RenderSettings`` fields (8 parameters, 23,040
+    settings). Values are ordered cheapest first, so the maximum quality is the last value."""
+    params = (
+        Parameter("sampling", tuple(n for n, _ in _SAMPLING), len(_SAMPLING) - 1,
+                  tuple(f for _, f in _SAMPLING)),
+        Parameter("similarity_threshold", ("loose", "medium", "strict"), 2),
+        Parameter("max_depth", (0, 1, 2, 3), 3),
+        Parameter("shadow_samples", (0, 1, 4, 16), 3),
+        Parameter("resolution_scale", (0.7, 0.8, 0.9, 1.0), 3),
+        Parameter("glossy_filter", ("off", "box", "bartlett"), 2),
+        Parameter("ao_samples", (0, 4, 8, 16), 3),
+        Parameter("multirate", (True, False), 1),
+    )
+    return ParameterSpace(params)

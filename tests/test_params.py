@@ -1,0 +1,72 @@
+"""Parameter space: packing round trips, fixed (inert) parameters, mapping to RenderSettings fields."""
+
+from __future__ import annotations
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from service.params import Parameter, ParameterSpace, default_space
+from service.pareto_store import pack_indices
+
+
+def test_default_space_shape() -> None:
+    s = default_space()
+    assert len(s.parameters) <= 8
+    assert all(len(p.values) <= 16 for p in s.parameters)
+    assert s.size == 5 * 3 * 4 * 4 * 4 * 3 * 4 * 2
+    mq = s.max_quality_indices()
+    assert mq == tuple(len(p.values) - 1 for p in s.parameters)  # values ordered cheapest first
+    assert s.values_of(mq)["sampling"] == "fsaa_2x2"
+    assert ParameterSpace.default() == s
+
+
+@given(st.data())
+def test_pack_roundtrip_in_default_space(data) -> None:
+    s = default_space()
+    idx = tuple(data.draw(st.integers(0, len(p.values) - 1)) for p in s.parameters)
+    packed = s.pack(idx)
+    assert packed == pack_indices(idx) and 0 <= packed < 2**32
+    assert s.unpack(packed) == idx
+    assert s.expand(s.restrict(idx)) == idx
+
+
+def test_fixed_parameters_leave_the_search() -> None:
+    s = default_space().fix_inert({"glossy_filter": "no glossy materials",
+                                   "ao_samples": "no geometry to occlude"})
+    assert s.fixed == {"glossy_filter": 2, "ao_samples": 3}
+    assert s.size == default_space().size // (3 * 4)
+    free = tuple(0 for _ in s.free_positions)
+    full = s.expand(free)
+    assert full[5] == 2 and full[6] == 3
+    sub = s.subset(["max_depth", "shadow_samples"])
+    assert sub.free_n_values == (4, 4)
+    assert sub.fixed_reasons["sampling"] == "not searched"
+    with pytest.raises(ValueError):
+        s.subset(["nope"])
+
+
+def test_fields_and_render_space() -> None:
+    s = default_space()
+    f = s.fields_of(s.max_quality_indices())
+    assert f["sampling"] == "fsaa" and f["block_size"] == 2 and f["max_depth"] == 3
+    rs = s.as_render_space()
+    assert rs["sampling"] == ["undersample", "1spp", "supersample", "fsaa"]
+    assert rs["shadow_samples"] == [0, 1, 4, 16]
+
+
+def test_dict_roundtrip_and_validation() -> None:
+    s = default_space().fix_inert({"multirate": "single tile"})
+    assert ParameterSpace.from_dict(s.to_dict()) == s
+    with pytest.raises(ValueError):
+        Parameter("x", tuple(range(17)), 0)
+    with pytest.raises(ValueError):
+        Parameter("x", (1, 1), 0)
+    with pytest.raises(ValueError):
+        Parameter("x", (1, 2), 2)
+    with pytest.raises(ValueError):
+        ParameterSpace(tuple(Parameter(f"p{i}", (0, 1), 1) for i in range(9)))
+    with pytest.raises(ValueError):
+        s.pack([0] * 7)
+    with pytest.raises(ValueError):
+        s.unpack(0xF)  # sampling index 15 does not exist
