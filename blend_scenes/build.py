@@ -39,7 +39,7 @@ def generator_hash(name: str) -> str:
     gen = PACKAGE_DIR / "scenes" / f"{name}.py"
     sources = [gen, PACKAGE_DIR / "common.py", PACKAGE_DIR / "build.py"]
     text = gen.read_text()
-    models = sorted(set(re.findall(r"[\w-]+\.obj", text)))
+    models = sorted(set(re.findall(r"[\"']([\w-]+\.obj)[\"']", text)))  # quoted model file names
     sources += [REPO_ROOT / "assets" / "models" / m for m in models]
     for src in sources:
         h.update(src.name.encode())
