@@ -19,7 +19,8 @@ def _store_file(tmp_path):
                                [1.0 + v, 1.5 + v, 2.0 + v, 3.0 + v]) for v in range(6)]
     corners = np.array([[(k & 1), (k >> 1) & 1, (k >> 2) & 1] for k in range(8)])
     views = np.tile(np.arange(6), (8, 1))
-    store = ParetoStore(params, np.zeros(3), 4.0, 0, np.array([-1]), corners, views, fr, vfov=math.radians(40), aspect=1.5)
+    store = ParetoStore(params, np.zeros(3), 4.0, 0, np.array([-1]), corners, views, fr,
+                        vfov=math.radians(40), aspect=1.5)
     f = tmp_path / "store.json"
     f.write_text(store.to_json())
     return f
