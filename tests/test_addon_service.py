@@ -1,0 +1,257 @@
+"""The add-on against a live local service (`render-budget serve` on a free 127.0.0.1 port, started by the
+add-on's own LocalService helper): optimize end to end, the store in the .blend through save/reload,
+playback along the path matching `render-budget query` and the service's query route, the GUI worker
+thread path and cancel, previews, and headless batch runs writing a report."""
+
+from __future__ import annotations
+
+import importlib
+import json
+import math
+import os
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from addon.core.client import ServiceClient
+from addon.core.local_service import LocalService, free_port
+from tests.addon_support import EXT_MODULE, REPO_ROOT, disable_dev, enable_dev, stage_extension
+
+pytestmark = [pytest.mark.blender, pytest.mark.service, pytest.mark.slow]
+bpy = pytest.importorskip("bpy")
+
+FRAMES = 16
+RES = (96, 54)  # scene render size: the path's aspect, so the add-on and the CLI see the same frustum
+EVAL = (16, 9)
+PARAMETERS = ("max_depth", "shadow_samples", "resolution_scale")
+
+
+@pytest.fixture(scope="module")
+def service(tmp_path_factory: pytest.TempPathFactory):
+    svc = LocalService(sys.executable, free_port(), tmp_path_factory.mktemp("service-data"))
+    svc.start(ready_timeout_s=120)
+    yield svc
+    svc.stop()
+
+
+@pytest.fixture(scope="module")
+def ext(tmp_path_factory: pytest.TempPathFactory, service):
+    mod = enable_dev(bpy, stage_extension(tmp_path_factory.mktemp("ext")))
+    prefs = importlib.import_module(f"{EXT_MODULE}.preferences").get()
+    prefs.service_mode, prefs.url, prefs.timeout_s = "URL", service.url, 120
+    yield mod
+    disable_dev()
+
+
+def m(name: str):
+    return importlib.import_module(f"{EXT_MODULE}.{name}")
+
+
+def build_scene() -> bpy.types.Scene:
+    """A lit box on a floor with a camera orbiting it once (keyframed, 24 fps); search space of 3 params."""
+    import bmesh
+
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    sc = bpy.context.scene
+    sc.render.resolution_x, sc.render.resolution_y, sc.render.resolution_percentage = *RES, 100
+    sc.render.fps, sc.render.fps_base = 24, 1.0
+    for name, size, loc in (("Box", 1.0, (0, 0, 0.5)), ("Floor", 6.0, (0, 0, -3.0))):
+        me = bpy.data.meshes.new(name)
+        bm = bmesh.new()
+        bmesh.ops.create_cube(bm, size=size)
+        bm.to_mesh(me)
+        bm.free()
+        ob = bpy.data.objects.new(name, me)
+        ob.location = loc
+        sc.collection.objects.link(ob)
+    light = bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "POINT"))
+    light.data.energy = 800
+    light.location = (2, -2, 3)
+    sc.collection.objects.link(light)
+    cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
+    cam.data.lens = 30
+    sc.collection.objects.link(cam)
+    sc.camera = cam
+    sc.frame_start, sc.frame_end = 1, FRAMES
+    for i in range(FRAMES):
+        a = 2 * math.pi * i / FRAMES
+        cam.location = (4 * math.cos(a), 4 * math.sin(a), 1.2)
+        cam.rotation_euler = (math.radians(80), 0.0, a + math.pi / 2)
+        cam.keyframe_insert("location", frame=i + 1)
+        cam.keyframe_insert("rotation_euler", frame=i + 1)
+    props = sc.power_budget
+    for name in PARAMETERS:
+        item = props.parameters.add()
+        item.name = name
+    props.eval_width, props.eval_height = EVAL
+    props.max_depth, props.population, props.generations, props.exhaustive_limit = 0, 8, 2, 64
+    props.filter_period = 0.25
+    return sc
+
+
+@pytest.fixture(scope="module")
+def optimized(ext, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Optimize once (synchronous operator path) and save the .blend."""
+    sc = build_scene()
+    assert bpy.ops.power.optimize() == {"FINISHED"}
+    assert sc.power_budget.store_text is not None
+    blend = tmp_path_factory.mktemp("blend") / "optimized.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    return blend
+
+
+def _frontier_budget(store) -> float:
+    """An error budget inside the frontiers' range, so the choice depends on the view."""
+    errs = np.concatenate([f.error for f in store.frontiers])
+    nonzero = errs[errs > 0]
+    return float(np.median(nonzero)) if nonzero.size else 0.01
+
+
+def test_optimize_end_to_end_store_in_blend_and_playback_matches_query(optimized, service, tmp_path) -> None:
+    from service.pareto_store import ParetoStore
+
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    bpy.ops.wm.open_mainfile(filepath=str(optimized))  # the store survived save and reload
+    sc = bpy.context.scene
+    props = sc.power_budget
+    text = props.store_text.as_string()
+    store = ParetoStore.from_json(text)
+    assert props.store_id and props.job_id and "views" in props.summary
+    assert json.loads(text) == json.loads(ServiceClient(service.url).store_text(props.store_id))
+    assert [p.name for p in store.parameters if len(p.values) > 1]  # something was searched
+    budget = _frontier_budget(store)
+    props.budget_mode, props.error_budget = "ERROR", budget
+    seen = []
+    for f in range(sc.frame_start, sc.frame_end + 1):
+        sc.frame_set(f)
+        assert props.playback_status in ("on target", "blending"), props.playback_status
+        seen.append((props.active_indices, props.target_indices, props.predicted_power, props.predicted_error,
+                     np.array(sc.camera.matrix_world), sc.camera.data.angle_y))
+    targets = [s[1] for s in seen]
+    assert len(set(targets)) >= 2, "settings should change along the orbit"
+    assert any(a != t for a, t, *_ in seen), "the temporal filter blends at target changes"
+    # the filter follows Eq. 8 on scene time: same answers as the pure driver on the same poses
+    from addon.core.playback_logic import PlaybackDriver
+
+    drv = PlaybackDriver(store, props.filter_period)
+    vf = m("camera_path").camera_vfov(sc.camera, sc)
+    for i, (active, *_rest, mat, _) in enumerate(seen):
+        fr = drv.step(mat, vf, RES[0] / RES[1], i / 24, "ERROR", budget)
+        assert " ".join(map(str, fr.active_indices)) == active
+    # the same poses through `render-budget query` (CLI) and POST /stores/{id}/query
+    store_file = tmp_path / "store.json"
+    store_file.write_text(text)
+    client = ServiceClient(service.url)
+    cli = Path(sys.executable).parent / "render-budget"
+    vfov = m("camera_path").camera_vfov(sc.camera, sc)
+    for _active, target, power, error, mat, _ in seen[:: max(1, FRAMES // 6)]:
+        pos, direction = mat[:3, 3], -mat[:3, 2]
+        q = client.query(props.store_id, {"position": pos.tolist(), "matrix": mat.tolist(), "fov": vfov,
+                                          "error_budget": budget})
+        assert " ".join(map(str, q["indices"])) == target
+        assert q["power_w"] == pytest.approx(power, rel=1e-6) and q["error"] == pytest.approx(error, abs=1e-6)
+        out = subprocess.run([str(cli), "query", str(store_file), "--position", *map(str, pos),
+                              "--direction", *map(str, direction), "--fov", str(math.degrees(vfov)),
+                              "--error-budget", str(budget)], capture_output=True, text=True, timeout=60,
+                             check=False)
+        assert out.returncode == 0, out.stderr
+        assert _indices_in(out.stdout) == target, out.stdout
+
+
+def _indices_in(stdout: str) -> str:
+    """The packed/indices answer of `render-budget query` (JSON output, or an 'indices' line)."""
+    try:
+        doc = json.loads(stdout)
+        return " ".join(map(str, doc["indices"]))
+    except (json.JSONDecodeError, KeyError, TypeError):
+        for line in stdout.splitlines():
+            if "indices" in line:
+                nums = [t for t in line.replace(",", " ").replace("[", " ").replace("]", " ").split()
+                        if t.isdigit()]
+                return " ".join(nums)
+    raise AssertionError(f"no indices in query output: {stdout!r}")
+
+
+def test_gui_path_worker_thread_and_queue(ext) -> None:
+    """invoke()'s machinery without a window: the worker thread does HTTP, the timer callback applies."""
+    ops = m("ops_optimize")
+    sc = build_scene()
+    client = m("service_process").client_for(bpy.context)
+    prep = ops.prepare(sc)
+    job = ops._ActiveJob(prep, threading.Thread())
+    job.thread = threading.Thread(target=ops._worker, args=(job, client), daemon=True)
+    ops._active = job
+    job.thread.start()
+    job.thread.join(600)
+    assert not job.thread.is_alive()
+    assert ops._poll_queue() is None  # drained: job finished, timer would stop
+    rt = bpy.context.window_manager.power_budget_runtime
+    assert rt.job_status.startswith("done"), rt.job_status
+    assert rt.job_progress == 1.0 and sc.power_budget.store_text is not None
+
+
+def test_cancel_from_the_gui_path(ext, service) -> None:
+    ops = m("ops_optimize")
+    sc = build_scene()
+    sc.power_budget.seed = 12345  # a job the cache has not seen
+    sc.power_budget.max_depth = 2
+    client = m("service_process").client_for(bpy.context)
+    prep = ops.prepare(sc)
+    job = ops._ActiveJob(prep, threading.Thread())
+    job.cancel.set()  # cancel as soon as the job exists
+    job.thread = threading.Thread(target=ops._worker, args=(job, client), daemon=True)
+    ops._active = job
+    job.thread.start()
+    job.thread.join(120)
+    assert ops._poll_queue() is None
+    rt = bpy.context.window_manager.power_budget_runtime
+    assert "cancel" in rt.job_status and sc.power_budget.store_text is None
+
+
+@pytest.mark.parametrize("fmt", ["PNG", "EXR"])
+def test_preview_renders_into_an_image(ext, fmt: str) -> None:
+    sc = build_scene()
+    sc.frame_set(3)
+    assert bpy.ops.power.preview(format=fmt, scale=0.5, use_active=False) == {"FINISHED"}
+    img = bpy.data.images[m("ops_preview").IMAGE_NAME]
+    assert tuple(img.size) == (48, 27) and img.packed_file is not None
+    px = np.empty(48 * 27 * 4, dtype=np.float32)
+    img.pixels.foreach_get(px)
+    assert np.isfinite(px).all() and px.reshape(-1, 4)[:, :3].max() > 0.0  # not a black frame
+    assert img.file_format == ("OPEN_EXR" if fmt == "EXR" else "PNG")
+
+
+def _batch(args: list[str], tmp: Path) -> subprocess.CompletedProcess:
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp / "user"))
+    return subprocess.run([sys.executable, "-m", "addon.batch", *args], cwd=REPO_ROOT, capture_output=True,
+                          text=True, env=env, timeout=900, check=False)
+
+
+def test_batch_evaluate_and_playback_write_reports(optimized, service, tmp_path) -> None:
+    out = tmp_path / "report"
+    proc = _batch(["--blend", str(optimized), "--url", service.url, "evaluate", "--out", str(out),
+                   "--frame-step", "4", "--budget-mode", "error", "--budget", "0.05"], tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "evaluate [" in proc.stdout and "Avg. Power (W)" in proc.stdout
+    for name in ("report.md", "per_frame.csv", "power_over_time.png", "error_over_time.png", "store.json"):
+        assert (out / name).is_file(), name
+    rows = (out / "per_frame.csv").read_text().splitlines()
+    assert len(rows) == 1 + 4 * 5  # 4 frames x (ours + 4 presets)
+    assert len(list((out / "frames").glob("*.png"))) >= 4
+    csv_out = tmp_path / "play.csv"
+    proc = _batch(["--blend", str(optimized), "playback", "--out", str(csv_out)], tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert len(csv_out.read_text().splitlines()) == 1 + FRAMES
+
+
+def test_batch_fails_loudly(optimized, tmp_path) -> None:
+    dead = f"http://127.0.0.1:{free_port()}"
+    proc = _batch(["--blend", str(optimized), "--url", dead, "evaluate", "--out", str(tmp_path / "r")],
+                  tmp_path)
+    assert proc.returncode == 1 and "no render-budget service" in proc.stderr
+    proc = _batch(["--blend", str(tmp_path / "missing.blend"), "playback"], tmp_path)
+    assert proc.returncode == 1 and "failed" in proc.stderr
