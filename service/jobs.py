@@ -101,10 +101,12 @@ def progress_dict(progress: Any, *, elapsed_s: float) -> dict[str, Any]:
             if isinstance(raw.get(n), int | float):
                 out[key] = int(raw[n])
                 break
-    out["elapsed_s"] = round(float(elapsed_s), 3)
+    out["elapsed_s"] = round(float(elapsed_s), 3)  # over all attempts (the optimiser's is per attempt)
     done, planned = out.get("views_done", 0), out.get("views_planned", 0)
+    own = raw.get("estimate_s")
     out["estimate_s"] = (
-        round(elapsed_s * (planned - done) / done, 3) if done > 0 and planned >= done else None
+        round(float(own), 3) if isinstance(own, int | float)
+        else round(elapsed_s * (planned - done) / done, 3) if done > 0 and planned >= done else None
     )
     return out
 
@@ -119,13 +121,14 @@ class JobManager:
 
     def __init__(
         self, storage: Storage, scenes: SceneCache, *, workers: int = 2, dask_scheduler: str | None = None,
-        render_threads: int | None = None,
+        render_threads: int | None = None, ship_scenes: bool = True,
     ) -> None:
         self.storage = storage
         self.scenes = scenes
         self.workers = workers
         self.dask_scheduler = dask_scheduler
         self.render_threads = render_threads
+        self.ship_scenes = ship_scenes
         self._queue: queue.Queue[str | None] = queue.Queue()
         self._threads: list[threading.Thread] = []
         self._cancel: dict[str, threading.Event] = {}
@@ -279,20 +282,24 @@ class JobManager:
             if should_cancel():
                 raise JobCancelled
 
+        from service.evaluation import SceneHandle
+        from service.optimize import Cancelled
+
         try:
+            # Workers get the scene file (its bytes too, for Dask workers without a shared disk) and load
+            # it once each; in-process the handle holds the loaded scene.
+            handle = SceneHandle(self.scenes.get(job.scene_id), path=self.storage.scene_path(job.scene_id),
+                                 ship_bytes=bool(self.dask_scheduler) and self.ship_scenes)
             store = run_optimisation(
-                job.spec, scene=self.scenes.get(job.scene_id), cache=self.eval_cache(),
-                executor=self.executor(), progress=on_progress, should_cancel=should_cancel,
+                job.spec, scene=handle, cache=self.eval_cache(), executor=self.executor(),
+                progress=on_progress, should_cancel=should_cancel, threads=self.render_threads,
             )
             if should_cancel():
                 raise JobCancelled
-        except JobCancelled:
+        except (JobCancelled, Cancelled):
             self._after_stop(job.id, elapsed())
             return
         except Exception as exc:
-            if should_cancel() and _looks_cancelled(exc):
-                self._after_stop(job.id, elapsed())
-                return
             log.exception("job %s failed", job.id)
             self._finish(job.id, "failed", error=f"{type(exc).__name__}: {exc}", elapsed_s=elapsed())
             return
@@ -311,10 +318,6 @@ class JobManager:
             self.storage.update_job(job_id=job_id, state="queued", elapsed_s=elapsed_s,
                                     event=("interrupted", {"state": "queued"}))
             self._bump()
-
-
-def _looks_cancelled(exc: BaseException) -> bool:
-    return "cancel" in type(exc).__name__.lower() or "cancel" in str(exc).lower()
 
 
 def is_terminal(state: str) -> bool:
@@ -371,24 +374,21 @@ def validate_job_spec(spec: dict[str, Any]) -> None:
 
 def run_optimisation(
     spec: dict[str, Any], *, scene: Any, cache: Any, executor: Any,
-    progress: Callable[[Any], None], should_cancel: Callable[[], bool],
+    progress: Callable[[Any], None], should_cancel: Callable[[], bool], threads: int | None = None,
 ) -> Any:
-    """Turn a stored job request into the optimiser's inputs and run it; returns a ParetoStore."""
+    """Turn a stored job request into the optimiser's inputs and run it; returns a ParetoStore.
+    Raises ``service.optimize.Cancelled`` when ``should_cancel`` turns true."""
     from service.camera_path import CameraPath
     from service.optimize import OptimizeOptions, optimize_path
 
     path = CameraPath.from_dict(spec["camera_path"])
-    space = build_space(spec)
+    opts, thresholds = spec["options"], spec["thresholds"]
+    width, height = spec["resolution"]
     options = OptimizeOptions(
-        max_depth=spec["options"]["max_depth"],
-        population=spec["options"]["population"],
-        generations=spec["options"]["generations"],
-        seed=spec["options"]["seed"],
-        exhaustive_limit=spec["options"]["exhaustive_limit"],
-        threshold_power=spec["thresholds"]["power_w"],
-        threshold_error=spec["thresholds"]["error"],
-        profile=spec["profile"],
-        resolution=tuple(spec["resolution"]),
+        threshold_power_w=thresholds["power_w"], threshold_error=thresholds["error"],
+        max_depth=opts["max_depth"], population=opts["population"], generations=opts["generations"],
+        exhaustive_limit=opts["exhaustive_limit"], eval_width=width, eval_height=height,
+        profile=spec["profile"], fps=path.fps, seed=opts["seed"], threads=threads,
     )
-    return optimize_path(scene, path, space, options, cache=cache, executor=executor, progress=progress,
-                         should_cancel=should_cancel)
+    return optimize_path(scene, path, build_space(spec), options, cache=cache, executor=executor,
+                         progress=progress, should_cancel=should_cancel)

@@ -103,7 +103,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         storage = Storage(settings.data_dir)
         scene_cache = SceneCache(storage, capacity=settings.scene_cache_size)
         manager = JobManager(storage, scene_cache, workers=settings.job_workers,
-                             dask_scheduler=settings.dask_scheduler, render_threads=settings.render_threads)
+                             dask_scheduler=settings.dask_scheduler, render_threads=settings.render_threads,
+                             ship_scenes=settings.dask_ship_scenes)
         app.state.render_budget = AppState(settings=settings, storage=storage, scenes=scene_cache,
                                            jobs=manager, stores=StoreCache(storage,
                                                                            capacity=settings.store_cache_size))

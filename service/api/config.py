@@ -38,6 +38,7 @@ class Settings(BaseSettings):
     port: int = Field(default=8765, ge=0, le=65535)
     data_dir: Path = Field(default_factory=default_data_dir)
     dask_scheduler: str | None = None
+    dask_ship_scenes: bool = True  # send scene bytes to Dask workers (no shared disk needed)
     token: SecretStr | None = None
     # Limits at the edge.
     max_upload_bytes: int = Field(default=64 * 1024 * 1024, gt=0)

@@ -124,7 +124,7 @@ class JobCreate(StrictModel):
     thresholds: Thresholds = Thresholds()
     options: OptimizerOptions = OptimizerOptions()
     profile: Name = "mobile"
-    resolution: tuple[Annotated[int, Field(ge=4, le=1024)], Annotated[int, Field(ge=4, le=1024)]] = Field(
+    resolution: tuple[Annotated[int, Field(ge=8, le=1024)], Annotated[int, Field(ge=8, le=1024)]] = Field(
         default=(64, 48), description="evaluation resolution (width, height)"
     )
 
