@@ -61,9 +61,11 @@ void bind_energy(nb::module_& m) {
 }
 
 void bind_sat(nb::module_& m);
+void bind_streaming(nb::module_& m);
 
 // Entry called from module.cpp: registers every binding of the energy-model part.
 void bind_energy_model(nb::module_& m) {
   bind_energy(m);
   bind_sat(m);
+  bind_streaming(m);
 }
