@@ -39,19 +39,33 @@ def draw_hud() -> None:
     if bpy.app.background:  # never draw without a GPU context
         return
     import blf
+    import gpu
+    from gpu_extras.batch import batch_for_shader
 
-    context = bpy.context
-    scene = context.scene
+    scene = bpy.context.scene
     if scene is None or not scene.power_budget.hud_enabled:
         return
-    font = 0
-    blf.size(font, 13)
-    y = 40
-    for text, colour in reversed(hud_lines(scene)):
+    lines = hud_lines(scene)
+    if not lines:
+        return
+    font, size, step, x0, y0 = 0, 13, 18, 20, 40
+    blf.size(font, size)
+    width = max(blf.dimensions(font, text)[0] for text, _ in lines)
+    x1, y1 = x0 - 8, y0 - 8
+    x2, y2 = x0 + width + 8, y0 + step * (len(lines) - 1) + size + 6
+    shader = gpu.shader.from_builtin("UNIFORM_COLOR")
+    batch = batch_for_shader(shader, "TRIS", {"pos": ((x1, y1), (x2, y1), (x2, y2), (x1, y2))},
+                             indices=((0, 1, 2), (0, 2, 3)))
+    gpu.state.blend_set("ALPHA")
+    shader.uniform_float("color", (0.0, 0.0, 0.0, 0.55))
+    batch.draw(shader)
+    gpu.state.blend_set("NONE")
+    y = y0
+    for text, colour in reversed(lines):
         blf.color(font, *colour)
-        blf.position(font, 20, y, 0)
+        blf.position(font, x0, y, 0)
         blf.draw(font, text)
-        y += 18
+        y += step
 
 
 def register() -> None:

@@ -315,3 +315,43 @@ def test_evaluate_without_store_is_reported(scene) -> None:
     _point_at_dead_service()
     with pytest.raises(RuntimeError, match="no Pareto store"):
         bpy.ops.power.evaluate_path(directory=str(Path(sys.prefix)))
+
+
+def test_hud_text_flags_a_broken_budget(scene, tmp_path) -> None:
+    hud = ext_module("hud")
+    turning_camera(scene, 6)
+    add_cube(scene)
+    assert hud.hud_lines(scene) == []  # nothing to show without a store
+    bpy.ops.power.record_path_animation()
+    _load_store(tmp_path)
+    props = scene.power_budget
+    props.budget_mode, props.power_budget = "POWER", 10.0
+    scene.frame_set(2)
+    lines = hud.hud_lines(scene)
+    assert "W" in lines[0][0] and lines[0][1] == (1.0, 1.0, 1.0, 1.0)
+    assert props.active_settings in lines[1][0]
+    props.power_budget = 0.5  # below every frontier point: infeasible, shown in red
+    scene.frame_set(3)
+    lines = hud.hud_lines(scene)
+    assert lines[0][1][1] < 0.5 and any("infeasible" in text for text, _ in lines)
+
+
+def test_panel_and_preferences_refer_to_existing_properties(ext) -> None:
+    """Drawing needs a window; check statically that every property the UI draws exists."""
+    import ast
+
+    scene_props = set(bpy.types.Scene.bl_rna.properties["power_budget"].fixed_type.properties.keys())
+    wm_rna = bpy.types.WindowManager.bl_rna
+    runtime = set(wm_rna.properties["power_budget_runtime"].fixed_type.properties.keys())
+    src = Path(ext.__file__).parent / "panels.py"
+    for node in ast.walk(ast.parse(src.read_text())):
+        if isinstance(node, ast.Call) and getattr(node.func, "attr", "") in {"prop", "prop_search"}:
+            owner = getattr(node.args[0], "id", "")
+            name = node.args[1]
+            choices = [name.body, name.orelse] if isinstance(name, ast.IfExp) else [name]
+            names = [c.value for c in choices]
+            for n in names:
+                assert n in (scene_props if owner == "props" else runtime | scene_props | {"enabled"}), n
+        if isinstance(node, ast.Call) and getattr(node.func, "attr", "") == "operator":
+            idname = node.args[0].value
+            getattr(getattr(bpy.ops, idname.split(".")[0]), idname.split(".")[1]).get_rna_type()
