@@ -7,15 +7,16 @@ use_sample_covariance=False``); the mean is taken over the image without a borde
 so only windows that lie fully inside the image count and no edge padding is needed. Colour images are
 averaged over channels (skimage's ``channel_axis=-1``).
 
-Speed comes from computing only those interior windows, with float64 running sums along each axis
-(separable box filter: one cumulative sum and one difference per axis), and one pass over the stacked
-quantities, in cache-sized strips of rows. float64 matters: sums of squares in float32 lose the
-variance to cancellation.
+Speed comes from computing only those interior windows, with float64 separable window sums (box sums
+by doubling, Gaussian taps paired), on four stacked quantities (SSIM needs only the sum of the two
+variances), in cache-sized strips of rows with preallocated buffers, and on two threads for large
+images. float64 matters: sums of squares in float32 lose the variance to cancellation.
 """
 
 from __future__ import annotations
 
 import math
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
@@ -42,23 +43,6 @@ def _check_pair(reference: Any, test: Any) -> tuple[np.ndarray, np.ndarray]:
     return x, y
 
 
-def _box7(a: np.ndarray, axis: int) -> np.ndarray:
-    """Sum over every full 7-sample window along ``axis`` by doubling (2, 4, then 4 + 2 + 1)."""
-    n = a.shape[axis]
-    m = n - 6
-
-    def sl(arr: np.ndarray, start: int, length: int) -> np.ndarray:
-        idx = [slice(None)] * arr.ndim
-        idx[axis] = slice(start, start + length)
-        return arr[tuple(idx)]
-
-    s2 = sl(a, 0, n - 1) + sl(a, 1, n - 1)
-    s4 = sl(s2, 0, n - 3) + sl(s2, 2, n - 3)
-    out = sl(s4, 0, m) + sl(s2, 4, m)
-    out += sl(a, 6, m)
-    return out
-
-
 def _gauss_kernel() -> np.ndarray:
     r = int(GAUSS_TRUNCATE * GAUSS_SIGMA + 0.5)
     x = np.arange(-r, r + 1, dtype=np.float64)
@@ -67,65 +51,103 @@ def _gauss_kernel() -> np.ndarray:
 
 
 _GAUSS = _gauss_kernel()
+_STRIP_ELEMENTS = 32768  # per quantity and strip: keeps a strip's working set in the CPU cache
+_PARALLEL_ELEMENTS = 300_000  # images this large are split over two threads (numpy releases the GIL)
+_pool: ThreadPoolExecutor | None = None
 
 
-def _corr_valid(a: np.ndarray, axis: int, k: np.ndarray) -> np.ndarray:
-    """Correlation with the symmetric kernel ``k`` over full windows along ``axis`` (taps paired)."""
-    n = a.shape[axis]
-    w = k.size
-    m = n - w + 1
+def _filter_axis(src: np.ndarray, axis: int, gaussian: bool, out: np.ndarray, tmp: np.ndarray,
+                 tmp2: np.ndarray) -> None:
+    """Full-window filter along ``axis`` of ``src`` into ``out`` (length shrinks by window - 1).
+
+    Box: window sums by doubling (2, 4, then 4 + 2 + 1 samples). Gaussian: symmetric taps paired."""
+    n = src.shape[axis]
+
+    def sl(arr: np.ndarray, start: int, length: int) -> np.ndarray:
+        idx = [slice(None)] * arr.ndim
+        idx[axis] = slice(start, start + length)
+        return arr[tuple(idx)]
+
+    if not gaussian:
+        m = n - 6
+        s2 = sl(tmp, 0, n - 1)
+        np.add(sl(src, 0, n - 1), sl(src, 1, n - 1), out=s2)
+        s4 = sl(tmp2, 0, n - 3)
+        np.add(sl(s2, 0, n - 3), sl(s2, 2, n - 3), out=s4)
+        np.add(sl(s4, 0, m), sl(s2, 4, m), out=out)
+        out += sl(src, 6, m)
+        return
+    w = _GAUSS.size
     r = w // 2
-
-    def sl(i: int) -> np.ndarray:
-        idx = [slice(None)] * a.ndim
-        idx[axis] = slice(i, i + m)
-        return a[tuple(idx)]
-
-    out = sl(r) * k[r]
+    m = n - w + 1
+    np.multiply(sl(src, r, m), _GAUSS[r], out=out)
+    pair = sl(tmp, 0, m)
     for i in range(r):
-        out += (sl(i) + sl(w - 1 - i)) * k[i]
-    return out
+        np.add(sl(src, i, m), sl(src, w - 1 - i, m), out=pair)
+        pair *= _GAUSS[i]
+        out += pair
 
 
-_STRIP_ROWS = 32
+def _ssim_rows(x: np.ndarray, y: np.ndarray, row_ranges: list[tuple[int, int]], data_range: float,
+               gaussian: bool) -> float:
+    """Sum of the SSIM map over output rows in ``row_ranges`` of (H, W, C) float64 images.
 
-
-def _ssim_sum(x: np.ndarray, y: np.ndarray, data_range: float, gaussian: bool) -> tuple[float, int]:
-    """Sum and count of the SSIM map of one 2-D channel over its interior windows (float64).
-
-    Works in horizontal strips of a few dozen rows so the five filtered quantities stay in cache."""
+    Four filtered quantities suffice: mean x, mean y, mean (x^2 + y^2) and mean xy, because SSIM only
+    uses the sum of the two variances. All buffers are allocated once per call and reused per strip."""
     win = _GAUSS.size if gaussian else UNIFORM_WIN
-    h = x.shape[0]
+    _, w, c = x.shape
+    strip = max(r1 - r0 for r0, r1 in row_ranges)
+    rows_in = strip + win - 1
+    wo = w - win + 1
+    q = np.empty((4, rows_in, w, c))
+    t1 = np.empty((4, rows_in, w, c))
+    t2 = np.empty((4, rows_in, w, c))
+    rf = np.empty((4, strip, w, c))
+    f = np.empty((4, strip, wo, c))
+    b1, b2, b3 = (np.empty((strip, wo, c)) for _ in range(3))
     c1 = (K1 * data_range) ** 2
     c2 = (K2 * data_range) ** 2
     n = float(win * win)
-    cov_norm = 1.0 if gaussian else n / (n - 1.0)
+    cov = 1.0 if gaussian else n / (n - 1.0)
+    scale = 1.0 if gaussian else 1.0 / n
     total = 0.0
-    count = 0
-    for r0 in range(0, h - win + 1, _STRIP_ROWS):
-        r1 = min(r0 + _STRIP_ROWS, h - win + 1) + win - 1
-        xs = x[r0:r1]
-        ys = y[r0:r1]
-        st = np.empty((5, *xs.shape))
-        st[0] = xs
-        st[1] = ys
-        np.multiply(xs, xs, out=st[2])
-        np.multiply(ys, ys, out=st[3])
-        np.multiply(xs, ys, out=st[4])
-        if gaussian:
-            f = _corr_valid(_corr_valid(st, 1, _GAUSS), 2, _GAUSS)
-        else:
-            f = _box7(_box7(st, 1), 2)
-            f *= 1.0 / n
-        ux, uy, uxx, uyy, uxy = f
-        uxuy = ux * uy
-        uxux = ux * ux
-        uyuy = uy * uy
-        num = (2.0 * uxuy + c1) * (2.0 * cov_norm * (uxy - uxuy) + c2)
-        den = (uxux + uyuy + c1) * (cov_norm * ((uxx - uxux) + (uyy - uyuy)) + c2)
-        total += float(np.sum(num / den, dtype=np.float64))
-        count += num.size
-    return total, count
+    for r0, r1 in row_ranges:
+        rows = r1 - r0
+        nin = rows + win - 1
+        xs, ys = x[r0:r0 + nin], y[r0:r0 + nin]
+        qq = q[:, :nin]
+        qq[0] = xs
+        qq[1] = ys
+        np.multiply(xs, xs, out=qq[2])
+        np.multiply(ys, ys, out=qq[3])
+        qq[2] += qq[3]
+        np.multiply(xs, ys, out=qq[3])
+        rr = rf[:, :rows]
+        _filter_axis(qq, 1, gaussian, rr, t1[:, :nin], t2[:, :nin])
+        ff = f[:, :rows]
+        _filter_axis(rr, 2, gaussian, ff, t1[:, :rows], t2[:, :rows])
+        if scale != 1.0:
+            ff *= scale
+        ux, uy, uss, uxy = ff
+        a1, a2, a3 = b1[:rows], b2[:rows], b3[:rows]
+        np.multiply(ux, uy, out=a1)
+        np.subtract(uxy, a1, out=a2)  # covariance (times 1/cov)
+        a2 *= 2.0 * cov
+        a2 += c2
+        a1 *= 2.0
+        a1 += c1
+        a1 *= a2  # numerator
+        np.multiply(ux, ux, out=a2)
+        np.multiply(uy, uy, out=a3)
+        a2 += a3  # ux^2 + uy^2
+        np.subtract(uss, a2, out=a3)  # sum of variances (times 1/cov)
+        a3 *= cov
+        a3 += c2
+        a2 += c1
+        a2 *= a3  # denominator
+        a1 /= a2
+        total += float(a1.sum(dtype=np.float64))
+    return total
 
 
 def ssim(reference: Any, test: Any, data_range: float = 1.0, gaussian_weights: bool = False) -> float:
@@ -142,14 +164,24 @@ def ssim(reference: Any, test: Any, data_range: float = 1.0, gaussian_weights: b
     if min(x.shape[0], x.shape[1]) < win:
         raise ValueError(f"images must be at least {win}x{win} pixels for SSIM, got {x.shape[:2]}")
     if x.ndim == 2:
-        t, c = _ssim_sum(x, y, data_range, gaussian_weights)
-        return t / c
-    vals = []
-    for ch in range(x.shape[2]):
-        t, c = _ssim_sum(np.ascontiguousarray(x[..., ch]), np.ascontiguousarray(y[..., ch]), data_range,
-                         gaussian_weights)
-        vals.append(t / c)
-    return float(np.mean(vals))
+        x, y = x[..., None], y[..., None]
+    x = np.ascontiguousarray(x)
+    y = np.ascontiguousarray(y)
+    h, w, c = x.shape
+    ho = h - win + 1
+    strip = max(4, min(ho, _STRIP_ELEMENTS // (w * c)))
+    ranges = [(r0, min(r0 + strip, ho)) for r0 in range(0, ho, strip)]
+    if x.size >= _PARALLEL_ELEMENTS and len(ranges) >= 4:
+        global _pool
+        if _pool is None:
+            _pool = ThreadPoolExecutor(max_workers=2, thread_name_prefix="ssim")
+        half = len(ranges) // 2
+        parts = list(_pool.map(lambda rs: _ssim_rows(x, y, rs, data_range, gaussian_weights),
+                               (ranges[:half], ranges[half:])))
+        total = parts[0] + parts[1]
+    else:
+        total = _ssim_rows(x, y, ranges, data_range, gaussian_weights)
+    return total / (ho * (w - win + 1) * c)
 
 
 def psnr(reference: Any, test: Any, data_range: float = 1.0) -> float:
