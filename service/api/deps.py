@@ -53,30 +53,31 @@ class AppState:
     stores: StoreCache
 
 
-def get_state(request: Request) -> AppState:
+async def get_state(request: Request) -> AppState:
     return request.app.state.render_budget  # type: ignore[no-any-return]
 
 
-def get_settings(request: Request) -> Settings:
-    return get_state(request).settings
+async def get_settings(request: Request) -> Settings:
+    return request.app.state.render_budget.settings  # type: ignore[no-any-return]
 
 
-def get_storage(request: Request) -> Storage:
-    return get_state(request).storage
+async def get_storage(request: Request) -> Storage:
+    return request.app.state.render_budget.storage  # type: ignore[no-any-return]
 
 
-def get_jobs(request: Request) -> JobManager:
-    return get_state(request).jobs
+async def get_jobs(request: Request) -> JobManager:
+    return request.app.state.render_budget.jobs  # type: ignore[no-any-return]
 
 
-def get_scenes(request: Request) -> SceneCache:
-    return get_state(request).scenes
+async def get_scenes(request: Request) -> SceneCache:
+    return request.app.state.render_budget.scenes  # type: ignore[no-any-return]
 
 
-def get_stores(request: Request) -> StoreCache:
-    return get_state(request).stores
+async def get_stores(request: Request) -> StoreCache:
+    return request.app.state.render_budget.stores  # type: ignore[no-any-return]
 
 
+# Accessors are ``async`` so FastAPI calls them inline instead of through its thread pool.
 SettingsDep = Annotated[Settings, Depends(get_settings)]
 StorageDep = Annotated[Storage, Depends(get_storage)]
 JobsDep = Annotated[JobManager, Depends(get_jobs)]
