@@ -1,0 +1,173 @@
+"""Model only what a scene needs: which effects a scene exercises, and which settings cannot matter.
+
+``analyze(scene)`` reads the scene (materials, lights, environment) and lists the effects it can exercise.
+``inert_parameters(scene, space)`` goes further and *verifies by rendering*: a parameter is inert for a
+scene when no candidate value changes the image or any activity counter (so neither error nor power can
+change) at low resolution, from every base setting tried. The search then leaves it out. The analysis only
+supplies the human-readable reason; the decision is always the renders'.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+__all__ = ["SceneAnalysis", "analyze", "inert_parameters"]
+
+
+@dataclass(frozen=True)
+class SceneAnalysis:
+    """Effects a scene can exercise (what the energy model may have to price for it)."""
+
+    triangles: int
+    lights: int
+    shadow_bits: int  # one per light (the similarity test's shadow bits)
+    reflection: bool  # some material traces mirror/glossy reflection rays
+    glossy: bool  # some reflective material is rough (cone-filtered environment lookups)
+    refraction: bool  # some material transmits (refraction rays)
+    emission: bool
+    soft_shadows: bool  # some light has a radius (shadow samples > 1 matter)
+    environment_map: bool  # an equirectangular map (environment filtering can matter)
+    effects: tuple[str, ...]
+
+    def possible_counters(self) -> set[str]:
+        """Counters that can be non-zero for this scene; the rest stay 0 in every render."""
+        always = {"rays_primary", "rays_total", "bvh_node_visits", "triangle_tests", "shading_evals",
+                  "raygen_evals", "similarity_checks", "interpolations", "reprojections",
+                  "tile_buffer_reads", "tile_buffer_writes", "framebuffer_bytes", "gbuffer_prefetch_bytes",
+                  "cache_accesses", "cache_misses", "dram_bytes_read", "closest_hit_comparisons",
+                  "env_lookups", "samples_traced", "samples_interpolated", "samples_reused", "pixels",
+                  "rays_ao"}
+        if self.lights:
+            always.add("rays_shadow")
+        if self.reflection:
+            always.add("rays_reflection")
+        if self.glossy:
+            always.add("rays_glossy")
+        if self.refraction:
+            always.add("rays_refraction")
+        if self.glossy and self.environment_map:
+            always.add("env_filtered_lookups")
+        return always
+
+
+def analyze(scene: Any) -> SceneAnalysis:
+    """List the effects ``scene`` (a ``sim_core.Scene``) can exercise, from its materials and lights."""
+    mats = list(getattr(scene, "materials", []) or [])
+    lights = list(getattr(scene, "lights", []) or [])
+    stats = dict(getattr(scene, "stats", {}) or {})
+    reflection = any(m.metallic > 0.0 or m.roughness < 0.5 for m in mats)
+    glossy = any((m.metallic > 0.0 or m.roughness < 0.5) and m.roughness > 0.0 for m in mats)
+    refraction = any(m.transmission > 0.0 for m in mats)
+    emission = any(max(m.emission) > 0.0 for m in mats)
+    soft = any(light.radius > 0.0 for light in lights)
+    effects = tuple(stats.get("effects", ()))
+    env_map = "environment_map" in effects
+    eff = []
+    if lights:
+        eff.append("shadows")
+    if soft:
+        eff.append("soft_shadows")
+    if reflection:
+        eff.append("reflection")
+    if glossy:
+        eff.append("glossy_reflection")
+    if refraction:
+        eff.append("refraction")
+    if emission:
+        eff.append("emission")
+    if env_map:
+        eff.append("environment_map")
+    return SceneAnalysis(
+        triangles=int(stats.get("triangles", 0)), lights=len(lights), shadow_bits=len(lights),
+        reflection=reflection, glossy=glossy, refraction=refraction, emission=emission, soft_shadows=soft,
+        environment_map=env_map, effects=tuple(eff),
+    )
+
+
+def _default_camera(scene: Any, width: int, height: int) -> Any:
+    from . import Camera
+
+    cams = list(getattr(scene, "cameras", []) or [])
+    if cams:
+        c = cams[0]
+        vfov = float(getattr(c, "vfov", getattr(c, "yfov", 0.7)))
+        return Camera.from_blender(np.asarray(c.matrix_world, dtype=np.float64), vfov, width, height)
+    lo, hi = (np.asarray(b, dtype=np.float64) for b in scene.bounds)
+    centre, diag = (lo + hi) / 2, float(np.linalg.norm(hi - lo))
+    eye = centre + np.array([0.35, -0.9, 0.45]) * max(diag, 1e-3)
+    return Camera.look_at(eye, centre, (0.0, 0.0, 1.0), 0.7, width, height)
+
+
+def _reason(name: str, a: SceneAnalysis) -> str:
+    hints = {
+        "max_depth": (not a.reflection and not a.refraction,
+                      "the scene has no reflective or refractive material, so no secondary rays exist"),
+        "env_filter": (not (a.glossy and a.environment_map),
+                       "no glossy material reflects an environment map"),
+        "shadow_samples": (a.lights == 0 or not a.soft_shadows,
+                           "no light" if a.lights == 0 else "every light is a point (hard shadows)"),
+    }
+    base = "no candidate value changed the image or any activity counter"
+    hint = hints.get(name)
+    return f"{base} ({hint[1]})" if hint and hint[0] else base
+
+
+def inert_parameters(scene: Any, space: Mapping[str, Sequence[Any]], camera: Any = None, *,
+                     resolution: tuple[int, int] = (48, 32), bases: Sequence[Any] | None = None,
+                     threads: int | None = None) -> dict[str, str]:
+    """Settings of ``space`` that cannot change ``scene``'s image or power, with the reason.
+
+    ``space`` maps ``RenderSettings`` field names to candidate values. For every base setting (default:
+    ``RenderSettings.max_quality()`` and ``RenderSettings()``) and every parameter, the scene is rendered
+    at ``resolution`` with each candidate value; the parameter is inert when all renders give the same
+    image (bit for bit) and the same counters from every base. ``camera`` defaults to the scene's first
+    camera or one framing its bounds.
+    """
+    from . import RenderSettings, render
+
+    fields = {f.name for f in dataclasses.fields(RenderSettings)}
+    for name, values in space.items():
+        if name not in fields:
+            raise ValueError(f"unknown RenderSettings field {name!r}")
+        if isinstance(values, (str, bytes)) or len(values) == 0:
+            raise ValueError(f"space[{name!r}] must be a non-empty sequence of values")
+    w, h = resolution
+    if w < 4 or h < 4:
+        raise ValueError("resolution must be at least 4x4")
+    cam = camera if camera is not None else _default_camera(scene, w, h)
+    base_list = list(bases) if bases is not None else [RenderSettings.max_quality(), RenderSettings()]
+    analysis = analyze(scene)
+    cache: dict[Any, tuple[np.ndarray, dict[str, int]]] = {}
+
+    def run(settings: Any) -> tuple[np.ndarray, dict[str, int]]:
+        key = repr(settings)
+        if key not in cache:
+            r = render(scene, cam, settings, threads=threads)
+            cache[key] = (np.asarray(r.image), dict(r.counters))
+        return cache[key]
+
+    inert: dict[str, str] = {}
+    for name, values in space.items():
+        if len(values) < 2:
+            inert[name] = "a single candidate value: nothing to choose"
+            continue
+        same = True
+        for base in base_list:
+            ref_img, ref_cnt = None, None
+            for v in values:
+                img, cnt = run(dataclasses.replace(base, **{name: v}))
+                if ref_img is None:
+                    ref_img, ref_cnt = img, cnt
+                elif img.shape != ref_img.shape or not np.array_equal(img, ref_img) or cnt != ref_cnt:
+                    same = False
+                    break
+            if not same:
+                break
+        if same:
+            inert[name] = _reason(name, analysis)
+    return inert
