@@ -279,8 +279,6 @@ class JobManager:
             p = progress_dict(progress, elapsed_s=elapsed())
             self.storage.update_job(job_id=job.id, progress=p, elapsed_s=elapsed(), event=("progress", p))
             self._bump()
-            if should_cancel():
-                raise JobCancelled
 
         from service.evaluation import SceneHandle
         from service.optimize import Cancelled
