@@ -3,9 +3,10 @@
     .venv/bin/python bench/bench_playback.py [--store STORE.json] [--frames 1800]
 
 Without --store a store of the paper's size is built (uniform octree of depth 3: 729 corners, 4374 views,
-300 distinct frontiers of 6-14 points). The path is a 60 s, 30 fps flight through the store's space. Three
-rows: the pure driver (lookup + filter), the Blender handler's work (lookup + filter + property writes,
-`playback.update_scene`), and a whole `scene.frame_set` (handler plus Blender's own frame change).
+300 distinct frontiers of 6-14 points). The path is a 60 s, 30 fps flight through the store's space. Rows:
+the pure driver (lookup + filter), the Blender handler's work (lookup + filter + property writes,
+`playback.update_scene`) on the first pass and when the path is replayed (lookups memoised on their exact
+inputs), and a whole `scene.frame_set` (handler plus Blender's own frame change).
 Target (issue 6): lookup + filter + property writes <= 0.2 ms per frame on average.
 """
 
@@ -97,6 +98,7 @@ def best_of(runs: list[list[float]]) -> tuple[float, float, float]:
 
 
 def bench_pure(store: ParetoStore, mats: list[np.ndarray]) -> list[float]:
+    """A fresh driver: every lookup computed."""
     from addon.core.playback_logic import PlaybackDriver
 
     drv = PlaybackDriver(store, 2.0)
@@ -134,7 +136,7 @@ def _enable_extension():
     return _PLAYBACK
 
 
-def bench_blender(store_json: str, mats: list[np.ndarray]) -> tuple[list[float], list[float]]:
+def bench_blender(store_json: str, mats: list[np.ndarray]) -> tuple[list[float], list[float], list[float]]:
     playback = _enable_extension()
     import bpy
     from mathutils import Matrix
@@ -155,24 +157,25 @@ def bench_blender(store_json: str, mats: list[np.ndarray]) -> tuple[list[float],
     props = sc.power_budget
     props.store_text = text
     props.budget_mode, props.error_budget = "ERROR", 0.02
-    # handler work only: the camera is moved first (outside the timing), then update_scene is timed
-    handler = []
+    # handler work only: the camera is moved first (outside the timing), then update_scene is timed.
+    # First pass: every lookup computed (cold); second pass: the same path replayed (memoised lookups).
     playback.reset()
     bpy.app.handlers.frame_change_post.remove(playback.on_frame_change)
-    for i in range(len(mats)):
-        sc.frame_set(i + 1)
-        t0 = time.perf_counter()
-        playback.update_scene(sc)
-        handler.append(time.perf_counter() - t0)
+    cold, warm = [], []
+    for times in (cold, warm):
+        for i in range(len(mats)):
+            sc.frame_set(i + 1)
+            t0 = time.perf_counter()
+            playback.update_scene(sc)
+            times.append(time.perf_counter() - t0)
     bpy.app.handlers.frame_change_post.append(playback.on_frame_change)
-    playback.reset()
     whole = []
-    for i in range(len(mats)):
+    for i in range(len(mats)):  # warm again, now through the real handler
         t0 = time.perf_counter()
         sc.frame_set(i + 1)
         whole.append(time.perf_counter() - t0)
     assert props.active_indices, "handler wrote nothing"
-    return handler, whole
+    return cold, warm, whole
 
 
 def main() -> int:
@@ -188,16 +191,18 @@ def main() -> int:
           f"{st['size_bytes'] / 1024:.1f} KB; path: {args.frames} frames at 30 fps")
     mats = flight(args.frames)
     pure = best_of([bench_pure(store, mats) for _ in range(args.repeat)])
-    rows = [("driver: lookup + filter (pure)", pure)]
+    rows = [("driver: lookup + filter (pure, first pass)", pure)]
     runs = [bench_blender(store_json, mats) for _ in range(args.repeat)]
-    rows.append(("handler: lookup + filter + property writes", best_of([r[0] for r in runs])))
-    rows.append(("scene.frame_set (Blender + handler)", best_of([r[1] for r in runs])))
+    rows.append(("handler, first pass (every lookup computed)", best_of([r[0] for r in runs])))
+    rows.append(("handler, replay (memoised lookups)", best_of([r[1] for r in runs])))
+    rows.append(("scene.frame_set, replay (Blender + handler)", best_of([r[2] for r in runs])))
     print(f"{'per frame (best of ' + str(args.repeat) + ' runs)':46s} {'mean ms':>8s} {'p50 ms':>8s} "
           f"{'p99 ms':>8s}")
     for name, (mean, p50, p99) in rows:
         print(f"{name:46s} {mean:8.4f} {p50:8.4f} {p99:8.4f}")
-    verdict = "meets" if rows[1][1][0] <= 0.2 else "MISSES"
-    print(f"target <= 0.2 ms mean for lookup + filter + property writes: {verdict}")
+    for i, label in ((1, "first pass"), (2, "replay")):
+        verdict = "meets" if rows[i][1][0] <= 0.2 else "MISSES"
+        print(f"target <= 0.2 ms mean for lookup + filter + property writes, {label}: {verdict}")
     return 0
 
 

@@ -284,3 +284,20 @@ def test_csv_round_trip_and_report_folder(tmp_path) -> None:
     assert (tmp_path / "rep" / "power_over_time.png").stat().st_size > 1000
     assert "plots_skipped" not in written
     assert len(plot_over_time(rows, tmp_path / "p")) == 2
+
+
+def test_memoised_lookups_equal_fresh_ones() -> None:
+    store = synthetic_store()
+    mats = [_look((math.cos(a), math.sin(a), 0.2), (a, -a, 1.0)) for a in np.linspace(0, 6, 40)]
+    drv = PlaybackDriver(store, period_s=0.0)
+    first = [drv.step(m, 0.69, 1.7, i / 24, "ERROR", 0.01) for i, m in enumerate(mats)]
+    assert drv.memo_hits == 0
+    again = [drv.step(m, 0.69, 1.7, (40 + i) / 24, "ERROR", 0.01) for i, m in enumerate(mats)]
+    assert drv.memo_hits == len(mats)
+    for a, b, m in zip(first, again, mats, strict=True):
+        ref = store.lookup(m[:3, 3], matrix=m, fov=0.69, aspect=1.7, error_budget=0.01)
+        assert a.target_indices == b.target_indices == ref.indices
+        assert b.predicted_power_w == ref.power_w and b.infeasible == ref.infeasible
+    # a different budget is a different key
+    drv.step(mats[0], 0.69, 1.7, 5.0, "ERROR", 0.02)
+    assert drv.memo_hits == len(mats)

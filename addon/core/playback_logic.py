@@ -10,6 +10,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from .vendored import pareto_store
 
 BUDGET_MODES = ("POWER", "ERROR")
@@ -50,11 +52,20 @@ class PlaybackFrame:
 
 
 class PlaybackDriver:
-    """Holds one parsed store and one temporal filter; `step()` is called once per frame change."""
+    """Holds one parsed store and one temporal filter; `step()` is called once per frame change.
+
+    Store lookups are memoised on their exact inputs (camera matrix, fov, aspect, budget): the lookup is
+    a pure function of them, and playback replays the same poses over and over (loops, scrubbing), so a
+    replayed frame costs a dictionary hit instead of a frustum/octree query. The filter always runs.
+    """
+
+    MEMO_LIMIT = 50_000
 
     def __init__(self, store: pareto_store.ParetoStore, period_s: float = 2.0) -> None:
         self.store = store
         self.filter = pareto_store.TemporalFilter(period_s)
+        self._memo: dict[tuple, Any] = {}
+        self.memo_hits = 0
 
     @property
     def period_s(self) -> float:
@@ -68,10 +79,18 @@ class PlaybackDriver:
     def step(self, matrix_world: Sequence[Sequence[float]], vfov: float, aspect: float, now_s: float,
              budget_mode: str, budget_value: float) -> PlaybackFrame:
         budget = validate_budget(budget_mode, budget_value)
-        kwargs = {"power_budget": budget} if budget_mode == "POWER" else {"error_budget": budget}
-        m = matrix_world
-        position = (m[0][3], m[1][3], m[2][3])
-        hit = self.store.lookup(position, matrix=m, fov=vfov, aspect=aspect, **kwargs)
+        rows = tuple(tuple(float(v) for v in matrix_world[r]) for r in range(3))
+        key = (rows, float(vfov), float(aspect), budget_mode, budget)
+        hit = self._memo.get(key)
+        if hit is None:
+            kwargs = {"power_budget": budget} if budget_mode == "POWER" else {"error_budget": budget}
+            m = np.array((*rows, (0.0, 0.0, 0.0, 1.0)))
+            hit = self.store.lookup(m[:3, 3], matrix=m, fov=vfov, aspect=aspect, **kwargs)
+            if len(self._memo) >= self.MEMO_LIMIT:
+                self._memo.clear()
+            self._memo[key] = hit
+        else:
+            self.memo_hits += 1
         active = self.filter.update(hit.indices, now_s)
         settings = hit.settings if active == hit.indices else self.store.settings_of(active)
         return PlaybackFrame(active, tuple(hit.indices), settings, hit.power_w, hit.error, hit.clamped,
