@@ -13,9 +13,9 @@ from __future__ import annotations
 import time
 
 import numpy as np
+from sim_core.sat import hdr_test_map, sat_precision
 
 from sim_core import _core
-from sim_core.sat import hdr_test_map, sat_precision
 
 
 def main() -> None:
