@@ -154,26 +154,17 @@ def test_optimize_end_to_end_store_in_blend_and_playback_matches_query(optimized
                                           "error_budget": budget})
         assert " ".join(map(str, q["indices"])) == target
         assert q["power_w"] == pytest.approx(power, rel=1e-6) and q["error"] == pytest.approx(error, abs=1e-6)
-        out = subprocess.run([str(cli), "query", str(store_file), "--position", *map(str, pos),
-                              "--direction", *map(str, direction), "--fov", str(math.degrees(vfov)),
-                              "--error-budget", str(budget)], capture_output=True, text=True, timeout=60,
-                             check=False)
-        assert out.returncode == 0, out.stderr
-        assert _indices_in(out.stdout) == target, out.stdout
+        def nums(a: np.ndarray) -> list[str]:
+            return [repr(float(v)) for v in np.asarray(a).reshape(-1)]
 
-
-def _indices_in(stdout: str) -> str:
-    """The packed/indices answer of `render-budget query` (JSON output, or an 'indices' line)."""
-    try:
-        doc = json.loads(stdout)
-        return " ".join(map(str, doc["indices"]))
-    except (json.JSONDecodeError, KeyError, TypeError):
-        for line in stdout.splitlines():
-            if "indices" in line:
-                nums = [t for t in line.replace(",", " ").replace("[", " ").replace("]", " ").split()
-                        if t.isdigit()]
-                return " ".join(nums)
-    raise AssertionError(f"no indices in query output: {stdout!r}")
+        for orient in (["--matrix", *nums(mat)], ["--direction", *nums(direction)]):
+            out = subprocess.run([str(cli), "query", str(store_file), "--json", "--position", *nums(pos),
+                                  *orient, "--fov", repr(math.degrees(vfov)), "--error-budget", repr(budget)],
+                                 capture_output=True, text=True, timeout=60, check=False)
+            assert out.returncode == 0, out.stderr
+            doc = json.loads(out.stdout)
+            assert " ".join(map(str, doc["indices"])) == target, (orient[0], doc)
+            assert doc["power_w"] == pytest.approx(power, rel=1e-6)
 
 
 def test_gui_path_worker_thread_and_queue(ext) -> None:
