@@ -405,3 +405,9 @@ def price(result: Any, profile: Profile | str | Path, fps: float) -> EnergyRepor
         comparator=comp,
         blocks_used=tuple(b for b in BLOCKS if energy[b] > 0),
     )
+
+
+# Re-exported here so the package needs a single import line for the energy-model part.
+from .analysis import SceneAnalysis, analyze, inert_parameters  # noqa: E402
+
+__all__ += ["SceneAnalysis", "analyze", "inert_parameters"]
