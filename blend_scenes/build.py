@@ -136,6 +136,9 @@ def build_scene(name: str, out_dir: Path) -> dict[str, Any]:
     start = time.perf_counter()
     module = importlib.import_module(f"blend_scenes.scenes.{name}")
     spec: common.SceneSpec = module.build(scene_dir)
+    clearance, problems = common.camera_clearance(spec.camera)
+    if problems:
+        raise RuntimeError(f"{name}: camera path clips geometry: {'; '.join(problems[:6])}")
     path_doc = common.sample_camera_path(spec.camera)
     common.write_camera_path(path_doc, scene_dir / "path.json")
     common.export_glb(scene_dir / "scene.glb")
@@ -147,6 +150,7 @@ def build_scene(name: str, out_dir: Path) -> dict[str, Any]:
         "duration_s": path_doc["frames"][-1]["time"],
         "resolution": path_doc["frames"][0]["resolution"],
         "extra_files": [p.name for p in spec.extra_files],
+        "camera_min_clearance_m": round(clearance, 3),
         "blender_version": bpy.app.version_string,
         "build_seconds": round(time.perf_counter() - start, 2),
         "generator_hash": generator_hash(name),

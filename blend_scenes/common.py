@@ -347,6 +347,40 @@ def sample_camera_path(cam: bpy.types.Object) -> dict:
     return {"version": 1, "fps": float(FPS), "frames": frames}
 
 
+def camera_clearance(cam: bpy.types.Object, every: int = 10) -> tuple[float, list[str]]:
+    """Check a camera path against the scene: the smallest distance from the camera to any surface (rays
+    in 26 directions) and the frames where the camera is inside a solid (most directions first hit a back
+    face; a few back faces are normal where open surfaces or grazing rays are seen). Catches paths that clip
+    through walls, terrain or objects."""
+    scene = bpy.context.scene
+    grid = [(x, y, z) for x in (-1, 0, 1) for y in (-1, 0, 1) for z in (-1, 0, 1)]
+    dirs = np.array([g for g in grid if g != (0, 0, 0)], dtype=np.float64)
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    nearest, inside = math.inf, []
+    nearest_at = ""
+    for f in range(scene.frame_start, scene.frame_end + 1, every):
+        scene.frame_set(f)
+        deps = bpy.context.evaluated_depsgraph_get()
+        origin = cam.matrix_world.translation.copy()
+        hits = back = 0
+        for d in dirs:
+            hit, loc, normal, _i, obj, _m = scene.ray_cast(deps, origin, Vector(d))
+            if not hit:
+                continue
+            dist = (loc - origin).length
+            if dist < nearest:
+                nearest, nearest_at = dist, f"frame {f}: {obj.name}"
+            hits += 1
+            if normal.dot(Vector(d)) > 0:
+                back += 1
+                last_back = f"{obj.name} at {dist:.2f} m"
+        if hits and back >= max(3, hits // 2):
+            inside.append(f"frame {f}: inside {last_back} ({back}/{hits} back faces)")
+    scene.frame_set(scene.frame_start)
+    clipping = bool(inside) or nearest < 0.3
+    return nearest, ([*inside, f"nearest surface {nearest:.3f} m at {nearest_at}"] if clipping else [])
+
+
 def write_camera_path(doc: dict, path: Path) -> None:
     """Write the path JSON through service.camera_path when it is available (it validates), else plainly
     in the same format."""
