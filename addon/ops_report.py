@@ -77,7 +77,7 @@ def evaluate_scene(scene: bpy.types.Scene, client: ServiceClient, out_dir: str |
     value = validate_budget(mode, props.power_budget if mode == "POWER" else props.error_budget)
     store = pareto_store.ParetoStore.from_json(props.store_text.as_string())
     scene_id = upload_scene(scene, client)
-    step = frame_step or props.frame_step
+    step = frame_step or props.report_frame_step
     spec = EvalSpec(scene_id=scene_id, profile=props.profile or store.profile,
                     resolution=(props.eval_width, props.eval_height), budget_mode=mode, budget_value=value,
                     filter_period_s=props.filter_period, frame_step=step)

@@ -103,6 +103,7 @@ class VIEW3D_PT_power_budget(bpy.types.Panel):
         row = layout.row(align=True)
         row.operator("power.preview", icon="RENDER_STILL")
         row.operator("power.evaluate_path", icon="GRAPH")
+        layout.prop(props, "report_frame_step")
         layout.operator("power.load_store", icon="FILE")
 
 

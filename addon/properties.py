@@ -60,8 +60,10 @@ class POWER_PG_scene(bpy.types.PropertyGroup):
                                  description="Temporal filter: settings move to a new target over T seconds")
     eval_width: IntProperty(name="Width", default=128, min=8, max=8192)  # type: ignore
     eval_height: IntProperty(name="Height", default=72, min=8, max=8192)  # type: ignore
-    frame_step: IntProperty(name="Frame step", default=1, min=1, max=1000,  # type: ignore
-                            description="Use every N-th frame when recording and evaluating a path")
+    frame_step: IntProperty(name="Record step", default=1, min=1, max=1000,  # type: ignore
+                            description="Record every N-th frame of the camera animation")
+    report_frame_step: IntProperty(name="Report step", default=5, min=1, max=1000,  # type: ignore
+                                   description="Evaluate every N-th path frame in Evaluate Path")
 
     path_text: PointerProperty(type=bpy.types.Text, name="Camera path")  # type: ignore
     store_text: PointerProperty(type=bpy.types.Text, name="Pareto store")  # type: ignore

@@ -4,6 +4,7 @@ min) and with the store's budget-driven settings (temporal filter included), as 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
@@ -48,8 +49,12 @@ def budget_kept(mode: str, value: float, power_w: float, error: float) -> bool:
 
 def evaluate_path(client: ServiceClient, store: pareto_store.ParetoStore, path: camera_path.CameraPath,
                   spec: EvalSpec, *, progress: Callable[[int, int], None] | None = None,
-                  frames: Sequence[int] | None = None) -> list[FrameRow]:
-    """Rows for every (sampled frame, mode); errors and power measured by the service, not predicted."""
+                  frames: Sequence[int] | None = None, concurrency: int = 4) -> list[FrameRow]:
+    """Rows for every (sampled frame, mode); errors and power measured by the service, not predicted.
+
+    The settings of every frame are decided first (the budget-driven mode runs the temporal filter over
+    the path in order, exactly as playback does); the evaluations then go out `concurrency` at a time.
+    """
     validate_budget(spec.budget_mode, spec.budget_value)
     presets = preset_settings(store)
     driver = PlaybackDriver(store, spec.filter_period_s)
@@ -57,27 +62,31 @@ def evaluate_path(client: ServiceClient, store: pareto_store.ParetoStore, path: 
     numbers = list(frames) if frames is not None else picked
     if len(numbers) != len(picked):
         raise ValueError("frames must give one frame number per sampled path frame")
-    rows: list[FrameRow] = []
-    total = len(picked) * len(spec.modes)
-    done = 0
+    jobs: list[tuple[int, camera_path.CameraFrame, str, dict[str, Any]]] = []
     for number, i in zip(numbers, picked, strict=True):
         f = path.frames[i]
-        cam = camera_payload(f, spec.resolution)
         for mode in spec.modes:
             if mode == "ours":
-                pf = driver.step(f.matrix_world, f.vfov, f.aspect, f.time, spec.budget_mode,
-                                 spec.budget_value)
-                settings = pf.active_settings
+                settings = driver.step(f.matrix_world, f.vfov, f.aspect, f.time, spec.budget_mode,
+                                       spec.budget_value).active_settings
             else:
                 settings = presets[mode]
-            res = client.evaluate({"scene_id": spec.scene_id, "camera": cam, "settings": settings,
-                                   "profile": spec.profile, "fps": path.fps})
-            p, e = float(res["power_w"]), float(res["error"])
-            kept = budget_kept(spec.budget_mode, spec.budget_value, p, e) if mode == "ours" else None
-            rows.append(FrameRow(number, f.time, mode, p, e, _settings_text(settings), kept))
-            done += 1
+            jobs.append((number, f, mode, settings))
+
+    def run(job: tuple[int, camera_path.CameraFrame, str, dict[str, Any]]) -> FrameRow:
+        number, f, mode, settings = job
+        res = client.evaluate({"scene_id": spec.scene_id, "camera": camera_payload(f, spec.resolution),
+                               "settings": settings, "profile": spec.profile, "fps": path.fps})
+        p, e = float(res["power_w"]), float(res["error"])
+        kept = budget_kept(spec.budget_mode, spec.budget_value, p, e) if mode == "ours" else None
+        return FrameRow(number, f.time, mode, p, e, _settings_text(settings), kept)
+
+    rows: list[FrameRow] = []
+    with ThreadPoolExecutor(max_workers=max(1, concurrency)) as pool:
+        for done, row in enumerate(pool.map(run, jobs), start=1):  # map keeps the order
+            rows.append(row)
             if progress:
-                progress(done, total)
+                progress(done, len(jobs))
     return rows
 
 
