@@ -46,6 +46,7 @@ VIEW_UP = np.array(
 )
 
 _QMAX = 65535
+_SIGNED_TO_VIEW = (0, 2, 4, 1, 3, 5)  # +X, +Y, +Z, -X, -Y, -Z -> VIEW_NAMES order
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -228,6 +229,19 @@ class LookupResult:
     leaf: int = -1
 
 
+def _vec3_floats(v: Any, name: str) -> tuple[float, float, float]:
+    """Three finite floats from a sequence or array (fast path for the per-frame lookup)."""
+    try:
+        if len(v) != 3:
+            raise ValueError
+        a, b, c = float(v[0]), float(v[1]), float(v[2])
+    except (TypeError, ValueError, IndexError) as exc:
+        raise ValueError(f"{name} must be 3 finite numbers, got {v!r}") from exc
+    if not (math.isfinite(a) and math.isfinite(b) and math.isfinite(c)):
+        raise ValueError(f"{name} must be 3 finite numbers, got {v!r}")
+    return a, b, c
+
+
 def _finite_vec3(v: Any, name: str) -> np.ndarray:
     a = np.asarray(v, dtype=np.float64).reshape(-1)
     if a.shape != (3,) or not np.all(np.isfinite(a)):
@@ -312,7 +326,21 @@ class ParetoStore:
                 h = s // 2
                 for k in range(8):
                     stack.append((c + k, x + h * (k & 1), y + h * ((k >> 1) & 1), z + h * ((k >> 2) & 1), h))
-        self._frustum_cache: dict[tuple[float, float], np.ndarray] = {}
+        self._frustum_cache: dict[tuple[float, float], tuple[np.ndarray, np.ndarray]] = {}
+        cell = self.root_size / side
+        self._lo = tuple(float(c) for c in self.root_min)
+        self._hi = tuple(float(c) + self.root_size for c in self.root_min)
+        self._lattice_scale = side / self.root_size
+        self._children_list = [int(c) for c in self.children]
+        self._leaf_box: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._leaf_corner_pos: dict[int, list[tuple[int, tuple[float, float, float]]]] = {}
+        for leaf, ids in self._leaf_corners.items():
+            x, y, z, s = self._node_origin[leaf]
+            lo = self.root_min + np.array([x, y, z], dtype=np.float64) * cell
+            self._leaf_box[leaf] = (lo, lo + s * cell)
+            self._leaf_corner_pos[leaf] = [
+                (int(c), tuple(float(v) for v in self.root_min + self.corner_coords[c] * cell))  # type: ignore[misc]
+                for c in ids]
 
     @property
     def n_params(self) -> int:
@@ -336,64 +364,54 @@ class ParetoStore:
 
     def find_leaf(self, position: Any) -> tuple[int, np.ndarray, bool]:
         """Leaf containing ``position`` (clamped into the root); returns (leaf, clamped position, clamped)."""
-        p = _finite_vec3(position, "position")
-        hi = self.root_min + self.root_size
-        q = np.minimum(np.maximum(p, self.root_min), hi)
-        clamped = bool(np.any(q != p))
-        side = 1 << self.lattice_depth
-        u = (q - self.root_min) * (side / self.root_size)
+        p = _vec3_floats(position, "position")
+        lo = self._lo
+        hi = self._hi
+        q = tuple(min(max(p[i], lo[i]), hi[i]) for i in range(3))
+        clamped = q != p
+        k_scale = self._lattice_scale
+        u = [(q[i] - lo[i]) * k_scale for i in range(3)]
         node = 0
         x = y = z = 0
-        s = side
-        while self.children[node] != -1:
+        s = 1 << self.lattice_depth
+        children = self._children_list
+        while children[node] != -1:
             h = s // 2
-            k = (int(u[0] >= x + h)) | (int(u[1] >= y + h) << 1) | (int(u[2] >= z + h) << 2)
+            k = int(u[0] >= x + h) | (int(u[1] >= y + h) << 1) | (int(u[2] >= z + h) << 2)
             x += h * (k & 1)
             y += h * ((k >> 1) & 1)
             z += h * ((k >> 2) & 1)
             s = h
-            node = int(self.children[node]) + k
-        return node, q, clamped
+            node = children[node] + k
+        return node, np.asarray(q), clamped
 
-    def _frustum_rays(self, vfov: float, aspect: float) -> np.ndarray:
+    def _frustum_rays(self, vfov: float, aspect: float) -> tuple[np.ndarray, np.ndarray]:
         key = (round(vfov, 6), round(aspect, 6))
         rays = self._frustum_cache.get(key)
         if rays is None:
-            n = 12
+            n = 8
             th = math.tan(vfov / 2)
             v = (np.arange(n) + 0.5) / n * 2 - 1
             uu, vv = np.meshgrid(v * th * aspect, v * th)
             # camera frame: x right, y up, looking down -z; weight = pixel solid angle on the image plane
-            d = np.stack([uu.ravel(), vv.ravel(), -np.ones(n * n)], axis=1)
-            w = 1.0 / np.linalg.norm(d, axis=1) ** 3
-            rays = np.concatenate([d, w[:, None]], axis=1)
+            d = np.stack([uu.ravel(), vv.ravel(), -np.ones(n * n)])
+            w = 1.0 / np.linalg.norm(d, axis=0) ** 3
+            rays = (np.ascontiguousarray(d), w)
             if len(self._frustum_cache) > 64:
                 self._frustum_cache.clear()
             self._frustum_cache[key] = rays
         return rays
 
-    def choose_view(self, leaf: int, position: np.ndarray, rotation: np.ndarray, vfov: float,
-                    aspect: float) -> int:
-        """Face of the leaf's cube that receives the largest (solid-angle weighted) part of the frustum.
+    def choose_view(self, rotation: np.ndarray, vfov: float, aspect: float) -> int:
+        """View-cube face that receives the largest (solid-angle weighted) part of the camera frustum.
 
-        Rays of the frustum leave the leaf cube from the camera position; each exits through one face.
-        """
-        rays = self._frustum_rays(vfov, aspect)
-        d = rays[:, :3] @ rotation.T  # world directions
-        x, y, z, s = self._node_origin[leaf]
-        cell = self.root_size / (1 << self.lattice_depth)
-        lo = self.root_min + np.array([x, y, z], dtype=np.float64) * cell
-        hi = lo + s * cell
-        with np.errstate(divide="ignore", invalid="ignore"):
-            bound = np.where(d > 0, hi, lo)
-            t = (bound - position) / d
-        t = np.where(d == 0, np.inf, t)
-        t = np.maximum(t, 0.0)
-        axis = np.argmin(t, axis=1)
-        sign_neg = d[np.arange(d.shape[0]), axis] < 0
-        face = axis * 2 + sign_neg
-        weights = np.bincount(face, weights=rays[:, 3], minlength=6)
-        return int(np.argmax(weights))
+        The view cube is a cube map around the camera, like the six axis views stored at each corner:
+        a frustum ray lands on the face of its largest direction component."""
+        rays_t, weights = self._frustum_rays(vfov, aspect)
+        d = np.asarray(rotation) @ rays_t  # (3, N) world directions
+        # scores in the order +X, +Y, +Z, -X, -Y, -Z; the largest is the face a ray lands on
+        face = np.concatenate((d, -d)).argmax(axis=0)
+        return _SIGNED_TO_VIEW[int(np.bincount(face, weights=weights, minlength=6).argmax())]
 
     def lookup(self, position: Any, direction: Any = None, matrix: Any = None, fov: float | None = None,
                power_budget: float | None = None, error_budget: float | None = None,
@@ -414,10 +432,14 @@ class ParetoStore:
         if not (math.isfinite(asp) and asp > 0):
             raise ValueError("aspect must be positive")
         leaf, q, clamped = self.find_leaf(position)
-        corners = self._leaf_corners[leaf]
-        pos = self.corner_positions_of(corners)
-        corner = int(corners[int(np.argmin(((pos - q) ** 2).sum(axis=1)))])
-        view = self.choose_view(leaf, q, rot, vf, asp)
+        qx, qy, qz = float(q[0]), float(q[1]), float(q[2])
+        best = math.inf
+        corner = -1
+        for c, (cx, cy, cz) in self._leaf_corner_pos[leaf]:
+            dd = (cx - qx) ** 2 + (cy - qy) ** 2 + (cz - qz) ** 2
+            if dd < best:
+                best, corner = dd, c
+        view = self.choose_view(rot, vf, asp)
         fr = self.frontier(corner, view)
         if power_budget is not None:
             i, infeasible = fr.under_power(budget)
@@ -578,20 +600,27 @@ def camera_rotation(direction: Any = None, matrix: Any = None, up: Any = None) -
         if np.any(norms < 1e-12):
             raise ValueError("matrix has a degenerate rotation")
         return r / norms  # remove scale
-    f = _finite_vec3(direction, "direction")
-    n = float(np.linalg.norm(f))
+    fx, fy, fz = _vec3_floats(direction, "direction")
+    n = math.sqrt(fx * fx + fy * fy + fz * fz)
     if n < 1e-12:
         raise ValueError("direction must be non-zero")
-    f = f / n
-    u = np.array([0.0, 0.0, 1.0]) if up is None else _finite_vec3(up, "up")
-    if abs(float(np.dot(u, f))) > 0.999 * float(np.linalg.norm(u)):
-        u = np.array([0.0, 1.0, 0.0]) if up is None else u
-        if abs(float(np.dot(u, f))) > 0.999 * float(np.linalg.norm(u)):
+    fx, fy, fz = fx / n, fy / n, fz / n
+    ux, uy, uz = (0.0, 0.0, 1.0) if up is None else _vec3_floats(up, "up")
+
+    def cross(a: tuple[float, float, float], b: tuple[float, float, float]) -> tuple[float, float, float]:
+        return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+    r = cross((fx, fy, fz), (ux, uy, uz))
+    rn = math.sqrt(r[0] ** 2 + r[1] ** 2 + r[2] ** 2)
+    un = math.sqrt(ux * ux + uy * uy + uz * uz)
+    if rn < 1e-3 * max(un, 1e-300):
+        if up is not None:
             raise ValueError("up must not be parallel to direction")
-    right = np.cross(f, u)
-    right /= np.linalg.norm(right)
-    true_up = np.cross(right, f)
-    return np.stack([right, true_up, -f], axis=1)
+        r = cross((fx, fy, fz), (0.0, 1.0, 0.0))
+        rn = math.sqrt(r[0] ** 2 + r[1] ** 2 + r[2] ** 2)
+    r = (r[0] / rn, r[1] / rn, r[2] / rn)
+    tu = cross(r, (fx, fy, fz))
+    return np.array([[r[0], tu[0], -fx], [r[1], tu[1], -fy], [r[2], tu[2], -fz]])
 
 
 class TemporalFilter:

@@ -114,7 +114,7 @@ def test_frontier_search_equals_brute_force(pts: list[tuple[int, int]], pb: floa
 
 def test_lookup_inside_picks_nearest_corner_and_view() -> None:
     s = _store()
-    r = s.lookup([0.2, 0.3, 1.9], direction=[1, 0, 0], power_budget=10.0)
+    r = s.lookup([0.2, 0.3, 1.1], direction=[1, 0, 0], power_budget=10.0)
     pos = s.corner_positions()[r.corner]
     assert np.allclose(pos, [0, 0, 2]) and not r.clamped and VIEW_NAMES[r.view] == "+X"
     fr = s.frontier(r.corner, r.view)
@@ -136,12 +136,17 @@ def test_frustum_face_for_each_axis(view: int) -> None:
     assert s.lookup([1, 1, 1], matrix=m, error_budget=1.0).view == view
 
 
-def test_frustum_face_depends_on_position_in_leaf() -> None:
+def test_frustum_face_takes_the_largest_share() -> None:
     s = _store()
-    d = np.array([1.0, 1.0, 0.0])
-    near_x = s.lookup([1.95, 0.2, 1.0], direction=d, fov=0.3, power_budget=5.0)
-    near_y = s.lookup([0.2, 1.95, 1.0], direction=d, fov=0.3, power_budget=5.0)
-    assert VIEW_NAMES[near_x.view] == "+X" and VIEW_NAMES[near_y.view] == "+Y"
+    c = [1.0, 1.0, 1.0]
+    assert VIEW_NAMES[s.lookup(c, direction=[1, 0.6, 0], power_budget=5.0).view] == "+X"
+    assert VIEW_NAMES[s.lookup(c, direction=[0.6, 1, 0], power_budget=5.0).view] == "+Y"
+    # looking 60 degrees up with a 30 degree fov: the whole frustum lies above 45 degrees
+    up = [math.cos(math.radians(60)), 0, math.sin(math.radians(60))]
+    assert VIEW_NAMES[s.lookup(c, direction=up, fov=math.radians(30), power_budget=5.0).view] == "+Z"
+    # a 20 degree tilt keeps a narrow frustum on the horizontal view
+    tilt = [0, -math.cos(math.radians(20)), -math.sin(math.radians(20))]
+    assert VIEW_NAMES[s.lookup(c, direction=tilt, fov=math.radians(30), power_budget=5.0).view] == "-Y"
 
 
 @pytest.mark.parametrize("pos,clamped", [
