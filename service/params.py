@@ -229,28 +229,30 @@ class ParameterSpace:
         return ParameterSpace(params, dict(d.get("fixed") or {}), dict(d.get("fixed_reasons") or {}))
 
 
-# Sampling modes of the tracer, cheapest first (DESIGN.md, "Settings"): each sets the mode and its block
-# or supersampling factor.
+# Sampling modes of the tracer, cheapest first (DESIGN.md, "Settings"): each sets RenderSettings.mode and
+# its block (reference spacing or sub-pixel grid; irrelevant for 1 spp, kept at the default there).
 _SAMPLING = (
-    ("undersample_4x4", {"sampling": "undersample", "block_size": 4}),
-    ("undersample_2x2", {"sampling": "undersample", "block_size": 2}),
-    ("1spp", {"sampling": "1spp", "block_size": 1}),
-    ("adaptive_supersample_2x2", {"sampling": "supersample", "block_size": 2}),
-    ("fsaa_2x2", {"sampling": "fsaa", "block_size": 2}),
+    ("undersample_4x4", {"mode": "undersample", "block": 4}),
+    ("undersample_2x2", {"mode": "undersample", "block": 2}),
+    ("1spp", {"mode": "1spp", "block": 2}),
+    ("adaptive_supersample_2x2", {"mode": "supersample", "block": 2}),
+    ("fsaa_2x2", {"mode": "fsaa", "block": 2}),
 )
 
 
 def default_space() -> ParameterSpace:
     """The DESIGN.md table mapped onto ``sim_core.RenderSettings`` fields (8 parameters, 23,040
-    settings). Values are ordered cheapest first, so the maximum quality is the last value."""
+    settings). Values are ordered cheapest first, so the maximum quality is the last value; parameter
+    names are the RenderSettings field they set (``sampling`` sets ``mode`` and ``block``). The
+    similarity threshold is the normal angle in degrees: loose 45, medium 20, strict 5."""
     params = (
         Parameter("sampling", tuple(n for n, _ in _SAMPLING), len(_SAMPLING) - 1,
                   tuple(f for _, f in _SAMPLING)),
-        Parameter("similarity_threshold", ("loose", "medium", "strict"), 2),
+        Parameter("normal_threshold_deg", (45.0, 20.0, 5.0), 2),
         Parameter("max_depth", (0, 1, 2, 3), 3),
         Parameter("shadow_samples", (0, 1, 4, 16), 3),
         Parameter("resolution_scale", (0.7, 0.8, 0.9, 1.0), 3),
-        Parameter("glossy_filter", ("off", "box", "bartlett"), 2),
+        Parameter("env_filter", ("off", "box", "bartlett"), 2),
         Parameter("ao_samples", (0, 4, 8, 16), 3),
         Parameter("multirate", (True, False), 1),
     )

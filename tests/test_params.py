@@ -32,9 +32,9 @@ def test_pack_roundtrip_in_default_space(data) -> None:
 
 
 def test_fixed_parameters_leave_the_search() -> None:
-    s = default_space().fix_inert({"glossy_filter": "no glossy materials",
-                                   "ao_samples": "no geometry to occlude"})
-    assert s.fixed == {"glossy_filter": 2, "ao_samples": 3}
+    s = default_space().fix_inert({"env_filter": "no glossy materials",
+                                   "ao_samples": "no geometry to occlude", "mode": "only one of two fields"})
+    assert s.fixed == {"env_filter": 2, "ao_samples": 3}
     assert s.size == default_space().size // (3 * 4)
     free = tuple(0 for _ in s.free_positions)
     full = s.expand(free)
@@ -49,9 +49,9 @@ def test_fixed_parameters_leave_the_search() -> None:
 def test_fields_and_render_space() -> None:
     s = default_space()
     f = s.fields_of(s.max_quality_indices())
-    assert f["sampling"] == "fsaa" and f["block_size"] == 2 and f["max_depth"] == 3
+    assert f["mode"] == "fsaa" and f["block"] == 2 and f["max_depth"] == 3
     rs = s.as_render_space()
-    assert rs["sampling"] == ["undersample", "1spp", "supersample", "fsaa"]
+    assert rs["mode"] == ["undersample", "1spp", "supersample", "fsaa"] and rs["block"] == [4, 2]
     assert rs["shadow_samples"] == [0, 1, 4, 16]
 
 
@@ -70,3 +70,16 @@ def test_dict_roundtrip_and_validation() -> None:
         s.pack([0] * 7)
     with pytest.raises(ValueError):
         s.unpack(0xF)  # sampling index 15 does not exist
+
+
+def test_max_quality_maps_to_render_settings_max_quality() -> None:
+    import sim_core
+
+    s = default_space()
+    got = s.to_settings(s.max_quality_indices())
+    want = sim_core.RenderSettings.max_quality()
+    for name in s.as_render_space():
+        if name != "normal_threshold_deg":  # only adaptive modes read it; the maximum is FSAA
+            assert getattr(got, name) == getattr(want, name), name
+    cheap = s.to_settings(tuple(0 for _ in s.parameters))
+    assert (cheap.mode, cheap.block, cheap.max_depth, cheap.resolution_scale) == ("undersample", 4, 0, 0.7)
