@@ -95,8 +95,7 @@ def _default_camera(scene: Any, width: int, height: int) -> Any:
     cams = list(getattr(scene, "cameras", []) or [])
     if cams:
         c = cams[0]
-        vfov = float(getattr(c, "vfov", getattr(c, "yfov", 0.7)))
-        return Camera.from_blender(np.asarray(c.matrix_world, dtype=np.float64), vfov, width, height)
+        return Camera.from_blender(np.asarray(c.matrix_world, dtype=np.float64), float(c.vfov), width, height)
     lo, hi = (np.asarray(b, dtype=np.float64) for b in scene.bounds)
     centre, diag = (lo + hi) / 2, float(np.linalg.norm(hi - lo))
     eye = centre + np.array([0.35, -0.9, 0.45]) * max(diag, 1e-3)
@@ -139,7 +138,10 @@ def inert_parameters(scene: Any, space: Mapping[str, Sequence[Any]], camera: Any
     w, h = resolution
     if w < 4 or h < 4:
         raise ValueError("resolution must be at least 4x4")
-    cam = camera if camera is not None else _default_camera(scene, w, h)
+    if camera is None:
+        cam = _default_camera(scene, w, h)
+    else:
+        cam = camera.with_resolution(w, h) if hasattr(camera, "with_resolution") else camera
     base_list = list(bases) if bases is not None else [RenderSettings.max_quality(), RenderSettings()]
     analysis = analyze(scene)
     cache: dict[Any, tuple[np.ndarray, dict[str, int]]] = {}

@@ -256,6 +256,14 @@ class EnergyReport:
     comparator: ComparatorStats
     blocks_used: tuple[str, ...] = field(default=())
 
+    @property
+    def unit_energy_j(self) -> dict[str, float]:
+        """Dynamic energy by hardware unit (srp, ti, tile_buffer, dram); the T&I unit includes its cache."""
+        out = {u: 0.0 for u in ("srp", "ti", "tile_buffer", "dram")}
+        for b, u in BLOCK_UNIT.items():
+            out[u] += self.energy_j[b]
+        return out
+
 
 def _counters_of(result: Any) -> tuple[dict[str, int], np.ndarray | None, Any]:
     if isinstance(result, Mapping):
@@ -293,12 +301,13 @@ def _filtered_reads_per_lookup(settings: Any) -> int:
     return 9 * 3  # unknown: price the dearer Bartlett lookup
 
 
-def price(result: Any, profile: Profile | str | Path, fps: float) -> EnergyReport:
+def price(result: Any, profile: Profile | str | Path, fps: float, *, scene: Any = None) -> EnergyReport:
     """Price one rendered frame: energy and cycles by block, frame time, deadline, power, perf/W.
 
     ``result`` is a ``RenderResult`` (its ``counters``, ``comparator_histogram`` and, when present,
     ``settings``) or a plain mapping of counter names to counts. A block whose counters are 0 costs
-    exactly 0 J and 0 cycles.
+    exactly 0 J and 0 cycles. ``scene`` (optional): when given and its environment is a constant colour,
+    environment lookups of missed rays cost nothing (a constant is a register, not a map lookup).
     """
     prof = load_profile(profile) if not isinstance(profile, Profile) else profile
     if isinstance(fps, bool) or not isinstance(fps, (int, float)) or not math.isfinite(fps) or fps <= 0:
@@ -323,14 +332,12 @@ def price(result: Any, profile: Profile | str | Path, fps: float) -> EnergyRepor
     srp_block("similarity", n("similarity_checks"), ops["similarity"])
     srp_block("interpolation", n("interpolations"), ops["interpolation"])
     srp_block("reprojection", n("reprojections"), ops["reprojection"])
-    env_reads = n("env_lookups") + n("env_filtered_lookups") * _filtered_reads_per_lookup(settings)
-    energy["env_filter"] = (
-        (n("env_lookups") * ops["env_lookup"] + n("env_filtered_lookups") * ops["env_filtered_lookup"])
-        * e["srp_op"] + env_reads * e["env_texel_read"]
-    ) * pj
-    cycles["env_filter"] = (
-        n("env_lookups") * ops["env_lookup"] + n("env_filtered_lookups") * ops["env_filtered_lookup"]
-    ) / thr["srp_ops_per_cycle"]
+    env_map = scene is None or "environment_map" in (getattr(scene, "stats", {}) or {}).get("effects", ())
+    lookups = n("env_lookups") if env_map else 0
+    env_reads = lookups + n("env_filtered_lookups") * _filtered_reads_per_lookup(settings)
+    env_ops = lookups * ops["env_lookup"] + n("env_filtered_lookups") * ops["env_filtered_lookup"]
+    energy["env_filter"] = (env_ops * e["srp_op"] + env_reads * e["env_texel_read"]) * pj
+    cycles["env_filter"] = env_ops / thr["srp_ops_per_cycle"]
 
     energy["traversal"] = n("bvh_node_visits") * e["traversal_step"] * pj
     cycles["traversal"] = n("bvh_node_visits") / thr["ti_box_tests_per_cycle"]
