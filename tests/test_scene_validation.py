@@ -80,24 +80,35 @@ def test_unreadable_files_raise(tmp_path):
 
 
 def test_stats_and_hash():
-    mats = [Material(base_color=(1, 0, 0)), Material(metallic=1.0, roughness=0.2),
-            Material(transmission=1.0, ior=1.45)]
+    mats = [
+        Material(base_color=(1, 0, 0)),
+        Material(metallic=1.0, roughness=0.2),
+        Material(transmission=1.0, ior=1.45),
+    ]
     lights = [Light(kind="point", position=(0, 0, 3), intensity=10, radius=0.1)]
     pos = np.vstack([POS, [[5, 5, 5]]]).astype(np.float32)
     tri = np.vstack([TRI, [[0, 1, 1]]])
-    a = sim_core.Scene.from_arrays(pos, tri, material_ids=[0, 1, 2], object_ids=[3, 7, 7], materials=mats,
-                                   lights=lights)
+    a = sim_core.Scene.from_arrays(
+        pos, tri, material_ids=[0, 1, 2], object_ids=[3, 7, 7], materials=mats, lights=lights
+    )
     s = a.stats
     assert s["triangles"] == 2 and s["degenerate_dropped"] == 1
     assert s["materials"] == 3 and s["lights"] == 1 and s["objects"] == 2
     assert {"reflection", "glossy", "refraction", "soft_shadows", "direct_light"} <= set(s["effects"])
-    b = sim_core.Scene.from_arrays(pos, tri, material_ids=[0, 1, 2], object_ids=[3, 7, 7], materials=mats,
-                                   lights=lights)
+    b = sim_core.Scene.from_arrays(
+        pos, tri, material_ids=[0, 1, 2], object_ids=[3, 7, 7], materials=mats, lights=lights
+    )
     assert a.content_hash == b.content_hash and len(a.content_hash) == 64
     c = sim_core.Scene.from_arrays(pos, tri, material_ids=[0, 1, 2], object_ids=[3, 7, 7], materials=mats)
     assert c.content_hash != a.content_hash
-    d = sim_core.Scene.from_arrays(pos + np.float32(1e-3), tri, material_ids=[0, 1, 2], object_ids=[3, 7, 7],
-                                   materials=mats, lights=lights)
+    d = sim_core.Scene.from_arrays(
+        pos + np.float32(1e-3),
+        tri,
+        material_ids=[0, 1, 2],
+        object_ids=[3, 7, 7],
+        materials=mats,
+        lights=lights,
+    )
     assert d.content_hash != a.content_hash
 
 

@@ -75,6 +75,7 @@ Scene::Scene(const float* positions, std::size_t vertex_count, const std::uint32
     const std::size_t src = order[i];
     TriShading& s = shading_[i];
     const Vec3 ng = geometric_normal(static_cast<std::uint32_t>(i));
+    s.ng = ng;
     for (int k = 0; k < 3; ++k) {
       if (normals) {
         const std::uint32_t vi = triangles[3 * src + k];

@@ -43,6 +43,7 @@ inline constexpr int kMaxLights = 32;    // one shadow bit per light
 
 struct TriShading {
   Vec3 n[3];  // shading normal at v0, v1, v2 (the geometric normal when none were given)
+  Vec3 ng;    // unit geometric normal (winding order)
 };
 
 class Scene {

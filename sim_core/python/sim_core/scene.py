@@ -89,8 +89,17 @@ def _light_table(lights: Sequence[Light]) -> np.ndarray:
     for light in lights:
         if not isinstance(light, Light):
             raise ValueError(f"lights must be sim_core.Light, got {type(light).__name__}")
-        rows.append([_LIGHT_KINDS[light.kind], *light.position, *light.direction, *light.color,
-                     light.intensity, light.radius, light.spot_angle])
+        rows.append(
+            [
+                _LIGHT_KINDS[light.kind],
+                *light.position,
+                *light.direction,
+                *light.color,
+                light.intensity,
+                light.radius,
+                light.spot_angle,
+            ]
+        )
     return np.asarray(rows, dtype=np.float32).reshape(-1, 13)
 
 
@@ -100,9 +109,16 @@ class Scene:
     World frame is Blender's (right-handed, Z up). Build with `from_arrays`, `from_obj` or `from_gltf`.
     """
 
-    def __init__(self, native: Any, stats: dict[str, Any], content_hash: str,
-                 materials: list[Material], lights: list[Light], cameras: list[CameraData],
-                 source: str = "") -> None:
+    def __init__(
+        self,
+        native: Any,
+        stats: dict[str, Any],
+        content_hash: str,
+        materials: list[Material],
+        lights: list[Light],
+        cameras: list[CameraData],
+        source: str = "",
+    ) -> None:
         self._native = native
         self._stats = stats
         self._hash = content_hash
@@ -141,14 +157,14 @@ class Scene:
         if tri.max() >= pos.shape[0]:
             bad = int(np.argmax(tri.max(axis=1) >= pos.shape[0]))
             raise ValueError(
-                f"triangle {bad} references vertex {int(tri[bad].max())} but there are only {pos.shape[0]}")
+                f"triangle {bad} references vertex {int(tri[bad].max())} but there are only {pos.shape[0]}"
+            )
         n_tri = tri.shape[0]
         nrm = None
         if normals is not None:
             nrm = _as_array(normals, "normals", np.float32, 3)
             if nrm.shape[0] != pos.shape[0]:
-                raise ValueError(
-                    f"normals must have one row per vertex ({pos.shape[0]}), got {nrm.shape[0]}")
+                raise ValueError(f"normals must have one row per vertex ({pos.shape[0]}), got {nrm.shape[0]}")
         mats = list(materials) if materials else [Material()]
         mtab = _material_table(mats)
         if material_ids is None:
@@ -157,7 +173,8 @@ class Scene:
             mid = _as_array(material_ids, "material_ids", np.int64, None)
             if mid.shape[0] != n_tri:
                 raise ValueError(
-                    f"material_ids must have one entry per triangle ({n_tri}), got {mid.shape[0]}")
+                    f"material_ids must have one entry per triangle ({n_tri}), got {mid.shape[0]}"
+                )
             if mid.size and mid.max() >= len(mats):
                 raise ValueError(f"material id {int(mid.max())} out of range (have {len(mats)} materials)")
             mid = mid.astype(np.uint32)
@@ -187,8 +204,17 @@ class Scene:
             raise ValueError(f"empty scene: all {n_tri} triangles are degenerate (zero area)")
         prim_ids = np.flatnonzero(keep).astype(np.int64)
         native = _core.NativeScene.build(
-            pos, np.ascontiguousarray(tri[keep], dtype=np.uint32), prim_ids, nrm,
-            np.ascontiguousarray(mid[keep]), np.ascontiguousarray(oid[keep]), mtab, ltab, env_color, env_map)
+            pos,
+            np.ascontiguousarray(tri[keep], dtype=np.uint32),
+            prim_ids,
+            nrm,
+            np.ascontiguousarray(mid[keep]),
+            np.ascontiguousarray(oid[keep]),
+            mtab,
+            ltab,
+            env_color,
+            env_map,
+        )
 
         h = hashlib.sha256()
         for arr in (pos, tri.astype(np.uint32), nrm, mid, oid, mtab, ltab, env_color, env_map):
@@ -226,9 +252,17 @@ class Scene:
     def from_scene_data(cls, data: SceneData) -> Scene:
         """Build from what a loader returns."""
         return cls.from_arrays(
-            data.positions, data.triangles, normals=data.normals, material_ids=data.material_ids,
-            object_ids=data.object_ids, materials=data.materials, lights=data.lights,
-            environment=data.environment, cameras=data.cameras, source=data.source)
+            data.positions,
+            data.triangles,
+            normals=data.normals,
+            material_ids=data.material_ids,
+            object_ids=data.object_ids,
+            materials=data.materials,
+            lights=data.lights,
+            environment=data.environment,
+            cameras=data.cameras,
+            source=data.source,
+        )
 
     @classmethod
     def from_obj(cls, path: str | os.PathLike[str]) -> Scene:

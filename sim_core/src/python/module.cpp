@@ -7,6 +7,7 @@ namespace nb = nanobind;
 
 namespace sim_core {
 void register_scene(nb::module_& m);
+void register_render(nb::module_& m);
 }  // namespace sim_core
 void bind_energy_model(nb::module_& m);  // energy model part: cache model, comparator, SAT
 
@@ -14,5 +15,6 @@ NB_MODULE(_core, m) {
   m.doc() = "render-budget native simulator core";
   m.attr("__version__") = sim_core::kVersion;
   sim_core::register_scene(m);
+  sim_core::register_render(m);
   bind_energy_model(m);
 }

@@ -1,0 +1,32 @@
+// Pinhole camera in the world frame. Like Blender's and glTF's cameras it looks down its local -Z with +Y
+// up; `forward` is that -Z axis in world space. Pixel (0, 0) is the top-left corner of the image.
+#pragma once
+#include "sim_core/intersect.h"
+#include "sim_core/math.h"
+
+namespace sim_core {
+
+struct Camera {
+  Vec3 position;
+  Vec3 right{1.f, 0.f, 0.f};    // unit, world +X of the camera
+  Vec3 up{0.f, 0.f, 1.f};       // unit, world +Y of the camera
+  Vec3 forward{0.f, 1.f, 0.f};  // unit, world -Z of the camera (viewing direction)
+  float vfov = 0.6911f;         // vertical field of view, radians
+  int width = 64, height = 64;
+
+  void validate() const;  // throws std::invalid_argument
+  float tan_half() const;
+  // Ray through continuous pixel coordinates (x right, y down; pixel centres at +0.5). Unit direction.
+  Ray primary(float px, float py) const;
+  // Projects a world point: continuous pixel coordinates and camera-space depth along forward.
+  // Returns false when the point is behind the camera.
+  bool project(Vec3 p, float* px, float* py, float* depth) const;
+  // Projects a direction (a point at infinity).
+  bool project_direction(Vec3 d, float* px, float* py) const;
+  // Same camera with a different image size (resolution scaling keeps the field of view).
+  Camera resized(int w, int h) const;
+  // Same camera moved along its right axis (stereo eyes).
+  Camera shifted(float dx) const;
+};
+
+}  // namespace sim_core

@@ -1,0 +1,42 @@
+// Activity counters of one render, the events the energy model prices (names fixed in ARCHITECTURE.md).
+// Every tile owns a Counters and the frame sums them in tile order, so totals are independent of threads.
+#pragma once
+#include <cstdint>
+
+namespace sim_core {
+
+#define SIM_CORE_COUNTERS(X)                                                                            \
+  X(rays_primary) X(rays_shadow) X(rays_reflection) X(rays_refraction) X(rays_ao) X(rays_glossy)         \
+  X(rays_total) X(bvh_node_visits) X(triangle_tests) X(shading_evals) X(raygen_evals)                    \
+  X(similarity_checks) X(interpolations) X(reprojections) X(tile_buffer_reads) X(tile_buffer_writes)     \
+  X(framebuffer_bytes) X(gbuffer_prefetch_bytes) X(cache_accesses) X(cache_misses) X(dram_bytes_read)    \
+  X(closest_hit_comparisons) X(env_lookups) X(env_filtered_lookups) X(samples_traced)                    \
+  X(samples_interpolated) X(samples_reused) X(pixels)
+
+struct Counters {
+#define SIM_CORE_DECLARE(name) std::uint64_t name = 0;
+  SIM_CORE_COUNTERS(SIM_CORE_DECLARE)
+#undef SIM_CORE_DECLARE
+
+  Counters& operator+=(const Counters& o) {
+#define SIM_CORE_ADD(name) name += o.name;
+    SIM_CORE_COUNTERS(SIM_CORE_ADD)
+#undef SIM_CORE_ADD
+    return *this;
+  }
+  // Calls fn(name, value) for every counter, in the order above.
+  template <class Fn>
+  void for_each(Fn&& fn) const {
+#define SIM_CORE_VISIT(name) fn(#name, name);
+    SIM_CORE_COUNTERS(SIM_CORE_VISIT)
+#undef SIM_CORE_VISIT
+  }
+};
+
+// Bytes of one tile-buffer record (colour + geometry of a sample) and of one G-buffer texel (stereo).
+inline constexpr std::uint64_t kTileRecordBytes = 32;
+inline constexpr std::uint64_t kGBufferTexelBytes = 32;
+// Frame-buffer flush: RGBA8 per pixel.
+inline constexpr std::uint64_t kFramebufferPixelBytes = 4;
+
+}  // namespace sim_core

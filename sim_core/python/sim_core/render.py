@@ -1,0 +1,251 @@
+"""render() and render_stereo(): the tile-based tracer with its activity counters.
+
+A RenderResult carries everything the energy model prices (counters, per-tile statistics, comparator
+histogram) next to the image and its AOVs, so `price(result, profile, fps)` needs nothing else.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from . import _core
+from .camera import Camera
+from .scene import Scene, _threads
+from .settings import RenderSettings
+
+# Default node/triangle cache of the T&I unit model when no hardware profile provides one.
+DEFAULT_CACHE = (32 * 1024, 64, 4)
+
+COUNTER_NAMES: tuple[str, ...] = (
+    "rays_primary",
+    "rays_shadow",
+    "rays_reflection",
+    "rays_refraction",
+    "rays_ao",
+    "rays_glossy",
+    "rays_total",
+    "bvh_node_visits",
+    "triangle_tests",
+    "shading_evals",
+    "raygen_evals",
+    "similarity_checks",
+    "interpolations",
+    "reprojections",
+    "tile_buffer_reads",
+    "tile_buffer_writes",
+    "framebuffer_bytes",
+    "gbuffer_prefetch_bytes",
+    "cache_accesses",
+    "cache_misses",
+    "dram_bytes_read",
+    "closest_hit_comparisons",
+    "env_lookups",
+    "env_filtered_lookups",
+    "samples_traced",
+    "samples_interpolated",
+    "samples_reused",
+    "pixels",
+)
+
+
+@dataclass
+class RenderResult:
+    """One rendered frame.
+
+    image: (H, W, 3) float32 linear RGB at the camera resolution (bilinearly upscaled when the settings
+      render at a reduced resolution_scale). aovs: depth (camera-space, inf on miss), normal, object_id
+      (-1 on miss), sample_kind (0 traced, 1 interpolated, 2 reused), all at the render resolution.
+    counters: activity counts (COUNTER_NAMES). tile_stats: one dict per tile. comparator_histogram:
+      closest-hit comparisons by compute-chain length (0..24). multirate_state: pass as `previous=`.
+    """
+
+    image: np.ndarray
+    aovs: dict[str, np.ndarray]
+    counters: dict[str, int]
+    tile_stats: list[dict[str, Any]]
+    comparator_histogram: np.ndarray
+    multirate_state: Any
+    settings: RenderSettings
+    camera: Camera
+    render_resolution: tuple[int, int]  # (width, height) actually traced
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def traced_ratio(self) -> float:
+        """Samples traced per pixel of the render resolution."""
+        return self.counters["samples_traced"] / max(1, self.counters["pixels"])
+
+
+@dataclass
+class StereoResult:
+    left: RenderResult
+    right: RenderResult
+    reuse_ratio: float  # right-eye pixels reused from the left eye / right-eye pixels
+    holes: int = 0  # right-eye pixels nothing reprojected into (disocclusion, out of frame)
+    depth_mismatches: int = 0  # farther samples showing through a reprojected nearer surface
+
+
+def _cache_args(cache: Any) -> tuple[int, int, int]:
+    if cache is None:
+        return DEFAULT_CACHE
+    if isinstance(cache, dict):
+        vals = (cache.get("size_bytes"), cache.get("line_bytes", 64), cache.get("ways", 4))
+    elif isinstance(cache, tuple | list):
+        if len(cache) != 3:
+            raise ValueError("cache must be (size_bytes, line_bytes, ways)")
+        vals = tuple(cache)
+    else:
+        try:
+            vals = (cache.size_bytes, cache.line_bytes, cache.ways)
+        except AttributeError:
+            raise ValueError(
+                f"cache must be a CacheConfig, a dict or a tuple, got {type(cache).__name__}"
+            ) from None
+    for v in vals:
+        if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 0 or v >= 2**32:
+            raise ValueError(f"cache sizes must be non-negative integers, got {vals!r}")
+    return int(vals[0]), int(vals[1]), int(vals[2])
+
+
+def _previous(previous: Any) -> Any:
+    if previous is None:
+        return None
+    if isinstance(previous, RenderResult):
+        return previous.multirate_state
+    if isinstance(previous, StereoResult):
+        return previous.left.multirate_state
+    if isinstance(previous, _core.MultirateState):
+        return previous
+    raise ValueError(f"previous must be a RenderResult or its multirate_state, got {type(previous).__name__}")
+
+
+def _render_size(camera: Camera, settings: RenderSettings) -> tuple[int, int]:
+    s = settings.resolution_scale
+    return max(1, round(camera.width * s)), max(1, round(camera.height * s))
+
+
+def _upscale(img: np.ndarray, height: int, width: int) -> np.ndarray:
+    """Bilinear resize with pixel-centre alignment (what a display upscaler does)."""
+    h, w = img.shape[:2]
+    if (h, w) == (height, width):
+        return img
+    ys = np.clip((np.arange(height) + 0.5) * h / height - 0.5, 0, h - 1)
+    xs = np.clip((np.arange(width) + 0.5) * w / width - 0.5, 0, w - 1)
+    y0 = np.floor(ys).astype(int)
+    x0 = np.floor(xs).astype(int)
+    y1, x1 = np.minimum(y0 + 1, h - 1), np.minimum(x0 + 1, w - 1)
+    fy = (ys - y0)[:, None, None].astype(np.float32)
+    fx = (xs - x0)[None, :, None].astype(np.float32)
+    top = img[y0][:, x0] * (1 - fx) + img[y0][:, x1] * fx
+    bot = img[y1][:, x0] * (1 - fx) + img[y1][:, x1] * fx
+    return (top * (1 - fy) + bot * fy).astype(np.float32)
+
+
+def _check(scene: Scene, camera: Camera, settings: RenderSettings | None) -> RenderSettings:
+    if not isinstance(scene, Scene):
+        raise ValueError(f"scene must be a sim_core.Scene, got {type(scene).__name__}")
+    if not isinstance(camera, Camera):
+        raise ValueError(f"camera must be a sim_core.Camera, got {type(camera).__name__}")
+    if settings is None:
+        settings = RenderSettings()
+    if not isinstance(settings, RenderSettings):
+        raise ValueError(f"settings must be a sim_core.RenderSettings, got {type(settings).__name__}")
+    return settings
+
+
+def _result(
+    d: dict[str, Any], camera: Camera, settings: RenderSettings, size: tuple[int, int]
+) -> RenderResult:
+    aovs = {k: d[k] for k in ("depth", "normal", "object_id", "sample_kind")}
+    aovs["position"] = d["position"]
+    counters = {k: int(v) for k, v in d["counters"].items()}
+    return RenderResult(
+        image=_upscale(d["image"], camera.height, camera.width),
+        aovs=aovs,
+        counters=counters,
+        tile_stats=list(d["tile_stats"]),
+        comparator_histogram=np.asarray(d["comparator_histogram"], dtype=np.int64),
+        multirate_state=d["multirate_state"],
+        settings=settings,
+        camera=camera,
+        render_resolution=size,
+    )
+
+
+def render(
+    scene: Scene,
+    camera: Camera,
+    settings: RenderSettings | None = None,
+    threads: int | None = None,
+    previous: Any = None,
+    cache: Any = None,
+) -> RenderResult:
+    """Render one frame; multithreaded over tiles with the GIL released.
+
+    previous: the previous frame's RenderResult (or its multirate_state) for multi-rate tiles.
+    cache: node/triangle cache of the T&I unit (CacheConfig, dict or (size_bytes, line_bytes, ways));
+      None uses DEFAULT_CACHE; size 0 disables it (every fetch goes to DRAM).
+    """
+    settings = _check(scene, camera, settings)
+    w, h = _render_size(camera, settings)
+    d = _core.render_frame(
+        scene.native,
+        camera.frame(),
+        camera.vfov,
+        w,
+        h,
+        settings.to_native(),
+        _threads(threads),
+        _previous(previous),
+        *_cache_args(cache),
+    )
+    return _result(d, camera, settings, (w, h))
+
+
+def render_stereo(
+    scene: Scene,
+    camera: Camera,
+    eye_separation: float,
+    settings: RenderSettings | None = None,
+    threads: int | None = None,
+    previous: Any = None,
+    cache: Any = None,
+) -> StereoResult:
+    """Render a stereo pair around `camera` (eyes at -/+ eye_separation / 2 along its right axis).
+
+    The left eye is rendered with `settings`; the right eye reuses reprojected left-eye shading where valid
+    and traces the bad pixels (holes from disocclusion or the frame edge, depth mismatches).
+    """
+    settings = _check(scene, camera, settings)
+    if (
+        isinstance(eye_separation, bool)
+        or not isinstance(eye_separation, int | float)
+        or not math.isfinite(eye_separation)
+        or eye_separation < 0
+    ):
+        raise ValueError(f"eye_separation must be a finite number >= 0, got {eye_separation!r}")
+    left, right = camera.shifted(-eye_separation / 2), camera.shifted(eye_separation / 2)
+    w, h = _render_size(camera, settings)
+    d = _core.render_stereo(
+        scene.native,
+        left.frame(),
+        right.frame(),
+        camera.vfov,
+        w,
+        h,
+        settings.to_native(),
+        _threads(threads),
+        _previous(previous),
+        *_cache_args(cache),
+    )
+    return StereoResult(
+        left=_result(d["left"], left, settings, (w, h)),
+        right=_result(d["right"], right, settings, (w, h)),
+        reuse_ratio=float(d["reuse_ratio"]),
+        holes=int(d["holes"]),
+        depth_mismatches=int(d["depth_mismatches"]),
+    )

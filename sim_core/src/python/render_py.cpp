@@ -1,0 +1,159 @@
+// Bindings of the renderer: settings struct, multi-rate state, render_frame and render_stereo.
+#include <nanobind/nanobind.h>
+#include <nanobind/ndarray.h>
+#include <nanobind/stl/string.h>
+
+#include <cstring>
+#include <stdexcept>
+#include <vector>
+
+#include "sim_core/render.h"
+#include "sim_core/stereo.h"
+
+namespace nb = nanobind;
+using namespace nb::literals;
+
+namespace sim_core {
+namespace {
+
+template <class T>
+nb::object to_numpy(const std::vector<T>& v, std::initializer_list<std::size_t> shape) {
+  T* data = new T[v.empty() ? 1 : v.size()];
+  if (!v.empty()) std::memcpy(data, v.data(), v.size() * sizeof(T));
+  nb::capsule owner(data, [](void* p) noexcept { delete[] static_cast<T*>(p); });
+  return nb::cast(nb::ndarray<nb::numpy, T>(data, shape.size(), shape.begin(), owner));
+}
+
+Camera make_camera(nb::ndarray<const float, nb::shape<4, 3>, nb::c_contig, nb::device::cpu> frame, float vfov,
+                   int width, int height) {
+  Camera c;
+  c.position = Vec3(frame(0, 0), frame(0, 1), frame(0, 2));
+  c.right = Vec3(frame(1, 0), frame(1, 1), frame(1, 2));
+  c.up = Vec3(frame(2, 0), frame(2, 1), frame(2, 2));
+  c.forward = Vec3(frame(3, 0), frame(3, 1), frame(3, 2));
+  c.vfov = vfov;
+  c.width = width;
+  c.height = height;
+  c.validate();
+  return c;
+}
+
+nb::dict output_to_dict(const RenderOutput& o) {
+  nb::dict d;
+  const std::size_t h = static_cast<std::size_t>(o.fb.height), w = static_cast<std::size_t>(o.fb.width);
+  d["image"] = to_numpy(o.fb.color, {h, w, 3});
+  d["depth"] = to_numpy(o.fb.depth, {h, w});
+  d["normal"] = to_numpy(o.fb.normal, {h, w, 3});
+  d["position"] = to_numpy(o.fb.position, {h, w, 3});
+  d["object_id"] = to_numpy(o.fb.object, {h, w});
+  d["sample_kind"] = to_numpy(o.fb.kind, {h, w});
+  nb::dict counters;
+  o.counters.for_each([&](const char* name, std::uint64_t v) { counters[name] = v; });
+  d["counters"] = counters;
+  std::vector<std::uint64_t> hist(o.histogram.begin(), o.histogram.end());
+  d["comparator_histogram"] = to_numpy(hist, {hist.size()});
+  nb::list tiles;
+  for (const TileStat& t : o.tiles) {
+    nb::dict td;
+    td["x0"] = t.x0; td["y0"] = t.y0; td["width"] = t.width; td["height"] = t.height;
+    td["block"] = t.block;
+    td["samples_traced"] = t.samples_traced;
+    td["samples_interpolated"] = t.samples_interpolated;
+    td["samples_reused"] = t.samples_reused;
+    td["similarity_checks"] = t.similarity_checks;
+    td["similarity_passed"] = t.similarity_passed;
+    td["similarity_ratio"] = t.similarity_ratio;
+    td["rays_total"] = t.rays_total;
+    td["bvh_node_visits"] = t.bvh_node_visits;
+    td["triangle_tests"] = t.triangle_tests;
+    td["cache_misses"] = t.cache_misses;
+    tiles.append(td);
+  }
+  d["tile_stats"] = tiles;
+  d["multirate_state"] = nb::cast(o.multirate);
+  return d;
+}
+
+}  // namespace
+
+void register_render(nb::module_& m) {
+  nb::class_<RenderSettings>(m, "NativeRenderSettings",
+                             "Native render settings; build them through sim_core.RenderSettings.")
+      .def(nb::init<>())
+      .def_prop_rw("mode", [](const RenderSettings& s) { return static_cast<int>(s.mode); },
+                   [](RenderSettings& s, int v) { s.mode = static_cast<SamplingMode>(v); })
+      .def_rw("block", &RenderSettings::block)
+      .def_rw("normal_threshold_deg", &RenderSettings::normal_threshold_deg)
+      .def_rw("max_depth", &RenderSettings::max_depth)
+      .def_rw("shadow_samples", &RenderSettings::shadow_samples)
+      .def_rw("resolution_scale", &RenderSettings::resolution_scale)
+      .def_prop_rw("env_filter", [](const RenderSettings& s) { return static_cast<int>(s.env_filter); },
+                   [](RenderSettings& s, int v) { s.env_filter = static_cast<EnvFilter>(v); })
+      .def_rw("ao_samples", &RenderSettings::ao_samples)
+      .def_rw("ao_distance", &RenderSettings::ao_distance)
+      .def_rw("multirate", &RenderSettings::multirate)
+      .def_rw("multirate_low", &RenderSettings::multirate_low)
+      .def_rw("multirate_high", &RenderSettings::multirate_high)
+      .def_rw("tile_size", &RenderSettings::tile_size)
+      .def("validate", &RenderSettings::validate);
+
+  nb::class_<MultirateState>(m, "MultirateState",
+                             "Per-tile block sizes and similarity ratios of a frame; pass to the next frame.")
+      .def_ro("tiles_x", &MultirateState::tiles_x)
+      .def_ro("tiles_y", &MultirateState::tiles_y)
+      .def_ro("tile_size", &MultirateState::tile_size)
+      .def_ro("width", &MultirateState::width)
+      .def_ro("height", &MultirateState::height)
+      .def_prop_ro("block", [](const MultirateState& s) {
+        return to_numpy(s.block, {static_cast<std::size_t>(s.tiles_y), static_cast<std::size_t>(s.tiles_x)});
+      })
+      .def_prop_ro("ratio", [](const MultirateState& s) {
+        return to_numpy(s.ratio, {static_cast<std::size_t>(s.tiles_y), static_cast<std::size_t>(s.tiles_x)});
+      });
+
+  m.def(
+      "render_frame",
+      [](const Scene& scene, nb::ndarray<const float, nb::shape<4, 3>, nb::c_contig, nb::device::cpu> frame,
+         float vfov, int width, int height, const RenderSettings& settings, int threads,
+         const MultirateState* previous, std::uint32_t cache_size, std::uint32_t cache_line, std::uint32_t cache_ways) {
+        const Camera cam = make_camera(frame, vfov, width, height);
+        const CacheConfig cc{cache_size, cache_line, cache_ways};
+        RenderOutput out;
+        {
+          nb::gil_scoped_release release;
+          out = render_frame(scene, cam, settings, threads, previous, cc);
+        }
+        return output_to_dict(out);
+      },
+      "scene"_a, "frame"_a, "vfov"_a, "width"_a, "height"_a, "settings"_a, "threads"_a, "previous"_a.none(),
+      "cache_size"_a, "cache_line"_a, "cache_ways"_a,
+      "Renders one frame. frame rows: position, right, up, forward (unit) of the camera.");
+
+  m.def(
+      "render_stereo",
+      [](const Scene& scene, nb::ndarray<const float, nb::shape<4, 3>, nb::c_contig, nb::device::cpu> left,
+         nb::ndarray<const float, nb::shape<4, 3>, nb::c_contig, nb::device::cpu> right, float vfov, int width,
+         int height, const RenderSettings& settings, int threads, const MultirateState* previous,
+         std::uint32_t cache_size, std::uint32_t cache_line, std::uint32_t cache_ways) {
+        const Camera cl = make_camera(left, vfov, width, height);
+        const Camera cr = make_camera(right, vfov, width, height);
+        const CacheConfig cc{cache_size, cache_line, cache_ways};
+        StereoOutput out;
+        {
+          nb::gil_scoped_release release;
+          out = render_stereo(scene, cl, cr, settings, threads, previous, cc);
+        }
+        nb::dict d;
+        d["left"] = output_to_dict(out.left);
+        d["right"] = output_to_dict(out.right);
+        d["reuse_ratio"] = out.reuse_ratio;
+        d["holes"] = out.holes;
+        d["depth_mismatches"] = out.depth_mismatches;
+        return d;
+      },
+      "scene"_a, "left"_a, "right"_a, "vfov"_a, "width"_a, "height"_a, "settings"_a, "threads"_a,
+      "previous"_a.none(), "cache_size"_a, "cache_line"_a, "cache_ways"_a,
+      "Renders the left eye, reprojects it into the right eye and traces only the bad pixels.");
+}
+
+}  // namespace sim_core
