@@ -6,6 +6,11 @@ fixed display transform before SSIM: linear RGB clamped to [0, 1], then the sRGB
 error is measured on what a display shows, and highlights above 1 do not dominate). A render smaller
 than the reference (resolution scale) is upsampled bilinearly to the reference size first.
 
+Evaluations run at a small resolution, but the power a store predicts is for the path's real
+resolution: static power stays, dynamic energy and frame time are scaled by the pixel-count ratio
+(``target_pixels``; the energy model's dynamic energy grows linearly with pixels, see its tests). At a
+few hundred pixels the static power would otherwise hide every difference between settings.
+
 :class:`Evaluator` is the driver side: it answers batches of (camera, settings) from the persistent
 cache and sends only the misses, as one batch, to an executor; workers keep their scene and each
 camera's reference image, so a reference is rendered once per worker and camera.
@@ -112,13 +117,16 @@ class SceneHandle:
     """A scene that can travel to worker processes: its content hash plus the file it was loaded from.
 
     In the process that made it the handle holds the loaded scene; pickled, it carries the path (and
-    the file bytes when ``ship_bytes``, for workers without a shared file system) and loads the scene
-    once per worker process."""
+    the file bytes when ``ship_bytes``, for workers without a shared file system), or a picklable
+    ``loader`` callable that rebuilds the scene, and loads the scene once per worker process."""
 
     def __init__(self, scene: Any = None, path: str | Path | None = None, *,
-                 ship_bytes: bool = False) -> None:
+                 ship_bytes: bool = False, loader: Any = None) -> None:
+        if scene is None and path is None and loader is None:
+            raise ValueError("a scene handle needs a scene, a path or a loader")
+        self.loader = loader
         if scene is None and path is None:
-            raise ValueError("a scene handle needs a scene or a path")
+            scene = loader()
         if path is None and scene is not None:
             src = str(getattr(scene, "source", "") or "")
             path = src if src and Path(src).is_file() else None  # loaded from a file: workers reload it
@@ -135,21 +143,28 @@ class SceneHandle:
             with _LOCK:
                 s = _SCENES.get(self.content_hash)
                 if s is None:
-                    if self.path is None:
-                        raise RuntimeError("this scene has no file to load it from in a worker process")
-                    s = _load_scene(self.path, self._data)
+                    if self.path is not None:
+                        s = _load_scene(self.path, self._data)
+                    elif self.loader is not None:
+                        s = self.loader()
+                    else:
+                        raise RuntimeError("this scene has no file or loader for a worker process")
+                    if str(s.content_hash) != self.content_hash:
+                        raise RuntimeError("the worker loaded a different scene (content hash differs)")
                     _SCENES[self.content_hash] = s
             self._scene = s
         return self._scene
 
     def __getstate__(self) -> dict[str, Any]:
-        if self.path is None:
-            raise RuntimeError("a scene without a source file can only be evaluated in-process")
-        return {"path": self.path, "data": self._data, "content_hash": self.content_hash}
+        if self.path is None and self.loader is None:
+            raise RuntimeError("a scene without a source file or loader can only be evaluated in-process")
+        return {"path": self.path, "data": self._data, "content_hash": self.content_hash,
+                "loader": self.loader}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.path = state["path"]
         self._data = state["data"]
+        self.loader = state["loader"]
         self.content_hash = state["content_hash"]
         self._scene = _SCENES.get(self.content_hash)
 
@@ -221,13 +236,19 @@ def _error(metric: str, reference: np.ndarray, image: np.ndarray) -> float:
     return float(min(max(e, 0.0), 1.0))
 
 
-def _price(result: Any, profile: str, fps: float) -> tuple[float, float, dict[str, float]]:
+def _price(result: Any, profile: str, fps: float, pixel_ratio: float = 1.0
+           ) -> tuple[float, float, dict[str, float]]:
+    """Power (W) and frame time at ``pixel_ratio`` times the rendered pixel count, and the breakdown
+    (energy per block at the rendered size)."""
     import sim_core
 
     rep = sim_core.price(result, _profile(profile), fps)
+    dynamic = float(rep.dynamic_energy_j)
+    static_w = float(rep.power_w) - dynamic * fps
     breakdown = {f"energy_j.{k}": float(v) for k, v in dict(rep.energy_j).items()}
     breakdown["rays_total"] = float(getattr(rep, "rays_total", 0))
-    return float(rep.power_w), float(rep.frame_time_s), breakdown
+    breakdown["pixel_ratio"] = float(pixel_ratio)
+    return static_w + dynamic * pixel_ratio * fps, float(rep.frame_time_s) * pixel_ratio, breakdown
 
 
 def _reference(scene: Any, scene_hash: str, camera: CameraSpec, space: ParameterSpace,
@@ -249,8 +270,9 @@ def _reference(scene: Any, scene_hash: str, camera: CameraSpec, space: Parameter
 
 def evaluate(scene: Any, camera: CameraSpec, indices: Sequence[int], space: ParameterSpace, *,
              profile: str = "mobile", fps: float = 30.0, metric: str = "ssim", threads: int | None = None,
-             reference: np.ndarray | None = None) -> Evaluation:
-    """Render ``indices`` at ``camera``, compare with the max-quality reference, price the frame."""
+             reference: np.ndarray | None = None, target_pixels: int | None = None) -> Evaluation:
+    """Render ``indices`` at ``camera``, compare with the max-quality reference, price the frame
+    (power and frame time for ``target_pixels`` pixels when given, else for the camera's own)."""
     if isinstance(scene, SceneHandle):
         handle_hash, scene = scene.content_hash, scene.get()
     else:
@@ -263,7 +285,8 @@ def evaluate(scene: Any, camera: CameraSpec, indices: Sequence[int], space: Para
         reference = _reference(scene, handle_hash, camera, space, threads)
     result = _render(scene, camera, space.to_settings(idx), threads)
     err = 0.0 if idx == space.max_quality_indices() else _error(metric, reference, _image(result))
-    power, frame_time, breakdown = _price(result, profile, fps)
+    ratio = 1.0 if target_pixels is None else float(target_pixels) / (camera.width * camera.height)
+    power, frame_time, breakdown = _price(result, profile, fps, ratio)
     return Evaluation(err, power, frame_time, breakdown)
 
 
@@ -277,12 +300,13 @@ class EvalContext:
     fps: float
     metric: str
     threads: int | None
+    target_pixels: int | None = None
 
 
 def _eval_task(ctx: EvalContext, item: tuple[CameraSpec, Indices]) -> Evaluation:
     camera, idx = item
     return evaluate(ctx.scene, camera, idx, ctx.space, profile=ctx.profile, fps=ctx.fps, metric=ctx.metric,
-                    threads=ctx.threads)
+                    threads=ctx.threads, target_pixels=ctx.target_pixels)
 
 
 def space_fingerprint(space: ParameterSpace) -> str:
@@ -296,7 +320,7 @@ class Evaluator:
 
     def __init__(self, scene: SceneHandle | Any, space: ParameterSpace, *, cache: EvalCache,
                  executor: Executor | None = None, profile: str = "mobile", fps: float = 30.0,
-                 metric: str = "ssim", threads: int | None = None) -> None:
+                 metric: str = "ssim", threads: int | None = None, target_pixels: int | None = None) -> None:
         if metric not in METRICS:
             raise ValueError(f"unknown metric {metric!r} (choose from {METRICS})")
         if not (math.isfinite(fps) and fps > 0):
@@ -305,8 +329,11 @@ class Evaluator:
         self.space = space
         self.cache = cache
         self.executor = executor or InProcessExecutor()
-        self.ctx = EvalContext(self.scene, space, profile, float(fps), metric, threads)
-        self.metric_key = f"{metric}:{PIPELINE_VERSION}:{space_fingerprint(space)}"
+        if target_pixels is not None and target_pixels < 1:
+            raise ValueError("target_pixels must be positive")
+        self.ctx = EvalContext(self.scene, space, profile, float(fps), metric, threads, target_pixels)
+        px = "own" if target_pixels is None else str(int(target_pixels))
+        self.metric_key = f"{metric}:{PIPELINE_VERSION}:{space_fingerprint(space)}:px={px}"
         self.evaluations = 0  # renders actually done
         self.cache_hits = 0
         self.render_time_s = 0.0

@@ -33,7 +33,9 @@ class OptimizeOptions:
 
     ``eval_width``/``eval_height`` set the evaluation resolution; a missing width follows the path's
     aspect. ``margin`` widens nodes (as a fraction of their side) when testing whether the path passes
-    through them. ``skip_inert`` asks the simulator which parameters cannot matter for the scene."""
+    through them. ``skip_inert`` asks the simulator which parameters cannot matter for the scene.
+    ``power_at_path_resolution`` predicts power for the path's resolution (dynamic energy scaled by the
+    pixel ratio) rather than for the small evaluation images."""
 
     threshold_power_w: float = 0.05
     threshold_error: float = 0.01
@@ -52,6 +54,7 @@ class OptimizeOptions:
     metric: str = "ssim"
     threads: int | None = None
     skip_inert: bool = True
+    power_at_path_resolution: bool = True
 
     def __post_init__(self) -> None:
         for name in ("threshold_power_w", "threshold_error", "fps"):
@@ -72,11 +75,22 @@ class OptimizeOptions:
             raise ValueError("margin and pad_fraction must be >= 0, min_size > 0")
 
 
-def resolve_space(scene: Any, space: ParameterSpace, path: CameraPath) -> ParameterSpace:
-    """Fix the parameters the simulator reports inert for this scene (verified by rendering there)."""
+def resolve_space(scene: Any, space: ParameterSpace, path: CameraPath, threads: int | None = None
+                  ) -> ParameterSpace:
+    """Fix the parameters the simulator reports inert for this scene (verified by rendering there).
+
+    The renders start from the space's maximum, its minimum and a middle setting, so settings that only
+    adaptive modes read (similarity threshold, multi-rate) are tried where they can matter; the camera
+    is the path's first frame."""
     import sim_core
 
-    inert = sim_core.inert_parameters(scene, space.as_render_space())
+    mq = space.max_quality_indices()
+    low = tuple(0 for _ in space.parameters)
+    mid = tuple(len(p.values) // 2 for p in space.parameters)
+    bases = [space.to_settings(x) for x in (mq, low, mid)]
+    f = path.frames[0]
+    cam = sim_core.Camera.from_blender(f.matrix_world, f.vfov, 48, max(8, round(48 / f.aspect)))
+    inert = sim_core.inert_parameters(scene, space.as_render_space(), cam, bases=bases, threads=threads)
     return space.fix_inert({str(k): str(v) for k, v in dict(inert).items()})
 
 
@@ -91,14 +105,16 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, options: 
     t0 = time.perf_counter()
     handle = scene if isinstance(scene, SceneHandle) else SceneHandle(scene)
     if options.skip_inert:
-        space = resolve_space(handle.get(), space, path)
+        space = resolve_space(handle.get(), space, path, options.threads)
     frames = path.frames
     vfov = float(np.median([f.vfov for f in frames]))
     aspect = float(np.median([f.aspect for f in frames]))
     height = int(options.eval_height)
     width = int(options.eval_width) if options.eval_width is not None else max(8, round(height * aspect))
+    target_pixels = int(np.median([f.resolution[0] * f.resolution[1] for f in frames]))
     evaluator = Evaluator(handle, space, cache=cache, executor=executor, profile=options.profile,
-                          fps=options.fps, metric=options.metric, threads=options.threads)
+                          fps=options.fps, metric=options.metric, threads=options.threads,
+                          target_pixels=target_pixels if options.power_at_path_resolution else None)
     cfg = OctreeConfig(
         threshold_power_w=options.threshold_power_w, threshold_error=options.threshold_error,
         max_depth=options.max_depth, margin=options.margin, pad_fraction=options.pad_fraction,
@@ -112,6 +128,7 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, options: 
         "thresholds": {"power_w": options.threshold_power_w, "error": options.threshold_error},
         "max_depth": options.max_depth,
         "eval_resolution": [width, height],
+        "power_pixels": target_pixels if options.power_at_path_resolution else width * height,
         "metric": options.metric,
         "seed": options.seed,
         "population": options.population,
