@@ -7,7 +7,6 @@ never from Blender's random operators. Generators import this module, so changin
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -382,21 +381,10 @@ def camera_clearance(cam: bpy.types.Object, every: int = 10) -> tuple[float, lis
 
 
 def write_camera_path(doc: dict, path: Path) -> None:
-    """Write the path JSON through service.camera_path when it is available (it validates), else plainly
-    in the same format."""
-    try:
-        from service import camera_path as cp  # owned by the service; optional at build time
-    except ImportError:
-        cp = None
-    if cp is not None and hasattr(cp, "CameraPath") and hasattr(cp.CameraPath, "from_dict"):
-        path_obj = cp.CameraPath.from_dict(doc)
-        if hasattr(cp, "write_camera_path"):
-            cp.write_camera_path(path_obj, path)
-            return
-        if hasattr(path_obj, "save"):
-            path_obj.save(path)
-            return
-    path.write_text(json.dumps(doc, separators=(",", ":")))
+    """Validate and write the path JSON through the service's own reader/writer (service.camera_path)."""
+    from service.camera_path import CameraPath
+
+    CameraPath.from_dict(doc).save(path)
 
 
 def export_glb(path: Path) -> None:

@@ -59,7 +59,7 @@ def build(out_dir: Path) -> c.SceneSpec:
 
     # Late-afternoon sun low through the door, a dim lamp inside, a bright sky outside.
     c.sun_light("Sun", (-1.0, 0.15, -0.35), strength=6.0, color=(1.0, 0.9, 0.75), angle_deg=1.0)
-    c.point_light("Lantern", (-6.5, 0.0, 4.5), watts=150.0, color=(1.0, 0.7, 0.4), radius=0.15)
+    c.point_light("Lantern", (-6.5, 0.0, 4.5), watts=400.0, color=(1.0, 0.7, 0.4), radius=0.15)
     c.world_color((0.5, 0.62, 0.8))
 
     path_eye = c.smooth_path([(6.5, 1.5, 1.7), (3.5, -1.0, 1.6), (1.5, -1.4, 1.4), (-1.5, -1.3, 1.5),

@@ -1,5 +1,5 @@
-"""Lab: thick-walled glassware (beakers, Erlenmeyer and round flasks, test tubes) with coloured liquids on
-a bench, several lights: refraction-heavy, a few hundred thousand triangles (seed: glass test scenes)."""
+"""Lab: glassware (beakers, Erlenmeyer and round flasks, test tubes) with coloured liquids on a bench,
+several lights: refraction-heavy, a few hundred thousand triangles (seed: glass test scenes)."""
 
 from __future__ import annotations
 
@@ -23,23 +23,35 @@ def _resample(points: list[tuple[float, float]], n: int) -> list[tuple[float, fl
     return [(float(np.interp(x, s, p[:, 0])), float(np.interp(x, s, p[:, 1]))) for x in u]
 
 
-def _shell(outer: list[tuple[float, float]], wall: float, n: int) -> list[tuple[float, float]]:
-    """Closed profile of a glass vessel: the outer surface from the axis to the rim, then the inner surface
-    (offset by the wall) back down to the axis; the lathe turns it into a solid with thickness."""
+def _solid(outer: list[tuple[float, float]], n: int) -> list[tuple[float, float]]:
+    """Closed profile of a solid body: the outer surface from the axis up to the rim, then back to the axis.
+    Glassware is modelled solid (two interfaces per object) so that a Whitted tracer with a depth of 2-4
+    sees through it; a hollow thick-walled vessel needs six or more refraction bounces and renders black."""
     out = _resample(outer, n)
-    top = out[-1][1]
-    inner = [(max(r - wall, 0.0), min(max(z, wall), top)) for r, z in out]
-    return out + inner[::-1]
+    return [*out, (0.0, out[-1][1])]
+
+
+def _split(outer: list[tuple[float, float]], level: float, n: int, gap: float = 0.001
+           ) -> tuple[list[tuple[float, float]], list[tuple[float, float]]]:
+    """Cut a body at `level`: the liquid below and the glass above as two closed solids, a hair apart
+    (no coincident faces)."""
+    out = np.asarray(_resample(outer, n))
+    r_at = float(np.interp(level, out[:, 1], out[:, 0]))  # profiles rise monotonically until the rim
+    below = [(float(r), float(z)) for r, z in out if z < level - gap / 2]
+    above = [(float(r), float(z)) for r, z in out if z > level + gap / 2]
+    lower = [*below, (r_at, level - gap / 2), (0.0, level - gap / 2)]
+    upper = [(0.0, level + gap / 2), (r_at, level + gap / 2), *above, (0.0, out[-1, 1])]
+    return lower, upper
 
 
 def beaker(radius: float, height: float) -> list[tuple[float, float]]:
-    return _shell([(0.0, 0.0), (radius, 0.0), (radius, height), (radius * 1.06, height + 0.004)], 0.003, 40)
+    return [(0.0, 0.0), (radius, 0.0), (radius, height), (radius * 1.06, height + 0.004)]
 
 
 def erlenmeyer(radius: float, height: float) -> list[tuple[float, float]]:
     neck = radius * 0.3
-    return _shell([(0.0, 0.0), (radius, 0.0), (radius, 0.01), (neck, height * 0.7), (neck, height),
-                   (neck * 1.15, height + 0.004)], 0.003, 50)
+    return [(0.0, 0.0), (radius, 0.0), (radius, 0.01), (neck, height * 0.7), (neck, height),
+            (neck * 1.15, height + 0.004)]
 
 
 def round_flask(radius: float, neck_len: float) -> list[tuple[float, float]]:
@@ -48,19 +60,12 @@ def round_flask(radius: float, neck_len: float) -> list[tuple[float, float]]:
     angles = np.linspace(-math.pi / 2, math.pi / 2 - top_angle, 40)
     sphere = [(radius * math.cos(a), radius + radius * math.sin(a)) for a in angles]
     z0 = sphere[-1][1]
-    return _shell([*sphere, (neck, z0 + neck_len), (neck * 1.15, z0 + neck_len + 0.004)], 0.003, 60)
+    return [*sphere, (neck, z0 + neck_len), (neck * 1.15, z0 + neck_len + 0.004)]
 
 
 def tube(radius: float, height: float) -> list[tuple[float, float]]:
     angles = np.linspace(-math.pi / 2, 0.0, 10)
-    cap = [(radius * math.cos(a), radius + radius * math.sin(a)) for a in angles]
-    return _shell([*cap, (radius, height)], 0.0015, 30)
-
-
-def liquid(profile_radius: float, level: float, bottom: float = 0.003) -> list[tuple[float, float]]:
-    """A solid of liquid filling a straight vessel up to `level`."""
-    r = profile_radius
-    return _resample([(0.0, bottom), (r, bottom), (r, level), (0.0, level)], 24)
+    return [*((radius * math.cos(a), radius + radius * math.sin(a)) for a in angles), (radius, height)]
 
 
 def build(out_dir: Path) -> c.SceneSpec:
@@ -88,30 +93,34 @@ def build(out_dir: Path) -> c.SceneSpec:
     c.box("LightPanel", (1.2, 0.4, 0.02), (0.0, 0.8, 2.9), panel)
     c.box("Rack", (0.5, 0.08, 0.12), (1.2, 0.7, 1.01), steel)
 
-    # Glassware: one mesh per kind, shared by its instances (instancing), liquids inside.
-    beaker_mesh = c.lathe("Beaker", beaker(0.045, 0.12), glass, STEPS)
-    erl_mesh = c.lathe("Erlenmeyer", erlenmeyer(0.06, 0.17), glass, STEPS)
-    flask_mesh = c.lathe("RoundFlask", round_flask(0.06, 0.12), glass, STEPS)
-    tube_mesh = c.lathe("TestTube", tube(0.008, 0.15), glass, 48)
-    beaker_fill = [c.lathe(f"BeakerLiquid{i}", liquid(0.0415, 0.07), m, STEPS) for i, m in enumerate(liquids)]
-    tube_fill = [c.lathe(f"TubeLiquid{i}", liquid(0.0062, 0.09, 0.002), m, 48) for i, m in enumerate(liquids)]
+    # Glassware: one mesh per (kind, liquid), shared by its instances (instancing).
+    def filled(name: str, outer: list[tuple[float, float]], level: float, n: int, steps: int) -> list:
+        lower, upper = _split(outer, level, n)
+        glass_part = c.lathe(f"{name}Glass", upper, glass, steps)
+        return [(glass_part, c.lathe(f"{name}Liquid{i}", lower, m, steps)) for i, m in enumerate(liquids)]
+
+    beakers = filled("Beaker", beaker(0.045, 0.12), 0.07, 60, STEPS)
+    erlenmeyers = filled("Erlenmeyer", erlenmeyer(0.06, 0.17), 0.06, 70, STEPS)
+    tubes = filled("TestTube", tube(0.008, 0.15), 0.09, 40, 48)
+    flask_mesh = c.lathe("RoundFlask", _solid(round_flask(0.06, 0.12), 80), glass, STEPS)
     top = 0.95
     rng = np.random.default_rng(7)
+
+    def place(name: str, parts: tuple, location: tuple, rotation: tuple = (0.0, 0.0, 0.0)) -> None:
+        for part, suffix in zip(parts, ("", "Liquid"), strict=True):
+            c.add_object(f"{name}{suffix}", part, location, rotation)
+
     for i in range(8):
-        x, y = -1.7 + i * 0.22, 0.75 + 0.12 * (i % 2)
-        c.add_object(f"Beaker{i}", beaker_mesh, (x, y, top))
-        c.add_object(f"BeakerLiquid{i}", beaker_fill[i % 3], (x, y, top))
+        place(f"Beaker{i}", beakers[i % 3], (-1.7 + i * 0.22, 0.75 + 0.12 * (i % 2), top))
     for i in range(7):
-        c.add_object(f"Erlenmeyer{i}", erl_mesh, (-0.05 + i * 0.2, 0.6 + 0.1 * (i % 2), top))
+        place(f"Erlenmeyer{i}", erlenmeyers[(i + 1) % 3], (-0.05 + i * 0.2, 0.6 + 0.1 * (i % 2), top))
     for i in range(5):
         c.add_object(f"RoundFlask{i}", flask_mesh, (-1.6 + i * 0.36, 1.35, 1.615))
     for i in range(24):
-        x, y = 0.99 + (i % 12) * 0.038, 0.68 + 0.04 * (i // 12)
         tilt = (float(rng.normal(0, 0.02)), 0.0, 0.0)
-        c.add_object(f"TestTube{i}", tube_mesh, (x, y, top + 0.01), tilt)
-        c.add_object(f"TubeLiquid{i}", tube_fill[i % 3], (x, y, top + 0.01), tilt)
+        at = (0.99 + (i % 12) * 0.038, 0.68 + 0.04 * (i // 12), top + 0.01)
+        place(f"TestTube{i}", tubes[i % 3], at, tilt)
 
-    # Watts chosen so lit diffuse surfaces land near radiance 1 in the linear image.
     c.point_light("CeilingA", (-1.5, 0.0, 2.8), watts=120.0, radius=0.2)
     c.point_light("CeilingB", (1.5, 0.0, 2.8), watts=120.0, radius=0.2)
     c.point_light("Fill", (0.0, -2.5, 1.8), watts=80.0, color=(0.85, 0.9, 1.0), radius=0.3)
@@ -124,5 +133,5 @@ def build(out_dir: Path) -> c.SceneSpec:
     path_target = c.smooth_path([(-1.4, 0.8, 1.0), (-0.4, 0.7, 1.0), (0.5, 0.7, 1.05), (1.2, 0.7, 1.02),
                                  (0.6, 1.1, 1.3), (-0.8, 1.2, 1.4)], DURATION_S)
     cam = c.animated_camera(path_eye, path_target, DURATION_S, lens_mm=35.0)
-    return c.SceneSpec("lab", "Lab bench glassware with liquids (refraction), 4 lights and a light panel",
+    return c.SceneSpec("lab", "Lab bench: solid glassware and liquids (refraction), 4 lights, a light panel",
                        cam, DURATION_S)
