@@ -3,6 +3,7 @@ each compared with an uninterrupted in-process run of the same request."""
 
 from __future__ import annotations
 
+import json
 import sqlite3
 import time
 from pathlib import Path
@@ -23,13 +24,32 @@ def cached_evaluations(data_dir: Path) -> int:
     path = data_dir / "eval_cache.sqlite3"
     if not path.exists():
         return 0
-    with sqlite3.connect(path) as db:
+    db = sqlite3.connect(f"file:{path}?mode=ro", uri=True, timeout=30)
+    try:
         return int(db.execute("SELECT COUNT(*) FROM evaluations").fetchone()[0])
+    except sqlite3.OperationalError:  # created but its table not yet
+        return 0
+    finally:
+        db.close()
 
 
 def job_state_on_disk(data_dir: Path, job_id: str) -> str:
-    with sqlite3.connect(data_dir / "service.sqlite3") as db:
+    db = sqlite3.connect(data_dir / "service.sqlite3", timeout=30)
+    try:
         return str(db.execute("SELECT state FROM jobs WHERE id = ?", (job_id,)).fetchone()[0])
+    finally:
+        db.close()
+
+
+RUN_STATISTICS = ("evaluations", "cache_hits", "elapsed_s", "executor")
+
+
+def comparable(store_json: str) -> dict[str, Any]:
+    """The store without the statistics of the run that made it (renders, hits, time, executor)."""
+    doc = json.loads(store_json)
+    for key in RUN_STATISTICS:
+        doc["meta"].pop(key)
+    return doc
 
 
 def durable_spec(scene_id: str) -> dict[str, Any]:
@@ -81,11 +101,11 @@ def test_sigkill_mid_job_resumes_without_redoing_work(tmp_path: Path) -> None:
         srv.stop()
 
     ref_job, ref_store, ref_evaluations = run_uninterrupted(ref_dir, durable_spec)
-    assert resumed_store == ref_store
-    assert final["store_id"] == ref_job["store_id"]
-    # Every evaluation is stored once: the resumed run rendered only what the first one had not.
+    assert comparable(resumed_store) == comparable(ref_store)
+    # The resumed attempt rendered exactly what the killed one had not committed.
+    assert 0 < done_before < ref_evaluations
+    assert final["progress"]["evaluations"] == ref_job["progress"]["evaluations"] - done_before
     assert cached_evaluations(crash_dir) == ref_evaluations
-    assert final["progress"]["cache_hits"] >= done_before
 
 
 @pytest.mark.slow
@@ -98,4 +118,5 @@ def test_dask_local_cluster_gives_the_in_process_store(tmp_path: Path) -> None:
         _, dask_store, _ = run_uninterrupted(tmp_path / "dask", tiny_job, dask_scheduler=address)
         with server_thread(Settings(data_dir=tmp_path / "dask", dask_scheduler=address)) as url:
             assert httpx.get(f"{url}/health").json()["executor"] == f"dask:{address}"
-    assert dask_store == local_store
+    assert comparable(dask_store) == comparable(local_store)
+    assert json.loads(dask_store)["meta"]["executor"] == "dask"
