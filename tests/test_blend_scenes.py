@@ -19,7 +19,7 @@ def teapot_build(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
     from blend_scenes.build import build
 
     out = tmp_path_factory.mktemp("scenes")
-    (stats,) = build(["teapot"], out)
+    stats, _chess = build(["teapot", "chess"], out)
     return out, stats
 
 
@@ -76,6 +76,56 @@ def test_teapot_camera_path(teapot_build: tuple[Path, dict]) -> None:
     cam = load_gltf(out / "teapot" / "scene.glb").cameras[0]
     assert np.allclose(cam.matrix_world, mats[0], atol=1e-5)
     assert cam.vfov == pytest.approx(frames[0]["vfov"], rel=1e-5)
+
+
+def test_teapot_loads_in_the_simulator_and_service(teapot_build: tuple[Path, dict]) -> None:
+    import sim_core
+    from service.camera_path import CameraPath
+
+    out, stats = teapot_build
+    scene = sim_core.Scene.from_gltf(out / "teapot" / "scene.glb")
+    assert scene.stats["triangles"] + scene.stats["degenerate_dropped"] == stats["triangles"]
+    assert len(scene.cameras) == 1
+    path = CameraPath.load(out / "teapot" / "path.json")
+    assert len(path) == stats["frames"] and path.fps == 30.0
+
+
+def test_build_is_deterministic(teapot_build: tuple[Path, dict], tmp_path: Path) -> None:
+    from blend_scenes.build import build
+
+    out, _ = teapot_build
+    build(["teapot"], tmp_path, force=True)
+    for name in ("scene.glb", "path.json"):
+        assert (tmp_path / "teapot" / name).read_bytes() == (out / "teapot" / name).read_bytes(), name
+
+
+def test_chess_glass_and_mirror_pieces_face_outwards(teapot_build: tuple[Path, dict]) -> None:
+    from sim_core.loaders import load_gltf
+
+    out, _ = teapot_build
+    stats = json.loads((out / "chess" / "stats.json").read_text())
+    assert {"refraction", "mirror_reflection", "instancing"} <= set(stats["effects"])
+    sd = load_gltf(out / "chess" / "scene.glb")
+    pieces = [i for i, n in enumerate(sd.object_names) if n.startswith(("white_", "black_"))]
+    assert len(pieces) == 32
+    kinds = {sd.materials[m].name for i in pieces for m in np.unique(sd.material_ids[sd.object_ids == i])}
+    assert kinds == {"Glass", "Mirror"}
+    p = sd.positions.astype(np.float64)
+    for i in pieces:
+        # Lathe solids must be closed and wound outwards (refraction decides inside/outside from it):
+        # the signed volume is positive, and the same as with every face flipped towards the outside.
+        t = sd.triangles[sd.object_ids == i]
+        a, b, c = p[t[:, 0]], p[t[:, 1]], p[t[:, 2]]
+        centre = p[np.unique(t)].mean(axis=0)
+        signed = np.einsum("ij,ij->i", a - centre, np.cross(b - centre, c - centre)).sum() / 6.0
+        assert signed > 0, sd.object_names[i]
+        # Closed: every edge is shared by exactly two triangles (after welding coincident vertices).
+        _, weld = np.unique(np.round(p[t.reshape(-1)], 6), axis=0, return_inverse=True)
+        tw = weld.reshape(-1, 3)
+        edges = np.sort(np.concatenate([tw[:, [0, 1]], tw[:, [1, 2]], tw[:, [2, 0]]]), axis=1)
+        edges = edges[edges[:, 0] != edges[:, 1]]
+        _, counts = np.unique(edges, axis=0, return_counts=True)
+        assert np.all(counts == 2), sd.object_names[i]
 
 
 def test_cache_skips_unchanged_scene(teapot_build: tuple[Path, dict], capsys: pytest.CaptureFixture) -> None:
