@@ -151,3 +151,18 @@ def test_unknown_scene_is_rejected(tmp_path: Path) -> None:
 
     with pytest.raises(ValueError, match="unknown scene"):
         build(["atlantis"], tmp_path)
+
+
+def test_valley_sky_puts_the_sun_where_the_sun_light_comes_from() -> None:
+    from blend_scenes.scenes.valley import SUN_DIRECTION, sky
+
+    img = sky(128, 256)
+    assert img.shape == (128, 256, 3) and img.dtype == np.float32 and np.all(np.isfinite(img))
+    # sim_core's (and Cycles') equirect convention: column = (0.5 - atan2(y, x) / 2 pi) * W,
+    # row = acos(z) / pi * H, row 0 at the zenith.
+    to_sun = -SUN_DIRECTION / np.linalg.norm(SUN_DIRECTION)
+    col = (0.5 - math.atan2(to_sun[1], to_sun[0]) / (2 * math.pi)) * 256
+    row = math.acos(to_sun[2]) / math.pi * 128
+    r, c = np.unravel_index(np.argmax(img.sum(axis=2)), img.shape[:2])
+    assert abs(r + 0.5 - row) <= 1.5 and abs(c + 0.5 - col) <= 1.5
+    assert img[0].mean() < img[60].mean()  # deeper blue at the zenith than near the horizon

@@ -181,6 +181,23 @@ def test_gltf_json_with_data_uri(tmp_path: Path) -> None:
     assert np.allclose(sd.positions, _to_blender(TRI + np.array([0.0, 5.0, 0.0])))
 
 
+def test_environment_extras_exr(tmp_path: Path) -> None:
+    import OpenEXR
+
+    sky = np.random.default_rng(0).random((8, 16, 3)).astype(np.float32)
+    with OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage},
+                      {"RGB": sky}) as f:
+        f.write(str(tmp_path / "sky.exr"))
+    b = _Builder()
+    _one_triangle(b)
+    b.gltf["scenes"][0]["extras"] = {"render_budget_environment": "sky.exr"}
+    sd = load_gltf(b.glb(tmp_path / "env.glb"))
+    assert isinstance(sd.environment, np.ndarray) and np.array_equal(sd.environment, sky)
+    b.gltf["scenes"][0]["extras"] = {"render_budget_environment": "missing.exr"}
+    with pytest.raises(FileNotFoundError, match=r"missing\.exr"):
+        load_gltf(b.glb(tmp_path / "env2.glb"))
+
+
 # ----------------------------------- bad inputs ----------------------------------------------------
 
 
