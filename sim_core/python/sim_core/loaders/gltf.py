@@ -512,8 +512,15 @@ def load_gltf(path: str | os.PathLike[str]) -> SceneData:
         object_id = len(object_names)
         object_names.append(name)
         m3 = world_b[:3, :3]
-        normal_matrix = np.linalg.inv(m3).T if abs(np.linalg.det(m3)) > 1e-300 else m3
-        mirrored = np.linalg.det(m3) < 0.0
+        # Inverse transpose up to a positive scale (normals are renormalised): the cofactor matrix times
+        # the determinant's sign. Closed form; np.linalg.inv costs milliseconds per call on small matrices.
+        c0, c1, c2 = m3[:, 0], m3[:, 1], m3[:, 2]
+        cof = np.stack([np.cross(c1, c2), np.cross(c2, c0), np.cross(c0, c1)], axis=1)
+        det = float(np.dot(c0, cof[:, 0]))
+        if det == 0.0:
+            raise ValueError(f"{doc.path}: node {name!r} has a singular transform (zero scale)")
+        normal_matrix = cof * math.copysign(1.0, det)
+        mirrored = det < 0.0
         for pi, prim in enumerate(meshes[mi].get("primitives", [])):
             what = f"{doc.path}: mesh {mi} ({meshes[mi].get('name', '')!r}) primitive {pi}"
             attrs = prim.get("attributes", {})
