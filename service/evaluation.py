@@ -100,17 +100,28 @@ class CameraSpec:
             raise ValueError("evaluation images need at least 8x8 pixels")
         object.__setattr__(self, "width", int(self.width))
         object.__setattr__(self, "height", int(self.height))
+        f = ",".join(f"{c:.6f}" for c in (*self.eye, *self.forward, *self.up, self.vfov))
+        object.__setattr__(self, "_key", f"{f}|{self.width}x{self.height}")
 
     def key(self) -> str:
         """Stable text key (values rounded to 1e-6) used by caches."""
-        f = ",".join(f"{c:.6f}" for c in (*self.eye, *self.forward, *self.up, self.vfov))
-        return f"{f}|{self.width}x{self.height}"
+        return self._key  # type: ignore[attr-defined,no-any-return]
 
     def to_camera(self) -> Any:
-        import sim_core
+        """The tracer's camera (built once per process and key)."""
+        cam = _CAMERAS.get(self._key)  # type: ignore[attr-defined]
+        if cam is None:
+            import sim_core
 
-        target = tuple(e + f for e, f in zip(self.eye, self.forward, strict=True))
-        return sim_core.Camera.look_at(self.eye, target, self.up, self.vfov, self.width, self.height)
+            target = tuple(e + f for e, f in zip(self.eye, self.forward, strict=True))
+            cam = sim_core.Camera.look_at(self.eye, target, self.up, self.vfov, self.width, self.height)
+            if len(_CAMERAS) > 4096:
+                _CAMERAS.clear()
+            _CAMERAS[self._key] = cam  # type: ignore[attr-defined]
+        return cam
+
+
+_CAMERAS: dict[str, Any] = {}
 
 
 class SceneHandle:
@@ -305,8 +316,11 @@ class EvalContext:
 
 def _eval_task(ctx: EvalContext, item: tuple[CameraSpec, Indices]) -> Evaluation:
     camera, idx = item
+    threads = ctx.threads
+    if threads is None and camera.width * camera.height <= 64 * 64:
+        threads = 1  # tiny images: spinning up the tracer's thread pool costs more than it saves
     return evaluate(ctx.scene, camera, idx, ctx.space, profile=ctx.profile, fps=ctx.fps, metric=ctx.metric,
-                    threads=ctx.threads, target_pixels=ctx.target_pixels)
+                    threads=threads, target_pixels=ctx.target_pixels)
 
 
 def space_fingerprint(space: ParameterSpace) -> str:
@@ -345,17 +359,21 @@ class Evaluator:
     def evaluate(self, requests: Sequence[tuple[CameraSpec, Sequence[int]]]) -> list[Evaluation]:
         """Evaluations in request order; cached ones are not rendered again."""
         reqs = [(cam, tuple(int(i) for i in idx)) for cam, idx in requests]
+        packs = {}
+        for _, idx in reqs:
+            if idx not in packs:
+                packs[idx] = self.space.pack(idx)  # validates once per distinct setting
         by_cam: dict[str, tuple[CameraSpec, dict[int, Indices]]] = {}
         for cam, idx in reqs:
-            by_cam.setdefault(cam.key(), (cam, {}))[1][self.space.pack(idx)] = idx
+            by_cam.setdefault(cam.key(), (cam, {}))[1][packs[idx]] = idx
         found: dict[tuple[str, int], Evaluation] = {}
         todo: list[tuple[CameraSpec, Indices]] = []
-        for ck, (cam, packs) in by_cam.items():
-            hit = self.cache.get_many(self._key(cam), list(packs))
+        for ck, (cam, cam_packs) in by_cam.items():
+            hit = self.cache.get_many(self._key(cam), list(cam_packs))
             self.cache_hits += len(hit)
             for p, ev in hit.items():
                 found[(ck, p)] = ev
-            todo.extend((cam, packs[p]) for p in packs if p not in hit)
+            todo.extend((cam, cam_packs[p]) for p in cam_packs if p not in hit)
         if todo:
             t0 = time.perf_counter()
             results = self.executor.map(_eval_task, self.ctx, todo)
@@ -363,9 +381,9 @@ class Evaluator:
             self.evaluations += len(todo)
             grouped: dict[str, list[tuple[int, Evaluation]]] = {}
             for (cam, idx), ev in zip(todo, results, strict=True):
-                p = self.space.pack(idx)
+                p = packs[idx]
                 found[(cam.key(), p)] = ev
                 grouped.setdefault(cam.key(), []).append((p, ev))
             for ck, items in grouped.items():
                 self.cache.put_many(self._key(by_cam[ck][0]), items)
-        return [found[(cam.key(), self.space.pack(idx))] for cam, idx in reqs]
+        return [found[(cam.key(), packs[idx])] for cam, idx in reqs]

@@ -3,7 +3,8 @@
 The root is the path's bounding box, padded and made cubic. Every corner carries a view cube of six
 axis views; a camera sample is (corner, view), rendered with the path camera's vertical field of view
 and aspect at the evaluation resolution. Each root corner view gets a Pareto frontier from NSGA-II (or
-exhaustive enumeration when the space is small).
+exhaustive enumeration when the space is small); every search starts from both ends of the space (the
+maximum-quality setting, error 0 by definition, and the cheapest one) plus its warm start.
 
 A node is subdivided when, for some view, two corners joined by one of its edges have frontiers that
 differ by more than ``tau_e`` in error or ``tau_p`` in power (Eq. 4-7, :func:`frontier_distance`), as
@@ -232,7 +233,10 @@ class OctreeBuilder:
                 cfg = NSGAConfig(self.cfg.nsga.population, self.cfg.nsga.generations,
                                  self.cfg.nsga.crossover_prob, self.cfg.nsga.mutation_prob,
                                  _camera_seed(self.cfg.nsga.seed, cam))
-                init = list(dict.fromkeys(self.space.restrict(w) for w in warm))
+                # both ends of the space first (max quality anchors error 0, the cheapest the low-power
+                # end), then the warm start
+                ends = [self.space.max_quality_indices(), self.space.min_quality_indices()]
+                init = list(dict.fromkeys(self.space.restrict(w) for w in [*ends, *warm]))
                 algos.append(NSGA2(nv, cfg, init[: cfg.population]))
             while True:
                 self._check_cancel()

@@ -90,7 +90,10 @@ def resolve_space(scene: Any, space: ParameterSpace, path: CameraPath, threads: 
     bases = [space.to_settings(x) for x in (mq, low, mid)]
     f = path.frames[0]
     cam = sim_core.Camera.from_blender(f.matrix_world, f.vfov, 48, max(8, round(48 / f.aspect)))
-    inert = sim_core.inert_parameters(scene, space.as_render_space(), cam, bases=bases, threads=threads)
+    candidates = space.as_render_space(free_only=True)
+    if not candidates:
+        return space
+    inert = sim_core.inert_parameters(scene, candidates, cam, bases=bases, threads=threads)
     return space.fix_inert({str(k): str(v) for k, v in dict(inert).items()})
 
 

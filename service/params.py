@@ -111,6 +111,11 @@ class ParameterSpace:
     def max_quality_indices(self) -> Indices:
         return tuple(self.fixed.get(p.name, p.max_quality) for p in self.parameters)
 
+    def min_quality_indices(self) -> Indices:
+        """The other end of every free parameter (the cheapest setting when values are ordered)."""
+        return tuple(self.fixed.get(p.name, 0 if p.max_quality == len(p.values) - 1 else len(p.values) - 1)
+                     for p in self.parameters)
+
     def expand(self, free: Sequence[int]) -> Indices:
         """Full index vector from the free parameters' indices (fixed ones filled in)."""
         pos = self.free_positions
@@ -171,10 +176,12 @@ class ParameterSpace:
             raise ValueError(f"parameter fields {unknown} are not RenderSettings fields")
         return dataclasses.replace(base, **flds)
 
-    def as_render_space(self) -> dict[str, list[Any]]:
+    def as_render_space(self, free_only: bool = False) -> dict[str, list[Any]]:
         """RenderSettings field -> candidate values (what ``sim_core.inert_parameters`` takes)."""
         out: dict[str, list[Any]] = {}
         for p in self.parameters:
+            if free_only and p.name in self.fixed:
+                continue
             for f in p.fields:
                 for k, v in f.items():
                     vals = out.setdefault(k, [])

@@ -174,6 +174,15 @@ def test_hierarchy_matrix_and_mirror_flip_winding(tmp_path: Path) -> None:
     assert np.allclose(p[t[1]], _to_blender(TRI * [1, 1, -1] + [10, 0, 0])[[0, 2, 1]])  # winding flipped
 
 
+def test_zero_scale_node_gives_degenerate_triangles(tmp_path: Path) -> None:
+    b = _Builder()
+    _one_triangle(b, name="visible")
+    _one_triangle(b, name="hidden", scale=[0.0, 0.0, 0.0], translation=[1.0, 2.0, 3.0])
+    sd = load_gltf(b.glb(tmp_path / "z.glb"))
+    hidden = sd.positions[sd.triangles[sd.object_ids == 1][0]]
+    assert np.allclose(hidden, _to_blender(np.array([1.0, 2.0, 3.0])))  # collapsed onto its origin
+
+
 def test_gltf_json_with_data_uri(tmp_path: Path) -> None:
     b = _Builder()
     _one_triangle(b, translation=[0.0, 5.0, 0.0])

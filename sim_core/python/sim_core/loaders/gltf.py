@@ -517,8 +517,7 @@ def load_gltf(path: str | os.PathLike[str]) -> SceneData:
         c0, c1, c2 = m3[:, 0], m3[:, 1], m3[:, 2]
         cof = np.stack([np.cross(c1, c2), np.cross(c2, c0), np.cross(c0, c1)], axis=1)
         det = float(np.dot(c0, cof[:, 0]))
-        if det == 0.0:
-            raise ValueError(f"{doc.path}: node {name!r} has a singular transform (zero scale)")
+        # A zero scale (hidden object) makes every triangle degenerate: kept; the core drops and counts them.
         normal_matrix = cof * math.copysign(1.0, det)
         mirrored = det < 0.0
         for pi, prim in enumerate(meshes[mi].get("primitives", [])):

@@ -1,0 +1,171 @@
+"""Octree over the camera path on the real tracer: frontier distances, structure, determinism,
+cancellation and resume from the cache, lookups along the path, and the command line end to end."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from service import cli
+from service.camera_path import CameraPath
+from service.eval_cache import EvalCache
+from service.executors import InProcessExecutor
+from service.octree import CUBE_EDGES, Cancelled, densify, frontier_distance
+from service.optimize import OptimizeOptions, optimize_path
+from service.params import default_space
+from service.pareto_store import ParetoStore
+
+MODELS = Path(__file__).resolve().parent.parent / "assets" / "models"
+
+
+def test_frontier_distance_known_values() -> None:
+    target = np.array([[0.0, 1.0], [0.1, 0.5], [0.3, 0.2]])
+    # projected points sitting on the target: distance 0
+    assert frontier_distance(target, target, (1.0, 1.0)) == (0.0, 0.0)
+    proj = np.array([[0.02, 1.1], [0.32, 0.25]])
+    de, dp = frontier_distance(proj, target, (0.3, 0.8))
+    assert de == pytest.approx((0.02 + 0.02) / 2) and dp == pytest.approx((0.1 + 0.05) / 2)
+    # normalisation decides which point is nearest: error axis stretched -> nearest by error
+    p = np.array([[0.1, 0.9]])
+    assert frontier_distance(p, target, (0.01, 10.0)) == pytest.approx((0.0, 0.4))
+    assert frontier_distance(p, target, (10.0, 0.01)) == pytest.approx((0.1, 0.1))
+    with pytest.raises(ValueError):
+        frontier_distance(np.zeros((0, 2)), target, (1, 1))
+
+
+def test_cube_edges_and_densify() -> None:
+    assert len(CUBE_EDGES) == 12
+    for a, b in CUBE_EDGES:
+        assert bin(a ^ b).count("1") == 1
+    pts = densify(np.array([[0.0, 0, 0], [1.0, 0, 0], [1.0, 0, 0]]), 0.3)
+    assert np.allclose(pts[0], 0) and np.allclose(pts[-1], [1, 0, 0])
+    assert np.max(np.linalg.norm(np.diff(pts, axis=0), axis=1)) <= 0.3 + 1e-12
+
+
+def _path() -> CameraPath:
+    n = 8
+    pos = [(-3.0 + 6.0 * i / (n - 1), -8.0, 4.0) for i in range(n)]
+    dirs = [(-0.2 * p[0], 8.0, -3.0) for p in pos]
+    return CameraPath.from_positions(pos, dirs, vfov=0.7, resolution=(320, 240))
+
+
+def _options(**kw) -> OptimizeOptions:
+    base = dict(threshold_power_w=0.01, threshold_error=0.005, max_depth=1, population=6, generations=3,
+                exhaustive_limit=0, eval_width=16, eval_height=12, seed=3)
+    base.update(kw)
+    return OptimizeOptions(**base)
+
+
+SPACE = default_space().subset(["sampling", "max_depth", "resolution_scale"])
+
+
+def _run(scene, cache=None, **kw):
+    progress = []
+    store = optimize_path(scene, _path(), SPACE, _options(**kw), cache=cache or EvalCache(),
+                          executor=InProcessExecutor(), progress=progress.append)
+    return store, progress
+
+
+def _body(store: ParetoStore) -> dict:
+    d = store.to_dict()
+    d.pop("meta")
+    return d
+
+
+@pytest.fixture(scope="module")
+def scene():
+    from test_evaluation import teapot_scene
+
+    return teapot_scene()
+
+
+@pytest.fixture(scope="module")
+def reference_run(scene):
+    return _run(scene)
+
+
+@pytest.mark.slow
+def test_structure_and_lookups(reference_run) -> None:
+    store, progress = reference_run
+    st = store.stats()
+    # the path crosses the root: it is split once (max_depth 1) into 8 leaves with 27 corners
+    assert st["depth"] == 1 and st["leaves"] == 8 and st["corners"] == 27
+    assert 48 < store.meta["views_optimised"] < 27 * 6  # some new views inherited, some optimised
+    assert st["unique_frontiers"] == store.meta["views_optimised"]
+    assert st["size_bytes"] < 40_000
+    # progress: monotone, ends done with everything planned finished
+    done = [p.views_done for p in progress]
+    assert done == sorted(done) and progress[-1].phase == "done"
+    assert progress[-1].views_done == progress[-1].views_planned == store.meta["views_optimised"]
+    assert progress[-1].evaluations == store.meta["evaluations"] > 0
+    path = _path()
+    for f in path.frames:
+        r = store.lookup(f.position, direction=f.direction, power_budget=10.0)
+        assert not r.clamped and not r.infeasible
+        assert r.settings["sampling"] in SPACE.parameters[0].values
+        fr = store.frontier(r.corner, r.view)
+        assert r.error == pytest.approx(float(fr.error.min()))
+    r = store.lookup([50.0, 0.0, 0.0], direction=[1, 0, 0], error_budget=0.0)
+    assert r.clamped
+    # every frontier is non-dominated and sorted
+    for fr in store.frontiers:
+        assert np.all(np.diff(fr.power_w) >= 0) and np.all(np.diff(fr.error) <= 0)
+    # the max-quality setting is never dominated in error: each frontier's least error is 0
+    assert all(float(fr.error.min()) == 0.0 for fr in store.frontiers)
+
+
+@pytest.mark.slow
+def test_same_seed_twice_identical_store(scene, reference_run) -> None:
+    again, _ = _run(scene)  # a fresh cache: everything rendered again
+    assert again.meta["cache_hits"] < again.meta["evaluations"]
+    assert _body(again) == _body(reference_run[0])
+
+
+@pytest.mark.slow
+def test_cancel_then_resume_from_cache(scene, reference_run, tmp_path) -> None:
+    calls = {"n": 0}
+
+    def cancel_midway() -> bool:
+        calls["n"] += 1
+        return calls["n"] > 12
+
+    cache_file = tmp_path / "cache.sqlite"
+    with EvalCache(cache_file) as cache, pytest.raises(Cancelled):
+        optimize_path(scene, _path(), SPACE, _options(), cache=cache, executor=InProcessExecutor(),
+                      should_cancel=cancel_midway)
+    with EvalCache(cache_file) as cache:
+        partial = len(cache)
+        assert partial > 0
+        store, _ = _run(scene, cache=cache)
+    assert _body(store) == _body(reference_run[0])
+    total = reference_run[0].meta["evaluations"]
+    assert store.meta["cache_hits"] >= partial and store.meta["evaluations"] == total - partial
+
+
+def test_cli_optimize_then_query(tmp_path, capsys) -> None:
+    """The command line end to end on the bundled teapot OBJ (root only, exhaustive small space)."""
+    path_file = tmp_path / "path.json"
+    CameraPath.from_positions([(0.0, -6.0, 2.0), (1.0, -6.0, 2.5)], [(0.0, 1.0, -0.2), (-0.1, 1.0, -0.3)],
+                              resolution=(64, 48)).save(path_file)
+    out = tmp_path / "store.json"
+    rc = cli.main(["optimize", str(MODELS / "teapot.obj"), "--path", str(path_file), "--out", str(out),
+                   "--max-depth", "0", "--parameters", "sampling,resolution_scale", "--eval-height", "12",
+                   "--cache", str(tmp_path / "c.sqlite"), "--no-progress"])
+    assert rc == 0
+    text = capsys.readouterr().out
+    assert "wrote" in text and "KB" in text
+    store = ParetoStore.from_json(out.read_text())
+    assert store.meta["evaluations"] > 0 and store.stats()["corners"] == 8
+    rc = cli.main(["query", str(out), "--position", "0.5", "-6", "2.2", "--direction", "0", "1", "-0.2",
+                   "--fov", "40", "--error-budget", "0.05", "--json"])
+    assert rc == 0
+    res = json.loads(capsys.readouterr().out)
+    assert res["error"] <= 0.05 + 1e-4 and not res["clamped"]
+    # the second run is answered from the cache
+    rc = cli.main(["optimize", str(MODELS / "teapot.obj"), "--path", str(path_file), "--out", str(out),
+                   "--max-depth", "0", "--parameters", "sampling,resolution_scale", "--eval-height", "12",
+                   "--cache", str(tmp_path / "c.sqlite"), "--no-progress"])
+    assert rc == 0 and ", 0 renders," in capsys.readouterr().out
