@@ -388,6 +388,38 @@ def test_blender_meshes_transforms_and_mirror(bpy_mod, tmp_path: Path) -> None:
 
 
 @pytest.mark.blender
+def test_blender_gpu_instancing(bpy_mod, tmp_path: Path) -> None:
+    """Linked duplicates under an empty, exported with EXT_mesh_gpu_instancing: one object per instance,
+    placed where Blender has them."""
+    bpy = bpy_mod
+    _reset(bpy)
+    bpy.ops.object.empty_add(location=(1.0, 0.0, 0.0), rotation=(0.0, 0.0, 0.4))
+    empty = bpy.context.active_object
+    bpy.ops.mesh.primitive_cone_add(vertices=8)
+    cones = [bpy.context.active_object]
+    for k in range(4):
+        obj = bpy.data.objects.new(f"Cone{k}", cones[0].data)
+        bpy.context.scene.collection.objects.link(obj)
+        obj.location, obj.rotation_euler = (2.0 * k, 1.0, 0.5 * k), (0.3 * k, 0.0, 0.2)
+        obj.scale = (1.0, 1.0, 1.0 + k / 5)
+        cones.append(obj)
+    for obj in cones:
+        obj.parent = empty
+    path = tmp_path / "gpu.glb"
+    bpy.ops.export_scene.gltf(filepath=str(path), export_format="GLB", export_apply=True,
+                              export_gpu_instances=True)
+    raw = json.loads(path.read_bytes()[20 : 20 + struct.unpack_from("<I", path.read_bytes(), 12)[0]])
+    assert "EXT_mesh_gpu_instancing" in raw.get("extensionsUsed", [])
+    sd = load_gltf(path)
+    assert len(sd.object_names) == len(cones)
+    theirs = np.concatenate([_blender_triangles(bpy, obj) for obj in cones])
+    mine = sd.positions.astype(np.float64)[sd.triangles]
+    assert mine.shape == theirs.shape
+    na, nb = _matched(mine, theirs)
+    assert np.all(np.sum(na * nb, axis=1) > 0.999)
+
+
+@pytest.mark.blender
 @pytest.mark.parametrize("res,fit", [((1920, 1080), "AUTO"), ((600, 900), "AUTO"), ((1280, 720), "VERTICAL")])
 def test_blender_camera(bpy_mod, tmp_path: Path, res: tuple[int, int], fit: str) -> None:
     bpy = bpy_mod

@@ -67,6 +67,7 @@ _SUPPORTED_REQUIRED = {
     "KHR_materials_unlit",
     "KHR_texture_transform",
     "KHR_mesh_quantization",
+    "EXT_mesh_gpu_instancing",
 }
 #: Scene extras key the blend_scenes generators use to name an environment (EXR path or RGB colour).
 ENVIRONMENT_EXTRAS_KEY = "render_budget_environment"
@@ -456,10 +457,38 @@ def _environment(doc: _Document) -> np.ndarray | tuple[float, float, float] | No
     return (float(rgb[0]), float(rgb[1]), float(rgb[2]))
 
 
+def _gpu_instances(doc: _Document, ext: dict[str, Any], what: str) -> list[np.ndarray]:
+    """EXT_mesh_gpu_instancing: per-instance local matrices (T * R * S) from its attribute accessors."""
+    attrs = ext.get("attributes", {})
+    if not attrs:
+        raise ValueError(f"{doc.path}: {what}: EXT_mesh_gpu_instancing without attributes")
+    arrays = {k: _read_accessor(doc, int(v)).astype(np.float64) for k, v in attrs.items()
+              if k in ("TRANSLATION", "ROTATION", "SCALE")}
+    counts = {a.shape[0] for a in arrays.values()}
+    if len(counts) != 1:
+        raise ValueError(f"{doc.path}: {what}: instance attributes differ in count")
+    n = counts.pop()
+    t = arrays.get("TRANSLATION", np.zeros((n, 3)))
+    r = arrays.get("ROTATION", np.tile([0.0, 0.0, 0.0, 1.0], (n, 1)))
+    sc = arrays.get("SCALE", np.ones((n, 3)))
+    if t.shape[1] != 3 or r.shape[1] != 4 or sc.shape[1] != 3:
+        raise ValueError(f"{doc.path}: {what}: instance attributes have the wrong types")
+    out = []
+    for k in range(n):
+        m = np.eye(4)
+        m[:3, :3] = _quat_to_matrix(list(r[k])) * sc[k][None, :]
+        m[:3, 3] = t[k]
+        if not np.all(np.isfinite(m)):
+            raise ValueError(f"{doc.path}: {what}: instance {k} has a non-finite transform")
+        out.append(m)
+    return out
+
+
 def load_gltf(path: str | os.PathLike[str]) -> SceneData:
     """Load a .glb/.gltf into flat arrays in Blender's world frame (Z up, metres).
 
-    One object id per mesh instance (node with a mesh), in depth-first node order; degenerate triangles
+    One object id per mesh instance (node with a mesh, or each of its EXT_mesh_gpu_instancing instances),
+    in depth-first node order; degenerate triangles
     are kept (the core drops and counts them). Raises FileNotFoundError for missing files and ValueError
     for anything malformed: not glTF, truncated buffers, NaN/Inf positions, out-of-range indices, or a
     scene without a single triangle.
@@ -509,68 +538,74 @@ def load_gltf(path: str | os.PathLike[str]) -> SceneData:
         mi = int(node["mesh"])
         if not 0 <= mi < len(meshes):
             raise ValueError(f"{doc.path}: mesh {mi} does not exist")
-        object_id = len(object_names)
-        object_names.append(name)
-        m3 = world_b[:3, :3]
-        # Inverse transpose up to a positive scale (normals are renormalised): the cofactor matrix times
-        # the determinant's sign. Closed form; np.linalg.inv costs milliseconds per call on small matrices.
-        c0, c1, c2 = m3[:, 0], m3[:, 1], m3[:, 2]
-        cof = np.stack([np.cross(c1, c2), np.cross(c2, c0), np.cross(c0, c1)], axis=1)
-        det = float(np.dot(c0, cof[:, 0]))
-        # A zero scale (hidden object) makes every triangle degenerate: kept; the core drops and counts them.
-        normal_matrix = cof * math.copysign(1.0, det)
-        mirrored = det < 0.0
-        for pi, prim in enumerate(meshes[mi].get("primitives", [])):
-            what = f"{doc.path}: mesh {mi} ({meshes[mi].get('name', '')!r}) primitive {pi}"
-            attrs = prim.get("attributes", {})
-            if "POSITION" not in attrs:
-                raise ValueError(f"{what}: no POSITION attribute")
-            key = id(prim)
-            if key not in decoded:
-                pos = _read_accessor(doc, int(attrs["POSITION"]))
-                if pos.shape[1] != 3:
-                    raise ValueError(f"{what}: POSITION must be VEC3")
-                pos = pos.astype(np.float64)
-                if not np.all(np.isfinite(pos)):
-                    raise ValueError(f"{what}: POSITION contains NaN or Inf")
-                nrm = None
-                if "NORMAL" in attrs:
-                    nrm = _read_accessor(doc, int(attrs["NORMAL"])).astype(np.float64)
-                    if nrm.shape != pos.shape:
-                        raise ValueError(f"{what}: NORMAL count/shape differs from POSITION")
-                    if not np.all(np.isfinite(nrm)):
-                        raise ValueError(f"{what}: NORMAL contains NaN or Inf")
-                decoded[key] = (pos, nrm)
-            pos, nrm = decoded[key]
-            tris = _primitive_triangles(doc, prim, pos.shape[0], what)
-            if tris is None or tris.shape[0] == 0:
-                continue
-            world_pos = pos @ m3.T + world_b[:3, 3]
-            if not np.all(np.isfinite(world_pos)):
-                raise ValueError(f"{what}: transformed positions overflow to Inf")
-            if mirrored:
-                tris = tris[:, [0, 2, 1]]
-            if nrm is not None:
-                wn = nrm @ normal_matrix.T
-                length = np.linalg.norm(wn, axis=1, keepdims=True)
-                wn = np.where(length > 0, wn / np.where(length > 0, length, 1.0), 0.0)
-            else:
-                wn = None
-            if "material" in prim:
-                mat = int(prim["material"])
-                if not 0 <= mat < len(materials):
-                    raise ValueError(f"{what}: material {mat} does not exist")
-            else:
-                if default_material is None:
-                    default_material = len(materials)
-                    materials.append(Material(name="default"))
-                mat = default_material
-            pos_parts.append(world_pos)
-            nrm_parts.append(wn)
-            tri_parts.append(tris + vbase)
-            mat_parts.append(np.full(tris.shape[0], mat, dtype=np.uint32))
-            obj_parts.append(np.full(tris.shape[0], object_id, dtype=np.uint32))
-            vbase += world_pos.shape[0]
+        instancing = ext.get("EXT_mesh_gpu_instancing")
+        placements = [(name, world_b)]
+        if instancing is not None:  # one object per GPU instance: node world @ instance TRS
+            placements = [(f"{name}.{k}", world_b @ m)
+                          for k, m in enumerate(_gpu_instances(doc, instancing, f"node {name!r}"))]
+        for name_k, world_k in placements:
+            object_id = len(object_names)
+            object_names.append(name_k)
+            m3 = world_k[:3, :3]
+            # Inverse transpose up to a positive scale (normals are renormalised): the cofactor matrix
+            # times the determinant's sign; closed form (np.linalg.inv is slow on many small matrices).
+            c0, c1, c2 = m3[:, 0], m3[:, 1], m3[:, 2]
+            cof = np.stack([np.cross(c1, c2), np.cross(c2, c0), np.cross(c0, c1)], axis=1)
+            det = float(np.dot(c0, cof[:, 0]))
+            # A zero scale (hidden object) makes every triangle degenerate: kept; the core drops them.
+            normal_matrix = cof * math.copysign(1.0, det)
+            mirrored = det < 0.0
+            for pi, prim in enumerate(meshes[mi].get("primitives", [])):
+                what = f"{doc.path}: mesh {mi} ({meshes[mi].get('name', '')!r}) primitive {pi}"
+                attrs = prim.get("attributes", {})
+                if "POSITION" not in attrs:
+                    raise ValueError(f"{what}: no POSITION attribute")
+                key = id(prim)
+                if key not in decoded:
+                    pos = _read_accessor(doc, int(attrs["POSITION"]))
+                    if pos.shape[1] != 3:
+                        raise ValueError(f"{what}: POSITION must be VEC3")
+                    pos = pos.astype(np.float64)
+                    if not np.all(np.isfinite(pos)):
+                        raise ValueError(f"{what}: POSITION contains NaN or Inf")
+                    nrm = None
+                    if "NORMAL" in attrs:
+                        nrm = _read_accessor(doc, int(attrs["NORMAL"])).astype(np.float64)
+                        if nrm.shape != pos.shape:
+                            raise ValueError(f"{what}: NORMAL count/shape differs from POSITION")
+                        if not np.all(np.isfinite(nrm)):
+                            raise ValueError(f"{what}: NORMAL contains NaN or Inf")
+                    decoded[key] = (pos, nrm)
+                pos, nrm = decoded[key]
+                tris = _primitive_triangles(doc, prim, pos.shape[0], what)
+                if tris is None or tris.shape[0] == 0:
+                    continue
+                world_pos = pos @ m3.T + world_k[:3, 3]
+                if not np.all(np.isfinite(world_pos)):
+                    raise ValueError(f"{what}: transformed positions overflow to Inf")
+                if mirrored:
+                    tris = tris[:, [0, 2, 1]]
+                if nrm is not None:
+                    wn = nrm @ normal_matrix.T
+                    length = np.linalg.norm(wn, axis=1, keepdims=True)
+                    wn = np.where(length > 0, wn / np.where(length > 0, length, 1.0), 0.0)
+                else:
+                    wn = None
+                if "material" in prim:
+                    mat = int(prim["material"])
+                    if not 0 <= mat < len(materials):
+                        raise ValueError(f"{what}: material {mat} does not exist")
+                else:
+                    if default_material is None:
+                        default_material = len(materials)
+                        materials.append(Material(name="default"))
+                    mat = default_material
+                pos_parts.append(world_pos)
+                nrm_parts.append(wn)
+                tri_parts.append(tris + vbase)
+                mat_parts.append(np.full(tris.shape[0], mat, dtype=np.uint32))
+                obj_parts.append(np.full(tris.shape[0], object_id, dtype=np.uint32))
+                vbase += world_pos.shape[0]
 
     if not tri_parts:
         raise ValueError(f"{doc.path}: the scene contains no triangles (empty scene)")
