@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .client import ServiceClient
+from .client import ServiceClient, ServiceError
 
 TERMINAL = ("done", "failed", "cancelled")
 
@@ -135,13 +135,30 @@ def run_job(client: ServiceClient, glb_path: str | Path, path_doc: dict[str, Any
         if update.state == "cancelled":
             raise JobCancelled(f"job {job_id} was cancelled")
         if deadline is not None and time.monotonic() > deadline:
-            client.cancel_job(job_id)
-            raise TimeoutError(f"job {job_id} did not finish within {timeout_s} s (cancelled)")
+            state = cancel_and_wait(client, job_id)
+            raise TimeoutError(f"job {job_id} did not finish within {timeout_s} s ({state})")
         # sleep in small steps so a cancel request is honoured quickly
         wake = time.monotonic() + poll_s
         while time.monotonic() < wake:
             if cancelled():
-                client.cancel_job(job_id)
-                raise JobCancelled(f"job {job_id} cancelled")
+                report(JobUpdate("cancelling", update.fraction, "cancelling"))
+                state = cancel_and_wait(client, job_id)
+                raise JobCancelled(f"job {job_id} cancelled (service state: {state})")
             time.sleep(min(0.05, poll_s))
         job = client.job(job_id)
+
+
+def cancel_and_wait(client: ServiceClient, job_id: str, wait_s: float = 30.0, poll_s: float = 0.1) -> str:
+    """DELETE the job, then wait (bounded) until the service says it stopped; returns the last state."""
+    try:
+        job = client.cancel_job(job_id) or {}
+    except ServiceError as err:
+        if err.status == 409:  # it finished before the cancel arrived: nothing to stop
+            return "already finished"
+        raise
+    state = str(job.get("state", "?"))
+    deadline = time.monotonic() + wait_s
+    while state not in TERMINAL and time.monotonic() < deadline:
+        time.sleep(poll_s)
+        state = str(client.job(job_id).get("state", "?"))
+    return state if state in TERMINAL else f"{state}, cancel requested"
