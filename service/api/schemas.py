@@ -15,7 +15,9 @@ from pydantic import BaseModel, ConfigDict, Field, StringConstraints, model_vali
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Vec3 = tuple[Finite, Finite, Finite]
 Row4 = tuple[Finite, Finite, Finite, Finite]
-Matrix4 = tuple[Row4, Row4, Row4, Row4]
+Zero = Annotated[float, Field(ge=0.0, le=0.0)]
+One = Annotated[float, Field(ge=1.0, le=1.0)]
+Matrix4 = tuple[Row4, Row4, Row4, tuple[Zero, Zero, Zero, One]]  # affine: last row [0, 0, 0, 1]
 SceneId = Annotated[str, StringConstraints(pattern=r"^[0-9a-f]{64}$")]
 Name = Annotated[str, StringConstraints(pattern=r"^[A-Za-z0-9_.-]{1,64}$")]
 Scalar = bool | int | Finite | Annotated[str, StringConstraints(max_length=64)]
@@ -170,6 +172,12 @@ class PreviousSettings(StrictModel):
 
 
 class StoreQuery(StrictModel):
+    # "Exactly one budget" in the OpenAPI too, so generated clients and fuzzers know it.
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, json_schema_extra={"oneOf": [
+        {"required": [name], "properties": {name: {"type": "number"}}}
+        for name in ("power_budget_w", "error_budget")
+    ]})
+
     position: Vec3
     direction: Vec3 | None = None
     matrix: Matrix4 | None = Field(default=None, description="camera world matrix (looks down local -Z)")
