@@ -1,6 +1,7 @@
 #include "sim_core/streaming.h"
 
 #include <algorithm>
+#include <cmath>
 #include <stdexcept>
 
 namespace sim_core {
@@ -19,7 +20,11 @@ struct CountingRecorder {
     ++t->triangle_tests;
     if (cache) cache->access(kTriBaseAddress + std::uint64_t{i} * sizeof(TriRecord), sizeof(TriRecord));
   }
-  void compare(float, float) {}
+  void compare(float candidate, float best) {
+    const int c = comparator_chain_length(std::fabs(candidate), best);
+    ++t->compare_all[static_cast<std::size_t>(c)];
+    if (best < kInf) ++t->compare_finite[static_cast<std::size_t>(c)];
+  }
 };
 
 struct Elem {

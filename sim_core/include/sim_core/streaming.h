@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "sim_core/cache.h"
+#include "sim_core/comparator.h"
 #include "sim_core/intersect.h"
 #include "sim_core/scene.h"
 
@@ -36,6 +37,10 @@ struct TraversalTraffic {
   std::uint64_t interior_streams = 0, leaf_streams = 0;
   std::uint64_t interior_stream_rays = 0, leaf_stream_rays = 0;  // sums, for average stream lengths
   std::uint64_t culled_at_pop = 0;     // rays compacted away because their closest hit is nearer
+  // Per-ray only: compute-chain lengths of the closest-hit comparisons (candidate t against the current
+  // best), all of them and only those against a finite best (not the initial +inf of a ray's first hit).
+  ComparatorHistogram compare_all{};
+  ComparatorHistogram compare_finite{};
 };
 
 // One stream element: ray id + its entry distance into the stream's node (the ray's origin, direction and

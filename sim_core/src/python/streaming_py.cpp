@@ -36,6 +36,13 @@ nb::dict traffic_dict(const sim_core::TraversalTraffic& t) {
   d["interior_stream_rays"] = t.interior_stream_rays;
   d["leaf_stream_rays"] = t.leaf_stream_rays;
   d["culled_at_pop"] = t.culled_at_pop;
+  nb::list all, finite;
+  for (std::size_t i = 0; i < t.compare_all.size(); ++i) {
+    all.append(t.compare_all[i]);
+    finite.append(t.compare_finite[i]);
+  }
+  d["compare_all"] = all;
+  d["compare_finite"] = finite;
   return d;
 }
 
