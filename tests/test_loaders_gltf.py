@@ -11,6 +11,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from sim_core.loaders import GLTF_TO_BLENDER, load_gltf
 from sim_core.loaders.gltf import LIGHT_RADIUS_EXTRAS_KEY, LUMENS_PER_WATT
 
@@ -285,6 +287,57 @@ def test_unsupported_required_extension(tmp_path: Path) -> None:
     b.gltf["extensionsRequired"] = ["KHR_draco_mesh_compression"]
     with pytest.raises(ValueError, match="KHR_draco_mesh_compression"):
         load_gltf(b.glb(tmp_path / "draco.glb"))
+
+
+def _valid_glb(tmp_path: Path) -> bytes:
+    b = _Builder()
+    quad = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=np.float32)
+    pos = b.accessor(quad, 5126, "VEC3")
+    nrm = b.accessor(np.tile(np.array([0, 0, 1], np.float32), (4, 1)), 5126, "VEC3")
+    idx = b.accessor(np.array([0, 1, 2, 0, 2, 3], dtype=np.uint16), 5123, "SCALAR")
+    b.gltf["materials"] = [{"pbrMetallicRoughness": {"metallicFactor": 0.5}}]
+    b.node(mesh=b.mesh([{"attributes": {"POSITION": pos, "NORMAL": nrm}, "indices": idx, "material": 0}]),
+           rotation=[0.0, 0.0, 0.3826834, 0.9238795])
+    return b.glb(tmp_path / "valid.glb").read_bytes()
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data())
+def test_corrupted_files_raise_value_errors_only(tmp_path: Path, data: st.DataObject) -> None:
+    """Uploads are untrusted: flipped bytes, truncation and JSON of the wrong shape give a SceneData or a
+    ValueError, never another exception, a crash or a hang."""
+    blob = bytearray(_valid_glb(tmp_path))
+    kind = data.draw(st.sampled_from(["bytes", "truncate", "json"]))
+    if kind == "bytes":
+        for _ in range(data.draw(st.integers(1, 8))):
+            blob[data.draw(st.integers(0, len(blob) - 1))] = data.draw(st.integers(0, 255))
+    elif kind == "truncate":
+        blob = blob[: data.draw(st.integers(0, len(blob) - 1))]
+    else:
+        n = struct.unpack_from("<I", blob, 12)[0]
+        doc = json.loads(blob[20 : 20 + n])
+        section = data.draw(st.sampled_from(["accessors", "bufferViews", "nodes", "meshes", "materials"]))
+        items = doc[section]
+        key = data.draw(st.sampled_from(sorted(items[0]))) if items[0] else None
+        junk = data.draw(st.one_of(st.none(), st.integers(-(2**40), 2**40), st.floats(allow_nan=True),
+                                   st.text(max_size=3), st.lists(st.integers(-3, 3), max_size=5),
+                                   st.dictionaries(st.text(max_size=2), st.integers(), max_size=2)))
+        if key is not None:
+            items[0][key] = junk
+        js = json.dumps(doc).encode()
+        js += b" " * ((4 - len(js) % 4) % 4)
+        rest = blob[20 + n :]
+        body = struct.pack("<II", len(js), 0x4E4F534A) + js + bytes(rest)
+        blob = bytearray(struct.pack("<III", 0x46546C67, 2, 12 + len(body)) + body)
+    path = tmp_path / "fuzz.glb"
+    path.write_bytes(bytes(blob))
+    try:
+        sd = load_gltf(path)
+    except ValueError:
+        return
+    assert sd.triangles.ndim == 2 and sd.triangles.shape[1] == 3
+    assert np.all(np.isfinite(sd.positions))
+    assert sd.triangles.max() < sd.positions.shape[0]
 
 
 # --------------------------------------------------------------------------------------------------

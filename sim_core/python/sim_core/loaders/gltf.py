@@ -69,6 +69,8 @@ _SUPPORTED_REQUIRED = {
     "KHR_mesh_quantization",
     "EXT_mesh_gpu_instancing",
 }
+#: Upper bound on any accessor's element count (a hostile count must not allocate gigabytes).
+_MAX_ELEMENTS = 1 << 28
 #: Scene extras key the blend_scenes generators use to name an environment (EXR path or RGB colour).
 ENVIRONMENT_EXTRAS_KEY = "render_budget_environment"
 #: Light extras key for the emitter size glTF cannot express: radius in metres for point and spot lights,
@@ -186,6 +188,8 @@ def _buffer_view_bytes(doc: _Document, index: int) -> tuple[memoryview, int | No
 
 def _strided(raw: memoryview, offset: int, count: int, ncomp: int, dtype: np.dtype, stride: int | None,
              what: str) -> np.ndarray:
+    if count < 0:
+        raise ValueError(f"{what}: negative count")
     elem = ncomp * dtype.itemsize
     stride = stride or elem
     if stride < elem:
@@ -216,8 +220,8 @@ def _read_accessor(doc: _Document, index: int) -> np.ndarray:
         raise ValueError(f"{what}: type {acc_type!r} is not supported for geometry")
     ncomp = _TYPE_SIZES[acc_type]
     count = int(acc["count"])
-    if count < 0:
-        raise ValueError(f"{what}: negative count")
+    if not 0 <= count <= _MAX_ELEMENTS:
+        raise ValueError(f"{what}: count {count} outside [0, {_MAX_ELEMENTS}]")
     if "bufferView" in acc:
         raw, stride = _buffer_view_bytes(doc, int(acc["bufferView"]))
         out = _strided(raw, int(acc.get("byteOffset", 0)), count, ncomp, dtype, stride, what)
@@ -488,12 +492,21 @@ def load_gltf(path: str | os.PathLike[str]) -> SceneData:
     """Load a .glb/.gltf into flat arrays in Blender's world frame (Z up, metres).
 
     One object id per mesh instance (node with a mesh, or each of its EXT_mesh_gpu_instancing instances),
-    in depth-first node order; degenerate triangles
-    are kept (the core drops and counts them). Raises FileNotFoundError for missing files and ValueError
-    for anything malformed: not glTF, truncated buffers, NaN/Inf positions, out-of-range indices, or a
-    scene without a single triangle.
+    in depth-first node order; degenerate triangles are kept (the core drops and counts them). Raises
+    FileNotFoundError for missing files and ValueError for anything malformed: not glTF, truncated
+    buffers, NaN/Inf positions, out-of-range indices, fields of the wrong type, or a scene without a
+    single triangle. Files come from users (uploads), so no other exception type escapes.
     """
     p = Path(path)
+    try:
+        return _load(p)
+    except (KeyError, TypeError, AttributeError, IndexError, OverflowError) as exc:
+        raise ValueError(f"{p}: malformed glTF ({type(exc).__name__}: {exc})") from exc
+    except (MemoryError, RecursionError) as exc:
+        raise ValueError(f"{p}: glTF too large or too deeply nested to load ({type(exc).__name__})") from exc
+
+
+def _load(p: Path) -> SceneData:
     doc = _read_document(p)
     gltf = doc.gltf
     nodes = gltf.get("nodes", [])
