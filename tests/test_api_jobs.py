@@ -258,3 +258,43 @@ def test_evaluate_reference_and_cheap_settings(client: httpx.Client, scene: dict
     assert r.status_code == 422 and "max_depth" in r.json()["error"]["message"]
     r = client.post("/render", json={"scene_id": "0" * 64, "camera": camera()})
     assert r.status_code == 404
+
+
+def test_query_fast_path_matches_the_fastapi_route(client: httpx.Client, finished: dict[str, Any],
+                                                   tmp_path: Path) -> None:
+    from service.storage import Storage
+
+    store_id = finished["job"]["store_id"]
+    body = client.get(f"/stores/{store_id}").text
+    storage = Storage(tmp_path)
+    assert storage.put_store(scene_id="0" * 64, job_id="copy", body=body) == store_id
+    storage.close()
+    rng = np.random.default_rng(3)
+    queries: list[Any] = []
+    for _ in range(12):
+        q: dict[str, Any] = {"position": rng.uniform(-4, 4, 3).tolist(),
+                             "direction": rng.normal(size=3).tolist(), "fov": float(rng.uniform(0.3, 1.2))}
+        q["power_budget_w" if rng.random() < 0.5 else "error_budget"] = float(rng.uniform(0, 1))
+        queries.append(q)
+    n = len(ParetoStore.from_json(body).parameters)
+    queries.append({**queries[0], "previous": {"indices": [0] * n, "elapsed_s": 0.7}})
+    queries.append({**queries[0], "previous": {"indices": [15] * n, "elapsed_s": 0.7}})  # out of range
+    queries.append({**queries[0], "error_budget": 0.1, "power_budget_w": 1.0})
+    queries.append({"position": "here", "error_budget": 0.1})
+    raw = [b'{"position": [0, NaN, 0], "error_budget": 0.1}', b'{"position": [0, 0', b"[]"]
+    with server_thread(Settings(data_dir=tmp_path, query_fast_path=False, job_workers=1)) as slow_url, \
+            httpx.Client(base_url=slow_url) as slow:
+        for target in (store_id, "f" * 32):
+            for q in queries:
+                a = client.post(f"/stores/{target}/query", json=q)
+                b = slow.post(f"/stores/{target}/query", json=q)
+                assert a.status_code == b.status_code, (q, a.text, b.text)
+                if a.status_code == 200:
+                    assert a.json() == b.json()
+                else:
+                    assert a.json()["error"]["code"] == b.json()["error"]["code"]
+            for data in raw:
+                headers = {"Content-Type": "application/json"}
+                a = client.post(f"/stores/{target}/query", content=data, headers=headers)
+                b = slow.post(f"/stores/{target}/query", content=data, headers=headers)
+                assert a.status_code == b.status_code == 422, (data, a.text, b.text)

@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import hmac
 import logging
-from collections.abc import AsyncIterator
+import re
+from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
+from pydantic import ValidationError
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.responses import Response
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 import service
@@ -17,8 +20,10 @@ from service.storage import Storage
 
 from .config import Settings
 from .deps import AppState, StoreCache
-from .errors import error_response, install_error_handlers
+from .errors import ApiError, clean_validation_errors, error_response, install_error_handlers, summarise
 from .routes import health, jobs, render, scenes, stores
+from .routes.stores import answer_query
+from .schemas import StoreQuery
 
 log = logging.getLogger("render_budget.api")
 
@@ -94,6 +99,51 @@ class BodySizeGuard:
         await self.app(scope, limited, send)
 
 
+_QUERY_PATH = re.compile(r"^/stores/([^/]+)/query$")
+
+
+class QueryFastPath:
+    """``POST /stores/{id}/query`` without FastAPI's routing and dependency machinery (the hot path of a
+    runtime asking for settings every frame). Same model, same lookup, same answers and error shapes as
+    the documented route (tested); anything but a JSON body falls through to that route."""
+
+    def __init__(self, app: ASGIApp, *, stores: Callable[[], StoreCache]) -> None:
+        self.app = app
+        self._stores = stores
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        match = _QUERY_PATH.match(scope["path"]) if scope["type"] == "http" else None
+        if match is None or scope["method"] != "POST" or not _is_json(scope["headers"]):
+            await self.app(scope, receive, send)
+            return
+        chunks = []
+        while True:
+            message = await receive()
+            if message["type"] != "http.request":
+                return  # client went away
+            chunks.append(message.get("body", b""))
+            if not message.get("more_body", False):
+                break
+        try:
+            body = StoreQuery.model_validate_json(b"".join(chunks))
+            result = answer_query(self._stores().get(match.group(1)), body)
+        except ValidationError as exc:
+            details = [{**d, "loc": ["body", *d["loc"]]} for d in clean_validation_errors(list(exc.errors()))]
+            response: Response = error_response(422, summarise(details), details=details)
+        except ApiError as exc:
+            response = error_response(exc.status, exc.message, code=exc.code, details=exc.details)
+        else:
+            response = Response(result.model_dump_json(), media_type="application/json")
+        await response(scope, receive, send)
+
+
+def _is_json(headers: list[tuple[bytes, bytes]]) -> bool:
+    for name, value in headers:
+        if name == b"content-type":
+            return value.split(b";")[0].strip().lower() == b"application/json"
+    return False
+
+
 def create_app(settings: Settings | None = None) -> FastAPI:
     """Build the app; storage and the job runner start in its lifespan (so tests can run several)."""
     settings = settings or Settings()
@@ -128,6 +178,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     install_error_handlers(app)
     for module in (health, scenes, jobs, stores, render):
         app.include_router(module.router)
+    if settings.query_fast_path:
+        app.add_middleware(QueryFastPath, stores=lambda: app.state.render_budget.stores)
     app.add_middleware(BodySizeGuard, default_limit=settings.max_body_bytes,
                        upload_limit=settings.max_upload_bytes)
     if settings.token is not None:

@@ -50,6 +50,7 @@ class Settings(BaseSettings):
     render_threads: int | None = Field(default=None, ge=1)
     scene_cache_size: int = Field(default=8, ge=1)
     store_cache_size: int = Field(default=64, ge=1)
+    query_fast_path: bool = True  # serve store queries without FastAPI's routing layer (same answers)
     sse_poll_s: float = Field(default=0.1, gt=0, le=5)
     sse_keepalive_s: float = Field(default=15.0, gt=0)
 

@@ -62,7 +62,7 @@ def error_response(status: int, message: str, *, code: str | None = None,
     return JSONResponse(body, status_code=status, headers=headers)
 
 
-def _clean_validation_errors(errors: list[Any]) -> list[dict[str, Any]]:
+def clean_validation_errors(errors: list[Any]) -> list[dict[str, Any]]:
     # Drop "input" and "ctx": they may hold NaN, bytes or huge client values that are not valid JSON.
     out = []
     for e in errors[:50]:
@@ -71,7 +71,7 @@ def _clean_validation_errors(errors: list[Any]) -> list[dict[str, Any]]:
     return out
 
 
-def _summary(details: list[dict[str, Any]]) -> str:
+def summarise(details: list[dict[str, Any]]) -> str:
     parts = []
     for d in details[:5]:
         loc = ".".join(str(p) for p in d["loc"] if p != "body") or "body"
@@ -95,8 +95,8 @@ def install_error_handlers(app: FastAPI) -> None:
 
     async def validation_error(_: Request, exc: Exception) -> JSONResponse:
         assert isinstance(exc, RequestValidationError)
-        details = _clean_validation_errors(list(exc.errors()))
-        return error_response(422, _summary(details), details=details)
+        details = clean_validation_errors(list(exc.errors()))
+        return error_response(422, summarise(details), details=details)
 
     async def unexpected(_: Request, exc: Exception) -> JSONResponse:
         log.exception("unhandled error: %s", exc)

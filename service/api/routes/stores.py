@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 from fastapi import APIRouter, Response
+
+from service.pareto_store import TemporalFilter, pack_indices
 
 from ..deps import StoreRecordDep, StoresDep
 from ..errors import ApiError, ErrorResponse
@@ -19,14 +23,8 @@ def get_store(record: StoreRecordDep) -> Response:
     return Response(record.body, media_type="application/json", headers={"ETag": f'"{record.id}"'})
 
 
-@router.post("/{store_id}/query", response_model=QueryResult,
-             responses={404: {"model": ErrorResponse}, 422: {"model": ErrorResponse}})
-async def query_store(store_id: str, body: StoreQuery, stores: StoresDep) -> QueryResult:
-    """Settings for a camera pose under a power or error budget, optionally through the temporal filter
-    (Eq. 8) from the ``previous`` settings, ``elapsed_s`` after the target changed."""
-    from service.pareto_store import TemporalFilter
-
-    store = stores.get(store_id)
+def answer_query(store: Any, body: StoreQuery) -> QueryResult:
+    """Lookup plus the optional temporal filter; shared by the route and the app's fast path."""
     try:
         hit = store.lookup(body.position, direction=body.direction, matrix=body.matrix, fov=body.fov,
                            power_budget=body.power_budget_w, error_budget=body.error_budget)
@@ -44,15 +42,22 @@ async def query_store(store_id: str, body: StoreQuery, stores: StoresDep) -> Que
                 raise ApiError(422, f"previous.indices[{i}] = {v} is out of range for parameter {p.name!r} "
                                     f"({len(p.values)} values)")
         tf = TemporalFilter(period_s=body.previous.period_s)
-        tf.update(prev, 0.0)
-        tf.update(indices, 0.0)
-        shown = tf.update(indices, body.previous.elapsed_s)
+        tf.update(prev, 0.0)  # the settings shown when the target changed ...
+        tf.update(indices, 0.0)  # ... the new target at that moment ...
+        shown = tf.update(indices, body.previous.elapsed_s)  # ... and what Eq. 8 shows elapsed_s later
         filtered = shown != indices
         indices = tuple(shown)
-    from service.pareto_store import pack_indices
-
     return QueryResult(
         settings=store.settings_of(indices) if filtered else hit.settings, indices=list(indices),
         packed=pack_indices(indices) if filtered else hit.packed, power_w=hit.power_w, error=hit.error,
         clamped=hit.clamped, infeasible=hit.infeasible, filtered=filtered,
     )
+
+
+@router.post("/{store_id}/query", response_model=QueryResult,
+             responses={404: {"model": ErrorResponse}, 422: {"model": ErrorResponse}})
+async def query_store(store_id: str, body: StoreQuery, stores: StoresDep) -> QueryResult:
+    """Settings for a camera pose under a power or error budget, optionally through the temporal filter
+    (Eq. 8) from the ``previous`` settings, ``elapsed_s`` after the target changed. ``power_w`` and
+    ``error`` are the predictions for the target settings."""
+    return answer_query(stores.get(store_id), body)
