@@ -208,6 +208,10 @@ def test_token_guards_every_route_but_health(tmp_path: Path) -> None:
         assert_error(r, 404)
         assert r.status_code == 404
         assert c.get("/openapi.json", headers={"Authorization": f"Bearer {token}"}).status_code == 200
+        query = {"position": [0, 0, 0], "error_budget": 0.1}
+        assert_error(c.post("/stores/" + "f" * 32 + "/query", json=query), 401)
+        r = c.post("/stores/" + "f" * 32 + "/query", json=query, headers={"Authorization": f"Bearer {token}"})
+        assert_error(r, 404)
         # An unauthenticated upload is refused before the body is read.
         assert_error(c.post("/scenes", content=box_scene_glb(), headers=GLB), 401)
 
