@@ -150,7 +150,8 @@ def main() -> int:
     ap.add_argument("--clients", type=int, nargs="+", default=[1, 4, 16])
     ap.add_argument("--skip-jobs", action="store_true", help="skip the in-process vs Dask job comparison")
     args = ap.parse_args()
-    print(f"# bench_api: {os.cpu_count()} cores, loopback, server = one uvicorn process")
+    print(f"# bench_api: {os.cpu_count()} cores, loopback, server = one uvicorn process, "
+          f"load average at start {os.getloadavg()[0]:.1f}")
 
     with tempfile.TemporaryDirectory(prefix="render-budget-bench-api-") as tmp:
         srv = ServerProcess(Path(tmp) / "query").wait_healthy()
@@ -170,12 +171,13 @@ def main() -> int:
             requests = [_request_bytes(srv.port, store_id, b) for b in bodies]
             load(srv.port, requests, 1, 1.0)  # warm-up
             print("\n## store queries (POST /stores/{id}/query)\n")
-            print("| clients | requests | errors | queries/s | p50 ms | p99 ms | mean ms |")
-            print("|---:|---:|---:|---:|---:|---:|---:|")
+            print("| clients | requests | errors | queries/s | p50 ms | p99 ms | mean ms | load avg |")
+            print("|---:|---:|---:|---:|---:|---:|---:|---:|")
             for n in args.clients:
                 r = load(srv.port, requests, n, args.seconds)
+                r["load"] = os.getloadavg()[0]
                 print(f"| {n} | {r['requests']} | {r['errors']} | {r['qps']:.0f} | {r['p50_ms']:.2f} | "
-                      f"{r['p99_ms']:.2f} | {r['mean_ms']:.2f} |", flush=True)
+                      f"{r['p99_ms']:.2f} | {r['mean_ms']:.2f} | {r['load']:.1f} |", flush=True)
         finally:
             srv.stop()
 
