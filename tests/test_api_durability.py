@@ -108,9 +108,15 @@ def test_sigkill_mid_job_resumes_without_redoing_work(tmp_path: Path) -> None:
     assert cached_evaluations(crash_dir) == ref_evaluations
 
 
+def _scenes_kept() -> list[str]:
+    from service import evaluation
+
+    return sorted(evaluation._SCENES)
+
+
 @pytest.mark.slow
 def test_dask_local_cluster_gives_the_in_process_store(tmp_path: Path) -> None:
-    from distributed import LocalCluster
+    from distributed import Client, LocalCluster
 
     _, local_store, _ = run_uninterrupted(tmp_path / "local", tiny_job)
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
@@ -118,5 +124,10 @@ def test_dask_local_cluster_gives_the_in_process_store(tmp_path: Path) -> None:
         _, dask_store, _ = run_uninterrupted(tmp_path / "dask", tiny_job, dask_scheduler=address)
         with server_thread(Settings(data_dir=tmp_path / "dask", dask_scheduler=address)) as url:
             assert httpx.get(f"{url}/health").json()["executor"] == f"dask:{address}"
+        # Each worker loaded the scene and keeps it (by content hash) for later batches and jobs.
+        with Client(address) as dask_client:
+            kept = dask_client.run(_scenes_kept)
+        content_hash = json.loads(dask_store)["meta"]["scene"]
+        assert len(kept) == 2 and all(v == [content_hash] for v in kept.values()), kept
     assert comparable(dask_store) == comparable(local_store)
     assert json.loads(dask_store)["meta"]["executor"] == "dask"
