@@ -150,6 +150,12 @@ def test_describe_job_progress() -> None:
     u = describe({"state": "running", "progress": {"views_done": 3, "views_planned": 12, "evaluations": 40}})
     assert u.fraction == pytest.approx(0.25) and "3/12 views" in u.text
     assert describe({"state": "done", "progress": {}}).fraction == 1.0
+    # inside a level: views finish together, the renders show the progress
+    mid = {"state": "running", "progress": {"views_done": 0, "views_planned": 48, "evaluations": 576,
+                                            "phase": "level 0"}}
+    assert describe(mid).fraction == 0.0
+    u = describe(mid, evals_per_view=24)
+    assert u.fraction == pytest.approx(0.5) and "[level 0]" in u.text
 
 
 def test_serve_command(tmp_path) -> None:

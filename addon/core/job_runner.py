@@ -90,13 +90,23 @@ class JobOutcome:
     job: dict[str, Any] = field(default_factory=dict)
 
 
-def describe(job: dict[str, Any]) -> JobUpdate:
-    """Fraction done and a one-line status from a GET /jobs/{id} body."""
+def describe(job: dict[str, Any], evals_per_view: int | None = None) -> JobUpdate:
+    """Fraction done and a one-line status from a GET /jobs/{id} body.
+
+    The optimiser finishes the views of an octree level together, so `views_done` moves in jumps; with
+    `evals_per_view` (population x generations) the fraction also follows the renders inside a level.
+    """
     p = job.get("progress") or {}
     done, planned = int(p.get("views_done") or 0), int(p.get("views_planned") or 0)
+    evals = int(p.get("evaluations") or 0) + int(p.get("cache_hits") or 0)
     state = str(job.get("state", "?"))
-    frac = 1.0 if state == "done" else (min(1.0, done / planned) if planned > 0 else 0.0)
-    text = f"{state}: {done}/{planned} views, {int(p.get('evaluations') or 0)} evaluations"
+    frac = min(1.0, done / planned) if planned > 0 else 0.0
+    if evals_per_view and planned > 0:
+        frac = max(frac, min(0.99, evals / (planned * evals_per_view)))
+    if state == "done":
+        frac = 1.0
+    phase = f" [{p['phase']}]" if isinstance(p.get("phase"), str) and state == "running" else ""
+    text = f"{state}{phase}: {done}/{planned} views, {int(p.get('evaluations') or 0)} evaluations"
     if p.get("cache_hits"):
         text += f" ({int(p['cache_hits'])} cached)"
     if p.get("estimate_s") is not None and state == "running":
@@ -124,8 +134,9 @@ def run_job(client: ServiceClient, glb_path: str | Path, path_doc: dict[str, Any
     if on_submitted:
         on_submitted(scene_id, job_id)
     deadline = None if timeout_s is None else time.monotonic() + timeout_s
+    per_view = options.population * options.generations
     while True:
-        update = describe(job)
+        update = describe(job, per_view)
         report(update)
         if update.state == "done":
             store_id = str(job["store_id"])
