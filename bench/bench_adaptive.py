@@ -2,7 +2,9 @@
 
 For each test scene (blend_scenes, built on demand into --scenes) and a few frames of its camera path, four
 renders per frame with otherwise identical settings: FSAA 2x2 and adaptive supersampling 2x2 (compared),
-1 spp and adaptive undersampling 2x2 (compared). Each render is priced on the mobile profile. Reported,
+1 spp and adaptive undersampling 2x2 (compared), and the seed's multi-rate extension (per-tile 2x2 or 4x4
+from the previous frame's similarity ratio; the previous frame is the same view rendered once).
+Each render is priced on the mobile profile. Reported,
 relative to the reference of its pair (as seed Fig. 7):
   perf   = frame rate at full speed (1 / frame time, frame time = slowest unit),
   power  = P_static + E_frame / frame_time (running flat out, as the seed measured),
@@ -81,7 +83,9 @@ def main() -> None:
     pairs = (("adaptive supersampling 2x2 vs FSAA 2x2", base.replace(mode="fsaa", block=2),
               base.replace(mode="supersample", block=2)),
              ("adaptive undersampling 2x2 vs 1 spp", base.replace(mode="1spp"),
-              base.replace(mode="undersample", block=2)))
+              base.replace(mode="undersample", block=2)),
+             ("multi-rate undersampling (2x2/4x4 per tile) vs 1 spp", base.replace(mode="1spp"),
+              base.replace(mode="undersample", block=2, multirate=True)))
     print(f"## Adaptive sampling on the mobile profile, {args.width} px wide, {args.frames} frames per "
           f"scene, normal threshold {args.threshold} deg")
     print("| scene | comparison | rays traced | GPU perf | GPU power | GPU perf/W | T&I perf | T&I power | "
@@ -96,7 +100,10 @@ def main() -> None:
             acc = {k: [] for k in ("rays", "perf", "power", "ppw", "tperf", "tpower", "tppw", "ovh", "psnr")}
             for cam in cams:
                 r_ref = render(scene, cam, ref_s, cache=prof.cache)
-                r_ada = render(scene, cam, ada_s, cache=prof.cache)
+                prev = None
+                if ada_s.multirate:  # the per-tile rates come from the previous frame's similarity ratios
+                    prev = render(scene, cam, ada_s, cache=prof.cache)
+                r_ada = render(scene, cam, ada_s, cache=prof.cache, previous=prev)
                 p_ref, p_ada = price(r_ref, prof, 30, scene=scene), price(r_ada, prof, 30, scene=scene)
                 acc["rays"].append(r_ada.counters["rays_total"] / r_ref.counters["rays_total"])
                 acc["perf"].append(p_ada.max_fps / p_ref.max_fps)

@@ -9,14 +9,22 @@ of the reprojected right eye against the traced one.
 
 Seed figures: 1.64x performance, 20 % energy saved, 91.5 % reused. Target here: >= 1.4x, >= 15 %.
 
+The G-buffer prefetch is priced three ways, because it decides the result: (a) as the tracer counts it
+(every tile fetches its rows of the left G-buffer over the full image width: h * W * 32 B per tile),
+(b) each row fetched once per band of tiles and kept on chip (H * W * 32 B per frame), (c) each tile fetching
+only the span reprojection can reach (h * (w + max disparity) * 32 B; max disparity = IPD * focal / nearest
+left-eye depth). (b) and (c) are what-ifs computed here from the same render, not tracer counters.
+
 Run: .venv/bin/python bench/bench_stereo.py [--width 640] [--frames 3] [--scenes DIR]
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 from bench_adaptive import SCENES, cameras, ensure_scenes, psnr
@@ -24,6 +32,36 @@ from bench_adaptive import SCENES, cameras, ensure_scenes, psnr
 from sim_core import RenderSettings, Scene, load_profile, price, render, render_stereo
 
 DEFAULT_SCENES = Path(__file__).resolve().parent.parent / "blend_scenes" / "build"
+GBUFFER_TEXEL_BYTES = 32  # the tracer's kGBufferTexelBytes
+
+
+def with_prefetch(result, prefetch_bytes: int) -> SimpleNamespace:
+    """The same render with another G-buffer prefetch byte count (for the what-if pricing)."""
+    c = dict(result.counters)
+    c["gbuffer_prefetch_bytes"] = int(prefetch_bytes)
+    return SimpleNamespace(counters=c, comparator_histogram=result.comparator_histogram,
+                           settings=result.settings)
+
+
+def prefetch_alternatives(st, cam, ipd: float) -> tuple[int, int]:
+    """(b) rows once per tile band, (c) per-tile disparity span, in bytes."""
+    w, h = st.right.render_resolution
+    rows_once = h * w * GBUFFER_TEXEL_BYTES
+    depth = np.asarray(st.left.aovs["depth"])
+    near = float(depth[np.isfinite(depth)].min()) if np.isfinite(depth).any() else math.inf
+    focal = h / (2 * math.tan(cam.vfov / 2))
+    dmax = 0 if not math.isfinite(near) else math.ceil(ipd * focal / max(near, 1e-6)) + 1
+    span = sum(t["height"] * min(w, t["width"] + dmax) for t in st.right.tile_stats) * GBUFFER_TEXEL_BYTES
+    return rows_once, span
+
+
+def row(name: str, m: dict[str, float]) -> str:
+    cells = [name, f"{100 * m['reuse']:.1f} %"]
+    for tag in ("", "_b", "_c"):
+        e = m["energy" + tag]
+        cells += [f"{m['perf' + tag]:.2f}x", f"{e:.2f} ({100 * (1 - e):.0f} % saved)"]
+    cells += [f"{m['tperf']:.2f}x", f"{m['tenergy']:.2f}", f"{m['psnr']:.1f}"]
+    return "| " + " | ".join(cells) + " |"
 
 
 def main() -> None:
@@ -37,13 +75,16 @@ def main() -> None:
     prof = load_profile("mobile")
     settings = RenderSettings(mode="1spp")
     print(f"## Stereo with/without reprojection, mobile profile, {args.width} px per eye, IPD {args.ipd} m")
-    print("| scene | reused | GPU perf | GPU energy | T&I perf | T&I energy | right-eye PSNR dB |")
-    print("|---|---|---|---|---|---|---|")
+    print("| scene | reused | GPU perf (a) | GPU energy (a) | GPU perf (b) | GPU energy (b) | GPU perf (c) | "
+          "GPU energy (c) | T&I perf | T&I energy | right-eye PSNR dB |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     rows = []
     t0 = time.perf_counter()
     for name in SCENES:
         scene = Scene.from_gltf(args.scenes / name / "scene.glb")
-        acc: dict[str, list[float]] = {k: [] for k in ("reuse", "perf", "energy", "tperf", "tenergy", "psnr")}
+        keys = ("reuse", "perf", "energy", "perf_b", "energy_b", "perf_c", "energy_c", "tperf", "tenergy",
+                "psnr")
+        acc: dict[str, list[float]] = {k: [] for k in keys}
         for cam in cameras(args.scenes / name / "path.json", args.width, args.frames):
             left = render(scene, cam.shifted(-args.ipd / 2), settings, cache=prof.cache)
             right = render(scene, cam.shifted(args.ipd / 2), settings, cache=prof.cache)
@@ -60,6 +101,12 @@ def main() -> None:
 
             t_no, e_no, tt_no, te_no = pair(pl, pr)
             t_re, e_re, tt_re, te_re = pair(sl, sr)
+            b_bytes, c_bytes = prefetch_alternatives(st, cam, args.ipd)
+            for tag, nbytes in (("b", b_bytes), ("c", c_bytes)):
+                alt = price(with_prefetch(st.right, nbytes), prof, 30, scene=scene)
+                t_alt, e_alt, _, _ = pair(sl, alt)
+                acc["perf_" + tag].append(t_no / t_alt)
+                acc["energy_" + tag].append(e_alt / e_no)
             acc["reuse"].append(st.reuse_ratio)
             acc["perf"].append(t_no / t_re)
             acc["energy"].append(e_re / e_no)
@@ -68,13 +115,9 @@ def main() -> None:
             acc["psnr"].append(psnr(right.image, st.right.image))
         m = {k: float(np.mean(v)) for k, v in acc.items()}
         rows.append(m)
-        print(f"| {name} | {100 * m['reuse']:.1f} % | {m['perf']:.2f}x | {m['energy']:.2f} "
-              f"({100 * (1 - m['energy']):.0f} % saved) | {m['tperf']:.2f}x | {m['tenergy']:.2f} | "
-              f"{m['psnr']:.1f} |")
+        print(row(name, m))
     mean = {k: float(np.mean([r[k] for r in rows])) for k in rows[0]}
-    print(f"| **mean** | {100 * mean['reuse']:.1f} % | {mean['perf']:.2f}x | {mean['energy']:.2f} "
-          f"({100 * (1 - mean['energy']):.0f} % saved) | {mean['tperf']:.2f}x | {mean['tenergy']:.2f} | "
-          f"{mean['psnr']:.1f} |")
+    print(row("**mean**", mean))
     print(f"\n(total bench time {time.perf_counter() - t0:.0f} s)")
 
 
