@@ -135,8 +135,20 @@ def read_csv(path: str | Path) -> list[FrameRow]:
     return rows
 
 
-def plot_over_time(rows: Sequence[FrameRow], out_dir: str | Path, budget: tuple[str, float] | None = None
-                   ) -> list[Path]:
+Budget = tuple[str, float]
+
+
+def budget_list(budget: Budget | Sequence[Budget] | None) -> list[Budget]:
+    """One budget ("POWER"/"ERROR", value) or several (a power and an error budget run side by side)."""
+    if budget is None:
+        return []
+    if len(budget) == 2 and isinstance(budget[0], str):
+        return [(str(budget[0]), float(budget[1]))]  # type: ignore[arg-type]
+    return [(str(m), float(v)) for m, v in budget]  # type: ignore[misc]
+
+
+def plot_over_time(rows: Sequence[FrameRow], out_dir: str | Path,
+                   budget: Budget | Sequence[Budget] | None = None) -> list[Path]:
     """Power and error over time per mode (the paper's Figures 9-11) as PNGs. Needs matplotlib."""
     import matplotlib
 
@@ -156,9 +168,9 @@ def plot_over_time(rows: Sequence[FrameRow], out_dir: str | Path, budget: tuple[
             rs = sorted(rs, key=lambda r: r.time_s)
             ax.plot([r.time_s for r in rs], [getattr(r, quantity) for r in rs],
                     label=MODE_LABELS.get(mode, mode), linewidth=1.2)
-        if budget and ((budget[0] == "POWER" and quantity == "power_w")
-                       or (budget[0] == "ERROR" and quantity == "error")):
-            ax.axhline(budget[1], color="k", linestyle="--", linewidth=0.8, label="budget")
+        for b_mode, b_value in budget_list(budget):
+            if (b_mode == "POWER" and quantity == "power_w") or (b_mode == "ERROR" and quantity == "error"):
+                ax.axhline(b_value, color="k", linestyle="--", linewidth=0.8, label="budget")
         ax.set_xlabel("time (s)")
         ax.set_ylabel(ylabel)
         ax.legend(fontsize=7, ncol=3)
@@ -184,8 +196,9 @@ if __name__ == "__main__":
     raise SystemExit(main(sys.argv[1:]))
 
 
-def write_report(out_dir: str | Path, rows: Sequence[FrameRow], *, title: str, budget: tuple[str, float],
-                 notes: Sequence[str] = (), plot: bool = True) -> dict[str, Path | str]:
+def write_report(out_dir: str | Path, rows: Sequence[FrameRow], *, title: str,
+                 budget: Budget | Sequence[Budget], notes: Sequence[str] = (), plot: bool = True
+                 ) -> dict[str, Path | str]:
     """Write report.md (Table 3 layout), per_frame.csv and, when matplotlib is importable, the plots.
 
     Returns the written paths, plus 'plots_skipped' with the reason when plotting was not possible here.
@@ -200,10 +213,12 @@ def write_report(out_dir: str | Path, rows: Sequence[FrameRow], *, title: str, b
         except ImportError as err:
             written["plots_skipped"] = f"matplotlib not available in this Python ({err})"
     summaries = summarise(rows)
-    mode, value = budget
-    unit = "W" if mode == "POWER" else "(1 - SSIM)"
+    budgets = budget_list(budget)
+    if not budgets:
+        raise ValueError("write_report needs at least one budget")
+    stated = ", ".join(f"{m.lower()} <= {v:g} {'W' if m == 'POWER' else '(1 - SSIM)'}" for m, v in budgets)
     lines = [f"# Power budget report: {title}", "",
-             f"Budget: {mode.lower()} <= {value:g} {unit}. Error is 1 - SSIM against the maximum-quality "
+             f"Budget: {stated}. Error is 1 - SSIM against the maximum-quality "
              "render of the same frame; power is the simulator's at the path's frame rate.", "",
              table3_markdown(summaries), "",
              "Files: `per_frame.csv` (every frame and mode), `power_over_time.png`, `error_over_time.png`, "

@@ -1,0 +1,158 @@
+"""The main job (`make demo` / `make report`): tools/demo.py end to end against a real local service, on a
+tiny configuration, plus the pieces it adds to the shared evaluation code."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from addon.core.evaluate_path import power_at_resolution
+from addon.core.report import budget_list
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+TEAPOT = REPO_ROOT / "blend_scenes" / "build" / "teapot"
+MODES = {"ours_power", "ours_error", "max", "max_mid", "mid_min", "min"}
+TINY = ["--scene", "teapot", "--resolution", "32x18", "--frames", "6", "--max-depth", "0",
+        "--population", "4", "--generations", "2", "--samples", "1", "--sample-resolution", "16x9"]
+
+
+def _port_closed(url: str) -> bool:
+    host, port = url.removeprefix("http://").split(":")
+    with socket.socket() as s:
+        s.settimeout(1.0)
+        return s.connect_ex((host, int(port))) != 0
+
+
+def test_power_scaled_to_the_path_resolution_matches_the_optimisers_prediction() -> None:
+    """The report's power for a 64x36 evaluation scaled to 1280x720 equals what the optimiser predicts
+    for the path (service.evaluation with target_pixels) for the same render."""
+    from service.camera_path import CameraPath
+    from service.evaluation import CameraSpec, evaluate, load_scene
+    from service.params import default_space
+
+    if not (TEAPOT / "scene.glb").is_file():
+        pytest.skip("teapot not built (python -m blend_scenes.build --scene teapot)")
+    scene = load_scene(TEAPOT / "scene.glb")
+    f = CameraPath.load(TEAPOT / "path.json").frames[0]
+    m = np.asarray(f.matrix_world)
+    cam = CameraSpec(eye=tuple(m[:3, 3]), forward=tuple(-m[:3, 2]), up=tuple(m[:3, 1]), vfov=f.vfov,
+                     width=32, height=18)
+    space = default_space()
+    idx = space.min_quality_indices()
+    own = evaluate(scene, cam, idx, space, threads=1)
+    predicted = evaluate(scene, cam, idx, space, threads=1, target_pixels=1280 * 720)
+    response = {"power_w": own.power_w, "breakdown": own.breakdown}
+    scaled = power_at_resolution(response, 30.0, (32, 18), (1280, 720))
+    assert scaled == pytest.approx(predicted.power_w, rel=1e-9)
+    assert scaled > own.power_w  # more pixels, more dynamic power
+    with pytest.raises(ValueError, match=r"energy_j\.static"):
+        power_at_resolution({"power_w": 1.0, "breakdown": {}}, 30.0, (32, 18), (64, 36))
+
+
+def test_report_budgets_one_or_several() -> None:
+    assert budget_list(("POWER", 2)) == [("POWER", 2.0)]
+    assert budget_list([("POWER", 2.0), ("ERROR", 0.02)]) == [("POWER", 2.0), ("ERROR", 0.02)]
+    assert budget_list(None) == []
+
+
+@pytest.mark.slow
+@pytest.mark.service
+def test_demo_end_to_end_tiny(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    proc = subprocess.run([sys.executable, "-m", "tools.demo", *TINY, "--out", str(out), "--data-dir",
+                           str(tmp_path / "var")], cwd=REPO_ROOT, capture_output=True, text=True, timeout=300,
+                          check=False)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    url = re.search(r"render-budget serve on (http://\S+),", proc.stdout).group(1)
+    assert "service stopped" in proc.stdout and _port_closed(url)
+    assert "Avg. Power (W)" in proc.stdout  # the table is printed
+
+    for name in ("report.md", "per_frame.csv", "power_over_time.png", "error_over_time.png", "store.json",
+                 "summary.json"):
+        assert (out / name).is_file() and (out / name).stat().st_size > 0, name
+    frames = sorted((out / "frames").iterdir())
+    assert {p.suffix for p in frames} == {".png", ".exr"}
+    assert all(p.read_bytes()[:4] == b"\x89PNG" for p in frames if p.suffix == ".png")
+    assert all(p.read_bytes()[:4] == b"\x76\x2f\x31\x01" for p in frames if p.suffix == ".exr")
+
+    summary = json.loads((out / "summary.json").read_text())
+    with (out / "per_frame.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert {r["mode"] for r in rows} == MODES
+    n = summary["frames_evaluated"]
+    assert 1 <= n <= 6 and len(rows) == 6 * n
+    power = {m: [float(r["power_w"]) for r in rows if r["mode"] == m] for m in MODES}
+    error = {m: [float(r["error"]) for r in rows if r["mode"] == m] for m in MODES}
+    assert all(math.isfinite(v) and v > 0 for vs in power.values() for v in vs)
+    assert all(math.isfinite(v) and 0.0 <= v <= 1.0 for vs in error.values() for v in vs)
+    assert error["max"] == [0.0] * n  # the maximum preset is the reference
+    assert np.mean(power["max"]) >= np.mean(power["max_mid"]) >= np.mean(power["min"])
+    assert np.mean(error["min"]) > 0.0
+
+    # budget-kept flags agree with the measured numbers and the budgets the driver chose
+    pb, eb = summary["power_budget_w"], summary["error_budget"]
+    for r in rows:
+        if r["mode"] == "ours_power":
+            assert r["budget_kept"] == str(int(float(r["power_w"]) <= pb))
+        elif r["mode"] == "ours_error":
+            assert r["budget_kept"] == str(int(float(r["error"]) <= eb))
+        else:
+            assert r["budget_kept"] == ""
+    # the summary's table is the CSV's means
+    by_mode = {s["mode"]: s for s in summary["summaries"]}
+    for m in MODES:
+        assert by_mode[m]["mean_power_w"] == pytest.approx(np.mean(power[m]), rel=1e-4)
+        assert by_mode[m]["mean_error"] == pytest.approx(np.mean(error[m]), rel=1e-4, abs=1e-6)
+    assert by_mode["max"]["saving_vs_max"] == pytest.approx(0.0, abs=1e-12)
+
+    # the automatic power budget lies within the store's frontiers (between their cheapest and best)
+    from service.pareto_store import ParetoStore
+
+    store = ParetoStore.from_json((out / "store.json").read_text())
+    assert store.stats()["views"] == summary["store"]["views"] and summary["store"]["depth"] == 0
+    lo, hi = (float(v) for v in re.findall(r"\(([\d.]+) W\)", summary["budget_choice"]))
+    assert lo <= pb <= hi
+
+    report_md = (out / "report.md").read_text()
+    for text in ("Avg. Power (W)", "Ours (power budget)", "Ours (error budget)", "Max-Mid", "Budget kept",
+                 "Table 2", "Valley (paper)", "Time per phase"):
+        assert text in report_md, text
+
+
+@pytest.mark.slow
+@pytest.mark.service
+def test_demo_stops_the_service_on_sigterm(tmp_path: Path) -> None:
+    proc = subprocess.Popen([sys.executable, "-m", "tools.demo", *TINY, "--generations", "50", "--out",
+                             str(tmp_path / "out"), "--data-dir", str(tmp_path / "var")], cwd=REPO_ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    url = None
+    try:
+        deadline = time.monotonic() + 120
+        for line in proc.stdout:
+            m = re.search(r"render-budget serve on (http://\S+),", line)
+            url = url or (m.group(1) if m else None)
+            if "optimise the path" in line or time.monotonic() > deadline:
+                break
+        assert url is not None
+        time.sleep(1.0)
+        os.kill(proc.pid, signal.SIGTERM)
+        rest, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130, err
+    assert "service stopped" in rest
+    assert _port_closed(url)
