@@ -29,7 +29,7 @@ test: venv
 	$(PY) -m pytest $(PYTEST_ARGS)
 
 demo: venv
-	$(PY) -m service.demo
+	$(PY) -m tools.demo
 
 # Every test scene (cached: a scene is rebuilt only when its generator changed).
 scenes: venv
@@ -42,7 +42,7 @@ addon: venv
 # The main job on any scene: make report SCENE=chess
 SCENE ?= teapot
 report: venv
-	$(PY) -m service.demo --scene $(SCENE) --out out/$(SCENE)
+	$(PY) -m tools.demo --scene $(SCENE) --out out/$(SCENE)
 
 # Benchmarks print their tables; bench/RESULTS.md records the quoted ones with their commands.
 bench: venv
