@@ -85,29 +85,15 @@ def _plain(value: Any) -> Any:
 
 
 def progress_dict(progress: Any, *, elapsed_s: float) -> dict[str, Any]:
-    """The optimiser's progress report as the API's JobProgress fields plus whatever else it carries."""
-    raw = _plain(progress)
-    if not isinstance(raw, dict):
-        raw = {"detail": raw}
-    aliases = {
-        "views_done": ("views_done", "samples_done", "done"),
-        "views_planned": ("views_planned", "samples_planned", "planned", "total"),
-        "evaluations": ("evaluations", "evaluated", "renders"),
-        "cache_hits": ("cache_hits", "hits"),
-    }
-    out: dict[str, Any] = {k: v for k, v in raw.items() if k not in ("elapsed_s", "estimate_s")}
-    for key, names in aliases.items():
-        for n in names:
-            if isinstance(raw.get(n), int | float):
-                out[key] = int(raw[n])
-                break
-    out["elapsed_s"] = round(float(elapsed_s), 3)  # over all attempts (the optimiser's is per attempt)
-    done, planned = out.get("views_done", 0), out.get("views_planned", 0)
-    own = raw.get("estimate_s")
-    out["estimate_s"] = (
-        round(float(own), 3) if isinstance(own, int | float)
-        else round(elapsed_s * (planned - done) / done, 3) if done > 0 and planned >= done else None
-    )
+    """``service.optimize.Progress`` as JSON, with the elapsed time summed over all attempts of the job
+    (the optimiser's own ``elapsed_s`` restarts with each attempt)."""
+    out = _plain(progress)
+    if not isinstance(out, dict):
+        raise TypeError(f"progress must be a dataclass or a dict, got {type(progress).__name__}")
+    out["elapsed_s"] = round(float(elapsed_s), 3)
+    done, planned = int(out.get("views_done", 0)), int(out.get("views_planned", 0))
+    if out.get("estimate_s") is None and 0 < done <= planned:
+        out["estimate_s"] = round(elapsed_s * (planned - done) / done, 3)
     return out
 
 
