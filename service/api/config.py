@@ -44,7 +44,7 @@ class Settings(BaseSettings):
     max_upload_bytes: int = Field(default=64 * 1024 * 1024, gt=0)
     max_body_bytes: int = Field(default=4 * 1024 * 1024, gt=0)
     max_path_frames: int = Field(default=20_000, gt=0)
-    max_render_pixels: int = Field(default=2048 * 2048, gt=0)
+    max_render_pixels: int = Field(default=1024 * 1024, gt=0)  # previews and /evaluate
     # Work.
     job_workers: int = Field(default=2, ge=1, le=64)
     render_threads: int | None = Field(default=None, ge=1)

@@ -10,6 +10,7 @@ from typing import Any
 
 from fastapi import APIRouter, Request, status
 from starlette.concurrency import run_in_threadpool
+from starlette.requests import ClientDisconnect
 
 from service.storage import SceneRecord, Storage
 
@@ -104,6 +105,9 @@ async def receive_upload(request: Request, storage: Storage, limit: int) -> tupl
                     raise ApiError(413, f"upload exceeds the limit of {limit} bytes")
                 digest.update(chunk)
                 f.write(chunk)
+    except ClientDisconnect as exc:
+        tmp.unlink(missing_ok=True)
+        raise ApiError(400, "upload interrupted: the client disconnected") from exc
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
