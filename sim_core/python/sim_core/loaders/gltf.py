@@ -540,12 +540,12 @@ def _load(p: Path) -> SceneData:
             persp = cams[ci].get("perspective")
             if persp is not None:  # orthographic cameras are not modelled
                 yfov = float(persp["yfov"])
+                aspect = float(persp.get("aspectRatio", 16 / 9))
                 if not (0.0 < yfov < math.pi):
                     raise ValueError(f"{doc.path}: camera {ci} yfov {yfov} outside (0, pi)")
-                cameras.append(
-                    CameraData(matrix_world=world_b.copy(), vfov=yfov,
-                               aspect=float(persp.get("aspectRatio", 16 / 9)), name=name)
-                )
+                if not (math.isfinite(aspect) and aspect > 0.0):
+                    raise ValueError(f"{doc.path}: camera {ci} aspectRatio {aspect} must be positive")
+                cameras.append(CameraData(matrix_world=world_b.copy(), vfov=yfov, aspect=aspect, name=name))
         if "mesh" not in node:
             continue
         mi = int(node["mesh"])
