@@ -73,3 +73,14 @@ def test_inert_parameters_defaults_and_validation(teapot_data) -> None:
         inert_parameters(scene, {"no_such_setting": [1, 2]})
     with pytest.raises(ValueError):
         inert_parameters(scene, {"max_depth": []})
+
+
+def test_interactions_with_other_parameters_are_tried(teapot_data) -> None:
+    """A similarity threshold does nothing at 1 spp but matters once the space offers an adaptive mode."""
+    scene = _scene(teapot_data, Material(roughness=0.6))
+    cam = _camera(scene)
+    alone = inert_parameters(scene, {"normal_threshold_deg": [5.0, 60.0]}, cam)
+    assert "normal_threshold_deg" in alone  # neither base (FSAA, 1 spp) is adaptive
+    space = {"normal_threshold_deg": [5.0, 60.0], "mode": ["1spp", "undersample"]}
+    with_mode = inert_parameters(scene, space, cam)
+    assert "normal_threshold_deg" not in with_mode and "mode" not in with_mode

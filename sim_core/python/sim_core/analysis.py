@@ -121,11 +121,13 @@ def inert_parameters(scene: Any, space: Mapping[str, Sequence[Any]], camera: Any
                      threads: int | None = None) -> dict[str, str]:
     """Settings of ``space`` that cannot change ``scene``'s image or power, with the reason.
 
-    ``space`` maps ``RenderSettings`` field names to candidate values. For every base setting (default:
-    ``RenderSettings.max_quality()`` and ``RenderSettings()``) and every parameter, the scene is rendered
-    at ``resolution`` with each candidate value; the parameter is inert when all renders give the same
-    image (bit for bit) and the same counters from every base. ``camera`` defaults to the scene's first
-    camera or one framing its bounds.
+    ``space`` maps ``RenderSettings`` field names to candidate values. A parameter is varied over its
+    candidates from every context: each base setting (default: ``RenderSettings.max_quality()`` and
+    ``RenderSettings()``) and each base with one other parameter of the space set to one of its candidates
+    (so a similarity threshold is tried under an adaptive mode when the space offers one). The scene is
+    rendered at ``resolution`` (the camera is re-made at that size); the parameter is inert when, in every
+    context, all its values give the same image (bit for bit) and the same counters. ``camera`` defaults
+    to the scene's first camera or one framing its bounds.
     """
     from . import RenderSettings, render
 
@@ -153,16 +155,40 @@ def inert_parameters(scene: Any, space: Mapping[str, Sequence[Any]], camera: Any
             cache[key] = (np.asarray(r.image), dict(r.counters))
         return cache[key]
 
+    def contexts(name: str) -> list[Any]:
+        """Base settings to vary ``name`` from: every base, and every base with one other parameter of the
+        space set to each of its candidates (so interactions such as threshold x adaptive mode count)."""
+        out, seen = [], set()
+        for base in base_list:
+            cands = [base]
+            for other, vals in space.items():
+                if other == name:
+                    continue
+                for v in vals:
+                    try:
+                        cands.append(dataclasses.replace(base, **{other: v}))
+                    except ValueError:
+                        continue  # an invalid combination is not a context the search can reach
+            for c in cands:
+                if repr(c) not in seen:
+                    seen.add(repr(c))
+                    out.append(c)
+        return out
+
     inert: dict[str, str] = {}
     for name, values in space.items():
         if len(values) < 2:
             inert[name] = "a single candidate value: nothing to choose"
             continue
         same = True
-        for base in base_list:
+        for base in contexts(name):
             ref_img, ref_cnt = None, None
             for v in values:
-                img, cnt = run(dataclasses.replace(base, **{name: v}))
+                try:
+                    settings = dataclasses.replace(base, **{name: v})
+                except ValueError:
+                    continue
+                img, cnt = run(settings)
                 if ref_img is None:
                     ref_img, ref_cnt = img, cnt
                 elif img.shape != ref_img.shape or not np.array_equal(img, ref_img) or cnt != ref_cnt:
