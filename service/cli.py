@@ -53,6 +53,8 @@ def build_parser() -> argparse.ArgumentParser:
     o.add_argument("--threshold-error", type=_positive, default=0.01, metavar="E",
                    help="subdivide where neighbouring frontiers differ by more than E (1 - SSIM)")
     o.add_argument("--max-depth", type=int, default=2, metavar="N")
+    o.add_argument("--min-depth", type=int, default=0, metavar="N",
+                   help="split nodes on the path at least N deep (default 0: only where frontiers differ)")
     o.add_argument("--population", type=int, default=24)
     o.add_argument("--generations", type=int, default=25)
     o.add_argument("--exhaustive-limit", type=int, default=512, metavar="N",
@@ -128,7 +130,8 @@ def _optimize(args: argparse.Namespace) -> int:
         space = space.subset([n.strip() for n in args.parameters.split(",") if n.strip()])
     options = OptimizeOptions(
         threshold_power_w=args.threshold_power, threshold_error=args.threshold_error,
-        max_depth=args.max_depth, population=args.population, generations=args.generations,
+        max_depth=args.max_depth, min_depth=args.min_depth, population=args.population,
+        generations=args.generations,
         exhaustive_limit=args.exhaustive_limit, eval_width=args.eval_width, eval_height=args.eval_height,
         profile=args.profile, fps=args.fps, seed=args.seed, metric=args.metric, threads=args.threads,
     )

@@ -80,6 +80,7 @@ class OctreeConfig:
     threshold_power_w: float
     threshold_error: float
     max_depth: int = 2
+    min_depth: int = 0  # nodes on the path are split at least this deep, whatever their frontiers
     margin: float = 0.1  # fraction of a node's side added around it for the "path passes through" test
     pad_fraction: float = 0.1
     min_size: float = 1.0
@@ -94,6 +95,8 @@ class OctreeConfig:
             raise ValueError("thresholds must be positive")
         if not 0 <= self.max_depth <= 12:
             raise ValueError("max_depth must be in 0..12")
+        if not 0 <= self.min_depth <= self.max_depth:
+            raise ValueError("min_depth must be in 0..max_depth")
         if self.margin < 0:
             raise ValueError("margin must be >= 0")
 
@@ -310,12 +313,12 @@ class OctreeBuilder:
                 break
             cand = [n for n in level if self._on_path(n)]
             pairs = []
-            for n in cand:
+            for n in (m for m in cand if depth >= self.cfg.min_depth):
                 cs = self._node_corners(n)
                 pairs += [(cs[a], cs[b], v) for a, b in CUBE_EDGES for v in range(N_VIEWS)]
             self._report(f"compare depth {depth}")
             self._distances(pairs)
-            split = [n for n in cand if any(
+            split = [n for n in cand if depth < self.cfg.min_depth or any(
                 self._differs(self._dist[(cs[a], cs[b], v)])
                 for cs in [self._node_corners(n)] for a, b in CUBE_EDGES for v in range(N_VIEWS))]
             level = self._subdivide(split, depth + 1)

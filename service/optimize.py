@@ -32,14 +32,17 @@ class OptimizeOptions:
     """Options of one run (defaults follow the paper: population 24, 25 generations).
 
     ``eval_width``/``eval_height`` set the evaluation resolution; a missing width follows the path's
-    aspect. ``margin`` widens nodes (as a fraction of their side) when testing whether the path passes
-    through them. ``skip_inert`` asks the simulator which parameters cannot matter for the scene.
-    ``power_at_path_resolution`` predicts power for the path's resolution (dynamic energy scaled by the
-    pixel ratio) rather than for the small evaluation images."""
+    aspect. ``min_depth`` splits the nodes the path passes through at least that deep (the paper's
+    behaviour is 0: split only where neighbouring frontiers differ). ``margin`` widens nodes (as a
+    fraction of their side) when testing whether the path passes through them. ``skip_inert`` asks the
+    simulator which parameters cannot matter for the scene. ``power_at_path_resolution`` predicts power
+    for the path's resolution (dynamic energy scaled by the pixel ratio) rather than for the small
+    evaluation images."""
 
     threshold_power_w: float = 0.05
     threshold_error: float = 0.01
     max_depth: int = 2
+    min_depth: int = 0
     population: int = 24
     generations: int = 25
     exhaustive_limit: int = 512
@@ -63,6 +66,8 @@ class OptimizeOptions:
                 raise ValueError(f"{name} must be a positive finite number, got {v!r}")
         if not 0 <= self.max_depth <= 12:
             raise ValueError("max_depth must be in 0..12")
+        if not 0 <= self.min_depth <= self.max_depth:
+            raise ValueError("min_depth must be in 0..max_depth")
         if self.population < 2 or self.generations < 1:
             raise ValueError("population must be >= 2 and generations >= 1")
         if self.exhaustive_limit < 0:
@@ -120,7 +125,8 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, options: 
                           target_pixels=target_pixels if options.power_at_path_resolution else None)
     cfg = OctreeConfig(
         threshold_power_w=options.threshold_power_w, threshold_error=options.threshold_error,
-        max_depth=options.max_depth, margin=options.margin, pad_fraction=options.pad_fraction,
+        max_depth=options.max_depth, min_depth=options.min_depth, margin=options.margin,
+        pad_fraction=options.pad_fraction,
         min_size=options.min_size,
         nsga=NSGAConfig(population=options.population, generations=options.generations, seed=options.seed),
         exhaustive_limit=options.exhaustive_limit, vfov=vfov, width=width, height=height,

@@ -169,3 +169,14 @@ def test_cli_optimize_then_query(tmp_path, capsys) -> None:
                    "--max-depth", "0", "--parameters", "sampling,resolution_scale", "--eval-height", "12",
                    "--cache", str(tmp_path / "c.sqlite"), "--no-progress"])
     assert rc == 0 and ", 0 renders," in capsys.readouterr().out
+
+
+def test_options_validation() -> None:
+    with pytest.raises(ValueError):
+        OptimizeOptions(min_depth=3, max_depth=2)
+    with pytest.raises(ValueError):
+        OptimizeOptions(threshold_power_w=0.0)
+    with pytest.raises(ValueError):
+        OptimizeOptions(metric="mse")
+    with pytest.raises(ValueError):
+        OptimizeOptions(eval_height=4)
