@@ -115,6 +115,24 @@ def test_bundled_meshes_counts(models_dir: Path) -> None:
         assert np.all(np.isfinite(sd.positions))
 
 
+def test_fast_and_general_parsers_agree(models_dir: Path, tmp_path: Path) -> None:
+    """Plain files take a vectorised path; a group line forces the general parser: same mesh."""
+    text = (models_dir / "teapot.obj").read_text()
+    fast = load_obj(models_dir / "teapot.obj")
+    (tmp_path / "grouped.obj").write_text("g teapot\n" + text)
+    general = load_obj(tmp_path / "grouped.obj")
+    assert np.array_equal(fast.positions, general.positions)
+    assert np.array_equal(fast.triangles, general.triangles)
+    assert fast.object_names == ["teapot"] and general.object_names == ["teapot"]
+
+
+def test_fast_path_falls_back_for_errors(tmp_path: Path) -> None:
+    path = tmp_path / "bad.obj"
+    path.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n")
+    with pytest.raises(ValueError, match=r"bad\.obj:4: vertex index 9 out of range"):
+        load_obj(path)
+
+
 @pytest.mark.blender
 @pytest.mark.parametrize("name", ["teapot.obj", "spot.obj"])
 def test_matches_blender_obj_importer(models_dir: Path, name: str) -> None:
