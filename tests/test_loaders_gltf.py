@@ -192,6 +192,17 @@ def test_gltf_json_with_data_uri(tmp_path: Path) -> None:
     assert np.allclose(sd.positions, _to_blender(TRI + np.array([0.0, 5.0, 0.0])))
 
 
+def test_undecodable_texture(tmp_path: Path) -> None:
+    b = _Builder()
+    _one_triangle(b)
+    b.gltf["images"] = [{"bufferView": b.view(b"not a png at all"), "mimeType": "image/png"}]
+    b.gltf["textures"] = [{"source": 0}]
+    b.gltf["materials"] = [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}]
+    b.gltf["meshes"][0]["primitives"][0]["material"] = 0
+    with pytest.raises(ValueError, match="cannot be decoded"):
+        load_gltf(b.glb(tmp_path / "tex.glb"))
+
+
 def test_environment_extras_exr(tmp_path: Path) -> None:
     import OpenEXR
 
@@ -579,3 +590,27 @@ def test_blender_principled_materials(bpy_mod, tmp_path: Path) -> None:
         used = {sd.materials[i].name for i in np.unique(sd.material_ids[sd.object_ids == oid])}
         assert used == {bpy.data.objects[name].data.materials[0].name}
     assert sd.environment == pytest.approx((0.05, 0.1, 0.2))
+
+
+@pytest.mark.blender
+def test_blender_base_color_texture_becomes_its_mean(bpy_mod, tmp_path: Path) -> None:
+    bpy = bpy_mod
+    _reset(bpy)
+    bpy.ops.mesh.primitive_cube_add()
+    mat = bpy.data.materials.new("Textured")
+    tree = mat.node_tree
+    img = bpy.data.images.new("halves", 8, 8)  # sRGB byte image: top half red, bottom half blue
+    px = np.zeros((8, 8, 4), np.float32)
+    px[..., 3] = 1.0
+    px[:4, :, 0] = 1.0
+    px[4:, :, 2] = 0.5
+    img.pixels.foreach_set(px.reshape(-1))
+    img.pack()
+    tex = tree.nodes.new("ShaderNodeTexImage")
+    tex.image = img
+    tree.links.new(tex.outputs["Color"], tree.nodes["Principled BSDF"].inputs["Base Color"])
+    bpy.context.active_object.data.materials.append(mat)
+    sd = load_gltf(_export(bpy, tmp_path / "tex.glb"))
+    (m,) = [m for m in sd.materials if m.name == "Textured"]
+    blue = ((0.5 + 0.055) / 1.055) ** 2.4  # sRGB 0.5 in linear light
+    assert np.allclose(m.base_color, [0.5, 0.0, 0.5 * blue], atol=0.01)

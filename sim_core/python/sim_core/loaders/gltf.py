@@ -3,7 +3,8 @@
 What it reads: triangle meshes (indexed or not, strips and fans too) placed by the node hierarchy,
 metallic-roughness materials with KHR_materials_transmission / _ior / _emissive_strength,
 KHR_lights_punctual lights and perspective cameras. Textures, skins, morph targets and animation are
-ignored: the simulator prices ray work, and those do not change what a ray hits in a static frame.
+ignored, except that a base-colour texture contributes its mean linear colour (the simulator shades one
+flat albedo per material): the simulator prices ray work, and those do not change what a ray hits.
 
 Frames: glTF is Y-up, the project's world is Blender's Z-up. The conversion happens here, once, in
 :data:`GLTF_TO_BLENDER` (``(x, y, z)_gltf -> (x, -z, y)``), applied to every node's world matrix.
@@ -68,6 +69,7 @@ _SUPPORTED_REQUIRED = {
     "KHR_texture_transform",
     "KHR_mesh_quantization",
     "EXT_mesh_gpu_instancing",
+    "EXT_texture_webp",
 }
 #: Upper bound on any accessor's element count (a hostile count must not allocate gigabytes).
 _MAX_ELEMENTS = 1 << 28
@@ -371,14 +373,78 @@ def _vertex_normals(positions: np.ndarray, tris: np.ndarray) -> np.ndarray:
     return np.where(length > 0, normals / np.where(length > 0, length, 1.0), fallback)
 
 
-def _material(doc: _Document, index: int) -> Material:
+def _srgb_to_linear(c: np.ndarray) -> np.ndarray:
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def _image_bytes(doc: _Document, image_index: int) -> bytes:
+    images = doc.gltf.get("images", [])
+    if not 0 <= image_index < len(images):
+        raise ValueError(f"{doc.path}: image {image_index} does not exist")
+    img = images[image_index]
+    if "bufferView" in img:
+        raw, _ = _buffer_view_bytes(doc, int(img["bufferView"]))
+        return bytes(raw)
+    uri = str(img.get("uri", ""))
+    if uri.startswith("data:"):
+        try:
+            return base64.b64decode(uri.split(",", 1)[1])
+        except (IndexError, ValueError) as exc:
+            raise ValueError(f"{doc.path}: image {image_index} has a bad data URI ({exc})") from None
+    from urllib.parse import unquote
+
+    file = doc.path.parent / unquote(uri)
+    if not uri or not file.is_file():
+        raise FileNotFoundError(f"{doc.path}: image {image_index} file not found: {file}")
+    return file.read_bytes()
+
+
+def _texture_mean(doc: _Document, texture_index: int, cache: dict[int, np.ndarray]) -> np.ndarray:
+    """Mean linear RGB of a base-colour texture: the simulator shades flat colours per material, so a
+    textured material gets its average albedo (baseColorFactor times this)."""
+    from PIL import Image
+
+    textures = doc.gltf.get("textures", [])
+    if not 0 <= texture_index < len(textures):
+        raise ValueError(f"{doc.path}: texture {texture_index} does not exist")
+    tex = textures[texture_index]
+    source = tex.get("source")
+    extensions = tex.get("extensions", {})
+    if "EXT_texture_webp" in extensions:  # Pillow decodes WebP
+        source = extensions["EXT_texture_webp"].get("source", source)
+    if source is None:
+        if extensions:  # GPU-compressed only (KTX2/basisu, DDS): no decoder here, keep the factor alone
+            return np.ones(3)
+        raise ValueError(f"{doc.path}: texture {texture_index} has no image source")
+    source = int(source)
+    if source not in cache:
+        import io
+        import warnings
+
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("error", Image.DecompressionBombWarning)
+                with Image.open(io.BytesIO(_image_bytes(doc, source))) as im:
+                    im.draft("RGB", (256, 256))  # JPEG: decode at reduced size
+                    im.thumbnail((256, 256))
+                    rgb = np.asarray(im.convert("RGB"), dtype=np.float64) / 255.0
+        except (OSError, ValueError, Image.DecompressionBombWarning, Image.DecompressionBombError) as exc:
+            raise ValueError(f"{doc.path}: texture image {source} cannot be decoded ({exc})") from None
+        cache[source] = _srgb_to_linear(rgb).reshape(-1, 3).mean(axis=0)
+    return cache[source]
+
+
+def _material(doc: _Document, index: int, texture_cache: dict[int, np.ndarray] | None = None) -> Material:
     mats = doc.gltf.get("materials", [])
     if not 0 <= index < len(mats):
         raise ValueError(f"{doc.path}: material {index} does not exist")
     m = mats[index]
     pbr = m.get("pbrMetallicRoughness", {})
     ext = m.get("extensions", {})
-    base = list(pbr.get("baseColorFactor", [1.0, 1.0, 1.0, 1.0]))[:3]
+    base = np.asarray(list(pbr.get("baseColorFactor", [1.0, 1.0, 1.0, 1.0]))[:3], dtype=np.float64)
+    if "baseColorTexture" in pbr:
+        base = base * _texture_mean(doc, int(pbr["baseColorTexture"]["index"]),
+                                    {} if texture_cache is None else texture_cache)
     emissive = np.asarray(m.get("emissiveFactor", [0.0, 0.0, 0.0]), dtype=np.float64)
     emissive = emissive * float(ext.get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0))
     transmission = float(ext.get("KHR_materials_transmission", {}).get("transmissionFactor", 0.0))
@@ -512,7 +578,8 @@ def _load(p: Path) -> SceneData:
     nodes = gltf.get("nodes", [])
     meshes = gltf.get("meshes", [])
 
-    materials: list[Material] = [_material(doc, i) for i in range(len(gltf.get("materials", [])))]
+    texture_cache: dict[int, np.ndarray] = {}
+    materials = [_material(doc, i, texture_cache) for i in range(len(gltf.get("materials", [])))]
     default_material: int | None = None
     pos_parts: list[np.ndarray] = []
     nrm_parts: list[np.ndarray | None] = []
