@@ -31,6 +31,7 @@ def test_typical_separation_reuses_most_and_matches_direct_render(teapot):
     st = render_stereo(teapot, cam, sep, RenderSettings(), threads=2)
     assert st.reuse_ratio >= 0.9
     assert st.holes > 0  # disocclusion behind the teapot and the right frame edge
+    assert st.silhouettes > 0  # edges are re-traced: which side a pixel centre falls on differs per eye
     direct = render(teapot, cam.shifted(sep / 2), RenderSettings(), threads=2)
     traced = st.right.aovs["sample_kind"] == 0
     # Traced bad pixels are exactly what a direct render gives (same rays through the same pixels).

@@ -11,7 +11,8 @@ namespace sim_core {
 namespace {
 
 constexpr float kDepthTolerance = 0.05f;  // relative depth difference that separates surfaces
-constexpr int kMaxSpan = 16;              // widest gap between two reprojected neighbours checked for leaks
+constexpr int kMaxSpan = 16;
+constexpr float kExactPx = 1e-3f;  // a reprojected sample this close to a pixel centre is used as is              // widest gap between two reprojected neighbours checked for leaks
 
 }  // namespace
 
@@ -31,7 +32,7 @@ StereoOutput render_stereo(const Scene& scene, const Camera& left, const Camera&
   //    z-buffer keeps the nearest. src = left pixel index feeding each right pixel, or -1 (hole).
   std::vector<std::int64_t> src(n, -1);
   std::vector<float> zbuf(n, kInf);
-  std::vector<float> proj_x(n, -1.f), proj_z(n, kInf);
+  std::vector<float> proj_x(n, -1.f), proj_y(n, -1.f), proj_z(n, kInf);
   std::vector<std::int32_t> proj_row(n, -1);
   Counters rc;
   for (std::size_t i = 0; i < n; ++i) {
@@ -47,15 +48,82 @@ StereoOutput render_stereo(const Scene& scene, const Camera& left, const Camera&
     if (!ok || !(u >= 0.f && u < static_cast<float>(W) && v >= 0.f && v < static_cast<float>(H))) continue;
     const int x = std::min(W - 1, static_cast<int>(u)), y = std::min(H - 1, static_cast<int>(v));
     proj_x[i] = u;
+    proj_y[i] = v;
     proj_z[i] = z;
     proj_row[i] = y;
     const std::size_t j = static_cast<std::size_t>(y) * W + x;
     if (src[j] < 0 || z < zbuf[j]) { src[j] = static_cast<std::int64_t>(i); zbuf[j] = z; }
   }
-  // 2. Bad pixels: holes, and farther samples showing through the gap between two reprojected
-  //    neighbours of one continuous nearer surface (a magnified surface in the right eye).
+  // 2. Sub-pixel resampling along reprojected spans: two horizontally adjacent left samples on one
+  //    continuous surface (same object, depths within tolerance, same target row) bound a span of right
+  //    pixels; each right pixel centre inside it takes the linear interpolation of the two samples, unless
+  //    a nearer surface landed there. Gaps a magnified surface leaves in the splat are filled the same way.
+  //    What remains without a source is a hole (disocclusion or out of frame).
+  std::vector<float> rcol(3 * n, 0.f), rdepth(n, kInf);
+  std::vector<std::uint8_t> filled(n, 0);
+  for (std::size_t j = 0; j < n; ++j) {
+    if (src[j] < 0) continue;
+    const std::size_t i = static_cast<std::size_t>(src[j]);
+    for (int ch = 0; ch < 3; ++ch) rcol[3 * j + ch] = L.color[3 * i + ch];
+    rdepth[j] = zbuf[j];
+    filled[j] = 1;
+  }
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x + 1 < W; ++x) {
+      const std::size_t a = static_cast<std::size_t>(y) * W + x, b = a + 1;
+      if (L.object[a] < 0 || L.object[a] != L.object[b] || proj_row[a] < 0 || proj_row[a] != proj_row[b]) continue;
+      const float za = proj_z[a], zb = proj_z[b];
+      if (std::fabs(za - zb) > kDepthTolerance * std::min(za, zb)) continue;
+      const float ua = proj_x[a], ub = proj_x[b];
+      if (!(ub > ua) || ub - ua > static_cast<float>(kMaxSpan)) continue;  // fold-over or torn span
+      const int first = std::max(0, static_cast<int>(std::ceil(ua - 0.5f)));
+      const int last = std::min(W - 1, static_cast<int>(std::ceil(ub - 0.5f)) - 1);
+      const std::size_t row = static_cast<std::size_t>(proj_row[a]) * W;
+      for (int xx = first; xx <= last; ++xx) {
+        const float f = (static_cast<float>(xx) + 0.5f - ua) / (ub - ua);
+        const float z = za + (zb - za) * f;
+        const std::size_t j = row + xx;
+        if (filled[j] && zbuf[j] < z * (1.f - kDepthTolerance)) continue;  // a nearer surface is in front
+        if (filled[j] && src[j] >= 0 && L.object[static_cast<std::size_t>(src[j])] == L.object[a] &&
+            std::fabs(proj_x[static_cast<std::size_t>(src[j])] - (static_cast<float>(xx) + 0.5f)) < kExactPx)
+          continue;  // a sample of this surface landed on the pixel centre: nothing to resample
+        for (int ch = 0; ch < 3; ++ch) rcol[3 * j + ch] = L.color[3 * a + ch] + (L.color[3 * b + ch] - L.color[3 * a + ch]) * f;
+        rdepth[j] = z;
+        if (!filled[j] || zbuf[j] > z * (1.f + kDepthTolerance)) src[j] = static_cast<std::int64_t>(a);
+        filled[j] = 1;
+      }
+    }
+  }
+  // 3. Bad pixels: holes; silhouettes (a 4-neighbour reprojected from another object or from a depth
+  //    more than the tolerance away: which side of the edge the pixel centre falls on changes between the
+  //    eyes); and farther samples showing through a gap between two reprojected neighbours of one
+  //    continuous nearer surface that no span covered (a torn or folded surface).
   std::vector<std::uint8_t> bad(n, 0);
-  for (std::size_t j = 0; j < n; ++j) if (src[j] < 0) { bad[j] = 1; ++out.holes; }
+  for (std::size_t j = 0; j < n; ++j) if (!filled[j]) { bad[j] = 1; ++out.holes; }
+  auto obj_of = [&](std::size_t j) { return src[j] >= 0 ? L.object[static_cast<std::size_t>(src[j])] : -2; };
+  auto edge = [&](std::size_t j, std::size_t k) {
+    if (!filled[k]) return false;
+    if (obj_of(j) != obj_of(k)) return true;
+    if (obj_of(j) < 0) return false;
+    return std::fabs(rdepth[j] - rdepth[k]) > kDepthTolerance * std::min(rdepth[j], rdepth[k]);
+  };
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x < W; ++x) {
+      const std::size_t j = static_cast<std::size_t>(y) * W + x;
+      if (bad[j]) continue;
+      if (src[j] >= 0) {
+        const std::size_t i = static_cast<std::size_t>(src[j]);
+        if (std::fabs(proj_x[i] - (static_cast<float>(x) + 0.5f)) < kExactPx &&
+            std::fabs(proj_y[i] - (static_cast<float>(y) + 0.5f)) < kExactPx)
+          continue;  // the left sample lies on this pixel's centre: it is the right eye's own sample
+      }
+      if ((x > 0 && edge(j, j - 1)) || (x + 1 < W && edge(j, j + 1)) || (y > 0 && edge(j, j - W)) ||
+          (y + 1 < H && edge(j, j + W))) {
+        bad[j] = 1;
+        ++out.silhouettes;
+      }
+    }
+  }
   for (int y = 0; y < H; ++y) {
     for (int x = 0; x + 1 < W; ++x) {
       const std::size_t a = static_cast<std::size_t>(y) * W + x, b = a + 1;
@@ -69,12 +137,12 @@ StereoOutput render_stereo(const Scene& scene, const Camera& left, const Camera&
       const float zmax = std::max(za, zb) * (1.f + kDepthTolerance);
       for (int xx = lo + 1; xx < hi; ++xx) {
         const std::size_t j = static_cast<std::size_t>(row) * W + xx;
-        if (!bad[j] && zbuf[j] > zmax) { bad[j] = 1; ++out.depth_mismatches; }
+        if (!bad[j] && rdepth[j] > zmax) { bad[j] = 1; ++out.depth_mismatches; }
       }
     }
   }
   // G-buffer reads of the error detection: the left rows each right tile's pixels reproject from.
-  // 3. Right eye, tile by tile: reuse valid pixels, trace bad ones (every sub-pixel of the grid).
+  // 4. Right eye, tile by tile: reuse valid pixels, trace bad ones (every sub-pixel of the grid).
   RenderOutput& R = out.right;
   R.fb.allocate(W, H);
   const int ts = settings.tile_size;
@@ -101,12 +169,12 @@ StereoOutput render_stereo(const Scene& scene, const Camera& left, const Camera&
           if (!bad[j]) {
             const std::size_t i = static_cast<std::size_t>(src[j]);
             for (int ch = 0; ch < 3; ++ch) {
-              R.fb.color[3 * j + ch] = L.color[3 * i + ch];
+              R.fb.color[3 * j + ch] = rcol[3 * j + ch];
               R.fb.normal[3 * j + ch] = L.normal[3 * i + ch];
               R.fb.position[3 * j + ch] = L.position[3 * i + ch];
             }
             R.fb.object[j] = L.object[i];
-            R.fb.depth[j] = L.object[i] >= 0 ? zbuf[j] : kInf;
+            R.fb.depth[j] = L.object[i] >= 0 ? rdepth[j] : kInf;
             R.fb.kind[j] = 2;
             ++stat.samples_reused;
             ++c.samples_reused;

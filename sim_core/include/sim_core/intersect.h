@@ -120,14 +120,29 @@ inline void box_entry_pair(const BvhNode* pair, const PreparedRay& r, float tmin
   tn = _mm_max_ps(_mm_max_ps(tn, nz), vmin);
   __m128 tf = _mm_min_ps(ff, _mm_shuffle_ps(ff, ff, _MM_SHUFFLE(2, 3, 0, 1)));
   tf = _mm_min_ps(_mm_min_ps(tf, fz), vmax);
-  alignas(16) float tnv[4], tfv[4];
-  _mm_store_ps(tnv, tn);
-  _mm_store_ps(tfv, tf);
-  *t0 = tnv[0] <= tfv[0] * kRobust ? tnv[0] : kInf;
-  *t1 = tnv[2] <= tfv[2] * kRobust ? tnv[2] : kInf;
+  const __m128 ok = _mm_cmple_ps(tn, _mm_mul_ps(tf, _mm_set1_ps(kRobust)));
+  const int mask = _mm_movemask_ps(ok);
+  *t0 = (mask & 1) ? _mm_cvtss_f32(tn) : kInf;
+  *t1 = (mask & 4) ? _mm_cvtss_f32(_mm_movehl_ps(tn, tn)) : kInf;
 #else
   *t0 = box_entry(pair[0], r, tmin, tmax);
   *t1 = box_entry(pair[1], r, tmin, tmax);
+#endif
+}
+
+// Starts fetching what visiting `n` will read (its children pair, or its triangles) so that the
+// dependent-load chain of the descent overlaps with the box tests of the current level.
+inline void prefetch_node(const BvhNode& n, const BvhNode* nodes, const TriRecord* tris) {
+#if SIM_CORE_SSE
+  if (n.count == 0) {
+    _mm_prefetch(reinterpret_cast<const char*>(nodes + n.first), _MM_HINT_T0);
+  } else {
+    const char* p = reinterpret_cast<const char*>(tris + n.first);
+    _mm_prefetch(p, _MM_HINT_T0);
+    _mm_prefetch(p + 64, _MM_HINT_T0);
+  }
+#else
+  (void)n; (void)nodes; (void)tris;
 #endif
 }
 
@@ -188,6 +203,8 @@ inline Hit intersect_closest(const BvhNode* nodes, const TriRecord* tris, const 
       rec.node(c);
       rec.node(c + 1);
       float t0, t1;
+      prefetch_node(nodes[c], nodes, tris);
+      prefetch_node(nodes[c + 1], nodes, tris);
       box_entry_pair(nodes + c, r, ray.tmin, best, &t0, &t1);
       if (t0 != kInf && t1 != kInf) {
         if (t0 <= t1) { stack[sp++] = {c + 1, t1}; cur = c; }
@@ -235,6 +252,8 @@ inline bool intersect_any(const BvhNode* nodes, const TriRecord* tris, const Ray
       rec.node(c);
       rec.node(c + 1);
       float t0, t1;
+      prefetch_node(nodes[c], nodes, tris);
+      prefetch_node(nodes[c + 1], nodes, tris);
       box_entry_pair(nodes + c, r, ray.tmin, ray.tmax, &t0, &t1);
       if (t0 != kInf && t1 != kInf) {
         if (t0 <= t1) { stack[sp++] = c + 1; cur = c; }

@@ -86,6 +86,7 @@ class StereoResult:
     right: RenderResult
     reuse_ratio: float  # right-eye pixels reused from the left eye / right-eye pixels
     holes: int = 0  # right-eye pixels nothing reprojected into (disocclusion, out of frame)
+    silhouettes: int = 0  # pixels at object/depth edges of the reprojected image, traced
     depth_mismatches: int = 0  # farther samples showing through a reprojected nearer surface
 
 
@@ -247,5 +248,6 @@ def render_stereo(
         right=_result(d["right"], right, settings, (w, h)),
         reuse_ratio=float(d["reuse_ratio"]),
         holes=int(d["holes"]),
+        silhouettes=int(d["silhouettes"]),
         depth_mismatches=int(d["depth_mismatches"]),
     )

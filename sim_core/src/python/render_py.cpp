@@ -148,6 +148,7 @@ void register_render(nb::module_& m) {
         d["right"] = output_to_dict(out.right);
         d["reuse_ratio"] = out.reuse_ratio;
         d["holes"] = out.holes;
+        d["silhouettes"] = out.silhouettes;
         d["depth_mismatches"] = out.depth_mismatches;
         return d;
       },
