@@ -57,7 +57,8 @@ class Material:
 @dataclass(frozen=True)
 class Light:
     """Punctual light in the world frame. Intensity is radiant intensity (W/sr) for point and spot
-    lights and irradiance (W/m^2) for sun lights; radius > 0 makes shadows soft."""
+    lights and irradiance (W/m^2) for sun lights; radius > 0 makes shadows soft (metres for point and
+    spot lights, the angular radius in radians for sun lights); spot_angle is the cone's half-angle."""
 
     kind: LightKind = "point"
     position: tuple[float, float, float] = (0.0, 0.0, 0.0)
