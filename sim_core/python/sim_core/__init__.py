@@ -1,8 +1,10 @@
 """Simulator of a mobile ray-tracing GPU: tracer, adaptive sampling and energy model."""
 
 from . import _core
+from ._core import CacheConfig
+from .analysis import SceneAnalysis, analyze, inert_parameters
 from .camera import Camera
-from .energy import *  # noqa: F403  energy model: price, load_profile, list_profiles, analyze, ...
+from .energy import EnergyReport, Profile, list_profiles, load_profile, price
 from .render import COUNTER_NAMES, RenderResult, StereoResult, render, render_stereo
 from .scene import Scene, smooth_normals
 from .scene_data import CameraData, Light, Material, SceneData
@@ -11,16 +13,25 @@ from .settings import RenderSettings
 __version__ = _core.__version__
 __all__ = [
     "COUNTER_NAMES",
+    "CacheConfig",
     "Camera",
     "CameraData",
+    "EnergyReport",
     "Light",
     "Material",
+    "Profile",
     "RenderResult",
     "RenderSettings",
     "Scene",
+    "SceneAnalysis",
     "SceneData",
     "StereoResult",
     "__version__",
+    "analyze",
+    "inert_parameters",
+    "list_profiles",
+    "load_profile",
+    "price",
     "render",
     "render_stereo",
     "smooth_normals",

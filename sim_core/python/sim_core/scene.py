@@ -126,6 +126,7 @@ class Scene:
         self.lights = lights
         self.cameras = cameras
         self.source = source
+        self.object_names: list[str] = []  # indexed by object id, when the loader knows them
 
     # ---- construction -------------------------------------------------------------------------
     @classmethod
@@ -141,6 +142,7 @@ class Scene:
         lights: Sequence[Light] | None = None,
         environment: Any = None,
         cameras: Sequence[CameraData] | None = None,
+        object_names: Sequence[str] | None = None,
         source: str = "",
     ) -> Scene:
         """Validate flat arrays and build the native scene.
@@ -246,7 +248,9 @@ class Scene:
             "objects": int(np.unique(oid[keep]).size),
             "effects": effects,
         }
-        return cls(native, stats, h.hexdigest(), mats, lts, list(cameras or []), source)
+        scene = cls(native, stats, h.hexdigest(), mats, lts, list(cameras or []), source)
+        scene.object_names = [str(n) for n in object_names] if object_names else []
+        return scene
 
     @classmethod
     def from_scene_data(cls, data: SceneData) -> Scene:
@@ -261,6 +265,7 @@ class Scene:
             lights=data.lights,
             environment=data.environment,
             cameras=data.cameras,
+            object_names=getattr(data, "object_names", None),
             source=data.source,
         )
 
