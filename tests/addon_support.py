@@ -11,7 +11,8 @@ import numpy as np
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 EXT_ID = "render_budget"
-EXT_MODULE = f"bl_ext.dev.{EXT_ID}"
+REPO_MODULE = "render_budget_dev"  # our own extension repository name: no clash with other tests' repos
+EXT_MODULE = f"bl_ext.{REPO_MODULE}.{EXT_ID}"
 
 sys.path.insert(0, str(REPO_ROOT / "tools"))
 import build_extension  # noqa: E402
@@ -59,8 +60,12 @@ def enable_dev(bpy: Any, repo_dir: Path) -> Any:
     import addon_utils
 
     prefs = bpy.context.preferences
-    if not any(r.module == "dev" for r in prefs.extensions.repos):
-        prefs.extensions.repos.new(name="dev", module="dev", custom_directory=str(repo_dir), source="USER")
+    repo = next((r for r in prefs.extensions.repos if r.module == REPO_MODULE), None)
+    if repo is None:
+        prefs.extensions.repos.new(name=REPO_MODULE, module=REPO_MODULE, custom_directory=str(repo_dir),
+                                   source="USER")
+    elif repo_dir != Path() and repo.custom_directory != str(repo_dir):
+        repo.custom_directory = str(repo_dir)
     return addon_utils.enable(EXT_MODULE, default_set=True, handle_error=_raise)
 
 
