@@ -66,7 +66,10 @@ def scene_statistics(glb: Path) -> dict[str, Any]:
     import numpy as np
     from sim_core.loaders import load_gltf
 
+    import sim_core
+
     sd = load_gltf(glb)
+    simulated = sim_core.Scene.from_scene_data(sd)  # the scene must load in the simulator, BVH and all
     raw = _glb_json(glb)
     mesh_nodes = [n for n in raw.get("nodes", []) if "mesh" in n]
     unique_meshes = len({n["mesh"] for n in mesh_nodes})
@@ -104,6 +107,8 @@ def scene_statistics(glb: Path) -> dict[str, Any]:
         "objects": len(sd.object_names),
         "unique_meshes": unique_meshes,
         "effects": effects,
+        "simulator_effects": list(simulated.stats["effects"]),
+        "degenerate_dropped": int(simulated.stats["degenerate_dropped"]),
         "bounds": [sd.positions.min(axis=0).round(3).tolist(), sd.positions.max(axis=0).round(3).tolist()],
     }
 
