@@ -592,6 +592,61 @@ def test_blender_principled_materials(bpy_mod, tmp_path: Path) -> None:
     assert sd.environment == pytest.approx((0.05, 0.1, 0.2))
 
 
+def _corner_case_files(tmp_path: Path) -> dict[str, Path]:
+    """Hand-built files exercising what Blender's exporter never writes: strides, quantised positions,
+    sparse accessors, strips, fans, matrices and a mirrored child."""
+    files = {}
+    b = _Builder()
+    q = np.array([[0, 0, 0], [32767, 0, 0], [0, 32767, 0], [32767, 32767, 16000]], dtype=np.int16)
+    rec = np.zeros(4, dtype=[("p", "<i2", 3), ("pad", "<i2"), ("n", "<f4", 3)])
+    rec["p"], rec["n"] = q, (0.0, 0.0, 1.0)
+    view = b.view(rec.tobytes(), stride=20)
+    pos = b.raw_accessor(view, 5122, "VEC3", 4, normalized=True)
+    idx = b.accessor(np.array([0, 1, 2, 2, 1, 3], dtype=np.uint8), 5121, "SCALAR")
+    b.node(mesh=b.mesh([{"attributes": {"POSITION": pos}, "indices": idx}]), scale=[2.0, 1.0, 3.0],
+           rotation=[0.2, 0.3, 0.1, 0.927], translation=[1.0, 2.0, -1.0])
+    files["quantised"] = b.glb(tmp_path / "quantised.glb")
+
+    b = _Builder()
+    base = b.view(np.tile(np.array([0.5, 0.5, 0.0], np.float32), (5, 1)).tobytes())
+    sidx = b.view(np.array([0, 1, 3, 4], dtype=np.uint32).tobytes())
+    svals = b.view(np.array([[0, 0, 0], [2, 0, 0], [2, 1, 1], [0, 1, 0]], dtype=np.float32).tobytes())
+    pos = b.raw_accessor(base, 5126, "VEC3", 5, sparse={
+        "count": 4, "indices": {"bufferView": sidx, "componentType": 5125}, "values": {"bufferView": svals}})
+    fan = b.mesh([{"attributes": {"POSITION": pos}, "mode": 6}])
+    strip_pos = b.accessor(np.array([[0, 0, 0], [0, 1, 0], [1, 0, 0], [1, 1, 1], [2, 0, 0]], np.float32),
+                           5126, "VEC3")
+    strip = b.mesh([{"attributes": {"POSITION": strip_pos}, "mode": 5}])
+    child = b.node(root=False, mesh=strip, scale=[1.0, -1.0, 1.0], translation=[0.0, 0.0, 2.0])
+    m = np.eye(4)
+    m[:3, :3] = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]
+    m[:3, 3] = [3.0, 0.0, 1.0]
+    b.node(mesh=fan, matrix=m.T.reshape(-1).tolist(), children=[child])
+    files["sparse_fan_strip"] = b.glb(tmp_path / "sparse_fan_strip.glb")
+    return files
+
+
+@pytest.mark.blender
+def test_corner_cases_match_blenders_gltf_importer(bpy_mod, tmp_path: Path) -> None:
+    """Blender's own glTF importer is an independent decoder: same world triangles, same winding."""
+    bpy = bpy_mod
+    for name, path in _corner_case_files(tmp_path).items():
+        _reset(bpy)
+        bpy.ops.import_scene.gltf(filepath=str(path))  # converts Y-up to Z-up like the loader
+        objs = [o for o in bpy.context.scene.objects if o.type == "MESH"]
+        per_object = [_blender_triangles(bpy, o) for o in objs]
+        theirs = np.concatenate(per_object)
+        signs = np.concatenate([np.full(len(t), np.sign(np.linalg.det(np.array(o.matrix_world)[:3, :3])))
+                                for t, o in zip(per_object, objs, strict=True)])
+        sd = load_gltf(path)
+        mine = sd.positions.astype(np.float64)[sd.triangles]
+        assert mine.shape == theirs.shape, name
+        area = np.linalg.norm(np.cross(theirs[:, 1] - theirs[:, 0], theirs[:, 2] - theirs[:, 0]), axis=1)
+        keep = area > 1e-9  # compare the non-degenerate ones
+        na, nb = _matched(mine[keep], theirs[keep])
+        assert np.all(np.sum(na * nb * signs[keep][:, None], axis=1) > 0.999), name
+
+
 @pytest.mark.blender
 def test_blender_base_color_texture_becomes_its_mean(bpy_mod, tmp_path: Path) -> None:
     bpy = bpy_mod
