@@ -80,7 +80,8 @@ def evaluate_scene(scene: bpy.types.Scene, client: ServiceClient, out_dir: str |
     step = frame_step or props.report_frame_step
     spec = EvalSpec(scene_id=scene_id, profile=props.profile or store.profile,
                     resolution=(props.eval_width, props.eval_height), budget_mode=mode, budget_value=value,
-                    filter_period_s=props.filter_period, frame_step=step)
+                    filter_period_s=props.filter_period, frame_step=step,
+                    power_resolution=path.frames[0].resolution)
     frames = [scene.frame_start + round(path.frames[i].time * path.fps) for i in range(0, len(path), step)]
     rows = evaluate_path(client, store, path, spec, progress=progress, frames=frames)
     out = Path(out_dir)
@@ -88,7 +89,10 @@ def evaluate_scene(scene: bpy.types.Scene, client: ServiceClient, out_dir: str |
                                        f"{scene.name}", budget=(mode, value),
                                        notes=[f"store: {props.summary}", f"frames evaluated: {len(frames)}",
                                               f"evaluation resolution: {spec.resolution[0]}x"
-                                              f"{spec.resolution[1]}"])
+                                              f"{spec.resolution[1]}; power at the path's resolution "
+                                              f"{path.frames[0].resolution[0]}x{path.frames[0].resolution[1]}"
+                                              " (dynamic power scaled by the pixel count, as the store "
+                                              "predicts it)"])
     if "plots_skipped" in written:
         python = _plot_elsewhere(Path(written["csv"]), out)
         if python:

@@ -307,3 +307,15 @@ def test_memoised_lookups_equal_fresh_ones() -> None:
     # a different budget is a different key
     drv.step(mats[0], 0.69, 1.7, 5.0, "ERROR", 0.02)
     assert drv.memo_hits == len(mats)
+
+
+def test_predictions_round_trip_and_are_compared_in_the_report(tmp_path) -> None:
+    from addon.core.report import prediction_notes
+
+    rows = [*_rows(), FrameRow(11, 1.1, "ours", 2.0, 0.05, "", False, 1.8, 0.02)]
+    assert read_csv(write_csv(tmp_path / "p.csv", rows)) == rows
+    notes = prediction_notes(rows)
+    assert len(notes) == 1 and "predicted mean error 0.0200" in notes[0] and "0.0500" in notes[0]
+    text = (write_report(tmp_path / "r", rows, title="t", budget=("ERROR", 0.02), plot=False)["report"]
+            ).read_text()
+    assert "store predicted" in text

@@ -84,26 +84,32 @@ def evaluate_path(client: ServiceClient, store: pareto_store.ParetoStore, path: 
     numbers = list(frames) if frames is not None else picked
     if len(numbers) != len(picked):
         raise ValueError("frames must give one frame number per sampled path frame")
-    jobs: list[tuple[int, camera_path.CameraFrame, str, dict[str, Any]]] = []
+    Job = tuple[int, camera_path.CameraFrame, str, dict[str, Any], tuple[float, float] | None]
+    jobs: list[Job] = []
     for number, i in zip(numbers, picked, strict=True):
         f = path.frames[i]
         for mode in spec.modes:
+            predicted = None
             if mode == "ours":
-                settings = driver.step(f.matrix_world, f.vfov, f.aspect, f.time, spec.budget_mode,
-                                       spec.budget_value).active_settings
+                pf = driver.step(f.matrix_world, f.vfov, f.aspect, f.time, spec.budget_mode,
+                                 spec.budget_value)
+                settings = pf.active_settings
+                if not pf.in_transition:  # the store predicts its target settings only
+                    predicted = (pf.predicted_power_w, pf.predicted_error)
             else:
                 settings = presets[mode]
-            jobs.append((number, f, mode, settings))
+            jobs.append((number, f, mode, settings, predicted))
 
-    def run(job: tuple[int, camera_path.CameraFrame, str, dict[str, Any]]) -> FrameRow:
-        number, f, mode, settings = job
+    def run(job: Job) -> FrameRow:
+        number, f, mode, settings, predicted = job
         res = client.evaluate({"scene_id": spec.scene_id, "camera": camera_payload(f, spec.resolution),
                                "settings": settings, "profile": spec.profile, "fps": path.fps})
         p, e = float(res["power_w"]), float(res["error"])
         if spec.power_resolution is not None:
             p = power_at_resolution(res, path.fps, spec.resolution, spec.power_resolution)
         kept = budget_kept(spec.budget_mode, spec.budget_value, p, e) if mode == "ours" else None
-        return FrameRow(number, f.time, mode, p, e, _settings_text(settings), kept)
+        pp, pe = predicted or (None, None)
+        return FrameRow(number, f.time, mode, p, e, _settings_text(settings), kept, pp, pe)
 
     rows: list[FrameRow] = []
     with ThreadPoolExecutor(max_workers=max(1, concurrency)) as pool:

@@ -25,7 +25,8 @@ MODE_LABELS: dict[str, str] = {
     "mid_min": "Mid-Min",
     "min": "Min",
 }
-CSV_FIELDS = ("frame", "time_s", "mode", "power_w", "error", "settings", "budget_kept")
+CSV_FIELDS = ("frame", "time_s", "mode", "power_w", "error", "settings", "budget_kept", "predicted_power_w",
+              "predicted_error")
 
 
 @dataclass(frozen=True)
@@ -39,6 +40,8 @@ class FrameRow:
     error: float
     settings: str = ""  # human-readable or packed settings, for the CSV
     budget_kept: bool | None = None  # only meaningful for budget-driven modes
+    predicted_power_w: float | None = None  # the store's prediction (budget-driven modes, on target)
+    predicted_error: float | None = None
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.power_w) and math.isfinite(self.error)):
@@ -120,8 +123,28 @@ def write_csv(path: str | Path, rows: Iterable[FrameRow]) -> Path:
         for r in rows:
             kept = "" if r.budget_kept is None else int(r.budget_kept)
             w.writerow([r.frame, f"{r.time_s:.6f}", r.mode, f"{r.power_w:.6g}", f"{r.error:.6g}",
-                        r.settings, kept])
+                        r.settings, kept, _opt(r.predicted_power_w), _opt(r.predicted_error)])
     return path
+
+
+def _opt(v: float | None) -> str:
+    return "" if v is None else f"{v:.6g}"
+
+
+def prediction_notes(rows: Sequence[FrameRow]) -> list[str]:
+    """The store's predictions against the measurements, per budget-driven mode: how well the octree's
+    camera samples stand for the path's real cameras."""
+    notes = []
+    for mode in sorted({r.mode for r in rows if r.predicted_error is not None}):
+        rs = [r for r in rows if r.mode == mode and r.predicted_error is not None]
+        pe = sum(r.predicted_error or 0.0 for r in rs) / len(rs)
+        pp = sum(r.predicted_power_w or 0.0 for r in rs) / len(rs)
+        me = sum(r.error for r in rs) / len(rs)
+        mp = sum(r.power_w for r in rs) / len(rs)
+        notes.append(f"{MODE_LABELS.get(mode, mode)}: the store predicted mean error {pe:.4f} and power "
+                     f"{pp:.3f} W; measured at the path's cameras: {me:.4f} and {mp:.3f} W "
+                     f"({len(rs)} frames on target)")
+    return notes
 
 
 def read_csv(path: str | Path) -> list[FrameRow]:
@@ -129,9 +152,11 @@ def read_csv(path: str | Path) -> list[FrameRow]:
     with Path(path).open(newline="", encoding="utf-8") as fh:
         for rec in csv.DictReader(fh):
             kept = rec.get("budget_kept", "")
+            pp, pe = rec.get("predicted_power_w") or "", rec.get("predicted_error") or ""
             rows.append(FrameRow(int(rec["frame"]), float(rec["time_s"]), rec["mode"], float(rec["power_w"]),
                                  float(rec["error"]), rec.get("settings", ""),
-                                 None if kept == "" else bool(int(kept))))
+                                 None if kept == "" else bool(int(kept)),
+                                 None if pp == "" else float(pp), None if pe == "" else float(pe)))
     return rows
 
 
@@ -223,7 +248,7 @@ def write_report(out_dir: str | Path, rows: Sequence[FrameRow], *, title: str,
              table3_markdown(summaries), "",
              "Files: `per_frame.csv` (every frame and mode), `power_over_time.png`, `error_over_time.png`, "
              "`frames/` (sample frames).", ""]
-    lines += [f"- {n}" for n in notes]
+    lines += [f"- {n}" for n in [*notes, *prediction_notes(rows)]]
     report = out_dir / "report.md"
     report.write_text("\n".join(lines) + "\n", encoding="utf-8")
     written["report"] = report
