@@ -127,7 +127,7 @@ def test_demo_end_to_end_tiny(tmp_path: Path) -> None:
 
     report_md = (out / "report.md").read_text()
     for text in ("Avg. Power (W)", "Ours (power budget)", "Ours (error budget)", "Max-Mid", "Budget kept",
-                 "Table 2", "Valley (paper)", "Time per phase"):
+                 "Table 2", "Valley (paper)", "Time per phase", "Diagnostic"):
         assert text in report_md, text
 
 
