@@ -16,6 +16,7 @@ from service.api import Settings
 pytestmark = pytest.mark.service
 
 GLB = {"Content-Type": "model/gltf-binary"}
+POSE = {"position": [0, 0, 0], "direction": [0, 1, 0]}
 
 
 @pytest.fixture(scope="module")
@@ -138,7 +139,7 @@ def test_unknown_ids_are_404(client: httpx.Client, method: str, path: str) -> No
 
 
 def test_query_of_unknown_store_is_404(client: httpx.Client) -> None:
-    r = client.post("/stores/" + "f" * 32 + "/query", json={"position": [0, 0, 0], "error_budget": 0.1})
+    r = client.post("/stores/" + "f" * 32 + "/query", json={**POSE, "error_budget": 0.1})
     assert_error(r, 404, "not found")
 
 
@@ -171,17 +172,19 @@ def test_non_finite_numbers_are_422(client: httpx.Client) -> None:
 
 
 @pytest.mark.parametrize("budget", [
-    {"power_budget_w": -1.0}, {"power_budget_w": 0.0}, {"error_budget": 1.5}, {"error_budget": -0.01},
+    {"power_budget_w": -1.0}, {"power_budget_w": 1e9}, {"power_budget_w": 0.0}, {"error_budget": 1.5},
+    {"error_budget": -0.01},
     {"power_budget_w": 1.0, "error_budget": 0.1}, {},
 ])
 def test_out_of_range_budgets_are_422(client: httpx.Client, budget: dict) -> None:
-    r = client.post("/stores/" + "f" * 32 + "/query", json={"position": [0, 0, 0], **budget})
+    r = client.post("/stores/" + "f" * 32 + "/query", json={**POSE, **budget})
     assert_error(r, 422)
 
 
 def test_unknown_fields_are_422(client: httpx.Client) -> None:
     r = client.post("/stores/" + "f" * 32 + "/query",
-                    json={"position": [0, 0, 0], "error_budget": 0.1, "profile": "../../etc/passwd"})
+                    json={"position": [0, 0, 0], "direction": [0, 1, 0], "error_budget": 0.1,
+                          "profile": "../../etc/passwd"})
     assert_error(r, 422, "extra")
 
 
@@ -208,7 +211,7 @@ def test_token_guards_every_route_but_health(tmp_path: Path) -> None:
         assert_error(r, 404)
         assert r.status_code == 404
         assert c.get("/openapi.json", headers={"Authorization": f"Bearer {token}"}).status_code == 200
-        query = {"position": [0, 0, 0], "error_budget": 0.1}
+        query = {"position": [0, 0, 0], "direction": [0, 1, 0], "error_budget": 0.1}
         assert_error(c.post("/stores/" + "f" * 32 + "/query", json=query), 401)
         r = c.post("/stores/" + "f" * 32 + "/query", json=query, headers={"Authorization": f"Bearer {token}"})
         assert_error(r, 404)

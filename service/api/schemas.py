@@ -172,15 +172,17 @@ class PreviousSettings(StrictModel):
 
 
 class StoreQuery(StrictModel):
-    # "Exactly one budget" in the OpenAPI too, so generated clients and fuzzers know it.
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, json_schema_extra={"oneOf": [
-        {"required": [name], "properties": {name: {"type": "number"}}}
-        for name in ("power_budget_w", "error_budget")
+    # "Exactly one budget" and "exactly one orientation" in the OpenAPI too, for clients and fuzzers.
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, json_schema_extra={"allOf": [
+        {"oneOf": [{"required": [name], "properties": {name: {"type": "number"}}}
+                   for name in ("power_budget_w", "error_budget")]},
+        {"oneOf": [{"required": [name], "properties": {name: {"type": "array"}}}
+                   for name in ("direction", "matrix")]},
     ]})
 
     position: Vec3
-    direction: Vec3 | None = None
-    matrix: Matrix4 | None = Field(default=None, description="camera world matrix (looks down local -Z)")
+    direction: Vec3 | None = Field(default=None, description="view direction (or give matrix)")
+    matrix: Matrix4 | None = Field(default=None, description="camera world matrix, looks down local -Z")
     fov: Vfov | None = None
     power_budget_w: Annotated[float, Field(gt=0.0, le=1e4)] | None = None
     error_budget: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
@@ -190,7 +192,9 @@ class StoreQuery(StrictModel):
     def _one_budget(self) -> StoreQuery:
         if (self.power_budget_w is None) == (self.error_budget is None):
             raise ValueError("give exactly one of power_budget_w and error_budget")
-        if self.direction is not None and math.hypot(*self.direction) == 0.0:
+        if (self.direction is None) == (self.matrix is None):
+            raise ValueError("give exactly one of direction and matrix")
+        if self.direction is not None and math.hypot(*self.direction) < 1e-12:
             raise ValueError("direction must be non-zero")
         if self.matrix is not None:
             _check_affine(self.matrix, "matrix")
