@@ -11,6 +11,7 @@ from .camera_path import camera_vfov, render_resolution, scene_fps
 from .core.playback_logic import PlaybackFrame, StoreCache
 
 _cache = StoreCache()
+_written: dict[int, tuple] = {}  # per scene: the last answer written to its properties
 
 
 def scene_time(scene: bpy.types.Scene) -> float:
@@ -41,21 +42,33 @@ def update_scene(scene: bpy.types.Scene) -> PlaybackFrame | None:
         frame = driver.step(cam.matrix_world, camera_vfov(cam, scene), w / h, scene_time(scene), mode, value)
     except ValueError as err:
         props.playback_status = f"error: {err}"
+        _written.pop(scene.as_pointer(), None)
         return None
+    # Most frames repeat the previous answer: write only when it changed (checked against what the
+    # scene holds, so undo or a hand edit of these outputs is corrected on the next frame).
+    status = "blending" if frame.in_transition else "on target"
+    key = (frame.active_indices, frame.target_indices, frame.predicted_power_w, frame.predicted_error,
+           frame.clamped, frame.infeasible, status)
+    written = _written.get(scene.as_pointer())
+    active_text = " ".join(map(str, frame.active_indices))
+    if written == key and props.active_indices == active_text and props.playback_status == status:
+        return frame
     props.active_settings = frame.settings_text()
-    props.active_indices = " ".join(map(str, frame.active_indices))
+    props.active_indices = active_text
     props.target_indices = " ".join(map(str, frame.target_indices))
     props.predicted_power = frame.predicted_power_w
     props.predicted_error = frame.predicted_error
     props.clamped = frame.clamped
     props.infeasible = frame.infeasible
-    props.playback_status = "blending" if frame.in_transition else "on target"
+    props.playback_status = status
+    _written[scene.as_pointer()] = key
     return frame
 
 
 def reset() -> None:
     """Forget the parsed store and the filter state (new file, new store)."""
     _cache.clear()
+    _written.clear()
 
 
 @persistent
