@@ -18,23 +18,32 @@ from pathlib import Path
 
 import numpy as np
 from sim_core.energy import load_profile
-from sim_core.loaders import load_obj
+from sim_core.loaders import load_gltf, load_obj
 from sim_core.scene import Scene
 from sim_core.streaming import compare_traversal, pinhole_rays, reflection_rays
 
 MODELS = Path(__file__).resolve().parent.parent / "assets" / "models"
+SCENES = Path(__file__).resolve().parent.parent / "blend_scenes" / "build"
 SIZE = 512
 
 
 def main() -> None:
+    import argparse
+
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--scenes", type=Path, default=SCENES, help="built blend_scenes (lab, valley if present)")
+    args = ap.parse_args()
     cache = load_profile("mobile").cache
     print(f"## Bytes per (triangle x pixel x frame), {SIZE}x{SIZE}, mobile cache {cache}")
     print("| scene | triangles | rays | per-ray, no cache | per-ray, per-tile cache | streaming (scene) | "
           "streaming (+ streams) | per-ray / streaming | avg interior stream | avg leaf stream | same hits |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     total = 0.0
-    for name in ("teapot", "spot", "cow", "stanford-bunny"):
-        data = load_obj(MODELS / f"{name}.obj")
+    sources = [(n, MODELS / f"{n}.obj") for n in ("teapot", "spot", "cow", "stanford-bunny")]
+    sources += [(n, args.scenes / n / "scene.glb") for n in ("lab", "valley")
+                if (args.scenes / n / "scene.glb").exists()]
+    for name, path in sources:
+        data = load_obj(path) if path.suffix == ".obj" else load_gltf(path)
         scene = Scene.from_scene_data(data)
         lo, hi = (np.array(b) for b in scene.bounds)
         c, diag = (lo + hi) / 2, float(np.linalg.norm(hi - lo))
