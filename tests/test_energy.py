@@ -10,6 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sim_core.energy as energy
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from sim_core.energy import BLOCKS, list_profiles, load_profile, price
 
 COUNTERS = {
@@ -132,3 +134,24 @@ def test_bad_input_is_rejected() -> None:
         price({**COUNTERS, "rays_total": 1.5}, "mobile", 30)
     with pytest.raises(ValueError):  # comparisons counted but no histogram to price them
         price({**COUNTERS, "closest_hit_comparisons": 10}, "mobile", 30)
+
+
+_counts = st.integers(min_value=0, max_value=10**10)
+
+
+@settings(max_examples=60, deadline=None)
+@given(counters=st.dictionaries(st.sampled_from(energy.COUNTERS[:-1]), _counts, max_size=12),
+       fps=st.floats(min_value=1.0, max_value=240.0), scale=st.integers(min_value=1, max_value=7))
+def test_pricing_invariants_hold_for_any_counters(counters: dict[str, int], fps: float, scale: int) -> None:
+    counters = {k: v for k, v in counters.items() if k != "closest_hit_comparisons"}
+    r = price(counters, "mobile", fps)
+    assert r.total_energy_j == pytest.approx(math.fsum(r.energy_j.values()), rel=1e-9, abs=1e-18)
+    static = load_profile("mobile").static_power_w
+    assert r.power_w == pytest.approx(static + r.dynamic_energy_j * fps, rel=1e-9)
+    assert all(v >= 0 for v in r.energy_j.values()) and all(v >= 0 for v in r.cycles.values())
+    for b in BLOCKS:  # a block with no activity costs exactly nothing
+        if r.cycles[b] == 0 and b != "comparator":
+            assert r.energy_j[b] == 0.0
+    scaled = price({k: v * scale for k, v in counters.items()}, "mobile", fps)
+    assert scaled.dynamic_energy_j == pytest.approx(scale * r.dynamic_energy_j, rel=1e-9, abs=1e-18)
+    assert scaled.frame_time_s == pytest.approx(scale * r.frame_time_s, rel=1e-9, abs=1e-18)
