@@ -289,16 +289,9 @@ def _counters_of(result: Any) -> tuple[dict[str, int], np.ndarray | None, Any]:
 
 def _filtered_reads_per_lookup(settings: Any) -> int:
     """SAT reads of one filtered environment lookup: 4 corners (box) or 9 (Bartlett), times 3 channels."""
-    for name in ("glossy_filter", "env_filter", "glossy_env_filter", "environment_filter"):
-        v = getattr(settings, name, None)
-        if v is None:
-            continue
-        s = str(getattr(v, "value", v)).lower()
-        if s in ("1", "box") or "box" in s:
-            return 4 * 3
-        if s in ("2", "bartlett") or "bartlett" in s:
-            return 9 * 3
-    return 9 * 3  # unknown: price the dearer Bartlett lookup
+    if str(getattr(settings, "env_filter", "")).lower() == "box":
+        return 4 * 3
+    return 9 * 3  # Bartlett, or settings unknown (a plain counter mapping): price the dearer lookup
 
 
 def price(result: Any, profile: Profile | str | Path, fps: float, *, scene: Any = None) -> EnergyReport:
@@ -323,8 +316,8 @@ def price(result: Any, profile: Profile | str | Path, fps: float, *, scene: Any 
     energy: dict[str, float] = {}
     cycles: dict[str, float] = {}
 
-    def srp_block(block: str, events: int, ops_per_event: float, extra_pj: float = 0.0) -> None:
-        energy[block] = events * ops_per_event * e["srp_op"] * pj + extra_pj * pj
+    def srp_block(block: str, events: int, ops_per_event: float) -> None:
+        energy[block] = events * ops_per_event * e["srp_op"] * pj
         cycles[block] = events * ops_per_event / thr["srp_ops_per_cycle"]
 
     srp_block("raygen", n("raygen_evals"), ops["raygen"])
@@ -412,9 +405,3 @@ def price(result: Any, profile: Profile | str | Path, fps: float, *, scene: Any 
         comparator=comp,
         blocks_used=tuple(b for b in BLOCKS if energy[b] > 0),
     )
-
-
-# Re-exported here so the package needs a single import line for the energy-model part.
-from .analysis import SceneAnalysis, analyze, inert_parameters  # noqa: E402
-
-__all__ += ["SceneAnalysis", "analyze", "inert_parameters"]
