@@ -31,11 +31,6 @@ struct TileRecorder {
 
 enum class RayKind { kPrimary, kReflection, kGlossy, kRefraction };
 
-float schlick(float f0, float cos_theta) {
-  const float m = std::min(1.f, std::max(0.f, 1.f - cos_theta));
-  const float m2 = m * m;
-  return f0 + (1.f - f0) * m2 * m2 * m;
-}
 Vec3 schlick(Vec3 f0, float cos_theta) {
   const float m = std::min(1.f, std::max(0.f, 1.f - cos_theta));
   const float m2 = m * m, w = m2 * m2 * m;

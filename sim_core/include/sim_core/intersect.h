@@ -70,9 +70,9 @@ struct PreparedRay {
     kx = kz + 1 == 3 ? 0 : kz + 1;
     ky = kx + 1 == 3 ? 0 : kx + 1;
     if (dir[kz] < 0.f) std::swap(kx, ky);
-    sx = dir[kx] / dir[kz];
-    sy = dir[ky] / dir[kz];
     sz = 1.f / dir[kz];
+    sx = dir[kx] * sz;
+    sy = dir[ky] * sz;
   }
 };
 
@@ -217,7 +217,7 @@ inline Hit intersect_closest(const BvhNode* nodes, const TriRecord* tris, const 
       const std::uint32_t end = n.first + n.count;
       for (std::uint32_t i = n.first; i < end; ++i) {
         rec.tri(i);
-        float t, b0, b1, b2;
+        float t = 0.f, b0 = 0.f, b1 = 0.f, b2 = 0.f;
         bool compared = false;
         const bool h = intersect_triangle(tris[i], r, ray.tmin, best, &t, &b0, &b1, &b2, &compared);
         if (compared) rec.compare(t, best);
@@ -266,7 +266,7 @@ inline bool intersect_any(const BvhNode* nodes, const TriRecord* tris, const Ray
       const std::uint32_t end = n.first + n.count;
       for (std::uint32_t i = n.first; i < end; ++i) {
         rec.tri(i);
-        float t, b0, b1, b2;
+        float t = 0.f, b0 = 0.f, b1 = 0.f, b2 = 0.f;
         bool compared = false;
         if (intersect_triangle(tris[i], r, ray.tmin, ray.tmax, &t, &b0, &b1, &b2, &compared)) return true;
       }
