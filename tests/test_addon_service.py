@@ -158,7 +158,7 @@ def test_optimize_end_to_end_store_in_blend_and_playback_matches_query(optimized
     client = ServiceClient(service.url)
     cli = Path(sys.executable).parent / "render-budget"
     vfov = m("camera_path").camera_vfov(sc.camera, sc)
-    for _active, target, power, error, mat, _ in seen[:: max(1, FRAMES // 6)]:
+    for _active, target, power, error, mat, _ in seen[:: max(1, FRAMES // 4)]:
         pos, direction = mat[:3, 3], -mat[:3, 2]
         q = client.query(props.store_id, {"position": pos.tolist(), "matrix": mat.tolist(), "fov": vfov,
                                           "error_budget": budget})
