@@ -119,3 +119,23 @@ def test_from_obj_matches_from_arrays(models_dir):
     data = load_obj(models_dir / "teapot.obj")
     assert scene.stats["triangles"] + scene.stats["degenerate_dropped"] == len(data.triangles)
     assert scene.content_hash == sim_core.Scene.from_scene_data(data).content_hash
+
+
+def test_load_exr_round_trip_and_errors(tmp_path):
+    import OpenEXR
+
+    sky = np.random.default_rng(0).random((8, 16, 3)).astype(np.float32)
+    path = tmp_path / "sky.exr"
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with OpenEXR.File(header, {"RGB": sky}) as f:
+        f.write(str(path))
+    loaded = sim_core.load_exr(path)
+    np.testing.assert_array_equal(loaded, sky)
+    scene = sim_core.Scene.from_arrays(POS, TRI, environment=loaded)
+    assert "environment_map" in scene.stats["effects"]
+    with pytest.raises(FileNotFoundError):
+        sim_core.load_exr(tmp_path / "missing.exr")
+    junk = tmp_path / "junk.exr"
+    junk.write_bytes(b"not an exr")
+    with pytest.raises(ValueError):
+        sim_core.load_exr(junk)

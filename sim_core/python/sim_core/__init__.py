@@ -6,7 +6,7 @@ from .analysis import SceneAnalysis, analyze, inert_parameters
 from .camera import Camera
 from .energy import EnergyReport, Profile, list_profiles, load_profile, price
 from .render import COUNTER_NAMES, RenderResult, StereoResult, render, render_stereo
-from .scene import Scene, smooth_normals
+from .scene import Scene, load_exr, smooth_normals
 from .scene_data import CameraData, Light, Material, SceneData
 from .settings import RenderSettings
 
@@ -30,6 +30,7 @@ __all__ = [
     "analyze",
     "inert_parameters",
     "list_profiles",
+    "load_exr",
     "load_profile",
     "price",
     "render",

@@ -21,6 +21,39 @@ DEFAULT_ENVIRONMENT = (0.050876, 0.050876, 0.050876)
 _LIGHT_KINDS = {"point": 0, "spot": 1, "sun": 2}
 
 
+def load_exr(path: str | os.PathLike[str]) -> np.ndarray:
+    """Read an OpenEXR image as (H, W, 3) float32 linear RGB (an equirectangular environment map).
+
+    Raises FileNotFoundError when the file is missing and ValueError when it is not a readable RGB EXR or
+    holds non-finite or negative values.
+    """
+    import OpenEXR
+
+    p = os.fspath(path)
+    if not os.path.isfile(p):
+        raise FileNotFoundError(f"EXR file not found: {p}")
+    try:
+        with OpenEXR.File(p) as f:
+            channels = f.channels()
+            if "RGB" in channels:
+                rgb = np.asarray(channels["RGB"].pixels, dtype=np.float32)
+            elif "RGBA" in channels:
+                rgb = np.asarray(channels["RGBA"].pixels, dtype=np.float32)[..., :3]
+            elif all(c in channels for c in "RGB"):
+                rgb = np.stack([np.asarray(channels[c].pixels, dtype=np.float32) for c in "RGB"], axis=-1)
+            else:
+                raise ValueError(f"{p}: EXR has no R, G, B channels ({sorted(channels)})")
+    except ValueError:
+        raise
+    except Exception as exc:
+        raise ValueError(f"{p}: not a readable EXR file ({exc})") from None
+    if rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise ValueError(f"{p}: expected an (H, W, 3) image, got shape {rgb.shape}")
+    if not np.all(np.isfinite(rgb)) or np.any(rgb < 0):
+        raise ValueError(f"{p}: environment map must be finite and >= 0")
+    return np.ascontiguousarray(rgb)
+
+
 def smooth_normals(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Area-weighted per-vertex normals (for meshes that come without normals)."""
     p = np.asarray(positions, dtype=np.float64)
