@@ -298,3 +298,18 @@ def test_query_fast_path_matches_the_fastapi_route(client: httpx.Client, finishe
                 a = client.post(f"/stores/{target}/query", content=data, headers=headers)
                 b = slow.post(f"/stores/{target}/query", content=data, headers=headers)
                 assert a.status_code == b.status_code == 422, (data, a.text, b.text)
+
+
+def test_extreme_but_finite_orientations_are_answered(client: httpx.Client, finished: dict[str, Any]) -> None:
+    """Found by the fuzzer: huge direction components overflowed the store's normalisation (a 500)."""
+    store_id = finished["job"]["store_id"]
+    url = f"/stores/{store_id}/query"
+    small = client.post(url, json={"position": [0, -3, 1.5], "direction": [0, 0, 1], "error_budget": 0.0})
+    huge = client.post(url, json={"position": [0, -3, 1.5], "direction": [0, 0, 1.34e154],
+                                  "error_budget": 0.0})
+    assert huge.status_code == 200 and huge.json() == small.json()
+    m = look_at_matrix((0.0, -3.0, 1.5), (0.0, 0.0, 0.4))
+    scaled = [[c * 1e150 if j < 3 else c for j, c in enumerate(row)] for row in m[:3]] + [m[3]]
+    a = client.post(url, json={"position": [0, -3, 1.5], "matrix": m, "power_budget_w": 1.0})
+    b = client.post(url, json={"position": [0, -3, 1.5], "matrix": scaled, "power_budget_w": 1.0})
+    assert a.status_code == b.status_code == 200 and a.json() == b.json()

@@ -33,6 +33,10 @@ class StrictModel(BaseModel):
 def _check_affine(m: Matrix4, name: str) -> None:
     if tuple(m[3]) != (0.0, 0.0, 0.0, 1.0):
         raise ValueError(f"{name} must be an affine 4x4 matrix with last row [0, 0, 0, 1]")
+    # Scale each column to unit max-magnitude first: only the axes' directions matter, and huge but finite
+    # entries must not overflow the determinant.
+    scale = [max(abs(m[i][j]) for i in range(3)) or 1.0 for j in range(3)]
+    m = tuple(tuple(m[i][j] / scale[j] for j in range(3)) for i in range(3))  # type: ignore[assignment]
     det = (
         m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
         - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])

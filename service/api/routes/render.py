@@ -29,6 +29,15 @@ def scene_or_404(storage: Storage, scenes: Any, scene_id: str) -> Any:
     return scenes.get(scene_id)
 
 
+def camera_matrix(cam: CameraIn) -> np.ndarray:
+    """The camera's world matrix with unit-length axes (a camera's scale means nothing; huge but finite
+    entries must not overflow later arithmetic)."""
+    m = np.asarray(cam.matrix_world, dtype=np.float64)
+    axes = m[:3, :3] / np.abs(m[:3, :3]).max(axis=0)
+    m[:3, :3] = axes / np.linalg.norm(axes, axis=0)
+    return m
+
+
 def make_camera(cam: CameraIn, max_pixels: int) -> Any:
     import sim_core
 
@@ -36,8 +45,7 @@ def make_camera(cam: CameraIn, max_pixels: int) -> Any:
         raise ApiError(422, f"camera resolution {cam.width}x{cam.height} exceeds the preview limit of "
                             f"{max_pixels} pixels")
     try:
-        return sim_core.Camera.from_blender(np.asarray(cam.matrix_world, dtype=np.float64), cam.vfov,
-                                            cam.width, cam.height)
+        return sim_core.Camera.from_blender(camera_matrix(cam), cam.vfov, cam.width, cam.height)
     except ValueError as exc:
         raise ApiError(422, f"camera: {exc}") from exc
 
@@ -146,7 +154,7 @@ def evaluate_settings(body: EvaluateRequest, storage: StorageDep, scenes: Scenes
     if cam.width * cam.height > settings.max_render_pixels:
         raise ApiError(422, f"camera resolution {cam.width}x{cam.height} exceeds the limit of "
                             f"{settings.max_render_pixels} pixels")
-    m = np.asarray(cam.matrix_world, dtype=np.float64)
+    m = camera_matrix(cam)
     try:
         spec = CameraSpec(eye=tuple(m[:3, 3]), forward=tuple(-m[:3, 2]), up=tuple(m[:3, 1]), vfov=cam.vfov,
                           width=cam.width, height=cam.height)

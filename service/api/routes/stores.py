@@ -23,13 +23,35 @@ def get_store(record: StoreRecordDep) -> Response:
     return Response(record.body, media_type="application/json", headers={"ETag": f'"{record.id}"'})
 
 
+def _unit_scale(v: tuple[float, ...] | list[float]) -> list[float]:
+    """Divide by the largest magnitude so later squaring cannot overflow (direction is all that counts)."""
+    m = max(abs(c) for c in v)
+    return [c / m for c in v] if m > 0 else list(v)
+
+
+def _orientation(body: StoreQuery) -> tuple[Any, Any]:
+    """Direction, or a matrix with its rotation columns rescaled, safe for any finite input."""
+    if body.direction is not None:
+        return _unit_scale(body.direction), None
+    assert body.matrix is not None
+    rows = [list(r) for r in body.matrix]
+    for j in range(3):
+        col = _unit_scale([rows[i][j] for i in range(3)])
+        for i in range(3):
+            rows[i][j] = col[i]
+    return None, rows
+
+
 def answer_query(store: Any, body: StoreQuery) -> QueryResult:
     """Lookup plus the optional temporal filter; shared by the route and the app's fast path."""
+    direction, matrix = _orientation(body)
     try:
-        hit = store.lookup(body.position, direction=body.direction, matrix=body.matrix, fov=body.fov,
+        hit = store.lookup(body.position, direction=direction, matrix=matrix, fov=body.fov,
                            power_budget=body.power_budget_w, error_budget=body.error_budget)
     except ValueError as exc:
         raise ApiError(422, str(exc)) from exc
+    except ArithmeticError as exc:  # extreme but finite numbers the lookup could not handle
+        raise ApiError(422, f"camera pose cannot be looked up: {type(exc).__name__}: {exc}") from exc
     indices = tuple(hit.indices)
     filtered = False
     if body.previous is not None:
