@@ -114,12 +114,13 @@ def test_equirect_convention_matches_blender() -> None:
 
 
 @pytest.mark.parametrize("order", [1, 2])
-def test_constant_map_filters_to_the_constant(order: int) -> None:
-    img = np.full((32, 64, 3), 0.7, dtype=np.float32)
+@pytest.mark.parametrize("shape", [(32, 64), (1, 1), (1, 3), (2, 1)])
+def test_constant_map_filters_to_the_constant(order: int, shape: tuple[int, int]) -> None:
+    img = np.full((*shape, 3), 0.7, dtype=np.float32)
     img[..., 2] = 2.5
     f = _core.EnvironmentFilter(img, order)
     rng = np.random.default_rng(3)
-    d = rng.normal(size=(200, 3)).astype(np.float32)
+    d = rng.normal(size=(200, 3)).astype(np.float32)  # tiny maps too: the tracer accepts 1x1 maps
     for cone in (0.0, 0.05, 0.3, 0.78, 2.0):
         np.testing.assert_allclose(f.lookup(d, cone), np.tile([0.7, 0.7, 2.5], (200, 1)), rtol=1e-5)
 

@@ -37,7 +37,7 @@ Vec3 equirect_direction(float column, float row, int width, int height) {
 EnvironmentFilter::EnvironmentFilter(const float* rgb, int width, int height, int order, int table_bits)
     : width_(width), height_(height), order_(order) {
   if (rgb == nullptr) throw std::invalid_argument("EnvironmentFilter: null map");
-  if (width < 2 || height < 2) throw std::invalid_argument("EnvironmentFilter: map must be at least 2x2");
+  if (width < 1 || height < 1) throw std::invalid_argument("EnvironmentFilter: map must be at least 1x1");
   if (order != 1 && order != 2)
     throw std::invalid_argument("EnvironmentFilter: order must be 1 (box) or 2 (Bartlett), got " + std::to_string(order));
   if (table_bits != 0 && table_bits != 32 && table_bits != 64)
