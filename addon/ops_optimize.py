@@ -292,7 +292,7 @@ class POWER_OT_optimize(bpy.types.Operator):
         _active = job
         rt.job_running, rt.job_progress, rt.job_status = True, 0.0, "starting"
         job.thread.start()
-        bpy.app.timers.register(_poll_queue, first_interval=0.25)
+        bpy.app.timers.register(_poll_queue, first_interval=0.25, persistent=True)  # survive file loads
         return {"FINISHED"}
 
 
