@@ -144,6 +144,67 @@ def load(port: int, requests: list[bytes], clients: int, seconds: float) -> dict
             "mean_ms": float(a.mean())}
 
 
+# -- server-side cost without the network ----------------------------------------------------------------
+async def _asgi_post(app: Any, path: str, body: bytes) -> int:
+    scope = {"type": "http", "asgi": {"version": "3.0"}, "http_version": "1.1", "method": "POST",
+             "scheme": "http", "path": path, "raw_path": path.encode(), "query_string": b"", "root_path": "",
+             "headers": [(b"content-type", b"application/json"),
+                         (b"content-length", str(len(body)).encode())],
+             "client": ("127.0.0.1", 1), "server": ("127.0.0.1", 80), "state": {}}
+    messages = [{"type": "http.request", "body": body, "more_body": False}]
+    status = 0
+
+    async def receive() -> dict[str, Any]:
+        return messages.pop() if messages else {"type": "http.disconnect"}
+
+    async def send(message: dict[str, Any]) -> None:
+        nonlocal status
+        if message["type"] == "http.response.start":
+            status = message["status"]
+
+    await app(scope, receive, send)
+    return status
+
+
+def asgi_costs(data_dir: Path, store_id: str, bodies: list[dict[str, Any]],
+               repeat: int = 5) -> dict[str, float]:
+    """Microseconds per query inside the server process: the fast path, the FastAPI route, the lookup."""
+    import asyncio
+
+    from service.api import Settings, create_app
+    from service.api.routes.stores import answer_query
+    from service.api.schemas import StoreQuery
+    from service.pareto_store import ParetoStore
+    from service.storage import Storage
+
+    raw = [json.dumps(b).encode() for b in bodies]
+    out: dict[str, float] = {}
+
+    async def run(fast: bool) -> float:
+        app = create_app(Settings(data_dir=data_dir, query_fast_path=fast, job_workers=1))
+        async with app.router.lifespan_context(app):
+            for b in raw:
+                assert await _asgi_post(app, f"/stores/{store_id}/query", b) == 200
+            t0 = time.perf_counter()
+            for _ in range(repeat):
+                for b in raw:
+                    await _asgi_post(app, f"/stores/{store_id}/query", b)
+            return (time.perf_counter() - t0) / (repeat * len(raw)) * 1e6
+
+    out["fast path"] = asyncio.run(run(True))
+    out["FastAPI route"] = asyncio.run(run(False))
+    storage = Storage(data_dir)
+    store = ParetoStore.from_json(storage.get_store(store_id=store_id).body)
+    storage.close()
+    queries = [StoreQuery.model_validate(b) for b in bodies]
+    t0 = time.perf_counter()
+    for _ in range(repeat):
+        for q in queries:
+            answer_query(store, q)
+    out["lookup + filter only"] = (time.perf_counter() - t0) / (repeat * len(queries)) * 1e6
+    return out
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seconds", type=float, default=3.0, help="load duration per client count")
@@ -180,6 +241,11 @@ def main() -> int:
                       f"{r['p99_ms']:.2f} | {r['mean_ms']:.2f} | {r['load']:.1f} |", flush=True)
         finally:
             srv.stop()
+        print("\n## server-side cost per query (ASGI call in-process, no network; same store and bodies)\n")
+        print("| path | us per query |")
+        print("|---|---:|")
+        for name, us in asgi_costs(Path(tmp) / "query", store_id, bodies).items():
+            print(f"| {name} | {us:.0f} |")
 
         if args.skip_jobs:
             return 0
@@ -196,12 +262,14 @@ def main() -> int:
         finally:
             srv.stop()
         with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cl:
-            srv = ServerProcess(Path(tmp) / "dask", dask_scheduler=cl.scheduler_address).wait_healthy()
-            try:
-                job, wall = run_job(srv.base_url, lambda sid: bench_job(sid, (32, 24)))
-                rows.append(("Dask LocalCluster, 2 workers x 1 thread", job, wall))
-            finally:
-                srv.stop()
+            for ship, what in (("true", "scene bytes shipped"), ("false", "scene file on a shared disk")):
+                srv = ServerProcess(Path(tmp) / f"dask-{ship}", dask_scheduler=cl.scheduler_address,
+                                    extra_env={"RENDER_BUDGET_DASK_SHIP_SCENES": ship}).wait_healthy()
+                try:
+                    job, wall = run_job(srv.base_url, lambda sid: bench_job(sid, (32, 24)))
+                    rows.append((f"Dask LocalCluster, 2 workers x 1 thread, {what}", job, wall))
+                finally:
+                    srv.stop()
         for name, job, wall in rows:
             p = job["progress"]
             print(f"| {name} | {p['evaluations']} | {p['cache_hits']} | {wall:.1f} | "
