@@ -90,7 +90,8 @@ def hv(points: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:
     return nsga.hypervolume_2d((P - lo) / (hi - lo), (1.0, 1.0))
 
 
-def run_pymoo(f: Counted, n_values, seed: int, pop: int, gens: int) -> np.ndarray:
+def run_pymoo(f: Counted, n_values, seed: int, pop: int, gens: int, eta: tuple[float, float] = (3.0, 3.0),
+              prob: float = 1.0) -> np.ndarray:
     from pymoo.algorithms.moo.nsga2 import NSGA2 as PymooNSGA2
     from pymoo.core.evaluator import Evaluator as PymooEvaluator
     from pymoo.core.problem import Problem
@@ -103,8 +104,8 @@ def run_pymoo(f: Counted, n_values, seed: int, pop: int, gens: int) -> np.ndarra
     xu = np.asarray(n_values) - 1
     problem = Problem(n_var=len(n_values), n_obj=2, xl=np.zeros(len(n_values)), xu=xu, vtype=int)
     algo = PymooNSGA2(pop_size=pop, sampling=IntegerRandomSampling(),
-                      crossover=SBX(prob=1.0, eta=3.0, vtype=float, repair=RoundingRepair()),
-                      mutation=PM(prob=1.0, eta=3.0, vtype=float, repair=RoundingRepair()),
+                      crossover=SBX(prob=prob, eta=eta[0], vtype=float, repair=RoundingRepair()),
+                      mutation=PM(prob=1.0, eta=eta[1], vtype=float, repair=RoundingRepair()),
                       eliminate_duplicates=True)
     algo.setup(problem, termination=("n_gen", gens), seed=seed, verbose=False)
     while algo.has_next():
@@ -157,7 +158,7 @@ def main() -> None:
     curves: dict[str, list[list[float]]] = {}
     for seed in range(args.seeds):
         for name in ("ours", "ours + warm start", "pymoo NSGA-II (final pop.)", "pymoo NSGA-II (archive)",
-                     "random sampling"):
+                     "pymoo, default etas (archive)", "random sampling"):
             f = Counted(table)
             if name.startswith("ours"):
                 init = ends + (near_front if "warm" in name else [])
@@ -165,7 +166,10 @@ def main() -> None:
                                      initial=init, exhaustive_limit=0)
                 front = np.asarray([(e, p) for _, e, p in arch.frontier()])
             elif name.startswith("pymoo"):
-                if "archive" in name:
+                if "default" in name:  # SBX eta 15 (prob 0.9), PM eta 20: pymoo's own defaults
+                    run_pymoo(f, nv, seed, 24, 25, eta=(15.0, 20.0), prob=0.9)
+                    front = np.asarray([table[x] for x in f.seen])
+                elif "archive" in name:
                     run_pymoo(f, nv, seed, 24, 25)
                     front = np.asarray([table[x] for x in f.seen])
                 else:

@@ -49,15 +49,18 @@ def part_a(quick: bool) -> None:
     handle = SceneHandle(scene)
     path = orbit_path(12 if quick else 24)
     sp = default_space().subset(["sampling", "max_depth", "shadow_samples", "resolution_scale", "ao_samples"])
-    pairs = [(0.05, 0.02), (0.02, 0.01)] if quick else [(0.1, 0.04), (0.05, 0.02), (0.02, 0.01)]
+    pairs = ([(0.05, 0.02, 0), (0.01, 0.005, 0), (0.01, 0.005, 2)] if quick else
+             [(0.1, 0.04, 0), (0.05, 0.02, 0), (0.01, 0.005, 0), (0.01, 0.005, 1), (0.01, 0.005, 2)])
     w, h = path.frames[0].resolution
     print(f"A) teapot, {len(path)}-frame orbit at {w}x{h}, space {sp.size} settings, evaluation 32x24, "
           f"pop 24 x {8 if quick else 12} gens, max depth 2")
-    print(f"{'tau_p W':>8} {'tau_e':>6} {'time s':>7} {'renders':>8} {'corners':>8} {'views opt/stored':>17} "
-          f"{'KB':>6} | {'budget':>12} {'|dP| W':>8} {'|dE|':>7} {'in budget':>9} {'P saved':>8}")
+    print(f"{'tau_p W':>8} {'tau_e':>6} {'min d':>5} {'time s':>7} {'renders':>8} {'corners':>8} "
+          f"{'views opt/stored':>17} {'KB':>6} | {'budget':>12} {'|dP| W':>8} {'|dE|':>7} "
+          f"{'in budget':>9} {'P saved':>8}")
     last_store = None
-    for tau_p, tau_e in pairs:
-        opts = OptimizeOptions(threshold_power_w=tau_p, threshold_error=tau_e, max_depth=2, population=24,
+    for tau_p, tau_e, min_depth in pairs:
+        opts = OptimizeOptions(threshold_power_w=tau_p, threshold_error=tau_e, max_depth=2,
+                               min_depth=min_depth, population=24,
                                generations=8 if quick else 12, exhaustive_limit=0, eval_width=32,
                                eval_height=24, seed=0)
         t0 = time.perf_counter()
@@ -65,8 +68,9 @@ def part_a(quick: bool) -> None:
         dt = time.perf_counter() - t0
         st = store.stats()
         last_store = store
-        head = (f"{tau_p:8.3f} {tau_e:6.3f} {dt:7.1f} {store.meta['evaluations']:8d} {st['corners']:8d} "
-                f"{store.meta['views_optimised']:>8}/{st['views']:<8} {st['size_bytes'] / 1024:6.1f}")
+        head = (f"{tau_p:8.3f} {tau_e:6.3f} {min_depth:5d} {dt:7.1f} {store.meta['evaluations']:8d} "
+                f"{st['corners']:8d} {store.meta['views_optimised']:>8}/{st['views']:<8} "
+                f"{st['size_bytes'] / 1024:6.1f}")
         # actual power/error of the chosen settings at each frame's own camera and resolution
         mq = sp.max_quality_indices()
         p_max = np.mean([evaluate(handle, frame_camera(f, w, h), mq, sp).power_w for f in path.frames])
