@@ -146,7 +146,7 @@ class SceneHandle:
         if scene is None:
             scene = _load_scene(self.path, None)  # type: ignore[arg-type]
         self.content_hash = str(scene.content_hash)
-        _SCENES[self.content_hash] = scene
+        _remember_scene(self.content_hash, scene)
         self._scene = scene
 
     def get(self) -> Any:
@@ -162,7 +162,7 @@ class SceneHandle:
                         raise RuntimeError("this scene has no file or loader for a worker process")
                     if str(s.content_hash) != self.content_hash:
                         raise RuntimeError("the worker loaded a different scene (content hash differs)")
-                    _SCENES[self.content_hash] = s
+                    _remember_scene(self.content_hash, s)
             self._scene = s
         return self._scene
 
@@ -208,6 +208,15 @@ _SCENES: dict[str, Any] = {}
 _PROFILES: dict[str, Any] = {}
 _REFS: OrderedDict[tuple[str, ...], np.ndarray] = OrderedDict()
 _REF_CAPACITY = 96
+_SCENE_CAPACITY = 8
+
+
+def _remember_scene(content_hash: str, scene: Any) -> None:
+    """Keep the few most recent scenes of this process (a long-lived worker sees many jobs)."""
+    _SCENES.pop(content_hash, None)
+    _SCENES[content_hash] = scene
+    while len(_SCENES) > _SCENE_CAPACITY:
+        _SCENES.pop(next(iter(_SCENES)))
 
 
 def _profile(name: str) -> Any:
