@@ -140,9 +140,10 @@ Vec3 Shader::trace(const Ray& ray, RayKind kind, int depth, std::uint32_t key, s
   std::uint32_t shadow_bits = 0;
   const std::uint32_t path_key = hash_combine(key, path);
 
-  // Direct light with shadow rays.
+  // Direct light with shadow rays (none for a fully transmissive surface: its direct BRDF is zero).
   const auto& lights = scene.lights();
-  for (std::size_t li = 0; li < lights.size(); ++li) {
+  const std::size_t light_count = opaque > 0.f ? lights.size() : 0;
+  for (std::size_t li = 0; li < light_count; ++li) {
     const Light& L = lights[li];
     Vec3 to_light;
     float dist = kInf;
