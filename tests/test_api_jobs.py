@@ -112,6 +112,10 @@ def test_job_end_to_end_events_store_and_query(client: httpx.Client, finished: d
     # Same answer as the store module itself.
     direct = store.lookup(m[:3, 3], matrix=m, fov=frame["vfov"], power_budget=1e4)
     assert rich["packed"] == direct.packed and rich["indices"] == list(direct.indices)
+    wide = client.post(f"/stores/{job['store_id']}/query",
+                       json={**query, "aspect": 3.0, "power_budget_w": 0.5}).json()
+    assert wide["packed"] == store.lookup(m[:3, 3], matrix=m, fov=frame["vfov"], power_budget=0.5,
+                                          aspect=3.0).packed
 
     by_error = client.post(f"/stores/{job['store_id']}/query", json={**query, "error_budget": 1.0}).json()
     assert by_error["power_w"] <= rich["power_w"]

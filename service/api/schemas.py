@@ -188,6 +188,8 @@ class StoreQuery(StrictModel):
     direction: Vec3 | None = Field(default=None, description="view direction (or give matrix)")
     matrix: Matrix4 | None = Field(default=None, description="camera world matrix, looks down local -Z")
     fov: Vfov | None = None
+    aspect: Annotated[float, Field(gt=0.0, le=100.0)] | None = Field(
+        default=None, description="width / height (default: the store's)")
     power_budget_w: Annotated[float, Field(gt=0.0, le=1e4)] | None = None
     error_budget: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
     previous: PreviousSettings | None = None

@@ -24,9 +24,10 @@ def get_store(record: StoreRecordDep) -> Response:
 
 
 def _unit_scale(v: tuple[float, ...] | list[float]) -> list[float]:
-    """Divide by the largest magnitude so later squaring cannot overflow (direction is all that counts)."""
+    """Divide by the largest magnitude when squaring could overflow or underflow (only the direction
+    counts); ordinary values pass unchanged, so answers match a direct ``ParetoStore.lookup`` bit for bit."""
     m = max(abs(c) for c in v)
-    return [c / m for c in v] if m > 0 else list(v)
+    return [c / m for c in v] if m > 0 and not 1e-100 < m < 1e100 else list(v)
 
 
 def _orientation(body: StoreQuery) -> tuple[Any, Any]:
@@ -47,7 +48,8 @@ def answer_query(store: Any, body: StoreQuery) -> QueryResult:
     direction, matrix = _orientation(body)
     try:
         hit = store.lookup(body.position, direction=direction, matrix=matrix, fov=body.fov,
-                           power_budget=body.power_budget_w, error_budget=body.error_budget)
+                           power_budget=body.power_budget_w, error_budget=body.error_budget,
+                           aspect=body.aspect)
     except ValueError as exc:
         raise ApiError(422, str(exc)) from exc
     except ArithmeticError as exc:  # extreme but finite numbers the lookup could not handle
