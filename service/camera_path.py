@@ -36,10 +36,15 @@ def _finite(a: np.ndarray, what: str) -> np.ndarray:
 
 
 def _matrix_from_direction(position: np.ndarray, direction: np.ndarray, up: np.ndarray) -> np.ndarray:
-    n = float(np.linalg.norm(direction))
-    if n < 1e-12:
+    big = float(np.abs(direction).max())
+    if big == 0.0:
         raise ValueError("direction must be non-zero")
-    f = direction / n
+    f = direction / big  # scale-free first, so huge components cannot overflow the norm
+    f = f / np.linalg.norm(f)
+    ubig = float(np.abs(up).max())
+    if ubig == 0.0:
+        raise ValueError("up must be non-zero")
+    up = up / ubig
     right = np.cross(f, up)
     if float(np.linalg.norm(right)) < 1e-9:
         raise ValueError("up must not be parallel to direction")
@@ -51,10 +56,11 @@ def _matrix_from_direction(position: np.ndarray, direction: np.ndarray, up: np.n
 
 
 def _matrix_from_quaternion(position: np.ndarray, q: np.ndarray) -> np.ndarray:
-    n = float(np.linalg.norm(q))
-    if n < 1e-12:
+    big = float(np.abs(q).max())
+    if big == 0.0:
         raise ValueError("rotation_quaternion must be non-zero")
-    w, x, y, z = q / n
+    q = q / big
+    w, x, y, z = q / np.linalg.norm(q)
     r = np.array([
         [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
         [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],

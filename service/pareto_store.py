@@ -584,6 +584,14 @@ def root_cube(positions: Any, pad_fraction: float = 0.1, min_size: float = 1.0) 
     return centre - size / 2, size
 
 
+def _scale_free(v: tuple[float, float, float], name: str) -> tuple[float, float, float]:
+    """Divide by the largest component (so squaring cannot overflow); zero vectors are refused."""
+    m = max(abs(v[0]), abs(v[1]), abs(v[2]))
+    if m == 0.0 or m < 1e-300:
+        raise ValueError(f"{name} must be non-zero")
+    return v[0] / m, v[1] / m, v[2] / m
+
+
 def camera_rotation(direction: Any = None, matrix: Any = None, up: Any = None) -> np.ndarray:
     """3x3 camera-to-world rotation (columns: right, up, backward; the camera looks down local -Z).
 
@@ -596,16 +604,18 @@ def camera_rotation(direction: Any = None, matrix: Any = None, up: Any = None) -
         if m.shape not in ((4, 4), (3, 3)) or not np.all(np.isfinite(m)):
             raise ValueError("matrix must be a finite 4x4 or 3x3 array")
         r = m[:3, :3]
+        big = np.abs(r).max(axis=0)
+        if np.any(big == 0):
+            raise ValueError("matrix has a degenerate rotation")
+        r = r / big  # scale-free first: huge but finite entries must not overflow the norms
         norms = np.linalg.norm(r, axis=0)
-        if np.any(norms < 1e-12):
+        if np.any(norms < 1e-12) or not np.all(np.isfinite(r)):
             raise ValueError("matrix has a degenerate rotation")
         return r / norms  # remove scale
-    fx, fy, fz = _vec3_floats(direction, "direction")
+    fx, fy, fz = _scale_free(_vec3_floats(direction, "direction"), "direction")
     n = math.sqrt(fx * fx + fy * fy + fz * fz)
-    if n < 1e-12:
-        raise ValueError("direction must be non-zero")
     fx, fy, fz = fx / n, fy / n, fz / n
-    ux, uy, uz = (0.0, 0.0, 1.0) if up is None else _vec3_floats(up, "up")
+    ux, uy, uz = (0.0, 0.0, 1.0) if up is None else _scale_free(_vec3_floats(up, "up"), "up")
 
     def cross(a: tuple[float, float, float], b: tuple[float, float, float]) -> tuple[float, float, float]:
         return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])

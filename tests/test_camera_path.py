@@ -57,6 +57,14 @@ def test_validation(mutate, msg: str) -> None:
         CameraPath.from_dict(d)
 
 
+def test_huge_orientations_do_not_overflow() -> None:
+    d = _doc()
+    d["frames"][1]["direction"] = [0, 1e308, 0]
+    d["frames"][2]["rotation_quaternion"] = [1e308, 1e308, 0, 0]
+    p = CameraPath.from_dict(d)
+    assert np.allclose(p.frames[1].direction, [0, 1, 0]) and np.allclose(p.frames[2].direction, [0, 1, 0])
+
+
 def test_not_json_and_from_positions() -> None:
     with pytest.raises(ValueError, match="JSON"):
         CameraPath.from_json("{nope")

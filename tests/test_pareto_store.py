@@ -211,6 +211,12 @@ def test_lookup_rejects_bad_input() -> None:
         s.lookup([0, 0, 0], direction=[0, 0, 0], power_budget=1)
     with pytest.raises(ValueError):
         s.lookup([0, 0, 0], direction=[1, 0, 0], fov=4.0, power_budget=1)
+    # huge but finite orientations are fine (scale-free), not an overflow
+    assert s.lookup([1, 1, 1], direction=[1e308, 0, -1e308], power_budget=1).view in (0, 5)
+    m = np.eye(4) * 1e307
+    m[3, 3] = 1
+    assert VIEW_NAMES[s.lookup([1, 1, 1], matrix=m, power_budget=1).view] == "-Z"
+    assert s.lookup([1, 1, 1], direction=[1e-200, 0, 0], power_budget=1).view == 0
 
 
 @settings(max_examples=60, deadline=None)
