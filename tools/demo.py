@@ -359,10 +359,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     path_resolution = tuple(int(v) for v in path.frames[0].resolution)
     service = LocalService(sys.executable, free_port(), args.data_dir)
     say(f"== 2/5 service: render-budget serve on {service.url}, data in {args.data_dir}")
-    service.start()
-    clock.service_pid = service.process.pid if service.process else None
     result: dict[str, Any] = {}
-    try:
+    try:  # from here on the service is stopped whatever happens (also Ctrl-C while it starts)
+        service.start()
+        clock.service_pid = service.process.pid if service.process else None
         client = service.client(timeout_s=300.0)
         health = client.health()
         say(f"  up: version {health['version']}, executor {health['executor']}, "
