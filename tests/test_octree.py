@@ -180,3 +180,15 @@ def test_options_validation() -> None:
         OptimizeOptions(metric="mse")
     with pytest.raises(ValueError):
         OptimizeOptions(eval_height=4)
+
+
+@pytest.mark.slow
+def test_min_depth_splits_and_similar_frontiers_are_inherited(scene) -> None:
+    """Thresholds nothing exceeds: only min_depth splits the root, and every new corner inherits."""
+    cache = EvalCache()
+    store, _ = _run(scene, cache=cache, threshold_power_w=1e6, threshold_error=1.0, min_depth=1)
+    st = store.stats()
+    assert st["depth"] == 1 and st["corners"] == 27
+    assert store.meta["views_optimised"] == 48 == st["unique_frontiers"]
+    root_only, _ = _run(scene, cache=cache, threshold_power_w=1e6, threshold_error=1.0)
+    assert root_only.stats()["corners"] == 8 and root_only.meta["evaluations"] == 0
