@@ -111,8 +111,10 @@ def test_effects_counters_and_model_only_what_is_needed(effects, teapot):
     cam = effects_camera(64, 36)
     r = render(effects, cam, RenderSettings(max_depth=2, shadow_samples=4, ao_samples=3), threads=2)
     c = r.counters
-    for k in ("rays_reflection", "rays_refraction", "rays_glossy", "rays_ao", "rays_shadow", "env_lookups"):
+    for k in ("rays_reflection", "rays_refraction", "rays_glossy", "rays_ao", "rays_shadow"):
         assert c[k] > 0, k
+    # A constant-colour environment needs no lookup: rays leave the scene, yet nothing is counted.
+    assert c["env_lookups"] == 0 and c["env_filtered_lookups"] == 0
     # Depth 0: no secondary rays at all; no AO samples: no AO rays; no shadows: no shadow rays.
     r0 = render(effects, cam, RenderSettings(max_depth=0, shadow_samples=0, ao_samples=0), threads=2)
     for k in ("rays_reflection", "rays_refraction", "rays_glossy", "rays_ao", "rays_shadow"):
@@ -184,6 +186,7 @@ def test_environment_map_and_glossy_filter(env_filter):
     cam = effects_camera(48, 32)
     r = render(scene, cam, RenderSettings(env_filter=env_filter, max_depth=1), threads=2)
     assert np.all(np.isfinite(r.image))
+    assert r.counters["env_lookups"] > 0  # primary and mirror rays that miss read the map
     if env_filter == "off":
         assert r.counters["env_filtered_lookups"] == 0 and r.counters["rays_glossy"] > 0
     else:

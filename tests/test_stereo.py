@@ -59,3 +59,33 @@ def test_bad_separation_raises(teapot):
         render_stereo(teapot, teapot_camera(16, 16), -0.1, RenderSettings())
     with pytest.raises(ValueError):
         render_stereo(teapot, teapot_camera(16, 16), float("nan"), RenderSettings())
+
+
+def _wall_scene(distance: float):
+    """A large wall facing a camera at the origin that looks down +Y: every pixel hits it at depth `distance`."""
+    from sim_core import Scene
+
+    pos = np.array([[-100, distance, -100], [100, distance, -100], [100, distance, 100], [-100, distance, 100]],
+                   dtype=np.float32)
+    return Scene.from_arrays(pos, np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int64), environment=(0, 0, 0))
+
+
+def test_gbuffer_prefetch_is_the_reachable_disparity_span():
+    """Hand-computed: 64 x 32 px, tan(vfov/2) = 0.5, so the focal length is 32 px; a wall at depth 4 and an
+    eye separation of 0.5 give a disparity of 32 * 0.5 / 4 = 4 px. A right-eye tile (16 x 16) reads the left
+    columns [x0 + 4, x0 + 20) of its own rows, clamped to the image: 16 + 16 + 16 + 12 columns per band of
+    16 rows, two bands, 32 bytes per texel."""
+    from sim_core import Camera
+
+    scene = _wall_scene(4.0)
+    cam = Camera.look_at((0, 0, 0), (0, 1, 0), (0, 0, 1), 2 * np.arctan(0.5), 64, 32)
+    settings = RenderSettings(tile_size=16, max_depth=0, shadow_samples=0)
+    st = render_stereo(scene, cam, 0.5, settings, threads=2)
+    assert st.right.counters["gbuffer_prefetch_bytes"] == 2 * 16 * (16 + 16 + 16 + 12) * 32  # 61,440
+    # Zero separation: every tile reads exactly its own texels, the whole G-buffer once.
+    st0 = render_stereo(scene, cam, 0.0, settings, threads=1)
+    assert st0.right.counters["gbuffer_prefetch_bytes"] == 64 * 32 * 32
+    # A wall at depth 1: disparity 16 px, so the last column of tiles reaches past the image edge (nothing
+    # to fetch: all its pixels are holes) and the others read 16 columns each.
+    near = render_stereo(_wall_scene(1.0), cam, 0.5, settings, threads=2).right.counters
+    assert near["gbuffer_prefetch_bytes"] == 2 * 16 * (16 + 16 + 16 + 0) * 32

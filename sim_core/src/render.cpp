@@ -82,7 +82,7 @@ class Shader {
       ++ctx_.counters.env_filtered_lookups;
       return env.filtered(ray.dir, cone, static_cast<int>(ctx_.settings.env_filter));
     }
-    ++ctx_.counters.env_lookups;
+    if (env.is_map()) ++ctx_.counters.env_lookups;  // a constant colour needs no lookup
     return env.radiance(ray.dir);
   }
 

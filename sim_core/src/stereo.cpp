@@ -11,10 +11,46 @@ namespace sim_core {
 namespace {
 
 constexpr float kDepthTolerance = 0.05f;  // relative depth difference that separates surfaces
-constexpr int kMaxSpan = 16;
-constexpr float kExactPx = 1e-3f;  // a reprojected sample this close to a pixel centre is used as is              // widest gap between two reprojected neighbours checked for leaks
+constexpr int kMaxSpan = 16;        // widest gap between two reprojected neighbours checked for leaks
+constexpr float kExactPx = 1e-3f;  // a reprojected sample this close to a pixel centre is used as is
 
 }  // namespace
+
+std::uint64_t stereo_prefetch_texels(const Camera& left, const Camera& right, int x0, int y0, int w, int h,
+                                     bool any_hit, float zmin, float zmax, bool any_env) {
+  const int W = left.width, H = left.height;
+  if ((!any_hit && !any_env) || w <= 0 || h <= 0) return 0;
+  constexpr float kSnap = 1e-3f;  // float round-off of an exactly integer reprojection
+  float umin = kInf, umax = -kInf, vmin = kInf, vmax = -kInf;
+  bool whole = false;
+  auto add = [&](bool ok, float u, float v) {
+    if (!ok || !std::isfinite(u) || !std::isfinite(v)) { whole = true; return; }
+    umin = std::min(umin, u); umax = std::max(umax, u);
+    vmin = std::min(vmin, v); vmax = std::max(vmax, v);
+  };
+  for (int cy = 0; cy < 2; ++cy)
+    for (int cx = 0; cx < 2; ++cx) {
+      const Ray r = right.primary(static_cast<float>(x0 + cx * w), static_cast<float>(y0 + cy * h));
+      const float cosz = dot(r.dir, right.forward);
+      float u, v, z;
+      if (any_hit) {
+        for (float depth : {zmin, zmax}) {
+          const bool ok = cosz > 0.f && left.project(r.origin + r.dir * (depth / cosz), &u, &v, &z);
+          add(ok, u, v);
+        }
+      }
+      if (any_env) add(left.project_direction(r.dir, &u, &v), u, v);
+    }
+  long c0 = 0, c1 = W, r0 = 0, r1 = H;  // half-open pixel ranges
+  if (!whole) {
+    c0 = std::max(0L, static_cast<long>(std::floor(umin + kSnap)));
+    c1 = std::min(static_cast<long>(W), static_cast<long>(std::ceil(umax - kSnap)));
+    r0 = std::max(0L, static_cast<long>(std::floor(vmin + kSnap)));
+    r1 = std::min(static_cast<long>(H), static_cast<long>(std::ceil(vmax - kSnap)));
+  }
+  if (c1 <= c0 || r1 <= r0) return 0;
+  return static_cast<std::uint64_t>(c1 - c0) * static_cast<std::uint64_t>(r1 - r0);
+}
 
 StereoOutput render_stereo(const Scene& scene, const Camera& left, const Camera& right,
                            const RenderSettings& settings, int threads, const MultirateState* previous,
@@ -141,7 +177,20 @@ StereoOutput render_stereo(const Scene& scene, const Camera& left, const Camera&
       }
     }
   }
-  // G-buffer reads of the error detection: the left rows each right tile's pixels reproject from.
+  // G-buffer reads of the error detection: per right tile, the left-eye pixels its reprojection can reach
+  // (see stereo.h). The depth range is that of the left samples that land in the right frame.
+  float zmin = kInf, zmax = 0.f;
+  bool any_env = false;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (proj_row[i] < 0) continue;
+    if (L.object[i] < 0) {
+      any_env = true;
+    } else {
+      zmin = std::min(zmin, proj_z[i]);
+      zmax = std::max(zmax, proj_z[i]);
+    }
+  }
+  const bool any_hit = zmin <= zmax;
   // 4. Right eye, tile by tile: reuse valid pixels, trace bad ones (every sub-pixel of the grid).
   RenderOutput& R = out.right;
   R.fb.allocate(W, H);
@@ -161,7 +210,8 @@ StereoOutput render_stereo(const Scene& scene, const Camera& left, const Camera&
       TileStat& stat = R.tiles[t];
       stat.x0 = x0; stat.y0 = y0; stat.width = w; stat.height = h; stat.block = 1;
       Counters& c = ctx.counters;
-      c.gbuffer_prefetch_bytes += static_cast<std::uint64_t>(h) * W * kGBufferTexelBytes;
+      c.gbuffer_prefetch_bytes +=
+          stereo_prefetch_texels(left, right, x0, y0, w, h, any_hit, zmin, zmax, any_env) * kGBufferTexelBytes;
       for (int yy = y0; yy < y0 + h; ++yy) {
         for (int xx = x0; xx < x0 + w; ++xx) {
           const std::size_t j = static_cast<std::size_t>(yy) * W + xx;
