@@ -68,6 +68,13 @@ def test_data_dir_uses_wal(data_dir: Path, client: httpx.Client) -> None:
         s.close()
 
 
+def test_second_service_on_the_same_data_dir_refuses(data_dir: Path, client: httpx.Client) -> None:
+    srv = ServerProcess(data_dir)
+    assert srv.proc.wait(60) != 0
+    assert "in use by another render-budget service" in srv.output()
+    assert client.get("/health").status_code == 200  # the first one is unaffected
+
+
 def test_openapi_documents_every_endpoint(client: httpx.Client) -> None:
     paths = client.get("/openapi.json").json()["paths"]
     assert {"/scenes", "/scenes/{scene_id}", "/jobs", "/jobs/{job_id}", "/jobs/{job_id}/events",

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import fcntl
 import hmac
 import logging
 import re
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
+from pathlib import Path
+from typing import IO
 
 from fastapi import FastAPI
 from pydantic import ValidationError
@@ -144,12 +147,26 @@ def _is_json(headers: list[tuple[bytes, bytes]]) -> bool:
     return False
 
 
+def lock_data_dir(data_dir: Path) -> IO[bytes]:
+    """One service per data directory: two would both resume the same jobs. The advisory lock dies with
+    the process, so a restart after a crash is never blocked."""
+    data_dir.mkdir(parents=True, exist_ok=True)
+    handle = open(data_dir / "service.lock", "ab")  # held for the app's lifetime
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError as exc:
+        handle.close()
+        raise RuntimeError(f"data directory {data_dir} is in use by another render-budget service") from exc
+    return handle
+
+
 def create_app(settings: Settings | None = None) -> FastAPI:
     """Build the app; storage and the job runner start in its lifespan (so tests can run several)."""
     settings = settings or Settings()
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        lock = lock_data_dir(settings.data_dir)
         storage = Storage(settings.data_dir)
         scene_cache = SceneCache(storage, capacity=settings.scene_cache_size)
         manager = JobManager(storage, scene_cache, workers=settings.job_workers,
@@ -166,6 +183,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         finally:
             manager.stop()
             storage.close()
+            lock.close()  # releases the lock (the OS does the same if the process dies)
 
     app = FastAPI(
         title="render-budget",
