@@ -11,7 +11,7 @@ and prints per frame:
 - what the store picks for the same frame under the same error budget: its predicted error and power
   (from the corner view it looks up) and the measured error and power of those settings at the frame.
 
-    .venv/bin/python bench/bench_demo_views.py --scene teapot --store out/demo/store.json [--frames 6]
+    .venv/bin/python bench/bench_demo_views.py --scene teapot [--store out/demo/store.json] [--frames 4]
 """
 
 from __future__ import annotations
@@ -35,16 +35,22 @@ REPO = Path(__file__).resolve().parent.parent
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--scene", default="teapot")
-    ap.add_argument("--store", type=Path, required=True, help="the demo's store.json for this scene")
-    ap.add_argument("--frames", type=int, default=6)
+    ap.add_argument("--store", type=Path, default=None,
+                    help="the demo's store.json (default: out/demo/ for teapot, else out/SCENE/)")
+    ap.add_argument("--frames", type=int, default=4)
     ap.add_argument("--error-budget", type=float, default=0.02)
     ap.add_argument("--population", type=int, default=24)
     ap.add_argument("--generations", type=int, default=25)
     args = ap.parse_args()
 
+    folder = "demo" if args.scene == "teapot" else args.scene
+    store_file = args.store or REPO / "out" / folder / "store.json"
+    if not store_file.is_file():
+        print(f"no store at {store_file}: run `make demo` (or make report SCENE={args.scene}) first; skipped")
+        return
     scene_dir = REPO / "blend_scenes" / "build" / args.scene
     path = CameraPath.load(scene_dir / "path.json")
-    store = ParetoStore.from_json(args.store.read_text())
+    store = ParetoStore.from_json(store_file.read_text())
     width, height = store.meta["eval_resolution"]
     space = default_space()
     fixed = store.meta.get("fixed_parameters") or {}
