@@ -64,7 +64,8 @@ SPACE = default_space().subset(["sampling", "max_depth", "resolution_scale"])
 
 def _run(scene, cache=None, **kw):
     progress = []
-    store = optimize_path(scene, _path(), SPACE, _options(**kw), cache=cache or EvalCache(),
+    cache = cache if cache is not None else EvalCache()  # an empty cache is falsy (len 0)
+    store = optimize_path(scene, _path(), SPACE, _options(**kw), cache=cache,
                           executor=InProcessExecutor(), progress=progress.append)
     return store, progress
 
