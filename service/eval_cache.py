@@ -114,6 +114,9 @@ class EvalCache:
                 self._db.execute("ROLLBACK")
                 raise
 
+    def __bool__(self) -> bool:
+        return True  # a cache is a cache even while empty (``cache or default`` must not replace it)
+
     def __len__(self) -> int:
         with self._lock:
             return int(self._db.execute("SELECT COUNT(*) FROM evaluations").fetchone()[0])

@@ -36,6 +36,7 @@ def test_persists_and_counts(tmp_path) -> None:
     ("height", 48), ("fps", 60.0)])
 def test_every_key_part_separates(field: str, value) -> None:
     c = EvalCache()
+    assert c and len(c) == 0
     c.put_many(_key(), [(5, Evaluation(0.2, 1.0, 0.1))])
     assert c.get_many(_key(**{field: value}), [5]) == {}
     assert 5 in c.get_many(_key(), [5])
