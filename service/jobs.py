@@ -225,11 +225,8 @@ class JobManager:
             job_id = self._queue.get()
             if job_id is None:
                 return
-            job = self.storage.get_job(job_id=job_id)
-            if job is None or job.state != "queued":
-                continue
             try:
-                self._run(job)
+                self._run(job_id)
             except Exception:  # keep the worker alive whatever one job does
                 log.exception("job %s crashed the worker", job_id)
                 self._finish(job_id, "failed", error="internal error while running the job")
@@ -245,14 +242,19 @@ class JobManager:
                                 finished=time.time(), elapsed_s=elapsed_s, event=(state, data))
         self._bump()
 
-    def _run(self, job: JobRecord) -> None:
+    def _run(self, job_id: str) -> None:
         cancel = threading.Event()
-        with self._cancel_lock:
-            self._cancel[job.id] = cancel
+        with self._cancel_lock:  # registered before the claim, so no cancel request can slip between
+            self._cancel[job_id] = cancel
+        job = self.storage.claim_job(job_id=job_id)
+        if job is None:  # cancelled while queued, or gone
+            with self._cancel_lock:
+                self._cancel.pop(job_id, None)
+            return
+        if job.cancel_requested:
+            cancel.set()
         t0 = time.monotonic()
         base_elapsed = job.elapsed_s
-        self.storage.update_job(job_id=job.id, state="running", started=time.time(), bump_attempts=True,
-                                event=("started", {"state": "running", "attempt": job.attempts + 1}))
         self._bump()
 
         def elapsed() -> float:

@@ -324,6 +324,21 @@ class Storage:
             if event is not None:
                 self._append_event(conn, job_id=job_id, kind=event[0], data=event[1])
 
+    def claim_job(self, *, job_id: str) -> JobRecord | None:
+        """Move a queued job to running (one attempt more) unless someone got there first (a cancel, another
+        worker); returns the claimed record or None."""
+        with self._write_lock, self._conn() as conn:
+            cur = conn.execute(
+                "UPDATE jobs SET state = 'running', started = ?, attempts = attempts + 1"
+                " WHERE id = ? AND state = 'queued'", (time.time(), job_id),
+            )
+            if cur.rowcount != 1:
+                return None
+            attempts = conn.execute("SELECT attempts FROM jobs WHERE id = ?", (job_id,)).fetchone()[0]
+            self._append_event(conn, job_id=job_id, kind="started",
+                               data={"state": "running", "attempt": attempts})
+        return self.get_job(job_id=job_id)
+
     def request_cancel(self, *, job_id: str) -> JobRecord | None:
         """Flag a job for cancellation; a queued job is cancelled at once. Returns the new record."""
         with self._write_lock, self._conn() as conn:

@@ -121,3 +121,15 @@ def test_progress_keeps_total_elapsed_and_estimates() -> None:
                       elapsed_s=6.0)
     assert p["elapsed_s"] == 6.0 and p["estimate_s"] == 18.0
     assert p["evaluations"] == 40 and p["cache_hits"] == 5 and p["phase"] == "starting"
+
+
+def test_claim_is_exclusive_and_loses_to_a_cancel(storage: Storage) -> None:
+    job = storage.create_job(scene_id=SCENE, spec={})
+    claimed = storage.claim_job(job_id=job.id)
+    assert claimed is not None and claimed.state == "running" and claimed.attempts == 1
+    assert storage.claim_job(job_id=job.id) is None  # a second worker gets nothing
+    assert storage.events_after(job_id=job.id)[-1].kind == "started"
+    other = storage.create_job(scene_id=SCENE, spec={})
+    storage.request_cancel(job_id=other.id)
+    assert storage.claim_job(job_id=other.id) is None
+    assert storage.get_job(job_id=other.id).state == "cancelled"
