@@ -10,7 +10,8 @@ of the reprojected right eye against the traced one.
 Seed figures: 1.64x performance, 20 % energy saved, 91.5 % reused. Target here: >= 1.4x, >= 15 %.
 
 The G-buffer prefetch is priced three ways, because it decides the result: (a) as the tracer counts it
-(every tile fetches its rows of the left G-buffer over the full image width: h * W * 32 B per tile),
+(every right tile fetches the left-eye texels its frustum can reach between the nearest and farthest left
+depth, clamped to the image; sim_core/stereo.h),
 (b) each row fetched once per band of tiles and kept on chip (H * W * 32 B per frame), (c) each tile fetching
 only the span reprojection can reach (h * (w + max disparity) * 32 B; max disparity = IPD * focal / nearest
 left-eye depth). (b) and (c) are what-ifs computed here from the same render, not tracer counters.
