@@ -62,11 +62,11 @@ def test_bad_separation_raises(teapot):
 
 
 def _wall_scene(distance: float):
-    """A large wall facing a camera at the origin that looks down +Y: every pixel hits it at depth `distance`."""
+    """A large wall facing a camera at the origin looking down +Y: every pixel hits it at `distance`."""
     from sim_core import Scene
 
-    pos = np.array([[-100, distance, -100], [100, distance, -100], [100, distance, 100], [-100, distance, 100]],
-                   dtype=np.float32)
+    d = distance
+    pos = np.array([[-100, d, -100], [100, d, -100], [100, d, 100], [-100, d, 100]], dtype=np.float32)
     return Scene.from_arrays(pos, np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int64), environment=(0, 0, 0))
 
 

@@ -172,4 +172,113 @@ Bvh build_bvh(std::vector<TriRecord>& tris, std::vector<std::uint32_t>* order_ou
   return out;
 }
 
+namespace {
+
+float node_area(const BvhNode& n) {
+  const float ex = n.hi[0] - n.lo[0], ey = n.hi[1] - n.lo[1], ez = n.hi[2] - n.lo[2];
+  return 2.f * (ex * ey + ey * ez + ez * ex);
+}
+
+struct Collapser {
+  const std::vector<BvhNode>& bin;
+  const std::vector<TriRecord>& tris;
+  std::vector<Bvh4Node>& out;
+  std::vector<TriBlock4>& blocks;
+  int depth = 0;
+  std::vector<std::uint32_t> lo, hi;  // triangle range [lo, hi) of every binary node's subtree
+
+  void ranges(std::uint32_t b) {
+    if (bin[b].count > 0) { lo[b] = bin[b].first; hi[b] = bin[b].first + bin[b].count; return; }
+    const std::uint32_t c = bin[b].first;
+    ranges(c);
+    ranges(c + 1);
+    lo[b] = std::min(lo[c], lo[c + 1]);
+    hi[b] = std::max(hi[c], hi[c + 1]);
+  }
+  // A subtree of at most four triangles is one SIMD block: testing it costs about one node test.
+  bool as_leaf(std::uint32_t b) const { return bin[b].count > 0 || hi[b] - lo[b] <= 4; }
+
+  std::uint32_t add_blocks(std::uint32_t first, std::uint32_t count) {
+    const std::uint32_t start = static_cast<std::uint32_t>(blocks.size());
+    for (std::uint32_t b = 0; b < count; b += 4) {
+      TriBlock4 blk{};
+      blk.first = first + b;
+      blk.count = std::min<std::uint32_t>(4, count - b);
+      for (std::uint32_t l = 0; l < blk.count; ++l)
+        for (int k = 0; k < 3; ++k)
+          for (int a = 0; a < 3; ++a) blk.v[k][a][l] = tris[blk.first + l].v[3 * k + a];
+      blocks.push_back(blk);
+    }
+    return start;
+  }
+
+  std::uint32_t collapse(std::uint32_t b, int level) {
+    depth = std::max(depth, level);
+    std::uint32_t kids[4];
+    int nk = 0;
+    if (as_leaf(b)) {
+      kids[nk++] = b;  // only for a small root
+    } else {
+      kids[nk++] = bin[b].first;
+      kids[nk++] = bin[b].first + 1;
+      while (nk < 4) {
+        int pick = -1;
+        float best = -1.f;
+        for (int i = 0; i < nk; ++i) {
+          if (as_leaf(kids[i])) continue;
+          const float a = node_area(bin[kids[i]]);
+          if (a > best) { best = a; pick = i; }
+        }
+        if (pick < 0) break;
+        const std::uint32_t c = bin[kids[pick]].first;
+        kids[pick] = c;  // keep left-to-right order of the binary tree
+        for (int j = nk; j > pick + 1; --j) kids[j] = kids[j - 1];
+        kids[pick + 1] = c + 1;
+        ++nk;
+      }
+    }
+    const std::uint32_t self = static_cast<std::uint32_t>(out.size());
+    out.emplace_back();
+    Bvh4Node node{};
+    for (int i = 0; i < 4; ++i) {
+      if (i >= nk) {
+        for (int a = 0; a < 3; ++a) {
+          node.box[2 * a][i] = std::numeric_limits<float>::infinity();
+          node.box[2 * a + 1][i] = -std::numeric_limits<float>::infinity();
+        }
+        node.child[i] = 0;
+        node.count[i] = 0;
+        continue;
+      }
+      const BvhNode& c = bin[kids[i]];
+      for (int a = 0; a < 3; ++a) { node.box[2 * a][i] = c.lo[a]; node.box[2 * a + 1][i] = c.hi[a]; }
+      if (as_leaf(kids[i])) {
+        node.count[i] = hi[kids[i]] - lo[kids[i]];
+        node.child[i] = add_blocks(lo[kids[i]], node.count[i]);
+      } else {
+        node.count[i] = 0;
+        node.child[i] = collapse(kids[i], level + 1);
+      }
+    }
+    out[self] = node;
+    return self;
+  }
+};
+
+}  // namespace
+
+Bvh4 collapse_bvh4(const Bvh& bvh, const std::vector<TriRecord>& tris) {
+  if (bvh.nodes.empty()) throw std::invalid_argument("cannot collapse an empty BVH");
+  Bvh4 out;
+  out.nodes.reserve(bvh.nodes.size() / 3 + 1);
+  out.blocks.reserve(static_cast<std::size_t>(bvh.leaf_count) + 1);
+  Collapser c{bvh.nodes, tris, out.nodes, out.blocks};
+  c.lo.resize(bvh.nodes.size());
+  c.hi.resize(bvh.nodes.size());
+  c.ranges(0);
+  c.collapse(0, 0);
+  out.depth = c.depth;
+  return out;
+}
+
 }  // namespace sim_core

@@ -70,6 +70,7 @@ Scene::Scene(const float* positions, std::size_t vertex_count, const std::uint32
   std::vector<std::uint32_t> order;
   bvh_ = build_bvh(recs, &order);
   tris_ = std::move(recs);
+  bvh4_ = collapse_bvh4(bvh_, tris_);
   shading_.resize(triangle_count);
   for (std::size_t i = 0; i < triangle_count; ++i) {
     const std::size_t src = order[i];
@@ -102,7 +103,8 @@ Vec3 Scene::geometric_normal(std::uint32_t i) const {
 }
 
 void Scene::intersect_many(const float* origins, const float* directions, std::size_t n, float* t_out,
-                           std::int64_t* prim_out, int threads) const {
+                           std::int64_t* prim_out, int threads, int bvh_width) const {
+  if (bvh_width != 2 && bvh_width != 4) throw std::invalid_argument("bvh_width must be 2 or 4");
   parallel_chunks(n, threads, 4096, [&](std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i) {
       Ray r;
@@ -113,7 +115,7 @@ void Scene::intersect_many(const float* origins, const float* directions, std::s
         prim_out[i] = -1;
         continue;
       }
-      const Hit h = closest(r);
+      const Hit h = bvh_width == 4 ? closest(r) : closest_binary(r);
       t_out[i] = h.t;
       prim_out[i] = h.hit() ? static_cast<std::int64_t>(tris_[h.tri].prim) : -1;
     }

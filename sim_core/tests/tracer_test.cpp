@@ -1,5 +1,5 @@
-// Native checks of the tracer internals (also run under ASan + UBSan by `make sanitize`): BVH invariants,
-// traversal against brute force, render determinism across thread counts, exactness of the adaptive modes
+// Native checks of the tracer internals (also run under ASan + UBSan by `make sanitize`): BVH and BVH4
+// invariants, binary and 4-wide traversal against brute force, render determinism across thread counts, exactness of the adaptive modes
 // at full rate, zero-separation stereo.
 #include <cmath>
 #include <cstdio>
@@ -92,6 +92,52 @@ void check_bvh(const Scene& s) {
   for (int c : seen) CHECK(c == 1);
 }
 
+// Walks the 4-wide BVH: every triangle in exactly one leaf block, blocks hold the records' vertices,
+// every child box holds its subtree's triangles, empty slots are inverted boxes.
+void check_bvh4_node(const Scene& s, std::uint32_t idx, const float* box_lo, const float* box_hi,
+                     std::vector<int>* seen, int level) {
+  const Bvh4& b = s.bvh4();
+  CHECK(idx < b.nodes.size() && level <= 64);
+  if (idx >= b.nodes.size() || level > 64) return;
+  const Bvh4Node& n = b.nodes[idx];
+  for (int i = 0; i < 4; ++i) {
+    const float lo[3] = {n.box[0][i], n.box[2][i], n.box[4][i]}, hi[3] = {n.box[1][i], n.box[3][i], n.box[5][i]};
+    if (n.count[i] == 0 && lo[0] > hi[0]) {  // empty slot
+      for (int a = 0; a < 3; ++a) CHECK(std::isinf(lo[a]) && lo[a] > 0 && std::isinf(hi[a]) && hi[a] < 0);
+      continue;
+    }
+    if (box_lo)
+      for (int a = 0; a < 3; ++a) CHECK(lo[a] >= box_lo[a] && hi[a] <= box_hi[a]);
+    if (n.count[i] == 0) {
+      check_bvh4_node(s, n.child[i], lo, hi, seen, level + 1);
+      continue;
+    }
+    std::uint32_t left = n.count[i];
+    for (std::uint32_t k = n.child[i]; left > 0; ++k) {
+      CHECK(k < b.blocks.size());
+      if (k >= b.blocks.size()) return;
+      const TriBlock4& blk = b.blocks[k];
+      CHECK(blk.count == std::min(4u, left));
+      for (std::uint32_t l = 0; l < blk.count; ++l) {
+        const TriRecord& t = s.tri(blk.first + l);
+        ++(*seen)[blk.first + l];
+        for (int v = 0; v < 3; ++v)
+          for (int a = 0; a < 3; ++a) {
+            CHECK(blk.v[v][a][l] == t.v[3 * v + a]);
+            CHECK(t.v[3 * v + a] >= lo[a] && t.v[3 * v + a] <= hi[a]);
+          }
+      }
+      left -= blk.count;
+    }
+  }
+}
+
+void check_bvh4(const Scene& s) {
+  std::vector<int> seen(s.triangle_count(), 0);
+  check_bvh4_node(s, 0, nullptr, nullptr, &seen, 0);
+  for (int c : seen) CHECK(c == 1);
+}
+
 void check_against_brute_force(const Scene& s) {
   std::mt19937 rng(3);
   std::normal_distribution<float> nd;
@@ -109,6 +155,14 @@ void check_against_brute_force(const Scene& s) {
       if (intersect_triangle(s.tri(t), pr, 0.f, best, &tt, &b0, &b1, &b2, &cmp)) best = tt;
     }
     if (h.t != best) ++mismatches;
+    const Hit h2 = s.closest_binary(r);
+    if (h2.t != best || h2.hit() != h.hit()) ++mismatches;
+    if (h.hit()) {  // barycentrics of the SIMD lane equal the scalar test's
+      float tt, b0, b1, b2;
+      bool cmp = false;
+      CHECK(intersect_triangle(s.tri(h.tri), pr, 0.f, kInf, &tt, &b0, &b1, &b2, &cmp) && tt == h.t);
+      CHECK(b0 == h.b0 && b1 == h.b1 && b2 == h.b2);
+    }
     NullRecorder rec;
     const Ray shadow{r.origin, r.dir, 0.f, best};
     CHECK(!s.occluded(shadow, rec) || best < kInf);
@@ -166,6 +220,7 @@ void check_render(const Scene& s) {
 int main() {
   const Scene s = make_scene();
   check_bvh(s);
+  check_bvh4(s);
   check_against_brute_force(s);
   check_render(s);
   if (failures) std::fprintf(stderr, "%d failures\n", failures);

@@ -45,6 +45,40 @@ struct Bvh {
   int leaf_count = 0;
 };
 
+// 4-wide node for the host-side closest-hit queries (Scene::intersect_many), 128 bytes (two 64-byte lines):
+// child boxes in SoA order so one SSE slab test covers all four. Collapsed from the binary SAH tree, so it
+// has the same leaves (the same triangle ranges) and the same boxes; only the interior levels are merged.
+// count[i] == 0: child i is interior node child[i] (or an empty slot, whose box is inverted so every ray
+// misses it); count[i] > 0: child i is a leaf of count[i] triangles stored from block child[i] on.
+// The energy model's T&I unit still walks the binary tree (32-byte nodes, counters and cache addresses).
+struct alignas(64) Bvh4Node {
+  float box[6][4];  // lo.x, hi.x, lo.y, hi.y, lo.z, hi.z, each for children 0..3
+  std::uint32_t child[4];
+  std::uint32_t count[4];
+};
+static_assert(sizeof(Bvh4Node) == 128, "BVH4 nodes must be 128 bytes");
+
+// Up to four triangles of one leaf in SoA order (v[vertex][axis][lane]) for a 4-wide triangle test.
+struct alignas(16) TriBlock4 {
+  float v[3][3][4];
+  std::uint32_t first;  // index of lane 0's triangle in the scene's (leaf-ordered) records
+  std::uint32_t count;  // valid lanes, 1..4
+  std::uint32_t pad[2];
+};
+static_assert(sizeof(TriBlock4) == 160, "triangle blocks must be 160 bytes");
+
+struct Bvh4 {
+  std::vector<Bvh4Node> nodes;  // nodes[0] is the root
+  std::vector<TriBlock4> blocks;  // a leaf child's child[i] is its first block, ceil(count / 4) blocks
+  int depth = 0;
+};
+
+// Collapses a binary BVH into a BVH4: each 4-wide node takes the binary children of a node and repeatedly
+// opens the interior child of largest surface area until it holds four (or only leaves remain).
+// Deterministic; a binary root that is a leaf becomes a root with one child.
+// `tris` are the leaf-ordered records the binary BVH indexes (for the SoA triangle blocks).
+Bvh4 collapse_bvh4(const Bvh& bvh, const std::vector<TriRecord>& tris);
+
 // Builds the BVH and reorders `tris` into leaf order. `order_out` receives, for every record position,
 // the index the record had in the input (so per-triangle side data can be permuted the same way).
 Bvh build_bvh(std::vector<TriRecord>& tris, std::vector<std::uint32_t>* order_out,

@@ -276,4 +276,159 @@ inline bool intersect_any(const BvhNode* nodes, const TriRecord* tris, const Ray
   }
 }
 
+// Up to four triangles of a block at once: the same operations, in the same order, as
+// intersect_triangle, so every lane's edge functions and t are bit-identical to the scalar test. A lane
+// with an edge function exactly 0 goes through the scalar test (its double-precision edge decision).
+// Updates best/hit with the nearest accepted lane (ties: lowest index, as a sequential loop would).
+inline void intersect_block4(const TriBlock4& b, const TriRecord* tris, const PreparedRay& r, float tmin,
+                             float* best, Hit* hit) {
+#if SIM_CORE_SSE
+  const int kx = r.kx, ky = r.ky, kz = r.kz;
+  const __m128 okx = _mm_set1_ps(r.org[kx]), oky = _mm_set1_ps(r.org[ky]), okz = _mm_set1_ps(r.org[kz]);
+  const __m128 sx = _mm_set1_ps(r.sx), sy = _mm_set1_ps(r.sy), sz = _mm_set1_ps(r.sz);
+  const __m128 az = _mm_sub_ps(_mm_load_ps(b.v[0][kz]), okz);
+  const __m128 bz = _mm_sub_ps(_mm_load_ps(b.v[1][kz]), okz);
+  const __m128 cz = _mm_sub_ps(_mm_load_ps(b.v[2][kz]), okz);
+  const __m128 ax = _mm_sub_ps(_mm_sub_ps(_mm_load_ps(b.v[0][kx]), okx), _mm_mul_ps(sx, az));
+  const __m128 ay = _mm_sub_ps(_mm_sub_ps(_mm_load_ps(b.v[0][ky]), oky), _mm_mul_ps(sy, az));
+  const __m128 bx = _mm_sub_ps(_mm_sub_ps(_mm_load_ps(b.v[1][kx]), okx), _mm_mul_ps(sx, bz));
+  const __m128 by = _mm_sub_ps(_mm_sub_ps(_mm_load_ps(b.v[1][ky]), oky), _mm_mul_ps(sy, bz));
+  const __m128 cx = _mm_sub_ps(_mm_sub_ps(_mm_load_ps(b.v[2][kx]), okx), _mm_mul_ps(sx, cz));
+  const __m128 cy = _mm_sub_ps(_mm_sub_ps(_mm_load_ps(b.v[2][ky]), oky), _mm_mul_ps(sy, cz));
+  const __m128 u = _mm_sub_ps(_mm_mul_ps(cx, by), _mm_mul_ps(cy, bx));
+  const __m128 v = _mm_sub_ps(_mm_mul_ps(ax, cy), _mm_mul_ps(ay, cx));
+  const __m128 w = _mm_sub_ps(_mm_mul_ps(bx, ay), _mm_mul_ps(by, ax));
+  const __m128 zero = _mm_setzero_ps();
+  const int valid = (1 << b.count) - 1;
+  const int edge0 = _mm_movemask_ps(_mm_or_ps(_mm_or_ps(_mm_cmpeq_ps(u, zero), _mm_cmpeq_ps(v, zero)),
+                                              _mm_cmpeq_ps(w, zero))) & valid;
+  const __m128 anyneg = _mm_or_ps(_mm_or_ps(_mm_cmplt_ps(u, zero), _mm_cmplt_ps(v, zero)), _mm_cmplt_ps(w, zero));
+  const __m128 anypos = _mm_or_ps(_mm_or_ps(_mm_cmpgt_ps(u, zero), _mm_cmpgt_ps(v, zero)), _mm_cmpgt_ps(w, zero));
+  const __m128 det = _mm_add_ps(_mm_add_ps(u, v), w);
+  const __m128 ts = _mm_add_ps(_mm_add_ps(_mm_mul_ps(u, _mm_mul_ps(sz, az)), _mm_mul_ps(v, _mm_mul_ps(sz, bz))),
+                               _mm_mul_ps(w, _mm_mul_ps(sz, cz)));
+  const __m128 rcp = _mm_div_ps(_mm_set1_ps(1.f), det);
+  const __m128 t = _mm_mul_ps(ts, rcp);
+  const __m128 ok = _mm_and_ps(_mm_andnot_ps(_mm_and_ps(anyneg, anypos), _mm_cmpneq_ps(det, zero)),
+                               _mm_and_ps(_mm_cmpgt_ps(t, _mm_set1_ps(tmin)), _mm_cmplt_ps(t, _mm_set1_ps(*best))));
+  int mask = _mm_movemask_ps(ok) & valid & ~edge0;
+  if (mask == 0 && edge0 == 0) return;
+  alignas(16) float tl[4], ul[4], vl[4], wl[4], rl[4];
+  _mm_store_ps(tl, t);
+  for (int l = 0; l < 4; ++l) {
+    const std::uint32_t i = b.first + static_cast<std::uint32_t>(l);
+    if (edge0 & (1 << l)) {
+      float tt = 0.f, b0 = 0.f, b1 = 0.f, b2 = 0.f;
+      bool compared = false;
+      if (intersect_triangle(tris[i], r, tmin, *best, &tt, &b0, &b1, &b2, &compared)) {
+        *best = tt;
+        hit->t = tt; hit->tri = i; hit->b0 = b0; hit->b1 = b1; hit->b2 = b2;
+      }
+    } else if ((mask & (1 << l)) && tl[l] < *best) {
+      _mm_store_ps(ul, u); _mm_store_ps(vl, v); _mm_store_ps(wl, w); _mm_store_ps(rl, rcp);
+      *best = tl[l];
+      hit->t = tl[l]; hit->tri = i; hit->b0 = ul[l] * rl[l]; hit->b1 = vl[l] * rl[l]; hit->b2 = wl[l] * rl[l];
+    }
+  }
+#else
+  for (std::uint32_t l = 0; l < b.count; ++l) {
+    const std::uint32_t i = b.first + l;
+    float tt = 0.f, b0 = 0.f, b1 = 0.f, b2 = 0.f;
+    bool compared = false;
+    if (intersect_triangle(tris[i], r, tmin, *best, &tt, &b0, &b1, &b2, &compared)) {
+      *best = tt;
+      hit->t = tt; hit->tri = i; hit->b0 = b0; hit->b1 = b1; hit->b2 = b2;
+    }
+  }
+#endif
+}
+
+// Closest hit along r within (r.tmin, r.tmax) over the 4-wide BVH (no recorder: the host-side query path).
+// Same boxes, leaves and triangle test as intersect_closest, so hit/miss and t agree with it exactly; only
+// which of two triangles at exactly the same t wins may differ (ties are broken by visiting order).
+inline Hit intersect_closest4(const Bvh4Node* nodes, const TriBlock4* blocks, const TriRecord* tris,
+                              const Ray& ray) {
+  const PreparedRay r(ray);
+  Hit hit;
+  float best = ray.tmax;
+  struct Entry { std::uint32_t child, count; float t; };
+  Entry stack[256];
+  int sp = 0;
+  // Near/far planes per axis: rows 2a (lo) and 2a + 1 (hi) of the SoA box, swapped for negative directions.
+  const int nx = r.sign[0], ny = 2 + r.sign[1], nz = 4 + r.sign[2];
+  const int fx = 1 - r.sign[0], fy = 3 - r.sign[1], fz = 5 - r.sign[2];
+  std::uint32_t cur = 0, cur_count = 0;
+#if SIM_CORE_SSE
+  const __m128 ox = _mm_set1_ps(r.org[0]), oy = _mm_set1_ps(r.org[1]), oz = _mm_set1_ps(r.org[2]);
+  const __m128 ix = _mm_set1_ps(r.inv[0]), iy = _mm_set1_ps(r.inv[1]), iz = _mm_set1_ps(r.inv[2]);
+  const __m128 vtmin = _mm_set1_ps(ray.tmin), robust = _mm_set1_ps(1.0000004f);
+#endif
+  for (;;) {
+    if (cur_count == 0) {
+      const Bvh4Node& n = nodes[cur];
+      alignas(16) float tn[4];
+      int mask;
+#if SIM_CORE_SSE
+      const __m128 tnx = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(n.box[nx]), ox), ix);
+      const __m128 tny = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(n.box[ny]), oy), iy);
+      const __m128 tnz = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(n.box[nz]), oz), iz);
+      const __m128 tfx = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(n.box[fx]), ox), ix);
+      const __m128 tfy = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(n.box[fy]), oy), iy);
+      const __m128 tfz = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(n.box[fz]), oz), iz);
+      // Operand order as in box_entry: a NaN slab distance never tightens the interval.
+      const __m128 vn = _mm_max_ps(tnz, _mm_max_ps(tny, _mm_max_ps(tnx, vtmin)));
+      const __m128 vf = _mm_min_ps(tfz, _mm_min_ps(tfy, _mm_min_ps(tfx, _mm_set1_ps(best))));
+      mask = _mm_movemask_ps(_mm_cmple_ps(vn, _mm_mul_ps(vf, robust)));
+      _mm_store_ps(tn, vn);
+#else
+      mask = 0;
+      for (int i = 0; i < 4; ++i) {
+        const float x0 = (n.box[nx][i] - r.org[0]) * r.inv[0], x1 = (n.box[fx][i] - r.org[0]) * r.inv[0];
+        const float y0 = (n.box[ny][i] - r.org[1]) * r.inv[1], y1 = (n.box[fy][i] - r.org[1]) * r.inv[1];
+        const float z0 = (n.box[nz][i] - r.org[2]) * r.inv[2], z1 = (n.box[fz][i] - r.org[2]) * r.inv[2];
+        float a = x0 > ray.tmin ? x0 : ray.tmin;
+        a = y0 > a ? y0 : a;
+        a = z0 > a ? z0 : a;
+        float b = x1 < best ? x1 : best;
+        b = y1 < b ? y1 : b;
+        b = z1 < b ? z1 : b;
+        tn[i] = a;
+        if (a <= b * 1.0000004f) mask |= 1 << i;
+      }
+#endif
+      if (mask != 0) {
+        // Visit the hit children nearest first: push the others far to near.
+        Entry hits[4];
+        int nh = 0;
+        for (int i = 0; i < 4; ++i) {
+          if (!(mask & (1 << i))) continue;
+          Entry e{n.child[i], n.count[i], tn[i]};
+          int j = nh++;
+          while (j > 0 && hits[j - 1].t < e.t) { hits[j] = hits[j - 1]; --j; }  // descending t
+          hits[j] = e;
+        }
+        for (int i = 0; i < nh - 1; ++i) stack[sp++] = hits[i];
+        cur = hits[nh - 1].child;
+        cur_count = hits[nh - 1].count;
+#if SIM_CORE_SSE
+        const char* p = cur_count == 0 ? reinterpret_cast<const char*>(nodes + cur)
+                                       : reinterpret_cast<const char*>(blocks + cur);
+        _mm_prefetch(p, _MM_HINT_T0);
+        _mm_prefetch(p + 64, _MM_HINT_T0);
+        if (cur_count != 0) _mm_prefetch(p + 128, _MM_HINT_T0);
+#endif
+        continue;
+      }
+    } else {
+      const std::uint32_t nb = (cur_count + 3) / 4;
+      for (std::uint32_t k = 0; k < nb; ++k) intersect_block4(blocks[cur + k], tris, r, ray.tmin, &best, &hit);
+    }
+    for (;;) {
+      if (sp == 0) return hit;
+      const Entry e = stack[--sp];
+      if (e.t < best) { cur = e.child; cur_count = e.count; break; }
+    }
+  }
+}
+
 }  // namespace sim_core

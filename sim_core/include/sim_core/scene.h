@@ -56,7 +56,9 @@ class Scene {
         const std::uint32_t* material_ids, const std::uint32_t* object_ids, const float* materials,
         std::size_t material_count, const float* lights, std::size_t light_count, Environment env);
 
-  Hit closest(const Ray& r) const {
+  // Unrecorded closest hit (host-side queries): the 4-wide BVH. Same hit/miss and t as the binary walk.
+  Hit closest(const Ray& r) const { return intersect_closest4(bvh4_.nodes.data(), bvh4_.blocks.data(), tris_.data(), r); }
+  Hit closest_binary(const Ray& r) const {
     NullRecorder rec;
     return intersect_closest(bvh_.nodes.data(), tris_.data(), r, rec);
   }
@@ -66,9 +68,9 @@ class Scene {
   bool occluded(const Ray& r, Rec& rec) const { return intersect_any(bvh_.nodes.data(), tris_.data(), r, rec); }
 
   // N rays (origins, directions: N*3 floats) -> t (inf on miss), original prim id (-1 on miss);
-  // multithreaded over chunks of rays.
+  // multithreaded over chunks of rays. bvh_width 4 (default) walks the BVH4, 2 the binary BVH (benchmarks).
   void intersect_many(const float* origins, const float* directions, std::size_t n, float* t_out,
-                      std::int64_t* prim_out, int threads) const;
+                      std::int64_t* prim_out, int threads, int bvh_width = 4) const;
 
   const TriRecord& tri(std::uint32_t i) const { return tris_[i]; }
   const TriShading& shading(std::uint32_t i) const { return shading_[i]; }
@@ -77,6 +79,7 @@ class Scene {
   const std::vector<Light>& lights() const { return lights_; }
   const Environment& environment() const { return env_; }
   const Bvh& bvh() const { return bvh_; }
+  const Bvh4& bvh4() const { return bvh4_; }
   std::size_t triangle_count() const { return tris_.size(); }
   Vec3 bounds_lo() const { return lo_; }
   Vec3 bounds_hi() const { return hi_; }
@@ -92,6 +95,7 @@ class Scene {
   std::vector<Light> lights_;
   Environment env_;
   Bvh bvh_;
+  Bvh4 bvh4_;
   Vec3 lo_, hi_;
   bool has_refraction_ = false, has_reflection_ = false, has_emission_ = false;
 };

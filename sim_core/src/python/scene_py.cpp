@@ -56,7 +56,8 @@ void register_scene(nb::module_& m) {
                   "env_map"_a.none())
       .def(
           "intersect",
-          [](const Scene& s, Arr2<float, 3> origins, Arr2<float, 3> directions, int threads) {
+          [](const Scene& s, Arr2<float, 3> origins, Arr2<float, 3> directions, int threads, int bvh_width) {
+            if (bvh_width != 2 && bvh_width != 4) throw std::invalid_argument("bvh_width must be 2 or 4");
             const std::size_t n = origins.shape(0);
             if (directions.shape(0) != n) throw std::invalid_argument("origins and directions differ in length");
             float* t = new float[n > 0 ? n : 1];
@@ -65,12 +66,12 @@ void register_scene(nb::module_& m) {
             nb::capsule p_owner(prim, [](void* p) noexcept { delete[] static_cast<std::int64_t*>(p); });
             {
               nb::gil_scoped_release release;
-              s.intersect_many(origins.data(), directions.data(), n, t, prim, threads);
+              s.intersect_many(origins.data(), directions.data(), n, t, prim, threads, bvh_width);
             }
             return nb::make_tuple(nb::ndarray<nb::numpy, float, nb::ndim<1>>(t, {n}, t_owner),
                                   nb::ndarray<nb::numpy, std::int64_t, nb::ndim<1>>(prim, {n}, p_owner));
           },
-          "origins"_a, "directions"_a, "threads"_a = 1)
+          "origins"_a, "directions"_a, "threads"_a = 1, "bvh_width"_a = 4)
       .def(
           "traversal_stats",
           [](const Scene& s, Arr2<float, 3> origins, Arr2<float, 3> directions) {
