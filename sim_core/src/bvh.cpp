@@ -196,7 +196,7 @@ struct Collapser {
     hi[b] = std::max(hi[c], hi[c + 1]);
   }
   // A subtree of at most four triangles is one SIMD block: testing it costs about one node test.
-  bool as_leaf(std::uint32_t b) const { return bin[b].count > 0 || hi[b] - lo[b] <= 4; }
+  bool as_leaf(std::uint32_t b) const { return bin[b].count > 0 || hi[b] - lo[b] <= 8; }
 
   std::uint32_t add_blocks(std::uint32_t first, std::uint32_t count) {
     const std::uint32_t start = static_cast<std::uint32_t>(blocks.size());
@@ -212,7 +212,9 @@ struct Collapser {
     return start;
   }
 
-  std::uint32_t collapse(std::uint32_t b, int level) {
+  // Fills node `self` from binary node b. The interior children of a node are allocated next to each
+  // other (then filled depth first), so siblings share DRAM pages and the adjacent-line prefetch.
+  void collapse(std::uint32_t self, std::uint32_t b, int level) {
     depth = std::max(depth, level);
     std::uint32_t kids[4];
     int nk = 0;
@@ -237,8 +239,6 @@ struct Collapser {
         ++nk;
       }
     }
-    const std::uint32_t self = static_cast<std::uint32_t>(out.size());
-    out.emplace_back();
     Bvh4Node node{};
     for (int i = 0; i < 4; ++i) {
       if (i >= nk) {
@@ -257,11 +257,13 @@ struct Collapser {
         node.child[i] = add_blocks(lo[kids[i]], node.count[i]);
       } else {
         node.count[i] = 0;
-        node.child[i] = collapse(kids[i], level + 1);
+        node.child[i] = static_cast<std::uint32_t>(out.size());
+        out.emplace_back();
       }
     }
     out[self] = node;
-    return self;
+    for (int i = 0; i < nk; ++i)
+      if (node.count[i] == 0) collapse(node.child[i], kids[i], level + 1);
   }
 };
 
@@ -276,7 +278,8 @@ Bvh4 collapse_bvh4(const Bvh& bvh, const std::vector<TriRecord>& tris) {
   c.lo.resize(bvh.nodes.size());
   c.hi.resize(bvh.nodes.size());
   c.ranges(0);
-  c.collapse(0, 0);
+  out.nodes.emplace_back();
+  c.collapse(0, 0, 0);
   out.depth = c.depth;
   return out;
 }
