@@ -3,7 +3,9 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <future>
 #include <limits>
+#include <thread>
 #include <stdexcept>
 
 namespace sim_core {
@@ -31,15 +33,18 @@ struct PrimInfo {
   Vec3 centroid;
 };
 
+// Builds one subtree into its own node array. Subtrees over disjoint index ranges can be built by
+// different threads: prims is read-only and each builder partitions only its own range of `index`.
 struct Builder {
   const BvhBuildOptions& opt;
-  std::vector<PrimInfo> prims;
-  std::vector<std::uint32_t> index;  // permutation being partitioned
+  const std::vector<PrimInfo>& prims;
+  std::vector<std::uint32_t>& index;  // permutation being partitioned
   std::vector<BvhNode> nodes;
   int max_depth = 0;
   int leaves = 0;
 
-  explicit Builder(const BvhBuildOptions& o) : opt(o) {}
+  Builder(const BvhBuildOptions& o, const std::vector<PrimInfo>& p, std::vector<std::uint32_t>& i)
+      : opt(o), prims(p), index(i) {}
 
   void make_leaf(std::uint32_t node, std::uint32_t begin, std::uint32_t end) {
     nodes[node].first = begin;
@@ -48,26 +53,49 @@ struct Builder {
   }
 
   void set_box(std::uint32_t node, std::uint32_t begin, std::uint32_t end) {
+    const BvhNode b = box_of(begin, end);
+    for (int a = 0; a < 3; ++a) { nodes[node].lo[a] = b.lo[a]; nodes[node].hi[a] = b.hi[a]; }
+  }
+
+  BvhNode box_of(std::uint32_t begin, std::uint32_t end) const {
     Aabb b;
     for (std::uint32_t i = begin; i < end; ++i) b.grow(prims[index[i]].box);
     // One ulp of outward padding: a ray lying exactly in a box face (axis-parallel, zero direction
     // component) then sees the slab as open instead of as an empty interval 0 * (1 / tiny) = 0.
+    BvhNode n{};
     for (int a = 0; a < 3; ++a) {
-      nodes[node].lo[a] = std::nextafter(b.lo[a], -std::numeric_limits<float>::infinity());
-      nodes[node].hi[a] = std::nextafter(b.hi[a], std::numeric_limits<float>::infinity());
+      n.lo[a] = std::nextafter(b.lo[a], -std::numeric_limits<float>::infinity());
+      n.hi[a] = std::nextafter(b.hi[a], std::numeric_limits<float>::infinity());
     }
+    return n;
   }
 
   // Recursive build of node `node` over index[begin, end); the node's box is already set.
   void build(std::uint32_t node, std::uint32_t begin, std::uint32_t end, int depth) {
     max_depth = std::max(max_depth, depth);
+    std::uint32_t mid = 0;
+    if (!split(nodes[node], begin, end, depth, &mid)) { make_leaf(node, begin, end); return; }
+    const std::uint32_t left = static_cast<std::uint32_t>(nodes.size());
+    nodes.push_back(BvhNode{});
+    nodes.push_back(BvhNode{});
+    nodes[node].first = left;
+    nodes[node].count = 0;
+    set_box(left, begin, mid);
+    set_box(left + 1, mid, end);
+    build(left, begin, mid, depth + 1);
+    build(left + 1, mid, end, depth + 1);
+  }
+
+  // Binned SAH decision for a node with box `box` over index[begin, end): false = make a leaf; true =
+  // index[begin, end) is partitioned at *mid into the two children's ranges.
+  bool split(const BvhNode& box, std::uint32_t begin, std::uint32_t end, int depth, std::uint32_t* mid_out) {
     const std::uint32_t n = end - begin;
-    if (n <= 1 || depth >= 60) { make_leaf(node, begin, end); return; }
+    if (n <= 1 || depth >= 60) return false;
     Aabb cb;
     for (std::uint32_t i = begin; i < end; ++i) cb.grow(prims[index[i]].centroid);
     const Vec3 extent = cb.hi - cb.lo;
     Aabb nb;
-    for (int a = 0; a < 3; ++a) { nb.lo[a] = nodes[node].lo[a]; nb.hi[a] = nodes[node].hi[a]; }
+    for (int a = 0; a < 3; ++a) { nb.lo[a] = box.lo[a]; nb.hi[a] = box.hi[a]; }
     const float parent_area = nb.area();
 
     int best_axis = -1, best_split = -1;
@@ -109,8 +137,7 @@ struct Builder {
         ? opt.traversal_cost + opt.intersection_cost * best_cost / parent_area
         : std::numeric_limits<float>::infinity();
     if (n <= static_cast<std::uint32_t>(opt.max_leaf_size) && leaf_cost <= split_cost) {
-      make_leaf(node, begin, end);
-      return;
+      return false;
     }
     std::uint32_t mid;
     if (best_axis < 0) {
@@ -126,17 +153,76 @@ struct Builder {
       mid = static_cast<std::uint32_t>(it - index.begin());
       if (mid == begin || mid == end) mid = begin + n / 2;
     }
-    const std::uint32_t left = static_cast<std::uint32_t>(nodes.size());
-    nodes.push_back(BvhNode{});
-    nodes.push_back(BvhNode{});
-    nodes[node].first = left;
-    nodes[node].count = 0;
-    set_box(left, begin, mid);
-    set_box(left + 1, mid, end);
-    build(left, begin, mid, depth + 1);
-    build(left + 1, mid, end, depth + 1);
+    *mid_out = mid;
+    return true;
   }
 };
+
+// A built subtree: `self` is its root node; `sub` holds the nodes below it in the order the serial
+// depth-first build allocates them ([children pair] + sub(left) + sub(right)); interior `first` indices
+// are relative to sub[0]. Concatenating chunks this way reproduces the serial layout exactly, so the tree
+// is the same for any thread count.
+struct Chunk {
+  BvhNode self{};
+  std::vector<BvhNode> sub;
+  int max_depth = 0;
+  int leaves = 0;
+};
+
+void append_relocated(std::vector<BvhNode>* out, const std::vector<BvhNode>& src, std::uint32_t offset) {
+  for (BvhNode n : src) {
+    if (n.count == 0) n.first += offset;
+    out->push_back(n);
+  }
+}
+
+constexpr std::uint32_t kMinParallelPrims = 8192;  // smaller subtrees are not worth a thread
+
+Chunk build_chunk(const BvhBuildOptions& opt, const std::vector<PrimInfo>& prims, std::vector<std::uint32_t>& index,
+                  const BvhNode& box, std::uint32_t begin, std::uint32_t end, int depth, int fork_levels) {
+  Builder b(opt, prims, index);
+  Chunk c;
+  std::uint32_t mid = 0;
+  if (fork_levels <= 0 || end - begin < kMinParallelPrims) {
+    b.nodes.reserve(2 * static_cast<std::size_t>(end - begin) + 2);
+    b.nodes.push_back(box);
+    b.nodes.push_back(BvhNode{});  // padding: keeps sibling pairs at even indices, as in the global array
+    b.build(0, begin, end, depth);
+    c.self = b.nodes[0];
+    if (c.self.count == 0) c.self.first -= 2;
+    c.sub.assign(b.nodes.begin() + 2, b.nodes.end());
+    for (BvhNode& n : c.sub)
+      if (n.count == 0) n.first -= 2;
+    c.max_depth = b.max_depth;
+    c.leaves = b.leaves;
+    return c;
+  }
+  c.self = box;
+  c.max_depth = depth;
+  if (!b.split(box, begin, end, depth, &mid)) {
+    c.self.first = begin;
+    c.self.count = end - begin;
+    c.leaves = 1;
+    return c;
+  }
+  const BvhNode lbox = b.box_of(begin, mid), rbox = b.box_of(mid, end);
+  auto left_job = std::async(std::launch::async, [&] {
+    return build_chunk(opt, prims, index, lbox, begin, mid, depth + 1, fork_levels - 1);
+  });
+  Chunk right = build_chunk(opt, prims, index, rbox, mid, end, depth + 1, fork_levels - 1);
+  Chunk left = left_job.get();
+  c.self.first = 0;
+  c.self.count = 0;
+  c.sub.reserve(2 + left.sub.size() + right.sub.size());
+  const std::uint32_t loff = 2, roff = 2 + static_cast<std::uint32_t>(left.sub.size());
+  append_relocated(&c.sub, {left.self}, loff);
+  append_relocated(&c.sub, {right.self}, roff);
+  append_relocated(&c.sub, left.sub, loff);
+  append_relocated(&c.sub, right.sub, roff);
+  c.max_depth = std::max(left.max_depth, right.max_depth);
+  c.leaves = left.leaves + right.leaves;
+  return c;
+}
 
 }  // namespace
 
@@ -144,31 +230,35 @@ Bvh build_bvh(std::vector<TriRecord>& tris, std::vector<std::uint32_t>* order_ou
               const BvhBuildOptions& options) {
   if (tris.empty()) throw std::invalid_argument("cannot build a BVH over zero triangles");
   if (tris.size() >= (1ull << 31)) throw std::invalid_argument("too many triangles");
-  Builder b(options);
   const std::uint32_t n = static_cast<std::uint32_t>(tris.size());
-  b.prims.resize(n);
-  b.index.resize(n);
+  std::vector<PrimInfo> prims(n);
+  std::vector<std::uint32_t> index(n);
   for (std::uint32_t i = 0; i < n; ++i) {
     const float* v = tris[i].v;
-    PrimInfo& p = b.prims[i];
+    PrimInfo& p = prims[i];
     for (int k = 0; k < 3; ++k) p.box.grow(Vec3(v[3 * k], v[3 * k + 1], v[3 * k + 2]));
     p.centroid = (p.box.lo + p.box.hi) * 0.5f;
-    b.index[i] = i;
+    index[i] = i;
   }
-  b.nodes.reserve(2 * static_cast<std::size_t>(n) + 2);
-  b.nodes.push_back(BvhNode{});  // root
-  b.nodes.push_back(BvhNode{});  // padding: sibling pairs start at an even index (one 64-byte line)
-  b.set_box(0, 0, n);
-  b.build(0, 0, n, 0);
+  int threads = options.threads > 0 ? options.threads : static_cast<int>(std::thread::hardware_concurrency());
+  threads = std::max(1, std::min(threads, 256));
+  int fork_levels = 0;  // 2^fork_levels subtrees for `threads` workers, x2 for load balance
+  while ((1 << fork_levels) < threads) ++fork_levels;
+  if (threads > 1) ++fork_levels;
+  const BvhNode root_box = Builder(options, prims, index).box_of(0, n);
+  Chunk root = build_chunk(options, prims, index, root_box, 0, n, 0, fork_levels);
+  Bvh out;
+  out.nodes.reserve(2 + root.sub.size());
+  append_relocated(&out.nodes, {root.self}, 2);
+  out.nodes.push_back(BvhNode{});  // padding: sibling pairs start at an even index (one 64-byte line)
+  append_relocated(&out.nodes, root.sub, 2);
+  out.depth = root.max_depth;
+  out.leaf_count = root.leaves;
 
   std::vector<TriRecord> sorted(n);
-  for (std::uint32_t i = 0; i < n; ++i) sorted[i] = tris[b.index[i]];
+  for (std::uint32_t i = 0; i < n; ++i) sorted[i] = tris[index[i]];
   tris.swap(sorted);
-  if (order_out) *order_out = b.index;
-  Bvh out;
-  out.nodes = std::move(b.nodes);
-  out.depth = b.max_depth;
-  out.leaf_count = b.leaves;
+  if (order_out) *order_out = std::move(index);
   return out;
 }
 
@@ -274,7 +364,7 @@ Bvh4 collapse_bvh4(const Bvh& bvh, const std::vector<TriRecord>& tris) {
   Bvh4 out;
   out.nodes.reserve(bvh.nodes.size() / 3 + 1);
   out.blocks.reserve(static_cast<std::size_t>(bvh.leaf_count) + 1);
-  Collapser c{bvh.nodes, tris, out.nodes, out.blocks};
+  Collapser c{bvh.nodes, tris, out.nodes, out.blocks, 0, {}, {}};
   c.lo.resize(bvh.nodes.size());
   c.hi.resize(bvh.nodes.size());
   c.ranges(0);

@@ -37,6 +37,7 @@ struct BvhBuildOptions {
   int max_leaf_size = 4;  // leaves never hold more triangles than this
   float traversal_cost = 1.0f;
   float intersection_cost = 1.0f;
+  int threads = 0;  // build threads (0 = hardware concurrency); the tree is identical for any count
 };
 
 struct Bvh {
