@@ -112,7 +112,9 @@ class DaskExecutor:
     def map(self, fn: Callable[[Any, Any], R], shared: Any, items: Sequence[Any]) -> list[R]:
         if not items:
             return []
-        shared_f = self.client.scatter(shared, broadcast=True)
+        # Scatter the payload as ONE object: scattering a dict would scatter its values under their own
+        # keys ("weights", ...), which collide across calls and clients and get released under us.
+        [shared_f] = self.client.scatter([shared], broadcast=True, hash=False)
         chunks = _chunks(items, 2 * self._n_workers())
         futures = [self.client.submit(_run_chunk, fn, shared_f, c, pure=False) for c in chunks]
         out: list[R] = []
