@@ -42,8 +42,9 @@ def test_power_scaled_to_the_path_resolution_matches_the_optimisers_prediction()
     from service.evaluation import CameraSpec, evaluate, load_scene
     from service.params import default_space
 
-    if not (TEAPOT / "scene.glb").is_file():
-        pytest.skip("teapot not built (python -m blend_scenes.build --scene teapot)")
+    if not (TEAPOT / "scene.glb").is_file():  # a fresh clone: build it (cached afterwards)
+        subprocess.run([sys.executable, "-m", "blend_scenes.build", "--scene", "teapot"], cwd=REPO_ROOT,
+                       check=True, capture_output=True, timeout=300)
     scene = load_scene(TEAPOT / "scene.glb")
     f = CameraPath.load(TEAPOT / "path.json").frames[0]
     m = np.asarray(f.matrix_world)
