@@ -489,25 +489,6 @@ def _light(doc: _Document, index: int, world_b: np.ndarray, name: str) -> Light:
     )
 
 
-def _read_exr_rgb(path: Path) -> np.ndarray:
-    """Read an EXR as (H, W, 3) float32 (OpenEXR 3 API)."""
-    import OpenEXR
-
-    with OpenEXR.File(str(path)) as f:
-        channels = f.channels()
-        if "RGB" in channels:
-            rgb = np.asarray(channels["RGB"].pixels, dtype=np.float32)
-        elif "RGBA" in channels:
-            rgb = np.asarray(channels["RGBA"].pixels, dtype=np.float32)[..., :3]
-        elif all(c in channels for c in "RGB"):
-            rgb = np.stack([np.asarray(channels[c].pixels, dtype=np.float32) for c in "RGB"], axis=-1)
-        else:
-            raise ValueError(f"{path}: EXR has no R, G, B channels ({sorted(channels)})")
-    if not np.all(np.isfinite(rgb)):
-        raise ValueError(f"{path}: environment map has non-finite pixels")
-    return np.ascontiguousarray(rgb)
-
-
 def _environment(doc: _Document) -> np.ndarray | tuple[float, float, float] | None:
     scenes = doc.gltf.get("scenes", [])
     if not scenes:
@@ -520,7 +501,9 @@ def _environment(doc: _Document) -> np.ndarray | tuple[float, float, float] | No
         exr = doc.path.parent / value
         if not exr.is_file():
             raise FileNotFoundError(f"{doc.path}: environment map {value!r} not found next to the scene")
-        return _read_exr_rgb(exr)
+        from ..scene import load_exr  # the one EXR reader (late: scene.py imports the loaders)
+
+        return load_exr(exr)
     rgb = np.asarray(value, dtype=np.float64).reshape(-1)
     if rgb.shape != (3,) or not np.all(np.isfinite(rgb)):
         raise ValueError(f"{doc.path}: environment colour must be 3 finite numbers, got {value!r}")
