@@ -4,17 +4,11 @@
 
 #include "sim_core/cache.h"
 
+#include "check.h"
+
 using sim_core::CacheConfig;
 using sim_core::CacheModel;
 
-static int failures = 0;
-#define CHECK(cond)                                                        \
-  do {                                                                     \
-    if (!(cond)) {                                                         \
-      std::fprintf(stderr, "%s:%d: CHECK failed: %s\n", __FILE__, __LINE__, #cond); \
-      ++failures;                                                          \
-    }                                                                      \
-  } while (0)
 
 int main() {
   {  // A working set that fits: compulsory misses only, then every access hits.
@@ -75,7 +69,5 @@ int main() {
     try { CacheModel c(CacheConfig{128, 64, 4}); } catch (const std::invalid_argument&) { threw = true; }
     CHECK(threw);
   }
-  if (failures) std::fprintf(stderr, "cache_test: %d failure(s)\n", failures);
-  else std::printf("cache_test: ok\n");
-  return failures ? 1 : 0;
+  return check_exit_code();
 }

@@ -6,16 +6,10 @@
 
 #include "sim_core/comparator.h"
 
+#include "check.h"
+
 using sim_core::comparator_chain_length;
 
-static int failures = 0;
-#define CHECK(cond)                                                        \
-  do {                                                                     \
-    if (!(cond)) {                                                         \
-      std::fprintf(stderr, "%s:%d: CHECK failed: %s\n", __FILE__, __LINE__, #cond); \
-      ++failures;                                                          \
-    }                                                                      \
-  } while (0)
 
 static float from_bits(std::uint32_t u) { float f; std::memcpy(&f, &u, sizeof f); return f; }
 
@@ -44,10 +38,8 @@ int main() {
     const double got = static_cast<double>(ge[k]) / n;
     if (std::fabs(got - p) > 5 * sd + 1e-12) {
       std::fprintf(stderr, "k=%d P(chain>=k)=%g expected %g\n", k, got, p);
-      ++failures;
+      ++check_failures();
     }
   }
-  if (failures) std::fprintf(stderr, "comparator_test: %d failure(s)\n", failures);
-  else std::printf("comparator_test: ok\n");
-  return failures ? 1 : 0;
+  return check_exit_code();
 }

@@ -8,14 +8,8 @@
 #include "sim_core/env_filter.h"
 #include "sim_core/sat.h"
 
-static int failures = 0;
-#define CHECK(cond)                                                        \
-  do {                                                                     \
-    if (!(cond)) {                                                         \
-      std::fprintf(stderr, "%s:%d: CHECK failed: %s\n", __FILE__, __LINE__, #cond); \
-      ++failures;                                                          \
-    }                                                                      \
-  } while (0)
+#include "check.h"
+
 
 int main() {
   const int w = 29, h = 23, c = 2;
@@ -63,7 +57,5 @@ int main() {
       }
     }
   }
-  if (failures) std::fprintf(stderr, "sat_test: %d failure(s)\n", failures);
-  else std::printf("sat_test: ok\n");
-  return failures ? 1 : 0;
+  return check_exit_code();
 }

@@ -7,14 +7,8 @@
 
 #include "sim_core/streaming.h"
 
-static int failures = 0;
-#define CHECK(cond)                                                        \
-  do {                                                                     \
-    if (!(cond)) {                                                         \
-      std::fprintf(stderr, "%s:%d: CHECK failed: %s\n", __FILE__, __LINE__, #cond); \
-      ++failures;                                                          \
-    }                                                                      \
-  } while (0)
+#include "check.h"
+
 
 int main() {
   std::mt19937 rng(3);
@@ -63,8 +57,7 @@ int main() {
   const auto tc = sim_core::per_ray_traversal(scene, rays.data(), rays.size(), c.data(),
                                               sim_core::CacheConfig{16384, 64, 4}, 256);
   CHECK(tc.scene_dram_bytes < ta.scene_dram_bytes);
-  if (failures) std::fprintf(stderr, "streaming_test: %d failure(s)\n", failures);
-  else std::printf("streaming_test: ok (%d hits, nodes %llu per-ray vs %llu streamed)\n", hits,
-                   static_cast<unsigned long long>(ta.node_fetches), static_cast<unsigned long long>(tb.node_fetches));
-  return failures ? 1 : 0;
+  std::printf("streaming_test: %d hits, nodes %llu per-ray vs %llu streamed\n", hits,
+              static_cast<unsigned long long>(ta.node_fetches), static_cast<unsigned long long>(tb.node_fetches));
+  return check_exit_code();
 }

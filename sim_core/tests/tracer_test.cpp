@@ -12,16 +12,10 @@
 #include "sim_core/scene.h"
 #include "sim_core/stereo.h"
 
+#include "check.h"
+
 using namespace sim_core;
 
-static int failures = 0;
-#define CHECK(cond)                                                      \
-  do {                                                                   \
-    if (!(cond)) {                                                       \
-      std::fprintf(stderr, "%s:%d: check failed: %s\n", __FILE__, __LINE__, #cond); \
-      ++failures;                                                        \
-    }                                                                    \
-  } while (0)
 
 namespace {
 
@@ -261,7 +255,5 @@ int main() {
   check_parallel_build_identical();
   check_against_brute_force(s);
   check_render(s);
-  if (failures) std::fprintf(stderr, "%d failures\n", failures);
-  else std::printf("tracer_test: ok\n");
-  return failures ? 1 : 0;
+  return check_exit_code();
 }
