@@ -7,10 +7,12 @@ use_sample_covariance=False``); the mean is taken over the image without a borde
 so only windows that lie fully inside the image count and no edge padding is needed. Colour images are
 averaged over channels (skimage's ``channel_axis=-1``).
 
-Speed comes from computing only those interior windows, with float64 separable window sums (box sums
-by doubling, Gaussian taps paired), on four stacked quantities (SSIM needs only the sum of the two
-variances), in cache-sized strips of rows with preallocated buffers, and on two threads for large
-images. float64 matters: sums of squares in float32 lose the variance to cancellation.
+``ssim`` runs the native kernel ``sim_core._core.ssim_mean`` (C++, float64 running window sums in
+bands of rows, all cores, GIL released; float32 or float64 input without a copy). ``ssim_numpy`` is
+its slower numpy twin, kept as an independent reference for tests: it computes only the interior
+windows too, with float64 separable window sums (box sums by doubling, Gaussian taps paired) on four
+stacked quantities (SSIM needs only the sum of the two variances). float64 matters in both: sums of
+squares in float32 lose the variance to cancellation.
 """
 
 from __future__ import annotations
@@ -20,6 +22,8 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
+
+from sim_core import _core
 
 K1 = 0.01
 K2 = 0.03
@@ -151,7 +155,42 @@ def _ssim_rows(x: np.ndarray, y: np.ndarray, row_ranges: list[tuple[int, int]], 
 
 
 def ssim(reference: Any, test: Any, data_range: float = 1.0, gaussian_weights: bool = False) -> float:
-    """Mean structural similarity of two H x W or H x W x C images (channels averaged).
+    """Mean structural similarity of two H x W or H x W x C images (channels averaged), native kernel.
+
+    Equals ``skimage.metrics.structural_similarity(reference, test, data_range=data_range,
+    channel_axis=-1)`` computed in float64 (and with ``gaussian_weights=True, sigma=1.5,
+    use_sample_covariance=False`` for the Gaussian option) to ~1e-15; float32 input is read as is and
+    summed in float64. Constant images give finite values (1 for identical ones); NaN or Inf input
+    raises ``ValueError``."""
+    x = np.asarray(reference)
+    y = np.asarray(test)
+    if x.shape != y.shape:
+        raise ValueError(f"images differ in shape: {x.shape} vs {y.shape}")
+    if x.ndim not in (2, 3):
+        raise ValueError(f"expected H x W or H x W x C images, got shape {x.shape}")
+    if not (np.issubdtype(x.dtype, np.number) and np.issubdtype(y.dtype, np.number)):
+        raise ValueError("images must be numeric")
+    if np.iscomplexobj(x) or np.iscomplexobj(y):
+        raise ValueError("images must be real")
+    if not (math.isfinite(data_range) and data_range > 0):
+        raise ValueError(f"data_range must be positive and finite, got {data_range}")
+    win = _GAUSS.size if gaussian_weights else UNIFORM_WIN
+    if min(x.shape[0], x.shape[1]) < win or (x.ndim == 3 and x.shape[2] < 1):
+        raise ValueError(f"images must be at least {win}x{win} pixels for SSIM, got {x.shape}")
+    dtype = np.float32 if x.dtype == np.float32 and y.dtype == np.float32 else np.float64
+    x = np.ascontiguousarray(x, dtype=dtype)
+    y = np.ascontiguousarray(y, dtype=dtype)
+    value = _core.ssim_mean(x, y, float(data_range), bool(gaussian_weights))
+    if not math.isfinite(value):
+        # Every pixel lies in a full window, so NaN/Inf input always reaches the mean; check only then.
+        if not (np.isfinite(x).all() and np.isfinite(y).all()):
+            raise ValueError("images contain NaN or Inf")
+        raise ValueError("SSIM overflowed: image values too large for float64 sums of squares")
+    return value
+
+
+def ssim_numpy(reference: Any, test: Any, data_range: float = 1.0, gaussian_weights: bool = False) -> float:
+    """Numpy twin of ``ssim`` (same definition, independent code), the reference for the native kernel.
 
     Equals ``skimage.metrics.structural_similarity(reference, test, data_range=data_range,
     channel_axis=-1)`` on float64 input (and with ``gaussian_weights=True, sigma=1.5,

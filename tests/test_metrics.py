@@ -6,9 +6,12 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from skimage.metrics import structural_similarity
 
-from service.metrics import flip, psnr, ssim
+from service.metrics import flip, psnr, ssim, ssim_numpy
+from sim_core import _core
 
 
 def _natural(h: int, w: int, seed: int) -> np.ndarray:
@@ -50,6 +53,56 @@ def test_ssim_matches_skimage(case, gaussian: bool) -> None:
     assert ours == pytest.approx(ref, abs=1e-6)
 
 
+@settings(max_examples=60, deadline=None)
+@given(h=st.integers(7, 70), w=st.integers(7, 70), c=st.sampled_from([None, 1, 2, 3, 4]),
+       gaussian=st.booleans(), noise=st.sampled_from([0.0, 1e-9, 1e-3, 0.2, 1.0]),
+       offset=st.sampled_from([0.0, 0.5, 1e3]), data_range=st.sampled_from([1.0, 255.0]),
+       seed=st.integers(0, 2**32 - 1))
+def test_native_ssim_matches_numpy_twin(h, w, c, gaussian, noise, offset, data_range, seed) -> None:
+    """The native kernel against the independent numpy twin: tiny, odd and non-multiple-of-band sizes,
+    constant to noisy images, large offsets (cancellation in the variances)."""
+    win = 11 if gaussian else 7
+    rng = np.random.default_rng(seed)
+    shape = (h, w) if c is None else (h, w, c)
+    a = offset + rng.random(shape)
+    b = a + noise * rng.standard_normal(shape)
+    if min(h, w) < win:
+        with pytest.raises(ValueError):
+            ssim(a, b, data_range=data_range, gaussian_weights=gaussian)
+        return
+    ours = ssim(a, b, data_range=data_range, gaussian_weights=gaussian)
+    twin = ssim_numpy(a, b, data_range=data_range, gaussian_weights=gaussian)
+    assert math.isfinite(ours)
+    assert ours == pytest.approx(twin, abs=1e-9)
+
+
+@pytest.mark.parametrize("gaussian", [False, True])
+def test_native_ssim_large_image_threads_and_dtypes(gaussian: bool) -> None:
+    """A large image (several bands per thread): skimage agreement, identical result for any thread
+    count (band sums are added in band order), float32 and non-contiguous input."""
+    a = _natural(301, 517, 5)
+    rng = np.random.default_rng(6)
+    b = np.clip(a + 0.05 * rng.standard_normal(a.shape), 0, 1)
+    kw = {"gaussian_weights": True, "sigma": 1.5, "use_sample_covariance": False} if gaussian else {}
+    ref = structural_similarity(a, b, data_range=1.0, channel_axis=-1, **kw)
+    ours = ssim(a, b, gaussian_weights=gaussian)
+    assert ours == pytest.approx(ref, abs=1e-12)
+    one = _core.ssim_mean(a, b, 1.0, gaussian, 1)
+    assert all(_core.ssim_mean(a, b, 1.0, gaussian, t) == one for t in (2, 3, 8))
+    a32, b32 = a.astype(np.float32), b.astype(np.float32)
+    ref32 = structural_similarity(a32.astype(np.float64), b32.astype(np.float64), data_range=1.0,
+                                  channel_axis=-1, **kw)
+    assert ssim(a32, b32, gaussian_weights=gaussian) == pytest.approx(ref32, abs=1e-12)
+    at, bt = a.transpose(1, 0, 2), b.transpose(1, 0, 2)  # not C-contiguous: converted in Python
+    ref_t = structural_similarity(at, bt, data_range=1.0, channel_axis=-1, **kw)
+    assert ssim(at, bt, gaussian_weights=gaussian) == pytest.approx(ref_t, abs=1e-12)
+    a8 = (a * 255).astype(np.uint8)
+    b8 = (b * 255).astype(np.uint8)
+    ref8 = structural_similarity(a8.astype(np.float64), b8.astype(np.float64), data_range=255.0,
+                                 channel_axis=-1, **kw)
+    assert ssim(a8, b8, data_range=255.0, gaussian_weights=gaussian) == pytest.approx(ref8, abs=1e-12)
+
+
 def test_ssim_data_range_and_identity() -> None:
     a = _natural(32, 48, 2) * 255
     b = np.clip(a + 10, 0, 255)
@@ -59,7 +112,7 @@ def test_ssim_data_range_and_identity() -> None:
     assert ssim(a.astype(np.float32), b.astype(np.float32), data_range=255.0) == pytest.approx(ref, abs=1e-6)
 
 
-@pytest.mark.parametrize("bad", ["nan", "inf", "shape", "small", "range"])
+@pytest.mark.parametrize("bad", ["nan", "inf", "shape", "small", "range", "nan32", "overflow", "complex"])
 def test_ssim_rejects_bad_input(bad: str) -> None:
     a = np.zeros((16, 16, 3))
     b = a.copy()
@@ -70,6 +123,15 @@ def test_ssim_rejects_bad_input(bad: str) -> None:
         a[0, 0, 0] = np.inf
     elif bad == "shape":
         b = np.zeros((16, 15, 3))
+    elif bad == "nan32":
+        a = np.zeros((40, 30, 3), np.float32)
+        b = a.copy()
+        b[39, 29, 2] = np.nan  # last pixel: only the last window sees it
+    elif bad == "overflow":
+        a = np.full((16, 16), 1e200)
+        b = np.zeros((16, 16))
+    elif bad == "complex":
+        a = b = np.zeros((16, 16), complex)
     elif bad == "small":
         a = b = np.zeros((6, 30))
     else:

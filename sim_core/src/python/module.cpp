@@ -10,6 +10,7 @@ void register_scene(nb::module_& m);
 void register_render(nb::module_& m);
 }  // namespace sim_core
 void bind_energy_model(nb::module_& m);  // energy model part: cache model, comparator, SAT
+void bind_ssim(nb::module_& m);          // image metric: SSIM as scikit-image
 
 NB_MODULE(_core, m) {
   m.doc() = "render-budget native simulator core";
@@ -17,4 +18,5 @@ NB_MODULE(_core, m) {
   sim_core::register_scene(m);
   sim_core::register_render(m);
   bind_energy_model(m);
+  bind_ssim(m);
 }
