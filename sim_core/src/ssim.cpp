@@ -81,7 +81,7 @@ SSIM_INLINE double ssim_row_sum(const double* h0, const double* h1, const double
 }
 
 template <typename T>
-SSIM_INLINE void add_row(const T* x, const T* y, double* col, std::size_t n, double sign) {
+SSIM_INLINE void add_row(const T* x, const T* y, double* col, std::size_t n) {
   double* s0 = col;
   double* s1 = col + n;
   double* s2 = col + 2 * n;
@@ -89,10 +89,27 @@ SSIM_INLINE void add_row(const T* x, const T* y, double* col, std::size_t n, dou
   for (std::size_t i = 0; i < n; ++i) {
     const double xv = static_cast<double>(x[i]);
     const double yv = static_cast<double>(y[i]);
-    s0[i] += sign * xv;
-    s1[i] += sign * yv;
-    s2[i] += sign * (xv * xv + yv * yv);
-    s3[i] += sign * (xv * yv);
+    s0[i] += xv;
+    s1[i] += yv;
+    s2[i] += xv * xv + yv * yv;
+    s3[i] += xv * yv;
+  }
+}
+
+// Slides the column sums one row down: adds the row entering the window, removes the row leaving it.
+template <typename T>
+SSIM_INLINE void slide_row(const T* xin, const T* yin, const T* xout, const T* yout, double* col, std::size_t n) {
+  double* s0 = col;
+  double* s1 = col + n;
+  double* s2 = col + 2 * n;
+  double* s3 = col + 3 * n;
+  for (std::size_t i = 0; i < n; ++i) {
+    const double xa = static_cast<double>(xin[i]), ya = static_cast<double>(yin[i]);
+    const double xb = static_cast<double>(xout[i]), yb = static_cast<double>(yout[i]);
+    s0[i] += xa - xb;
+    s1[i] += ya - yb;
+    s2[i] += (xa * xa + ya * ya) - (xb * xb + yb * yb);
+    s3[i] += xa * ya - xb * yb;
   }
 }
 
@@ -165,13 +182,14 @@ SSIM_INLINE double band_sum_impl(const T* x, const T* y, std::size_t r0, std::si
   double total = 0.0;
   if (!gaussian) {
     std::fill(col, col + 4 * n, 0.0);
-    for (std::size_t r = r0; r + 1 < r0 + kBoxWin; ++r) add_row(x + r * n, y + r * n, col, n, 1.0);
+    for (std::size_t r = r0; r < r0 + kBoxWin; ++r) add_row(x + r * n, y + r * n, col, n);
     for (std::size_t r = r0; r < r1; ++r) {
-      const std::size_t last = r + kBoxWin - 1;
-      add_row(x + last * n, y + last * n, col, n, 1.0);
+      if (r > r0) {
+        const std::size_t in = r + kBoxWin - 1, out = r - 1;
+        slide_row(x + in * n, y + in * n, x + out * n, y + out * n, col, n);
+      }
       box_horizontal(col, hor, n, no, p.c);
       total += ssim_row_sum(hor, hor + no, hor + 2 * no, hor + 3 * no, m, p);
-      if (r + 1 < r1) add_row(x + r * n, y + r * n, col, n, -1.0);
     }
   } else {
     for (std::size_t r = r0; r < r1; ++r) {
