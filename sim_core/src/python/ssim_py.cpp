@@ -2,6 +2,7 @@
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
 
+#include <limits>
 #include <stdexcept>
 
 #include "sim_core/ssim.h"
@@ -20,6 +21,9 @@ double ssim_binding(Image<T> x, Image<T> y, double data_range, bool gaussian, in
     throw std::invalid_argument("images must both be (H, W) or (H, W, C)");
   for (std::size_t i = 0; i < x.ndim(); ++i)
     if (x.shape(i) != y.shape(i)) throw std::invalid_argument("images differ in shape");
+  for (std::size_t i = 0; i < x.ndim(); ++i)
+    if (x.shape(i) > static_cast<std::size_t>(std::numeric_limits<int>::max()))
+      throw std::invalid_argument("image dimension too large");
   const int h = static_cast<int>(x.shape(0));
   const int w = static_cast<int>(x.shape(1));
   const int c = x.ndim() == 3 ? static_cast<int>(x.shape(2)) : 1;
