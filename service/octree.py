@@ -35,13 +35,63 @@ import numpy as np
 from service.evaluation import CameraSpec, Evaluator
 from service.nsga import NSGA2, Archive, NSGAConfig, enumerate_space
 from service.params import Indices, ParameterSpace
-from service.pareto_store import VIEW_FORWARD, VIEW_UP, Frontier, ParetoStore, root_cube
+from service.pareto_store import (
+    VIEW_FORWARD,
+    VIEW_UP,
+    Frontier,
+    ParetoStore,
+    face_of,
+    quantise_directions,
+    root_cube,
+    view_up,
+)
 
 N_VIEWS = 6
 # The 12 edges of a cube as pairs of corner numbers (bit 0: +x, bit 1: +y, bit 2: +z).
 CUBE_EDGES: tuple[tuple[int, int], ...] = tuple(
     (k, k | (1 << a)) for a in range(3) for k in range(8) if not k & (1 << a)
 )
+
+
+VIEW_SAMPLING = ("axis", "aimed")
+
+
+def aimed_directions(corner: np.ndarray, positions: np.ndarray, forwards: np.ndarray,
+                     targets: np.ndarray, cell: float) -> np.ndarray:
+    """Sample direction (6, 3) of each view-cube face at ``corner``, aimed like the path's cameras.
+
+    The path frames whose forward vector falls in face k's cone (the frames a lookup would send to
+    face k) vote with their *target* (the point their central ray sees), weighted by
+    1 / (distance to the corner^2 + cell^2) so frames near the corner count most; face k samples the
+    direction from the corner to the weighted mean target. When that direction leaves face k's
+    hemisphere (the corner is on the far side of what those frames look at) the weighted mean forward
+    is used instead, and a face no frame looks through keeps its axis. Unit vectors, quantised as the
+    store keeps them (:func:`service.pareto_store.quantise_directions`)."""
+    c = np.asarray(corner, dtype=np.float64).reshape(3)
+    P = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    F = np.asarray(forwards, dtype=np.float64).reshape(-1, 3)
+    T = np.asarray(targets, dtype=np.float64).reshape(-1, 3)
+    if not (P.shape == F.shape == T.shape) or not (np.all(np.isfinite(P)) and np.all(np.isfinite(F))
+                                                     and np.all(np.isfinite(T))):
+        raise ValueError("positions, forwards and targets must be finite (N, 3) arrays of one length")
+    F = F / np.maximum(np.linalg.norm(F, axis=1, keepdims=True), 1e-300)
+    faces = np.asarray([face_of(f) for f in F], dtype=np.int64) if len(F) else np.zeros(0, np.int64)
+    w_all = 1.0 / (((P - c) ** 2).sum(axis=1) + max(cell, 1e-9) ** 2)
+    out = VIEW_FORWARD.copy()
+    for k in range(6):
+        sel = faces == k
+        if not np.any(sel):
+            continue
+        w = w_all[sel] / w_all[sel].sum()
+        d = (w[:, None] * T[sel]).sum(axis=0) - c
+        n = float(np.linalg.norm(d))
+        if n > 1e-6 and float(d @ VIEW_FORWARD[k]) / n > 0.0:
+            out[k] = d / n
+        else:
+            m = (w[:, None] * F[sel]).sum(axis=0)
+            if float(np.linalg.norm(m)) > 1e-6:
+                out[k] = m / np.linalg.norm(m)
+    return quantise_directions(out)
 
 
 class Cancelled(Exception):
@@ -89,8 +139,11 @@ class OctreeConfig:
     vfov: float = 0.6911
     width: int = 64
     height: int = 36
+    view_sampling: str = "aimed"  # "axis": the six world axes; "aimed": see :func:`aimed_directions`
 
     def __post_init__(self) -> None:
+        if self.view_sampling not in VIEW_SAMPLING:
+            raise ValueError(f"view_sampling must be one of {VIEW_SAMPLING}")
         if not (self.threshold_power_w > 0 and self.threshold_error > 0):
             raise ValueError("thresholds must be positive")
         if not 0 <= self.max_depth <= 12:
@@ -136,19 +189,29 @@ class OctreeBuilder:
 
     def __init__(self, evaluator: Evaluator, space: ParameterSpace, path_positions: np.ndarray,
                  config: OctreeConfig, progress: Callable[[Progress], None] | None = None,
-                 should_cancel: Callable[[], bool] | None = None) -> None:
+                 should_cancel: Callable[[], bool] | None = None, *,
+                 path_forwards: np.ndarray | None = None, path_targets: np.ndarray | None = None
+                 ) -> None:
         self.ev = evaluator
         self.space = space
         self.cfg = config
         self._progress_cb = progress
         self._should_cancel = should_cancel
-        self.root_min, self.root_size = root_cube(path_positions, config.pad_fraction, config.min_size)
+        self.aimed = config.view_sampling == "aimed"
+        if self.aimed and (path_forwards is None or path_targets is None):
+            raise ValueError("aimed view sampling needs the path's forward vectors and targets")
+        self.path_positions = np.asarray(path_positions, dtype=np.float64).reshape(-1, 3)
+        self.path_forwards = None if path_forwards is None else np.asarray(path_forwards, np.float64)
+        self.path_targets = None if path_targets is None else np.asarray(path_targets, np.float64)
+        self.root_min, self.root_size = root_cube(path_positions, config.pad_fraction, config.min_size,
+                                                  rest_on_path=self.aimed)
         self.side = 1 << config.max_depth
         self.cell = self.root_size / self.side
         self.path_points = densify(path_positions, self.cell / 2)
         self.corner_index: dict[tuple[int, int, int], int] = {}
         self.corner_coords: list[tuple[int, int, int]] = []
         self.corner_views: list[list[int]] = []
+        self.corner_dirs: list[np.ndarray] = []  # (6, 3) sample directions per corner
         self.frontiers: list[FrontierRecord] = []
         # nodes: (lattice origin, lattice size, depth); children[n] = first child or -1
         self.nodes: list[tuple[tuple[int, int, int], int, int]] = []
@@ -178,8 +241,12 @@ class OctreeBuilder:
 
     def camera(self, corner: int, view: int) -> CameraSpec:
         pos = self.root_min + np.asarray(self.corner_coords[corner], dtype=np.float64) * self.cell
-        return CameraSpec(tuple(pos), tuple(VIEW_FORWARD[view]), tuple(VIEW_UP[view]), self.cfg.vfov,
-                          self.cfg.width, self.cfg.height)
+        if not self.aimed:
+            return CameraSpec(tuple(pos), tuple(VIEW_FORWARD[view]), tuple(VIEW_UP[view]), self.cfg.vfov,
+                              self.cfg.width, self.cfg.height)
+        f = self.corner_dirs[corner][view]
+        return CameraSpec(tuple(pos), tuple(f), tuple(view_up(f)), self.cfg.vfov, self.cfg.width,
+                          self.cfg.height)
 
     def _corner(self, xyz: tuple[int, int, int]) -> tuple[int, bool]:
         c = self.corner_index.get(xyz)
@@ -189,6 +256,13 @@ class OctreeBuilder:
         self.corner_index[xyz] = c
         self.corner_coords.append(xyz)
         self.corner_views.append([-1] * N_VIEWS)
+        if self.aimed:
+            pos = self.root_min + np.asarray(xyz, dtype=np.float64) * self.cell
+            assert self.path_forwards is not None and self.path_targets is not None
+            self.corner_dirs.append(aimed_directions(pos, self.path_positions, self.path_forwards,
+                                                     self.path_targets, self.cell))
+        else:
+            self.corner_dirs.append(VIEW_FORWARD.copy())
         return c, True
 
     def _node_box(self, node: int) -> tuple[np.ndarray, np.ndarray]:
@@ -408,4 +482,5 @@ class OctreeBuilder:
             profile=profile,
             fps=fps,
             meta=meta,
+            view_dirs=np.asarray(self.corner_dirs) if self.aimed else None,
         )

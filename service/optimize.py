@@ -20,7 +20,7 @@ from service.eval_cache import EvalCache
 from service.evaluation import METRICS, Evaluator, SceneHandle
 from service.executors import Executor
 from service.nsga import NSGAConfig
-from service.octree import Cancelled, OctreeBuilder, OctreeConfig, Progress
+from service.octree import VIEW_SAMPLING, Cancelled, OctreeBuilder, OctreeConfig, Progress
 from service.params import ParameterSpace
 from service.pareto_store import ParetoStore
 
@@ -58,6 +58,7 @@ class OptimizeOptions:
     threads: int | None = None
     skip_inert: bool = True
     power_at_path_resolution: bool = True
+    view_sampling: str = "aimed"
 
     def __post_init__(self) -> None:
         for name in ("threshold_power_w", "threshold_error", "fps"):
@@ -74,6 +75,8 @@ class OptimizeOptions:
             raise ValueError("exhaustive_limit must be >= 0")
         if self.eval_height < 8 or (self.eval_width is not None and self.eval_width < 8):
             raise ValueError("evaluation resolution must be at least 8x8")
+        if self.view_sampling not in VIEW_SAMPLING:
+            raise ValueError(f"view_sampling must be one of {VIEW_SAMPLING}")
         if self.metric not in METRICS:
             raise ValueError(f"metric must be one of {METRICS}")
         if not (self.margin >= 0 and self.pad_fraction >= 0 and self.min_size > 0):
@@ -100,6 +103,25 @@ def resolve_space(scene: Any, space: ParameterSpace, path: CameraPath, threads: 
         return space
     inert = sim_core.inert_parameters(scene, candidates, cam, bases=bases, threads=threads)
     return space.fix_inert({str(k): str(v) for k, v in dict(inert).items()})
+
+
+def path_targets(scene: Any, path: CameraPath) -> tuple[np.ndarray, np.ndarray]:
+    """Forward vectors (N, 3) of the path's frames and the points their central rays see (N, 3).
+
+    A ray that misses the scene gets the median hit distance of the others (or the path's extent when
+    none hits), so open sky still yields a point in front of the camera."""
+    frames = path.frames
+    eye = np.stack([f.position for f in frames]).astype(np.float64)
+    fwd = np.stack([f.direction for f in frames]).astype(np.float64)
+    t, _ = scene.intersect(eye.astype(np.float32), fwd.astype(np.float32))
+    t = np.asarray(t, dtype=np.float64)
+    hit = np.isfinite(t) & (t > 0)
+    if np.any(hit):
+        fill = float(np.median(t[hit]))
+    else:
+        fill = max(float(np.ptp(eye, axis=0).max()), 1.0)
+    t = np.where(hit, t, fill)
+    return fwd, eye + fwd * t[:, None]
 
 
 def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, options: OptimizeOptions, *,
@@ -130,8 +152,13 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, options: 
         min_size=options.min_size,
         nsga=NSGAConfig(population=options.population, generations=options.generations, seed=options.seed),
         exhaustive_limit=options.exhaustive_limit, vfov=vfov, width=width, height=height,
+        view_sampling=options.view_sampling,
     )
-    builder = OctreeBuilder(evaluator, space, path.positions(), cfg, progress, should_cancel)
+    forwards = targets = None
+    if options.view_sampling == "aimed":
+        forwards, targets = path_targets(handle.get(), path)
+    builder = OctreeBuilder(evaluator, space, path.positions(), cfg, progress, should_cancel,
+                            path_forwards=forwards, path_targets=targets)
     builder.run()
     meta = {
         "thresholds": {"power_w": options.threshold_power_w, "error": options.threshold_error},
@@ -139,6 +166,7 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, options: 
         "eval_resolution": [width, height],
         "power_pixels": target_pixels if options.power_at_path_resolution else width * height,
         "metric": options.metric,
+        "view_sampling": options.view_sampling,
         "seed": options.seed,
         "population": options.population,
         "generations": options.generations,

@@ -10,7 +10,12 @@ Layout of a store (power-budget paper, sec. 4.2 and 6):
   leaf (``children[n] == -1``) or has eight consecutive children starting at ``children[n]``; child ``k``
   covers the upper half along x if ``k & 1``, along y if ``k & 2``, along z if ``k & 4``;
 - corners on an integer lattice of ``2**lattice_depth`` cells per root side, each with six view
-  frontiers (view order :data:`VIEW_NAMES`);
+  frontiers (view order :data:`VIEW_NAMES`). A view is the cube face (cone of directions around its
+  axis) a camera's frustum mostly falls into; its frontier was measured at a *sample direction*: the
+  axis itself (version 1, or ``view_dirs`` absent) or, since version 2, a per-(corner, view) direction
+  aimed at what the path's cameras looking through that face see (``view_dirs``: int8 unit vectors,
+  :func:`quantise_directions`). Lookup still picks the nearest corner and the face with the largest
+  frustum share; the sample direction says where that face's frontier was measured;
 - frontiers: lists of (packed settings, error, power), power ascending and error descending, shared
   between corners and views that inherit them. Error and power are quantised to 16 bits (error over
   [0, 1], power over [0, ``power_scale``]); the quantisation step is reported by :meth:`ParetoStore.stats`.
@@ -28,7 +33,9 @@ from typing import Any
 import numpy as np
 
 FORMAT_NAME = "render-budget/pareto-store"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+#: Versions this reader accepts (version 1 stores have axis-aligned sample views).
+READABLE_VERSIONS = (1, 2)
 
 BITS_PER_PARAM = 4
 MAX_VALUES_PER_PARAM = 1 << BITS_PER_PARAM
@@ -47,6 +54,43 @@ VIEW_UP = np.array(
 
 _QMAX = 65535
 _SIGNED_TO_VIEW = (0, 2, 4, 1, 3, 5)  # +X, +Y, +Z, -X, -Y, -Z -> VIEW_NAMES order
+_DIR_Q = 127  # int8 quantisation of sample directions
+
+
+def quantise_directions(directions: Any) -> np.ndarray:
+    """Unit vectors (..., 3) rounded to the int8 grid the store keeps, renormalised (float64).
+
+    The optimiser renders with the quantised direction so the stored sample is exactly what was
+    measured."""
+    d = np.asarray(directions, dtype=np.float64)
+    if d.shape[-1:] != (3,) or not np.all(np.isfinite(d)):
+        raise ValueError("directions must be finite (..., 3) vectors")
+    q = _direction_codes(d).astype(np.float64)
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def _direction_codes(d: np.ndarray) -> np.ndarray:
+    """int8 codes of directions: scaled so the largest component is +-127 (a cube-map style code, so
+    decoding and re-encoding gives the same codes)."""
+    m = np.abs(d).max(axis=-1, keepdims=True)
+    if np.any(m < 1e-300):
+        raise ValueError("directions must be non-zero")
+    return np.rint(d / m * _DIR_Q).astype(np.int8)
+
+
+def view_up(forward: Any) -> np.ndarray:
+    """Up vector for rendering a sample view: world +Z, or +Y when looking (nearly) along Z."""
+    f = np.asarray(forward, dtype=np.float64)
+    f = f / np.linalg.norm(f)
+    return np.array([0.0, 1.0, 0.0]) if abs(f[2]) > 0.95 else np.array([0.0, 0.0, 1.0])
+
+
+def face_of(direction: Any) -> int:
+    """View-cube face (index into :data:`VIEW_NAMES`) whose cone contains ``direction``."""
+    d = np.asarray(direction, dtype=np.float64).reshape(3)
+    if not np.all(np.isfinite(d)) or not np.any(d):
+        raise ValueError("direction must be a finite non-zero 3-vector")
+    return _SIGNED_TO_VIEW[int(np.concatenate((d, -d)).argmax())]
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -194,7 +238,7 @@ def _enc(arr: np.ndarray, dtype: str) -> str:
 
 def _dec(text: str) -> np.ndarray:
     dtype, _, data = str(text).partition(":")
-    if dtype not in ("<u1", "<u2", "<u4", "<i4", "<f4", "<f8"):
+    if dtype not in ("<i1", "<u1", "<u2", "<u4", "<i4", "<f4", "<f8"):
         raise ValueError(f"unsupported array dtype {dtype!r} in store")
     try:
         raw = base64.b64decode(data.encode("ascii"), validate=True)
@@ -266,6 +310,7 @@ class ParetoStore:
     profile: str = "mobile"
     fps: float = 30.0
     meta: dict[str, Any] = field(default_factory=dict)
+    view_dirs: np.ndarray | None = None  # float64 (C, 6, 3) sample directions; None = the axes
 
     def __post_init__(self) -> None:
         self.root_min = _finite_vec3(self.root_min, "root_min")
@@ -292,6 +337,14 @@ class ParetoStore:
             self.corner_views.min() < 0 or self.corner_views.max() >= len(self.frontiers)
         ):
             raise ValueError("corner view refers to a missing frontier")
+        if self.view_dirs is not None:
+            vd = np.asarray(self.view_dirs, dtype=np.float64)
+            if vd.shape != (self.corner_coords.shape[0], 6, 3) or not np.all(np.isfinite(vd)):
+                raise ValueError("view_dirs must be finite (corners, 6, 3)")
+            n = np.linalg.norm(vd, axis=2, keepdims=True)
+            if np.any(n < 1e-9):
+                raise ValueError("view_dirs must be non-zero")
+            self.view_dirs = vd / n
         if len(self.parameters) > MAX_PARAMS:
             raise ValueError(f"at most {MAX_PARAMS} parameters")
         for prm in self.parameters:
@@ -350,6 +403,18 @@ class ParetoStore:
         """World positions (C, 3) of the corners."""
         cell = self.root_size / (1 << self.lattice_depth)
         return self.root_min[None, :] + self.corner_coords.astype(np.float64) * cell
+
+    def sample_direction(self, corner: int, view: int) -> np.ndarray:
+        """Unit direction (world) at which the (corner, view) frontier was measured."""
+        if self.view_dirs is None:
+            return VIEW_FORWARD[int(view)].copy()
+        return self.view_dirs[int(corner), int(view)].copy()
+
+    def sample_camera(self, corner: int, view: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(eye, forward, up) of the camera sample behind the (corner, view) frontier."""
+        f = self.sample_direction(corner, view)
+        up = VIEW_UP[int(view)].copy() if self.view_dirs is None else view_up(f)
+        return self.corner_positions()[int(corner)], f, up
 
     def frontier(self, corner: int, view: int) -> Frontier:
         return self.frontiers[int(self.corner_views[corner, view])]
@@ -475,6 +540,9 @@ class ParetoStore:
         eq = np.rint(err * _QMAX).astype(np.int64)
         pq = np.rint(pw / power_scale * _QMAX).astype(np.int64)
         side = 1 << self.lattice_depth
+        extra = {}
+        if self.view_dirs is not None:
+            extra["view_dirs"] = _enc(_direction_codes(self.view_dirs).reshape(-1), "<i1")
         return {
             "format": FORMAT_NAME,
             "version": FORMAT_VERSION,
@@ -497,6 +565,7 @@ class ParetoStore:
             "frontier_power": _enc(pq, "<u2"),
             "power_scale": power_scale,
             "meta": self.meta,
+            **extra,
         }
 
     def to_json(self) -> str:
@@ -506,8 +575,8 @@ class ParetoStore:
     def from_dict(d: dict[str, Any]) -> ParetoStore:
         if not isinstance(d, dict) or d.get("format") != FORMAT_NAME:
             raise ValueError("not a render-budget Pareto store")
-        if d.get("version") != FORMAT_VERSION:
-            raise ValueError(f"unsupported store version {d.get('version')!r} (reader: {FORMAT_VERSION})")
+        if d.get("version") not in READABLE_VERSIONS:
+            raise ValueError(f"unsupported store version {d.get('version')!r} (reader: {READABLE_VERSIONS})")
         try:
             params = tuple(StoredParameter.from_dict(p) for p in d["parameters"])
             sizes = _dec(d["frontier_sizes"]).astype(np.int64)
@@ -525,6 +594,12 @@ class ParetoStore:
                 sl = slice(off, off + int(n))
                 frontiers.append(Frontier(table[idx[sl]], eq[sl], pq[sl]))
                 off += int(n)
+            view_dirs = None
+            if d.get("version", 1) >= 2 and d.get("view_dirs") is not None:
+                vq = _dec(d["view_dirs"]).astype(np.float64)
+                if vq.size % 18:
+                    raise ValueError("view_dirs length is not a multiple of 6 x 3")
+                view_dirs = vq.reshape(-1, 6, 3)
             return ParetoStore(
                 parameters=params,
                 root_min=np.asarray(d["root_min"], dtype=np.float64),
@@ -539,6 +614,7 @@ class ParetoStore:
                 profile=str(d["profile"]),
                 fps=float(d["fps"]),
                 meta=dict(d.get("meta") or {}),
+                view_dirs=view_dirs,
             )
         except (KeyError, TypeError) as exc:
             raise ValueError(f"malformed store: missing or wrong field {exc}") from exc
@@ -568,10 +644,16 @@ class ParetoStore:
         }
 
 
-def root_cube(positions: Any, pad_fraction: float = 0.1, min_size: float = 1.0) -> tuple[np.ndarray, float]:
+def root_cube(positions: Any, pad_fraction: float = 0.1, min_size: float = 1.0, *,
+              rest_on_path: bool = False) -> tuple[np.ndarray, float]:
     """Cubic root box around camera positions: the bounding box, padded by ``pad_fraction`` of its
     largest side on every side, made cubic about its centre; at least ``min_size`` wide so that
-    degenerate paths (one point, a line, a plane) still get a proper cube. Returns (min corner, side)."""
+    degenerate paths (one point, a line, a plane) still get a proper cube. Returns (min corner, side).
+
+    ``rest_on_path`` lifts the cube so its bottom lies below the path's lowest point by
+    ``pad_fraction`` of the path's *vertical* extent instead of centring it vertically: for a flat
+    path (a walk or an orbit above a floor) the lower corners then stay near camera height rather
+    than far below the ground."""
     p = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
     if p.shape[0] == 0 or not np.all(np.isfinite(p)):
         raise ValueError("need at least one finite position")
@@ -581,7 +663,10 @@ def root_cube(positions: Any, pad_fraction: float = 0.1, min_size: float = 1.0) 
     extent = float((hi - lo).max())
     size = max(extent * (1.0 + 2.0 * pad_fraction), float(min_size))
     centre = (lo + hi) / 2
-    return centre - size / 2, size
+    root_min = centre - size / 2
+    if rest_on_path:
+        root_min[2] = max(root_min[2], lo[2] - pad_fraction * float(hi[2] - lo[2]))
+    return root_min, size
 
 
 def _scale_free(v: tuple[float, float, float], name: str) -> tuple[float, float, float]:

@@ -193,3 +193,44 @@ def test_min_depth_splits_and_similar_frontiers_are_inherited(scene) -> None:
     assert store.meta["views_optimised"] == 48 == st["unique_frontiers"]
     root_only, _ = _run(scene, cache=cache, threshold_power_w=1e6, threshold_error=1.0)
     assert root_only.stats()["corners"] == 8 and root_only.meta["evaluations"] == 0
+
+
+def test_aimed_directions_look_at_what_the_path_sees() -> None:
+    from service.octree import aimed_directions
+    from service.pareto_store import VIEW_FORWARD, face_of
+
+    # an orbit of radius 4 at height 1.5 around a subject at the origin, cameras looking at it
+    ang = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+    pos = np.stack([4 * np.cos(ang), 4 * np.sin(ang), np.full_like(ang, 1.5)], axis=1)
+    fwd = -pos / np.linalg.norm(pos, axis=1, keepdims=True)
+    targets = np.zeros_like(pos)
+    corner = np.array([5.0, 5.0, 1.0])
+    d = aimed_directions(corner, pos, fwd, targets, cell=5.0)
+    assert d.shape == (6, 3) and np.allclose(np.linalg.norm(d, axis=1), 1.0)
+    to_subject = -corner / np.linalg.norm(corner)
+    for k in (1, 3):  # -X and -Y: the frames looking that way see the subject, so does the sample
+        assert float(d[k] @ to_subject) > 0.999
+    for k in (0, 2):  # +X, +Y: the subject is behind the corner -> weighted mean forward, in the face
+        assert float(d[k] @ VIEW_FORWARD[k]) > 0.5
+    assert np.array_equal(d[4], VIEW_FORWARD[4]) and np.array_equal(d[5], VIEW_FORWARD[5])  # no frame
+    assert all(0 <= face_of(v) < 6 for v in d)
+    with pytest.raises(ValueError):
+        aimed_directions(corner, pos, fwd[:3], targets, cell=1.0)
+
+
+@pytest.mark.slow
+def test_axis_and_aimed_view_sampling(scene) -> None:
+    """Both samplings build valid stores on the real tracer; aimed stores carry unit sample directions
+    that the optimiser rendered (their cameras equal the store's sample cameras)."""
+    axis, _ = _run(scene, view_sampling="axis", max_depth=0)
+    aimed, _ = _run(scene, view_sampling="aimed", max_depth=0)
+    assert axis.view_dirs is None and aimed.view_dirs is not None
+    assert np.allclose(np.linalg.norm(aimed.view_dirs, axis=2), 1.0)
+    assert aimed.meta["view_sampling"] == "aimed"
+    back = ParetoStore.from_json(aimed.to_json())
+    assert np.allclose(back.view_dirs, aimed.view_dirs)
+    # the path looks along +Y: every corner's +Y sample is aimed (not the bare axis) and within 90 deg
+    assert all(float(aimed.sample_direction(c, 2) @ [0, 1, 0]) > 0 for c in range(8))
+    assert any(not np.allclose(aimed.sample_direction(c, 2), [0, 1, 0]) for c in range(8))
+    with pytest.raises(ValueError):
+        OptimizeOptions(view_sampling="random")

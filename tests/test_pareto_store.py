@@ -11,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from service.pareto_store import (
+    FORMAT_VERSION,
     MAX_PARAMS,
     VIEW_FORWARD,
     VIEW_NAMES,
@@ -246,7 +247,7 @@ def test_json_roundtrip_and_size() -> None:
     s = _store(subdivide=True)
     text = s.to_json()
     doc = json.loads(text)
-    assert doc["version"] == 1 and doc["views"] == list(VIEW_NAMES)
+    assert doc["version"] == FORMAT_VERSION and doc["views"] == list(VIEW_NAMES)
     t = ParetoStore.from_json(text)
     assert t.to_json() == text
     for a, b in zip(s.frontiers, t.frontiers, strict=True):
@@ -332,3 +333,94 @@ def test_filter_values_stay_between_old_and_new(steps, period) -> None:
         prev_target = target
     # hold the last target for T: it is reached
     assert f.update(steps[-1][0], now + period) == tuple(steps[-1][0])
+
+
+# ------------------------------------------------------------------------ aimed sample views (version 2)
+
+_unit_dirs = st.tuples(*[st.floats(-1.0, 1.0, allow_nan=False)] * 3).filter(
+    lambda v: max(abs(c) for c in v) > 1e-3)
+
+
+@given(_unit_dirs)
+def test_face_of_is_a_valid_face_and_matches_a_narrow_frustum(v) -> None:
+    from service.pareto_store import face_of
+
+    k = face_of(v)
+    assert 0 <= k < 6
+    # the face's axis is the direction's largest component, with its sign
+    d = np.asarray(v) / np.linalg.norm(v)
+    assert float(d @ VIEW_FORWARD[k]) == pytest.approx(float(np.abs(d).max()))
+    # lookup's frustum vote agrees for a narrow frustum away from cone borders
+    srt = np.sort(np.abs(d))
+    if srt[2] - srt[1] > 0.05:
+        s = _store()
+        assert s.choose_view(camera_rotation(direction=d), math.radians(1.0), 1.0) == k
+
+
+@given(st.lists(_unit_dirs, min_size=1, max_size=12))
+def test_quantised_directions_are_unit_and_close(vs) -> None:
+    from service.pareto_store import quantise_directions
+
+    d = np.asarray(vs, dtype=np.float64)
+    q = quantise_directions(d)
+    assert np.allclose(np.linalg.norm(q, axis=1), 1.0)
+    u = d / np.linalg.norm(d, axis=1, keepdims=True)
+    assert np.all((q * u).sum(axis=1) > math.cos(math.radians(1.0)))  # within a degree
+    assert np.array_equal(quantise_directions(q), q)  # stable: a reloaded store re-encodes identically
+
+
+def _aimed_store() -> ParetoStore:
+    s = _store(subdivide=True)
+    rng = np.random.default_rng(3)
+    dirs = rng.normal(size=(s.corner_coords.shape[0], 6, 3))
+    s.view_dirs = dirs
+    s.__post_init__()
+    return s
+
+
+def test_view_dirs_roundtrip_and_old_version_loads_as_axis_views() -> None:
+    from service.pareto_store import quantise_directions
+
+    s = _aimed_store()
+    text = s.to_json()
+    doc = json.loads(text)
+    assert doc["version"] == 2 and "view_dirs" in doc
+    t = ParetoStore.from_json(text)
+    assert t.to_json() == text
+    assert np.allclose(t.view_dirs, quantise_directions(s.view_dirs))
+    assert np.allclose(np.linalg.norm(t.view_dirs, axis=2), 1.0)
+    eye, f, up = t.sample_camera(4, 2)
+    assert np.allclose(f, t.view_dirs[4, 2]) and abs(float(f @ up)) < 0.96
+    assert np.allclose(eye, t.corner_positions()[4])
+    # lookup is unchanged by the sample directions: same corner, face and settings
+    a = _store(subdivide=True).lookup([0.3, 1.2, 0.5], direction=[0, -1, 0.2], power_budget=2.0)
+    b = t.lookup([0.3, 1.2, 0.5], direction=[0, -1, 0.2], power_budget=2.0)
+    assert (a.corner, a.view, a.packed) == (b.corner, b.view, b.packed)
+    # a version-1 document (no view_dirs) still loads, with axis sample views
+    old = _store(subdivide=True).to_dict()
+    old["version"] = 1
+    v1 = ParetoStore.from_dict(old)
+    assert v1.view_dirs is None
+    for v in range(6):
+        assert np.array_equal(v1.sample_direction(0, v), VIEW_FORWARD[v])
+        assert np.array_equal(v1.sample_camera(0, v)[2], [0, 0, 1] if v < 4 else [0, 1, 0])
+    bad = json.loads(text)
+    bad["view_dirs"] = bad["view_dirs"][:-4]
+    with pytest.raises(ValueError):
+        ParetoStore.from_dict(bad)
+    with pytest.raises(ValueError):
+        ParetoStore(PARAMS, np.zeros(3), 2.0, 0, np.asarray([-1]),
+                    np.asarray([(x, y, z) for z in (0, 1) for y in (0, 1) for x in (0, 1)]),
+                    np.zeros((8, 6), dtype=np.int64), [_frontier(0)], view_dirs=np.zeros((8, 6, 3)))
+
+
+@given(st.lists(st.tuples(st.floats(-50, 50), st.floats(-50, 50), st.floats(-5, 5)), min_size=1,
+                max_size=20), st.floats(0.0, 0.5))
+def test_root_cube_resting_on_the_path_still_contains_it(pts, pad) -> None:
+    p = np.asarray(pts)
+    lo, size = root_cube(p, pad, 1.0)
+    lo2, size2 = root_cube(p, pad, 1.0, rest_on_path=True)
+    assert size2 == size and np.array_equal(lo2[:2], lo[:2])
+    assert np.all(p >= lo2 - 1e-9) and np.all(p <= lo2 + size2 + 1e-9)
+    assert lo2[2] >= lo[2]
+    assert lo2[2] >= p[:, 2].min() - pad * np.ptp(p[:, 2]) - 1e-9
