@@ -13,38 +13,20 @@ Run: .venv/bin/python bench/bench_nsga.py [--width 32 --height 24 --seeds 3]
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-import sim_core
 from service import nsga
 from service.eval_cache import EvalCache
 from service.evaluation import CameraSpec, Evaluator
 from service.params import Parameter, ParameterSpace
 
-MODELS = Path(__file__).resolve().parent.parent / "assets" / "models"
-
-
-def teapot_scene() -> sim_core.Scene:
-    from sim_core.loaders import load_obj
-
-    d = load_obj(MODELS / "teapot.obj")
-    pos = np.asarray(d.positions, dtype=np.float64)
-    tri = np.asarray(d.triangles, dtype=np.int64)
-    z = float(pos[:, 2].min())
-    g = np.array([[-8, -8, z], [8, -8, z], [8, 8, z], [-8, 8, z]], dtype=np.float64)
-    p = np.vstack([pos, g]).astype(np.float32)
-    n0 = len(pos)
-    t = np.vstack([tri, [[n0, n0 + 1, n0 + 2], [n0, n0 + 2, n0 + 3]]])
-    ids = np.r_[np.zeros(len(tri), np.int64), np.ones(2, np.int64)]
-    mats = [sim_core.Material(base_color=(0.8, 0.3, 0.2), metallic=1.0, roughness=0.2),
-            sim_core.Material(base_color=(0.7, 0.7, 0.7), roughness=0.9)]
-    light = sim_core.Light(kind="point", position=(4.0, -4.0, 8.0), intensity=300.0, radius=0.5)
-    return sim_core.Scene.from_arrays(p, t, normals=sim_core.smooth_normals(p, t), material_ids=ids,
-                                      object_ids=ids, materials=mats, lights=[light],
-                                      environment=(0.3, 0.35, 0.4))
+# The search's test scene is shared with the tests (tests/tracer_scenes.py).
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+from tracer_scenes import teapot_scene
 
 
 def space_16k() -> ParameterSpace:

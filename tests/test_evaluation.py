@@ -3,11 +3,9 @@ exhaustive enumeration against brute force, NSGA-II against the exact frontier."
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
-from sim_core.loaders import load_obj
+from tracer_scenes import teapot_scene
 
 import sim_core
 from service import nsga
@@ -15,28 +13,6 @@ from service.eval_cache import EvalCache
 from service.evaluation import CameraSpec, Evaluator, SceneHandle, evaluate, tone_map, upsample_bilinear
 from service.executors import DaskExecutor, InProcessExecutor, ProcessPoolExecutor
 from service.params import default_space
-
-MODELS = Path(__file__).resolve().parent.parent / "assets" / "models"
-
-
-def teapot_scene() -> sim_core.Scene:
-    """The bundled teapot, mirror-like, on a diffuse ground under a soft point light (module level, so
-    worker processes can rebuild it)."""
-    d = load_obj(MODELS / "teapot.obj")
-    pos = np.asarray(d.positions, dtype=np.float64)
-    tri = np.asarray(d.triangles, dtype=np.int64)
-    z = float(pos[:, 2].min())
-    g = np.array([[-8, -8, z], [8, -8, z], [8, 8, z], [-8, 8, z]], dtype=np.float64)
-    p = np.vstack([pos, g]).astype(np.float32)
-    n0 = len(pos)
-    t = np.vstack([tri, [[n0, n0 + 1, n0 + 2], [n0, n0 + 2, n0 + 3]]])
-    ids = np.r_[np.zeros(len(tri), np.int64), np.ones(2, np.int64)]
-    mats = [sim_core.Material(base_color=(0.8, 0.3, 0.2), metallic=1.0, roughness=0.2),
-            sim_core.Material(base_color=(0.7, 0.7, 0.7), roughness=0.9)]
-    light = sim_core.Light(kind="point", position=(4.0, -4.0, 8.0), intensity=300.0, radius=0.5)
-    return sim_core.Scene.from_arrays(p, t, normals=sim_core.smooth_normals(p, t), material_ids=ids,
-                                      object_ids=ids, materials=mats, lights=[light],
-                                      environment=(0.3, 0.35, 0.4))
 
 
 @pytest.fixture(scope="module")

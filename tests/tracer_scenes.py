@@ -121,3 +121,23 @@ def sky_map(height: int = 32, width: int = 64) -> np.ndarray:
     sky[..., 2] = 0.9 - 0.3 * v[:, None]
     sky[height // 4 : height // 4 + 3, width // 3 : width // 3 + 4] = 20.0
     return sky
+
+
+def teapot_scene() -> sim_core.Scene:
+    """The bundled teapot, mirror-like, on a diffuse ground under a soft point light (module level, so
+    worker processes can rebuild it)."""
+    d = load_obj(MODELS / "teapot.obj")
+    pos = np.asarray(d.positions, dtype=np.float64)
+    tri = np.asarray(d.triangles, dtype=np.int64)
+    z = float(pos[:, 2].min())
+    g = np.array([[-8, -8, z], [8, -8, z], [8, 8, z], [-8, 8, z]], dtype=np.float64)
+    p = np.vstack([pos, g]).astype(np.float32)
+    n0 = len(pos)
+    t = np.vstack([tri, [[n0, n0 + 1, n0 + 2], [n0, n0 + 2, n0 + 3]]])
+    ids = np.r_[np.zeros(len(tri), np.int64), np.ones(2, np.int64)]
+    mats = [sim_core.Material(base_color=(0.8, 0.3, 0.2), metallic=1.0, roughness=0.2),
+            sim_core.Material(base_color=(0.7, 0.7, 0.7), roughness=0.9)]
+    light = sim_core.Light(kind="point", position=(4.0, -4.0, 8.0), intensity=300.0, radius=0.5)
+    return sim_core.Scene.from_arrays(p, t, normals=sim_core.smooth_normals(p, t), material_ids=ids,
+                                      object_ids=ids, materials=mats, lights=[light],
+                                      environment=(0.3, 0.35, 0.4))
