@@ -31,7 +31,8 @@ UNIFORM_WIN = 7
 GAUSS_SIGMA = 1.5
 GAUSS_TRUNCATE = 3.5
 
-def _check_pair(reference: Any, test: Any) -> tuple[np.ndarray, np.ndarray]:
+def _check_shapes(reference: Any, test: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Two real-valued H x W or H x W x C images of the same shape (values not yet checked)."""
     x = np.asarray(reference)
     y = np.asarray(test)
     if x.shape != y.shape:
@@ -40,6 +41,13 @@ def _check_pair(reference: Any, test: Any) -> tuple[np.ndarray, np.ndarray]:
         raise ValueError(f"expected H x W or H x W x C images, got shape {x.shape}")
     if not (np.issubdtype(x.dtype, np.number) and np.issubdtype(y.dtype, np.number)):
         raise ValueError("images must be numeric")
+    if np.iscomplexobj(x) or np.iscomplexobj(y):
+        raise ValueError("images must be real")
+    return x, y
+
+
+def _check_pair(reference: Any, test: Any) -> tuple[np.ndarray, np.ndarray]:
+    x, y = _check_shapes(reference, test)
     x = x.astype(np.float64, copy=False)
     y = y.astype(np.float64, copy=False)
     if not (np.isfinite(x).all() and np.isfinite(y).all()):
@@ -162,16 +170,7 @@ def ssim(reference: Any, test: Any, data_range: float = 1.0, gaussian_weights: b
     use_sample_covariance=False`` for the Gaussian option) to ~1e-15; float32 input is read as is and
     summed in float64. Constant images give finite values (1 for identical ones); NaN or Inf input
     raises ``ValueError``."""
-    x = np.asarray(reference)
-    y = np.asarray(test)
-    if x.shape != y.shape:
-        raise ValueError(f"images differ in shape: {x.shape} vs {y.shape}")
-    if x.ndim not in (2, 3):
-        raise ValueError(f"expected H x W or H x W x C images, got shape {x.shape}")
-    if not (np.issubdtype(x.dtype, np.number) and np.issubdtype(y.dtype, np.number)):
-        raise ValueError("images must be numeric")
-    if np.iscomplexobj(x) or np.iscomplexobj(y):
-        raise ValueError("images must be real")
+    x, y = _check_shapes(reference, test)
     if not (math.isfinite(data_range) and data_range > 0):
         raise ValueError(f"data_range must be positive and finite, got {data_range}")
     win = _GAUSS.size if gaussian_weights else UNIFORM_WIN
