@@ -4,6 +4,7 @@ when the add-on is disabled or Blender exits."""
 from __future__ import annotations
 
 import atexit
+import os
 from pathlib import Path
 
 import bpy
@@ -31,7 +32,9 @@ def client_for(context: bpy.types.Context) -> ServiceClient:
         python = bpy.path.abspath(prefs.python_path)
         if _local is None or not _local.running() or _local.port != prefs.local_port:
             stop_local()
-            _local = LocalService(python, prefs.local_port, _data_dir(prefs), prefs.token or None)
+            # a desktop service: render a job's evaluations on every core
+            _local = LocalService(python, prefs.local_port, _data_dir(prefs), prefs.token or None,
+                                  eval_workers=os.cpu_count() or 1)
             _local.start()
         return _local.client(timeout_s=float(prefs.timeout_s))
     # Loopback is not "online": a service on this machine is usable whatever 'Allow Online Access' says.

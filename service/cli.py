@@ -52,9 +52,17 @@ def build_parser() -> argparse.ArgumentParser:
                    help="subdivide where neighbouring frontiers differ by more than W watts")
     o.add_argument("--threshold-error", type=_positive, default=0.01, metavar="E",
                    help="subdivide where neighbouring frontiers differ by more than E (1 - SSIM)")
-    o.add_argument("--max-depth", type=int, default=2, metavar="N")
+    o.add_argument("--max-depth", type=int, default=6, metavar="N", help="deepest octree level (default 6)")
     o.add_argument("--min-depth", type=int, default=0, metavar="N",
-                   help="split nodes on the path at least N deep (default 0: only where frontiers differ)")
+                   help="split nodes on the path at least N deep (default 0: only where needed)")
+    o.add_argument("--view-sampling", choices=("path", "aimed", "axis"), default="path",
+                   help="camera samples: the path's own cameras on a lattice refined by viewing distance "
+                        "(path, default), or the paper's six views per corner with frontier-difference "
+                        "refinement (aimed at what the path sees, or along the axes)")
+    o.add_argument("--path-resolution", type=_positive, default=0.25, metavar="R",
+                   help="path sampling: octree leaves at most R x the viewing distance wide (default 0.25)")
+    o.add_argument("--guard-frames", type=int, default=2, metavar="N",
+                   help="path sampling: also price each frontier at N more path cameras (default 2)")
     o.add_argument("--population", type=int, default=24)
     o.add_argument("--generations", type=int, default=25)
     o.add_argument("--exhaustive-limit", type=int, default=512, metavar="N",
@@ -88,6 +96,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--data-dir", type=Path, default=None)
     s.add_argument("--dask-scheduler", default=None, metavar="ADDR")
     s.add_argument("--token", default=None, help="bearer token (required for a non-loopback bind)")
+    s.add_argument("--eval-workers", type=int, default=None, metavar="N",
+                   help="local processes rendering a job's evaluations (default 1; ignored with Dask)")
     return p
 
 
@@ -130,7 +140,8 @@ def _optimize(args: argparse.Namespace) -> int:
         space = space.subset([n.strip() for n in args.parameters.split(",") if n.strip()])
     options = OptimizeOptions(
         threshold_power_w=args.threshold_power, threshold_error=args.threshold_error,
-        max_depth=args.max_depth, min_depth=args.min_depth, population=args.population,
+        max_depth=args.max_depth, min_depth=args.min_depth, view_sampling=args.view_sampling,
+        path_resolution=args.path_resolution, guard_frames=args.guard_frames, population=args.population,
         generations=args.generations,
         exhaustive_limit=args.exhaustive_limit, eval_width=args.eval_width, eval_height=args.eval_height,
         profile=args.profile, fps=args.fps, seed=args.seed, metric=args.metric, threads=args.threads,
@@ -188,7 +199,7 @@ def _query(args: argparse.Namespace) -> int:
 def _serve(args: argparse.Namespace) -> int:
     from service.api.server import run
 
-    run(args.host, args.port, args.data_dir, args.dask_scheduler, args.token)
+    run(args.host, args.port, args.data_dir, args.dask_scheduler, args.token, eval_workers=args.eval_workers)
     return 0
 
 

@@ -207,7 +207,7 @@ _LOCK = threading.Lock()
 _SCENES: dict[str, Any] = {}
 _PROFILES: dict[str, Any] = {}
 _REFS: OrderedDict[tuple[str, ...], np.ndarray] = OrderedDict()
-_REF_CAPACITY = 96
+_REF_CAPACITY = 512  # 64x36 references are ~27 KB: a whole lockstep batch of samples fits
 _SCENE_CAPACITY = 8
 
 

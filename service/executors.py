@@ -73,7 +73,7 @@ class ProcessPoolExecutor:
     def map(self, fn: Callable[[Any, Any], R], shared: Any, items: Sequence[Any]) -> list[R]:
         if not items:
             return []
-        futures = [self._pool.submit(_run_chunk, fn, shared, c) for c in _chunks(items, 2 * self.workers)]
+        futures = [self._pool.submit(_run_chunk, fn, shared, c) for c in _chunks(items, 4 * self.workers)]
         out: list[R] = []
         for f in futures:
             out.extend(f.result())

@@ -107,13 +107,14 @@ class JobManager:
 
     def __init__(
         self, storage: Storage, scenes: SceneCache, *, workers: int = 2, dask_scheduler: str | None = None,
-        render_threads: int | None = None, ship_scenes: bool = True,
+        render_threads: int | None = None, ship_scenes: bool = True, eval_workers: int = 1,
     ) -> None:
         self.storage = storage
         self.scenes = scenes
         self.workers = workers
         self.dask_scheduler = dask_scheduler
         self.render_threads = render_threads
+        self.eval_workers = eval_workers
         self.ship_scenes = ship_scenes
         self._queue: queue.Queue[str | None] = queue.Queue()
         self._threads: list[threading.Thread] = []
@@ -131,7 +132,9 @@ class JobManager:
     # -- lifecycle ---------------------------------------------------------------------------------
     @property
     def executor_description(self) -> str:
-        return f"dask:{self.dask_scheduler}" if self.dask_scheduler else "in-process"
+        if self.dask_scheduler:
+            return f"dask:{self.dask_scheduler}"
+        return f"process-pool:{self.eval_workers}" if self.eval_workers > 1 else "in-process"
 
     def start(self) -> None:
         for job in self.storage.list_jobs(states=("queued", "running")):
@@ -208,7 +211,7 @@ class JobManager:
             if self._executor is None:
                 from service import executors
 
-                self._executor = executors.make_executor(self.dask_scheduler)
+                self._executor = executors.make_executor(self.dask_scheduler, self.eval_workers)
             return self._executor
 
     def eval_cache(self) -> Any:
@@ -375,6 +378,9 @@ def run_optimisation(
         max_depth=opts["max_depth"], population=opts["population"], generations=opts["generations"],
         exhaustive_limit=opts["exhaustive_limit"], eval_width=width, eval_height=height,
         profile=spec["profile"], fps=path.fps, seed=opts["seed"], threads=threads,
+        # jobs stored before these options existed ran the paper's sampling
+        min_depth=opts.get("min_depth", 0), view_sampling=opts.get("view_sampling", "aimed"),
+        path_resolution=opts.get("path_resolution", 0.25), guard_frames=opts.get("guard_frames", 0),
     )
     return optimize_path(scene, path, build_space(spec), options, cache=cache, executor=executor,
                          progress=progress, should_cancel=should_cancel)

@@ -15,6 +15,20 @@ face-centre neighbours along the three axes. A view is optimised afresh (warm-st
 frontiers) only when a pair differs for that view; otherwise it inherits the frontier of the first
 corner of the first pair. Corners shared with neighbouring nodes are created once.
 
+``view_sampling="path"`` (the default of :class:`service.optimize.OptimizeOptions`) replaces the
+paper's sampling for a known path: the corners the paper samples sit up to half a cell from the path
+and their six views see what a path camera would only see from elsewhere, so their frontiers predict
+the path's power and error poorly. Here the nodes holding path frames are split until their side is
+at most ``path_resolution`` times the frames' median viewing distance (the distance their central ray
+travels), and the runtime lookup itself (:meth:`ParetoStore.locate`) says which (corner, face) each
+path frame will read. Each such sample is measured at the path camera most like the frames reading it
+(their medoid by eye distance over viewing distance plus direction difference); a full search runs at
+every ``path_stride``-th sample along the path and short warm-started ones in between; then every
+frontier setting is also priced at ``guard_frames`` more of those frames (the ones least like the
+chosen ones) and the frontier keeps each setting's worst error and power, so it bounds the frames it
+serves. Faces no path frame reads inherit the frontier of the nearest sample. No frontier-difference
+comparisons are made in this mode.
+
 All searches of one stage run in lockstep, so every generation of every camera goes to the executor
 as one batch. Seeds derive from the run seed and the camera, and the evaluation cache answers every
 repeated render, so a rerun after an interruption replays the same decisions and resumes where it
@@ -42,6 +56,7 @@ from service.pareto_store import (
     ParetoStore,
     face_of,
     quantise_directions,
+    quantise_eyes,
     root_cube,
     view_up,
 )
@@ -53,7 +68,7 @@ CUBE_EDGES: tuple[tuple[int, int], ...] = tuple(
 )
 
 
-VIEW_SAMPLING = ("axis", "aimed")
+VIEW_SAMPLING = ("axis", "aimed", "path")
 
 
 def aimed_directions(corner: np.ndarray, positions: np.ndarray, forwards: np.ndarray,
@@ -139,7 +154,12 @@ class OctreeConfig:
     vfov: float = 0.6911
     width: int = 64
     height: int = 36
-    view_sampling: str = "aimed"  # "axis": the six world axes; "aimed": see :func:`aimed_directions`
+    # "axis": the six world axes; "aimed": see :func:`aimed_directions`; "path": see the module docstring
+    view_sampling: str = "aimed"
+    path_resolution: float = 0.25  # "path" sampling: leaf side <= this x the path's viewing distance there
+    guard_frames: int = 2  # "path" sampling: extra path cameras of each sample its frontier is priced at
+    path_stride: int = 4  # "path" sampling: a full search at every path_stride-th sample along the path
+    warm_generations: int = 5  # "path" sampling: generations of the warm-started searches in between
 
     def __post_init__(self) -> None:
         if self.view_sampling not in VIEW_SAMPLING:
@@ -152,6 +172,10 @@ class OctreeConfig:
             raise ValueError("min_depth must be in 0..max_depth")
         if self.margin < 0:
             raise ValueError("margin must be >= 0")
+        if not (math.isfinite(self.path_resolution) and self.path_resolution > 0):
+            raise ValueError("path_resolution must be a positive finite number")
+        if not 0 <= self.guard_frames <= 8:
+            raise ValueError("guard_frames must be in 0..8")
 
 
 def frontier_distance(projected: np.ndarray, target: np.ndarray, scale: tuple[float, float]
@@ -190,21 +214,32 @@ class OctreeBuilder:
     def __init__(self, evaluator: Evaluator, space: ParameterSpace, path_positions: np.ndarray,
                  config: OctreeConfig, progress: Callable[[Progress], None] | None = None,
                  should_cancel: Callable[[], bool] | None = None, *,
-                 path_forwards: np.ndarray | None = None, path_targets: np.ndarray | None = None
-                 ) -> None:
+                 path_forwards: np.ndarray | None = None, path_targets: np.ndarray | None = None,
+                 path_matrices: np.ndarray | None = None, path_vfovs: np.ndarray | None = None,
+                 path_aspects: np.ndarray | None = None) -> None:
         self.ev = evaluator
         self.space = space
         self.cfg = config
         self._progress_cb = progress
         self._should_cancel = should_cancel
         self.aimed = config.view_sampling == "aimed"
-        if self.aimed and (path_forwards is None or path_targets is None):
-            raise ValueError("aimed view sampling needs the path's forward vectors and targets")
+        self.path_mode = config.view_sampling == "path"
+        if (self.aimed or self.path_mode) and (path_forwards is None or path_targets is None):
+            raise ValueError(f"{config.view_sampling} view sampling needs the path's forwards and targets")
         self.path_positions = np.asarray(path_positions, dtype=np.float64).reshape(-1, 3)
         self.path_forwards = None if path_forwards is None else np.asarray(path_forwards, np.float64)
         self.path_targets = None if path_targets is None else np.asarray(path_targets, np.float64)
+        n = len(self.path_positions)
+        self.path_matrices = None if path_matrices is None else np.asarray(path_matrices, np.float64)
+        self.path_vfovs = (np.full(n, config.vfov) if path_vfovs is None
+                           else np.asarray(path_vfovs, np.float64).reshape(-1))
+        self.path_aspects = (np.full(n, config.width / config.height) if path_aspects is None
+                             else np.asarray(path_aspects, np.float64).reshape(-1))
+        if self.path_mode and (self.path_matrices is None or self.path_matrices.shape[0] != n
+                               or self.path_vfovs.shape[0] != n or self.path_aspects.shape[0] != n):
+            raise ValueError("path view sampling needs one world matrix, fov and aspect per path frame")
         self.root_min, self.root_size = root_cube(path_positions, config.pad_fraction, config.min_size,
-                                                  rest_on_path=self.aimed)
+                                                  rest_on_path=self.aimed or self.path_mode)
         self.side = 1 << config.max_depth
         self.cell = self.root_size / self.side
         self.path_points = densify(path_positions, self.cell / 2)
@@ -217,6 +252,10 @@ class OctreeBuilder:
         self.nodes: list[tuple[tuple[int, int, int], int, int]] = []
         self.children: list[int] = []
         self._dist: dict[tuple[int, int, int], tuple[float, float]] = {}
+        # "path" sampling: the camera behind each optimised (corner, view)
+        self.sample_cams: dict[tuple[int, int], CameraSpec] = {}
+        self.sample_scale: dict[tuple[int, int], float] = {}  # median viewing distance of its frames
+        self.frame_samples: list[tuple[int, int]] = []  # (corner, view) each path frame looks up
         self.t0 = time.perf_counter()
         self.state = Progress(phase="root")
 
@@ -240,6 +279,9 @@ class OctreeBuilder:
             raise Cancelled("optimisation cancelled")
 
     def camera(self, corner: int, view: int) -> CameraSpec:
+        cam = self.sample_cams.get((corner, view))
+        if cam is not None:
+            return cam
         pos = self.root_min + np.asarray(self.corner_coords[corner], dtype=np.float64) * self.cell
         if not self.aimed:
             return CameraSpec(tuple(pos), tuple(VIEW_FORWARD[view]), tuple(VIEW_UP[view]), self.cfg.vfov,
@@ -283,8 +325,10 @@ class OctreeBuilder:
 
     # -- searches -----------------------------------------------------------------------------------
 
-    def _optimise(self, jobs: Sequence[tuple[int, int, list[Indices]]], phase: str) -> None:
-        """Frontiers for (corner, view, warm start) jobs, all searches in lockstep."""
+    def _optimise(self, jobs: Sequence[tuple[int, int, list[Indices]]], phase: str,
+                  generations: int | None = None) -> None:
+        """Frontiers for (corner, view, warm start) jobs, all searches in lockstep (``generations``
+        overrides the configured number, for short searches from a good warm start)."""
         if not jobs:
             return
         nv = self.space.free_n_values
@@ -307,7 +351,7 @@ class OctreeBuilder:
         else:
             algos = []
             for (_, _, warm), cam in zip(jobs, cams, strict=True):
-                cfg = NSGAConfig(self.cfg.nsga.population, self.cfg.nsga.generations,
+                cfg = NSGAConfig(self.cfg.nsga.population, generations or self.cfg.nsga.generations,
                                  self.cfg.nsga.crossover_prob, self.cfg.nsga.mutation_prob,
                                  _camera_seed(self.cfg.nsga.seed, cam))
                 # both ends of the space first (max quality anchors error 0, the cheapest the low-power
@@ -373,6 +417,9 @@ class OctreeBuilder:
     # -- the build ----------------------------------------------------------------------------------
 
     def run(self) -> None:
+        if self.path_mode:
+            self._run_path()
+            return
         self.nodes.append(((0, 0, 0), self.side, 0))
         self.children.append(-1)
         for k in range(8):
@@ -397,6 +444,183 @@ class OctreeBuilder:
                 for cs in [self._node_corners(n)] for a, b in CUBE_EDGES for v in range(N_VIEWS))]
             level = self._subdivide(split, depth + 1)
         self._report("done")
+
+    # -- "path" sampling ------------------------------------------------------------------------------
+
+    def _view_distances(self) -> np.ndarray:
+        assert self.path_targets is not None
+        d = np.linalg.norm(self.path_targets - self.path_positions, axis=1)
+        return np.maximum(d, 1e-3 * self.root_size)
+
+    def _run_path(self) -> None:
+        """Split the nodes the path's frames are in until their side is at most ``path_resolution``
+        times the median distance those frames look (so the lattice is fine where the camera looks at
+        something near and coarse where it looks far), then optimise one sample per (corner, view) that
+        some path frame looks up, at the path camera that best represents those frames."""
+        self.nodes.append(((0, 0, 0), self.side, 0))
+        self.children.append(-1)
+        for k in range(8):
+            self._corner((self.side * (k & 1), self.side * ((k >> 1) & 1), self.side * ((k >> 2) & 1)))
+        dist = self._view_distances()
+        level = [0]
+        while level:
+            depth = self.nodes[level[0]][2]
+            if depth >= self.cfg.max_depth:
+                break
+            split = []
+            for n in level:
+                lo, hi = self._node_box(n)
+                inside = np.all((self.path_positions >= lo) & (self.path_positions <= hi), axis=1)
+                if not np.any(inside):
+                    continue
+                side = float(hi[0] - lo[0])
+                if depth < self.cfg.min_depth or side > self.cfg.path_resolution * float(
+                        np.median(dist[inside])):
+                    split.append(n)
+            level = self._split_plain(split, depth + 1)
+        self._report("place samples")
+        groups = self._group_frames()
+        self.state.views_planned = len(groups)
+        guards: dict[tuple[int, int], list[CameraSpec]] = {}
+        order = sorted(groups, key=lambda cv: groups[cv][0])  # in path order (first frame)
+        for (c, v) in order:
+            frames = groups[(c, v)]
+            cams = self._sample_cameras(frames, dist)
+            self.sample_cams[(c, v)] = cams[0]
+            self.sample_scale[(c, v)] = float(np.median(dist[frames]))
+            guards[(c, v)] = cams[1:]
+        # Neighbouring samples along the path see nearly the same image: a full search at every
+        # ``stride``-th one, then short searches for the others, warm-started from the frontiers of
+        # the full searches before and after them on the path.
+        stride = max(1, self.cfg.path_stride)
+        anchors = list(range(0, len(order), stride))
+        if anchors and anchors[-1] != len(order) - 1 and len(order) > 1:
+            anchors.append(len(order) - 1)
+        self._optimise([(*order[i], []) for i in anchors], "optimise path samples")
+        anchor_set = set(anchors)
+        jobs = []
+        for i, (c, v) in enumerate(order):
+            if i in anchor_set:
+                continue
+            before = max(a for a in anchors if a < i)
+            after = min(a for a in anchors if a > i)
+            fa = self.frontiers[self.corner_views[order[before][0]][order[before][1]]].settings()
+            fb = self.frontiers[self.corner_views[order[after][0]][order[after][1]]].settings()
+            warm = [x for pair in itertools.zip_longest(fa, fb) for x in pair if x is not None]
+            jobs.append((c, v, warm))
+        self._optimise(jobs, "refine path samples", generations=self.cfg.warm_generations)
+        self._guard(guards)
+        self._inherit_unsampled()
+        self._report("done")
+
+    def _split_plain(self, nodes: Sequence[int], child_depth: int) -> list[int]:
+        """Split ``nodes`` and create their new corners without optimising anything."""
+        children = []
+        for n in nodes:
+            (x, y, z), s, _ = self.nodes[n]
+            h = s // 2
+            first = len(self.nodes)
+            self.children[n] = first
+            for k in range(8):
+                self.nodes.append(((x + h * (k & 1), y + h * ((k >> 1) & 1), z + h * ((k >> 2) & 1)), h,
+                                   child_depth))
+                self.children.append(-1)
+                children.append(first + k)
+            for i, j, k in itertools.product(range(3), repeat=3):
+                self._corner((x + h * i, y + h * j, z + h * k))
+        return children
+
+    def _skeleton(self) -> ParetoStore:
+        """The finished tree with one placeholder frontier, to ask it what a camera would look up."""
+        x = self.space.max_quality_indices()
+        ph = Frontier.from_points([self.space.pack(x)], [0.0], [0.0])
+        return ParetoStore(
+            parameters=self.space.to_stored(), root_min=self.root_min, root_size=self.root_size,
+            lattice_depth=self.cfg.max_depth, children=np.asarray(self.children),
+            corner_coords=np.asarray(self.corner_coords, dtype=np.int64).reshape(-1, 3),
+            corner_views=np.zeros((len(self.corner_coords), N_VIEWS), dtype=np.int64), frontiers=[ph],
+            vfov=self.cfg.vfov, aspect=self.cfg.width / self.cfg.height)
+
+    def _group_frames(self) -> dict[tuple[int, int], list[int]]:
+        """Path frames by the (corner, view) the runtime lookup sends them to (the store's own code)."""
+        assert self.path_matrices is not None
+        skel = self._skeleton()
+        groups: dict[tuple[int, int], list[int]] = {}
+        self.frame_samples = []
+        for i, m in enumerate(self.path_matrices):
+            cv = skel.locate(self.path_positions[i], matrix=m, fov=float(self.path_vfovs[i]),
+                             aspect=float(self.path_aspects[i]))
+            self.frame_samples.append(cv)
+            groups.setdefault(cv, []).append(i)
+        return groups
+
+    def _sample_cameras(self, frames: Sequence[int], dist: np.ndarray) -> list[CameraSpec]:
+        """The group's medoid frame (eye and view direction, distances in units of the viewing
+        distance), then up to ``guard_frames`` frames farthest from the chosen ones."""
+        assert self.path_forwards is not None
+        idx = np.asarray(frames, dtype=np.int64)
+        p = self.path_positions[idx]
+        f = self.path_forwards[idx] / np.linalg.norm(self.path_forwards[idx], axis=1, keepdims=True)
+        scale = float(np.median(dist[idx]))
+        cost = (((p[:, None, :] - p[None, :, :]) ** 2).sum(axis=2) / scale**2
+                + ((f[:, None, :] - f[None, :, :]) ** 2).sum(axis=2))
+        chosen = [int(np.argmin(cost.sum(axis=1)))]
+        for _ in range(self.cfg.guard_frames):
+            far = cost[chosen].min(axis=0)
+            k = int(np.argmax(far))
+            if far[k] <= 1e-12:
+                break
+            chosen.append(k)
+        eyes = quantise_eyes(p[chosen], self.root_min, self.root_size)
+        fwd = quantise_directions(f[chosen], fine=True)
+        return [CameraSpec(tuple(e), tuple(d), tuple(view_up(d)), self.cfg.vfov, self.cfg.width,
+                           self.cfg.height) for e, d in zip(eyes, fwd, strict=True)]
+
+    def _guard(self, guards: dict[tuple[int, int], list[CameraSpec]]) -> None:
+        """Price every frontier setting at its sample's guard cameras too and keep, per setting, the
+        worst error and power seen, then the Pareto-optimal points of that: the stored frontier then
+        bounds the frames between the sample and its guards, not just the sample itself."""
+        reqs: list[tuple[CameraSpec, Indices]] = []
+        for cv, cams in guards.items():
+            rec = self.frontiers[self.corner_views[cv[0]][cv[1]]]
+            reqs += [(cam, x) for cam in cams for x in rec.settings()]
+        if not reqs:
+            return
+        self._check_cancel()
+        self._report("price guard frames")
+        res = iter(self.ev.evaluate(reqs))
+        for cv, cams in guards.items():
+            rec = self.frontiers[self.corner_views[cv[0]][cv[1]]]
+            e = np.asarray([pt[1] for pt in rec.points], dtype=np.float64)
+            pw = np.asarray([pt[2] for pt in rec.points], dtype=np.float64)
+            for _ in cams:
+                r = [next(res) for _ in rec.points]
+                e = np.maximum(e, [x.error for x in r])
+                pw = np.maximum(pw, [x.power_w for x in r])
+            order = np.lexsort((e, pw))
+            kept, best = [], math.inf
+            for i in order:
+                if e[i] < best:
+                    kept.append(int(i))
+                    best = float(e[i])
+            rec.points = [(rec.points[i][0], float(e[i]), float(pw[i])) for i in kept]
+
+    def _inherit_unsampled(self) -> None:
+        """Views no path frame looks up take the frontier (and sample camera) of the sample nearest to
+        them: eye distance in units of that sample's viewing distance, plus direction difference."""
+        keys = list(self.sample_cams)
+        eyes = np.asarray([self.sample_cams[k].eye for k in keys])
+        fwd = np.asarray([self.sample_cams[k].forward for k in keys])
+        scale = np.asarray([self.sample_scale[k] for k in keys])
+        for c, views in enumerate(self.corner_views):
+            pos = self.root_min + np.asarray(self.corner_coords[c], dtype=np.float64) * self.cell
+            d_eye = ((eyes - pos) ** 2).sum(axis=1) / scale**2
+            for v in range(N_VIEWS):
+                if views[v] != -1:
+                    continue
+                k = int(np.argmin(d_eye + ((fwd - VIEW_FORWARD[v]) ** 2).sum(axis=1)))
+                sc, sv = keys[k]
+                views[v] = self.corner_views[sc][sv]
 
     def _subdivide(self, nodes: Sequence[int], child_depth: int) -> list[int]:
         """Split ``nodes``; create their new corners stage by stage; return the children."""
@@ -468,6 +692,8 @@ class OctreeBuilder:
             frontiers.append(Frontier.from_points([self.space.pack(x) for x, _, _ in rec.points],
                                                   [min(max(e, 0.0), 1.0) for _, e, _ in rec.points],
                                                   [p for _, _, p in rec.points]))
+        cams = ([self.sample_cams[(self.frontiers[f].corner, self.frontiers[f].view)] for f in used]
+                if self.path_mode else [])
         return ParetoStore(
             parameters=self.space.to_stored(),
             root_min=self.root_min,
@@ -483,4 +709,6 @@ class OctreeBuilder:
             fps=fps,
             meta=meta,
             view_dirs=np.asarray(self.corner_dirs) if self.aimed else None,
+            frontier_dirs=np.asarray([c.forward for c in cams]) if cams else None,
+            frontier_eyes=np.asarray([c.eye for c in cams]) if cams else None,
         )

@@ -37,11 +37,17 @@ class OptimizeOptions:
     fraction of their side) when testing whether the path passes through them. ``skip_inert`` asks the
     simulator which parameters cannot matter for the scene. ``power_at_path_resolution`` predicts power
     for the path's resolution (dynamic energy scaled by the pixel ratio) rather than for the small
-    evaluation images."""
+    evaluation images.
+
+    ``view_sampling="path"`` (default) splits the nodes holding path frames until they are at most
+    ``path_resolution`` times the frames' viewing distance wide (``max_depth`` caps it) and optimises
+    one sample per (corner, face) the path looks up, at the path camera most like the frames looking it
+    up, priced also at ``guard_frames`` more of them. ``"aimed"``/``"axis"`` are the paper's view cubes
+    with frontier-difference refinement: there ``max_depth`` is the split depth (keep it at 1-3)."""
 
     threshold_power_w: float = 0.05
     threshold_error: float = 0.01
-    max_depth: int = 2
+    max_depth: int = 6
     min_depth: int = 0
     population: int = 24
     generations: int = 25
@@ -58,7 +64,9 @@ class OptimizeOptions:
     threads: int | None = None
     skip_inert: bool = True
     power_at_path_resolution: bool = True
-    view_sampling: str = "aimed"
+    view_sampling: str = "path"
+    path_resolution: float = 0.25
+    guard_frames: int = 2
 
     def __post_init__(self) -> None:
         for name in ("threshold_power_w", "threshold_error", "fps"):
@@ -79,6 +87,11 @@ class OptimizeOptions:
             raise ValueError(f"view_sampling must be one of {VIEW_SAMPLING}")
         if self.metric not in METRICS:
             raise ValueError(f"metric must be one of {METRICS}")
+        if not (isinstance(self.path_resolution, (int, float)) and math.isfinite(self.path_resolution)
+                and self.path_resolution > 0):
+            raise ValueError(f"path_resolution must be positive and finite, got {self.path_resolution!r}")
+        if not 0 <= self.guard_frames <= 8:
+            raise ValueError("guard_frames must be in 0..8")
         if not (self.margin >= 0 and self.pad_fraction >= 0 and self.min_size > 0):
             raise ValueError("margin and pad_fraction must be >= 0, min_size > 0")
 
@@ -152,13 +165,18 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, options: 
         min_size=options.min_size,
         nsga=NSGAConfig(population=options.population, generations=options.generations, seed=options.seed),
         exhaustive_limit=options.exhaustive_limit, vfov=vfov, width=width, height=height,
-        view_sampling=options.view_sampling,
+        view_sampling=options.view_sampling, path_resolution=options.path_resolution,
+        guard_frames=options.guard_frames,
     )
     forwards = targets = None
-    if options.view_sampling == "aimed":
+    if options.view_sampling in ("aimed", "path"):
         forwards, targets = path_targets(handle.get(), path)
     builder = OctreeBuilder(evaluator, space, path.positions(), cfg, progress, should_cancel,
-                            path_forwards=forwards, path_targets=targets)
+                            path_forwards=forwards, path_targets=targets,
+                            path_matrices=np.stack([np.asarray(f.matrix_world, dtype=np.float64)
+                                                    for f in frames]),
+                            path_vfovs=np.asarray([f.vfov for f in frames]),
+                            path_aspects=np.asarray([f.aspect for f in frames]))
     builder.run()
     meta = {
         "thresholds": {"power_w": options.threshold_power_w, "error": options.threshold_error},
@@ -167,6 +185,8 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, options: 
         "power_pixels": target_pixels if options.power_at_path_resolution else width * height,
         "metric": options.metric,
         "view_sampling": options.view_sampling,
+        "path_resolution": options.path_resolution,
+        "guard_frames": options.guard_frames,
         "seed": options.seed,
         "population": options.population,
         "generations": options.generations,

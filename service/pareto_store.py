@@ -14,8 +14,12 @@ Layout of a store (power-budget paper, sec. 4.2 and 6):
   axis) a camera's frustum mostly falls into; its frontier was measured at a *sample direction*: the
   axis itself (version 1, or ``view_dirs`` absent) or, since version 2, a per-(corner, view) direction
   aimed at what the path's cameras looking through that face see (``view_dirs``: int8 unit vectors,
-  :func:`quantise_directions`). Lookup still picks the nearest corner and the face with the largest
-  frustum share; the sample direction says where that face's frontier was measured;
+  :func:`quantise_directions`). Since version 3 a store may instead give every *frontier* the camera
+  it was measured at (``frontier_dirs``: int8 directions, ``frontier_eyes``: uint16 positions over the
+  root cube, :func:`quantise_eyes`): path-sampled stores measure each face the path looks up at the
+  path camera that best represents the frames looking it up, away from the corner, and the faces
+  that inherit that frontier share its camera. Lookup still picks the nearest corner and the face
+  with the largest frustum share; the sample camera says where that face's frontier was measured;
 - frontiers: lists of (packed settings, error, power), power ascending and error descending, shared
   between corners and views that inherit them. Error and power are quantised to 16 bits (error over
   [0, 1], power over [0, ``power_scale``]); the quantisation step is reported by :meth:`ParetoStore.stats`.
@@ -33,9 +37,10 @@ from typing import Any
 import numpy as np
 
 FORMAT_NAME = "render-budget/pareto-store"
-FORMAT_VERSION = 2
-#: Versions this reader accepts (version 1 stores have axis-aligned sample views).
-READABLE_VERSIONS = (1, 2)
+FORMAT_VERSION = 3
+#: Versions this reader accepts (version 1 stores have axis-aligned sample views at the corners,
+#: version 2 adds sample directions, version 3 sample eyes).
+READABLE_VERSIONS = (1, 2, 3)
 
 BITS_PER_PARAM = 4
 MAX_VALUES_PER_PARAM = 1 << BITS_PER_PARAM
@@ -54,28 +59,43 @@ VIEW_UP = np.array(
 
 _QMAX = 65535
 _SIGNED_TO_VIEW = (0, 2, 4, 1, 3, 5)  # +X, +Y, +Z, -X, -Y, -Z -> VIEW_NAMES order
-_DIR_Q = 127  # int8 quantisation of sample directions
+_DIR_Q = 127  # int8 quantisation of per-view sample directions (version 2)
+_DIR_Q16 = 32767  # int16 quantisation of per-frontier sample directions (version 3, path cameras)
+_EYE_Q = 65535  # uint16 quantisation of sample eyes over the root cube
 
 
-def quantise_directions(directions: Any) -> np.ndarray:
-    """Unit vectors (..., 3) rounded to the int8 grid the store keeps, renormalised (float64).
+def quantise_directions(directions: Any, *, fine: bool = False) -> np.ndarray:
+    """Unit vectors (..., 3) rounded to the grid the store keeps (int8 per-view directions, or int16
+    per-frontier ones when ``fine``: a path camera's direction to ~0.002 degrees), renormalised.
 
     The optimiser renders with the quantised direction so the stored sample is exactly what was
     measured."""
     d = np.asarray(directions, dtype=np.float64)
     if d.shape[-1:] != (3,) or not np.all(np.isfinite(d)):
         raise ValueError("directions must be finite (..., 3) vectors")
-    q = _direction_codes(d).astype(np.float64)
+    q = _direction_codes(d, _DIR_Q16 if fine else _DIR_Q).astype(np.float64)
     return q / np.linalg.norm(q, axis=-1, keepdims=True)
 
 
-def _direction_codes(d: np.ndarray) -> np.ndarray:
-    """int8 codes of directions: scaled so the largest component is +-127 (a cube-map style code, so
-    decoding and re-encoding gives the same codes)."""
+def _eye_codes(eyes: Any, root_min: Any, root_size: float) -> np.ndarray:
+    u = (np.asarray(eyes, dtype=np.float64) - np.asarray(root_min, dtype=np.float64)) / float(root_size)
+    return np.rint(np.clip(u, 0.0, 1.0) * _EYE_Q).astype(np.uint16)
+
+
+def quantise_eyes(eyes: Any, root_min: Any, root_size: float) -> np.ndarray:
+    """Sample eyes as the store keeps them: uint16 steps over the root cube (clamped into it), so the
+    optimiser renders exactly the camera a loaded store reports."""
+    rm = np.asarray(root_min, dtype=np.float64)
+    return rm + _eye_codes(eyes, rm, root_size).astype(np.float64) / _EYE_Q * float(root_size)
+
+
+def _direction_codes(d: np.ndarray, q: int = _DIR_Q) -> np.ndarray:
+    """Integer codes of directions: scaled so the largest component is +-q (a cube-map style code, so
+    decoding and re-encoding gives the same codes); int8 for q = 127, int16 for q = 32767."""
     m = np.abs(d).max(axis=-1, keepdims=True)
     if np.any(m < 1e-300):
         raise ValueError("directions must be non-zero")
-    return np.rint(d / m * _DIR_Q).astype(np.int8)
+    return np.rint(d / m * q).astype(np.int8 if q <= 127 else np.int16)
 
 
 def view_up(forward: Any) -> np.ndarray:
@@ -238,7 +258,7 @@ def _enc(arr: np.ndarray, dtype: str) -> str:
 
 def _dec(text: str) -> np.ndarray:
     dtype, _, data = str(text).partition(":")
-    if dtype not in ("<i1", "<u1", "<u2", "<u4", "<i4", "<f4", "<f8"):
+    if dtype not in ("<i1", "<u1", "<i2", "<u2", "<u4", "<i4", "<f4", "<f8"):
         raise ValueError(f"unsupported array dtype {dtype!r} in store")
     try:
         raw = base64.b64decode(data.encode("ascii"), validate=True)
@@ -311,6 +331,8 @@ class ParetoStore:
     fps: float = 30.0
     meta: dict[str, Any] = field(default_factory=dict)
     view_dirs: np.ndarray | None = None  # float64 (C, 6, 3) sample directions; None = the axes
+    frontier_dirs: np.ndarray | None = None  # float64 (F, 3) sample direction of each frontier
+    frontier_eyes: np.ndarray | None = None  # float64 (F, 3) sample eye of each frontier
 
     def __post_init__(self) -> None:
         self.root_min = _finite_vec3(self.root_min, "root_min")
@@ -345,6 +367,20 @@ class ParetoStore:
             if np.any(n < 1e-9):
                 raise ValueError("view_dirs must be non-zero")
             self.view_dirs = vd / n
+        if (self.frontier_dirs is None) != (self.frontier_eyes is None):
+            raise ValueError("frontier_dirs and frontier_eyes come together")
+        if self.frontier_dirs is not None:
+            fd = np.asarray(self.frontier_dirs, dtype=np.float64)
+            fe = np.asarray(self.frontier_eyes, dtype=np.float64)
+            nf = len(self.frontiers)
+            if fd.shape != (nf, 3) or fe.shape != (nf, 3) or not (np.all(np.isfinite(fd))
+                                                                   and np.all(np.isfinite(fe))):
+                raise ValueError("frontier_dirs and frontier_eyes must be finite (frontiers, 3)")
+            n = np.linalg.norm(fd, axis=1, keepdims=True)
+            if np.any(n < 1e-9):
+                raise ValueError("frontier_dirs must be non-zero")
+            self.frontier_dirs = fd / n
+            self.frontier_eyes = fe
         if len(self.parameters) > MAX_PARAMS:
             raise ValueError(f"at most {MAX_PARAMS} parameters")
         for prm in self.parameters:
@@ -406,6 +442,8 @@ class ParetoStore:
 
     def sample_direction(self, corner: int, view: int) -> np.ndarray:
         """Unit direction (world) at which the (corner, view) frontier was measured."""
+        if self.frontier_dirs is not None:
+            return self.frontier_dirs[int(self.corner_views[int(corner), int(view)])].copy()
         if self.view_dirs is None:
             return VIEW_FORWARD[int(view)].copy()
         return self.view_dirs[int(corner), int(view)].copy()
@@ -413,6 +451,8 @@ class ParetoStore:
     def sample_camera(self, corner: int, view: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(eye, forward, up) of the camera sample behind the (corner, view) frontier."""
         f = self.sample_direction(corner, view)
+        if self.frontier_eyes is not None:
+            return self.frontier_eyes[int(self.corner_views[int(corner), int(view)])].copy(), f, view_up(f)
         up = VIEW_UP[int(view)].copy() if self.view_dirs is None else view_up(f)
         return self.corner_positions()[int(corner)], f, up
 
@@ -478,6 +518,29 @@ class ParetoStore:
         face = np.concatenate((d, -d)).argmax(axis=0)
         return _SIGNED_TO_VIEW[int(np.bincount(face, weights=weights, minlength=6).argmax())]
 
+    def _locate(self, position: Any, rotation: np.ndarray, vfov: float, aspect: float
+                ) -> tuple[int, int, int, bool]:
+        """(leaf, corner, view, clamped) a camera looks up: nearest corner of its leaf, then the face."""
+        leaf, q, clamped = self.find_leaf(position)
+        qx, qy, qz = float(q[0]), float(q[1]), float(q[2])
+        best = math.inf
+        corner = -1
+        for c, (cx, cy, cz) in self._leaf_corner_pos[leaf]:
+            dd = (cx - qx) ** 2 + (cy - qy) ** 2 + (cz - qz) ** 2
+            if dd < best:
+                best, corner = dd, c
+        return leaf, corner, self.choose_view(rotation, vfov, aspect), clamped
+
+    def locate(self, position: Any, direction: Any = None, matrix: Any = None, fov: float | None = None,
+               aspect: float | None = None, up: Any = None) -> tuple[int, int]:
+        """(corner, view) whose frontier :meth:`lookup` would read for this camera (no budget needed);
+        the optimiser uses it to group path frames by the sample that will serve them."""
+        rot = camera_rotation(direction, matrix, up)
+        vf = self.vfov if fov is None else float(fov)
+        asp = self.aspect if aspect is None else float(aspect)
+        _, corner, view, _ = self._locate(position, rot, vf, asp)
+        return corner, view
+
     def lookup(self, position: Any, direction: Any = None, matrix: Any = None, fov: float | None = None,
                power_budget: float | None = None, error_budget: float | None = None,
                aspect: float | None = None, up: Any = None) -> LookupResult:
@@ -496,15 +559,7 @@ class ParetoStore:
         asp = self.aspect if aspect is None else float(aspect)
         if not (math.isfinite(asp) and asp > 0):
             raise ValueError("aspect must be positive")
-        leaf, q, clamped = self.find_leaf(position)
-        qx, qy, qz = float(q[0]), float(q[1]), float(q[2])
-        best = math.inf
-        corner = -1
-        for c, (cx, cy, cz) in self._leaf_corner_pos[leaf]:
-            dd = (cx - qx) ** 2 + (cy - qy) ** 2 + (cz - qz) ** 2
-            if dd < best:
-                best, corner = dd, c
-        view = self.choose_view(rot, vf, asp)
+        leaf, corner, view, clamped = self._locate(position, rot, vf, asp)
         fr = self.frontier(corner, view)
         if power_budget is not None:
             i, infeasible = fr.under_power(budget)
@@ -543,6 +598,10 @@ class ParetoStore:
         extra = {}
         if self.view_dirs is not None:
             extra["view_dirs"] = _enc(_direction_codes(self.view_dirs).reshape(-1), "<i1")
+        if self.frontier_dirs is not None and self.frontier_eyes is not None:
+            extra["frontier_dirs"] = _enc(_direction_codes(self.frontier_dirs, _DIR_Q16).reshape(-1), "<i2")
+            extra["frontier_eyes"] = _enc(_eye_codes(self.frontier_eyes, self.root_min,
+                                                     self.root_size).reshape(-1), "<u2")
         return {
             "format": FORMAT_NAME,
             "version": FORMAT_VERSION,
@@ -600,6 +659,12 @@ class ParetoStore:
                 if vq.size % 18:
                     raise ValueError("view_dirs length is not a multiple of 6 x 3")
                 view_dirs = vq.reshape(-1, 6, 3)
+            frontier_dirs = frontier_eyes = None
+            if d.get("version", 1) >= 3 and d.get("frontier_dirs") is not None:
+                frontier_dirs = _dec(d["frontier_dirs"]).astype(np.float64).reshape(-1, 3)
+                frontier_eyes = (np.asarray(d["root_min"], dtype=np.float64)
+                                 + _dec(d["frontier_eyes"]).astype(np.float64).reshape(-1, 3) / _EYE_Q
+                                 * float(d["root_size"]))
             return ParetoStore(
                 parameters=params,
                 root_min=np.asarray(d["root_min"], dtype=np.float64),
@@ -615,6 +680,8 @@ class ParetoStore:
                 fps=float(d["fps"]),
                 meta=dict(d.get("meta") or {}),
                 view_dirs=view_dirs,
+                frontier_dirs=frontier_dirs,
+                frontier_eyes=frontier_eyes,
             )
         except (KeyError, TypeError) as exc:
             raise ValueError(f"malformed store: missing or wrong field {exc}") from exc

@@ -54,7 +54,7 @@ def _path() -> CameraPath:
 
 def _options(**kw) -> OptimizeOptions:
     base = dict(threshold_power_w=0.01, threshold_error=0.005, max_depth=1, population=6, generations=3,
-                exhaustive_limit=0, eval_width=16, eval_height=12, seed=3)
+                exhaustive_limit=0, eval_width=16, eval_height=12, seed=3, view_sampling="aimed")
     base.update(kw)
     return OptimizeOptions(**base)
 
@@ -234,3 +234,89 @@ def test_axis_and_aimed_view_sampling(scene) -> None:
     assert any(not np.allclose(aimed.sample_direction(c, 2), [0, 1, 0]) for c in range(8))
     with pytest.raises(ValueError):
         OptimizeOptions(view_sampling="random")
+
+
+def _orbit_path(n: int = 12) -> CameraPath:
+    """Cameras on a quarter orbit around the teapot, looking at it."""
+    ang = np.linspace(-0.6, 0.9, n)
+    pos = [(6.0 * np.sin(a), -6.0 * np.cos(a), 2.5) for a in ang]
+    dirs = [(-x, -y, 0.6 - z) for x, y, z in pos]
+    return CameraPath.from_positions(pos, dirs, vfov=0.7, resolution=(320, 240))
+
+
+@pytest.mark.slow
+def test_path_sampling_prices_the_frames_it_serves(scene) -> None:
+    """Path sampling: every path frame reads a frontier measured at path cameras of its own group, and
+    with enough guard frames every frame is one of them, so the error and power measured at each frame
+    for the settings looked up are at most what the store predicted (the store bounds its frames)."""
+    from service.evaluation import CameraSpec, Evaluator
+
+    path = _orbit_path()
+    cache = EvalCache()
+    opts = _options(view_sampling="path", max_depth=5, path_resolution=0.1, guard_frames=8, population=6,
+                    generations=3)
+    store = optimize_path(scene, path, SPACE, opts, cache=cache, executor=InProcessExecutor())
+    st = store.stats()
+    assert store.meta["view_sampling"] == "path" and st["depth"] >= 2
+    assert store.frontier_dirs is not None and store.frontier_eyes is not None
+    back = ParetoStore.from_json(store.to_json())
+    assert np.allclose(back.frontier_eyes, store.frontier_eyes, atol=1e-9)
+    assert np.allclose(back.frontier_dirs, store.frontier_dirs, atol=1e-12)
+    positions = path.positions()
+    ev = Evaluator(scene, SPACE, cache=cache, profile="mobile", fps=30.0,
+                   target_pixels=320 * 240)
+    for f in path.frames:
+        m = np.asarray(f.matrix_world)
+        corner, view = store.locate(f.position, matrix=m, fov=f.vfov, aspect=f.aspect)
+        eye, _, _ = store.sample_camera(corner, view)
+        # the sample is a path camera (to the store's quantisation), not the corner
+        assert np.min(np.linalg.norm(positions - eye, axis=1)) < 1e-3
+        assert np.linalg.norm(eye - store.corner_positions()[corner]) > 1e-3
+        mid_power = float(np.median(store.frontier(corner, view).power_w))
+        for budget in ({"error_budget": 0.02}, {"power_budget": mid_power}):
+            r = store.lookup(f.position, matrix=m, fov=f.vfov, aspect=f.aspect, **budget)
+            assert (r.corner, r.view) == (corner, view)
+            idx = tuple(q.values.index(r.settings[q.name]) for q in SPACE.parameters)
+            cam = CameraSpec(tuple(f.position), tuple(f.direction), tuple(m[:3, 1]), store.vfov, 16, 12)
+            meas = ev.evaluate([(cam, idx)])[0]
+            # (within the store's quantisation of the sample camera: 1e-4 m, 0.002 degrees)
+            assert meas.error <= r.error + 1e-3 and meas.power_w <= r.power_w * 1.01
+
+
+@pytest.mark.slow
+def test_path_sampling_without_guards_and_determinism(scene) -> None:
+    """Without guard frames each frontier is the one measured at its sample; same seed, same store;
+    a finer resolution never gives fewer samples."""
+    path = _orbit_path(8)
+    cache = EvalCache()
+
+    def build(resolution: float) -> ParetoStore:
+        opts = _options(view_sampling="path", max_depth=4, path_resolution=resolution, guard_frames=0)
+        return optimize_path(scene, path, SPACE, opts, cache=cache, executor=InProcessExecutor())
+
+    coarse = build(0.5)
+    again = build(0.5)
+    assert _body(coarse) == _body(again) and again.meta["evaluations"] == 0
+    fine = build(0.1)
+    assert fine.stats()["depth"] > coarse.stats()["depth"]
+    assert fine.meta["views_optimised"] >= coarse.meta["views_optimised"]
+    from service.evaluation import CameraSpec, Evaluator
+    from service.pareto_store import unpack_indices, view_up
+
+    ev = Evaluator(scene, SPACE, cache=cache, profile="mobile", fps=30.0, target_pixels=320 * 240)
+    step = coarse.stats()["power_step_w"]
+    for fid, fr in enumerate(coarse.frontiers):
+        eye, fwd = coarse.frontier_eyes[fid], coarse.frontier_dirs[fid]
+        cam = CameraSpec(tuple(eye), tuple(fwd), tuple(view_up(fwd)), coarse.vfov, 16, 12)
+        got = ev.evaluate([(cam, unpack_indices(int(p), coarse.n_params)) for p in fr.packed])
+        assert np.allclose([g.error for g in got], fr.error, atol=2e-5)
+        assert np.allclose([g.power_w for g in got], fr.power_w, atol=step)
+    assert ev.evaluations == 0  # every one of them was rendered by the optimiser at that very camera
+    for store in (coarse, fine):
+        assert all(float(fr.error.min()) == 0.0 for fr in store.frontiers)
+        for fr in store.frontiers:
+            assert np.all(np.diff(fr.power_w) >= 0) and np.all(np.diff(fr.error) <= 0)
+    with pytest.raises(ValueError):
+        OptimizeOptions(path_resolution=0.0)
+    with pytest.raises(ValueError):
+        OptimizeOptions(guard_frames=-1)

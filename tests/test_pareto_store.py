@@ -384,7 +384,7 @@ def test_view_dirs_roundtrip_and_old_version_loads_as_axis_views() -> None:
     s = _aimed_store()
     text = s.to_json()
     doc = json.loads(text)
-    assert doc["version"] == 2 and "view_dirs" in doc
+    assert doc["version"] == 3 and "view_dirs" in doc
     t = ParetoStore.from_json(text)
     assert t.to_json() == text
     assert np.allclose(t.view_dirs, quantise_directions(s.view_dirs))

@@ -123,12 +123,30 @@ def parser() -> argparse.ArgumentParser:
 
 # -- resources -----------------------------------------------------------------------------------------
 def process_cpu_s(pid: int) -> float | None:
-    """User + system CPU seconds of a running process (Linux /proc; None elsewhere)."""
+    """User + system CPU seconds of a running process and of its live and finished descendants (the
+    service's evaluation workers): Linux /proc; None elsewhere."""
+    stats: dict[int, list[str]] = {}
     try:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-    except (OSError, IndexError, ValueError):
+        for entry in Path("/proc").iterdir():
+            if entry.name.isdigit():
+                try:
+                    stats[int(entry.name)] = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+                except (OSError, IndexError):
+                    continue
+    except OSError:
         return None
+    if pid not in stats:
+        return None
+    children: dict[int, list[int]] = {}
+    for p, f in stats.items():
+        children.setdefault(int(f[1]), []).append(p)
+    total, todo = 0, [pid]
+    while todo:
+        p = todo.pop()
+        f = stats[p]
+        total += int(f[11]) + int(f[12]) + (int(f[13]) + int(f[14]) if p == pid else 0)
+        todo.extend(children.get(p, []))
+    return total / os.sysconf("SC_CLK_TCK")
 
 
 def own_cpu_s() -> float:
@@ -357,7 +375,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
     resolution = args.resolution or default_resolution(path)
     path_resolution = tuple(int(v) for v in path.frames[0].resolution)
-    service = LocalService(sys.executable, free_port(), args.data_dir)
+    # the service renders a job's evaluations on every core, like the add-on's local service
+    service = LocalService(sys.executable, free_port(), args.data_dir, eval_workers=os.cpu_count() or 1)
     say(f"== 2/5 service: render-budget serve on {service.url}, data in {args.data_dir}")
     result: dict[str, Any] = {}
     try:  # from here on the service is stopped whatever happens (also Ctrl-C while it starts)

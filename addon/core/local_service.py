@@ -20,7 +20,7 @@ def free_port(host: str = "127.0.0.1") -> int:
 
 
 def serve_command(python: str | Path, port: int, data_dir: str | Path, token: str | None = None,
-                  host: str = "127.0.0.1") -> list[str]:
+                  host: str = "127.0.0.1", eval_workers: int | None = None) -> list[str]:
     """Command line that runs the service with `python`: its `render-budget` script when present."""
     python = Path(python)
     if not python.is_file():
@@ -33,17 +33,21 @@ def serve_command(python: str | Path, port: int, data_dir: str | Path, token: st
     cmd = [*head, "serve", "--host", host, "--port", str(int(port)), "--data-dir", str(data_dir)]
     if token:
         cmd += ["--token", token]
+    if eval_workers is not None:
+        cmd += ["--eval-workers", str(int(eval_workers))]
     return cmd
 
 
 class LocalService:
     """A `render-budget serve` child process bound to loopback; stopped explicitly or at exit."""
 
-    def __init__(self, python: str | Path, port: int, data_dir: str | Path, token: str | None = None) -> None:
+    def __init__(self, python: str | Path, port: int, data_dir: str | Path, token: str | None = None,
+                 eval_workers: int | None = None) -> None:
         self.port = int(port)
         self.data_dir = Path(data_dir)
         self.token = token or None
-        self.command = serve_command(python, self.port, self.data_dir, self.token)
+        self.command = serve_command(python, self.port, self.data_dir, self.token,
+                                     eval_workers=eval_workers)
         self.process: subprocess.Popen | None = None
         self.log_path = self.data_dir / "service.log"
 

@@ -171,6 +171,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         scene_cache = SceneCache(storage, capacity=settings.scene_cache_size)
         manager = JobManager(storage, scene_cache, workers=settings.job_workers,
                              dask_scheduler=settings.dask_scheduler, render_threads=settings.render_threads,
+                             eval_workers=settings.eval_workers,
                              ship_scenes=settings.dask_ship_scenes)
         app.state.render_budget = AppState(settings=settings, storage=storage, scenes=scene_cache,
                                            jobs=manager, stores=StoreCache(storage,

@@ -47,6 +47,9 @@ class Settings(BaseSettings):
     max_render_pixels: int = Field(default=1024 * 1024, gt=0)  # previews and /evaluate
     # Work.
     job_workers: int = Field(default=2, ge=1, le=64)
+    # Local worker processes rendering a job's evaluations (1: in the job's own thread). Ignored when a
+    # Dask scheduler is set.
+    eval_workers: int = Field(default=1, ge=1, le=256)
     render_threads: int | None = Field(default=None, ge=1)
     scene_cache_size: int = Field(default=8, ge=1)
     store_cache_size: int = Field(default=64, ge=1)

@@ -111,11 +111,29 @@ class Thresholds(StrictModel):
 
 
 class OptimizerOptions(StrictModel):
-    max_depth: Annotated[int, Field(ge=0, le=8)] = 1
+    """How the store's camera samples are placed and searched (``service.optimize.OptimizeOptions``).
+
+    ``view_sampling``: ``path`` (default) measures each octree face at the path camera that best
+    represents the frames looking it up, on a lattice refined to ``path_resolution`` times the viewing
+    distance (capped by ``max_depth``), and prices each frontier at ``guard_frames`` more path cameras;
+    ``aimed`` and ``axis`` are the paper's six views per corner (aimed at what the path sees, or along
+    the world axes) with frontier-difference refinement down to ``max_depth``."""
+
+    max_depth: Annotated[int, Field(ge=0, le=8)] = 6
+    min_depth: Annotated[int, Field(ge=0, le=8)] = 0
+    view_sampling: Literal["path", "aimed", "axis"] = "path"
+    path_resolution: Annotated[float, Field(gt=0.0, le=10.0)] = 0.25
+    guard_frames: Annotated[int, Field(ge=0, le=8)] = 2
     population: Annotated[int, Field(ge=4, le=512)] = 24
     generations: Annotated[int, Field(ge=1, le=500)] = 25
     seed: Annotated[int, Field(ge=0, le=2**31 - 1)] = 0
     exhaustive_limit: Annotated[int, Field(ge=0, le=65536)] = 512
+
+    @model_validator(mode="after")
+    def _depths(self) -> OptimizerOptions:
+        if self.min_depth > self.max_depth:
+            raise ValueError("min_depth must not exceed max_depth")
+        return self
 
 
 class JobCreate(StrictModel):

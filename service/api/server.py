@@ -13,9 +13,12 @@ from .config import Settings
 
 
 def run(host: str = "127.0.0.1", port: int = 8765, data_dir: str | Path | None = None,
-        dask_scheduler: str | None = None, token: str | None = None, *, log_level: str = "info") -> None:
+        dask_scheduler: str | None = None, token: str | None = None, *, log_level: str = "info",
+        eval_workers: int | None = None) -> None:
     """Serve until interrupted. Raises ValueError for a non-loopback bind without a token."""
     kwargs: dict[str, object] = {"host": host, "port": port, "dask_scheduler": dask_scheduler, "token": token}
+    if eval_workers is not None:
+        kwargs["eval_workers"] = eval_workers
     if data_dir is not None:
         kwargs["data_dir"] = Path(data_dir)
     settings = Settings(**kwargs)
@@ -34,6 +37,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dask-scheduler", default=None, help="fan evaluations out to this Dask scheduler")
     parser.add_argument("--token", default=None, help="require a bearer token on all but /health")
     parser.add_argument("--log-level", default="info")
+    parser.add_argument("--eval-workers", type=int, default=None,
+                        help="local processes rendering a job's evaluations (default 1; ignored with Dask)")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -41,7 +46,8 @@ def main(argv: list[str] | None = None) -> int:
     add_arguments(parser)
     args = parser.parse_args(argv)
     try:
-        run(args.host, args.port, args.data_dir, args.dask_scheduler, args.token, log_level=args.log_level)
+        run(args.host, args.port, args.data_dir, args.dask_scheduler, args.token, log_level=args.log_level,
+            eval_workers=args.eval_workers)
     except ValueError as exc:
         parser.exit(2, f"error: {exc}\n")
     return 0
