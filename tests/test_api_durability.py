@@ -131,3 +131,17 @@ def test_dask_local_cluster_gives_the_in_process_store(tmp_path: Path) -> None:
         assert len(kept) == 2 and all(v == [content_hash] for v in kept.values()), kept
     assert comparable(dask_store) == comparable(local_store)
     assert json.loads(dask_store)["meta"]["executor"] == "dask"
+
+
+@pytest.mark.slow
+def test_process_pool_service_gives_the_in_process_store(tmp_path: Path) -> None:
+    """``--eval-workers 2``: a job's renders run in two local processes; the store (path sampling, the
+    default) is the one the in-process service makes."""
+    _, local_store, _ = run_uninterrupted(tmp_path / "local", durable_spec)
+    _, pool_store, _ = run_uninterrupted(tmp_path / "pool", durable_spec, eval_workers=2)
+    with server_thread(Settings(data_dir=tmp_path / "pool", eval_workers=2)) as url:
+        assert httpx.get(f"{url}/health").json()["executor"] == "process-pool:2"
+    assert comparable(pool_store) == comparable(local_store)
+    doc = json.loads(pool_store)
+    assert doc["meta"]["executor"] == "process-pool" and doc["meta"]["view_sampling"] == "path"
+    assert "frontier_eyes" in doc and "frontier_dirs" in doc

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import struct
 from collections.abc import Iterator
 from pathlib import Path
@@ -245,3 +246,14 @@ def test_non_loopback_bind_with_token_requires_bearer(tmp_path: Path) -> None:
         assert_error(r, 404)
     finally:
         srv.stop()
+
+
+@pytest.mark.parametrize("options", [
+    {"view_sampling": "random"}, {"min_depth": 3, "max_depth": 2}, {"path_resolution": 0.0},
+    {"path_resolution": float("inf")}, {"guard_frames": 9}, {"max_depth": 9},
+])
+def test_bad_optimiser_options_are_422(client: httpx.Client, options: dict) -> None:
+    body = {"scene_id": "a" * 64, "camera_path": camera_path(), "options": options}
+    r = client.post("/jobs", content=json.dumps(body, allow_nan=True),
+                    headers={"Content-Type": "application/json"})
+    assert_error(r, 422, "min_depth" if "min_depth" in options else next(iter(options)))
