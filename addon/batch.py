@@ -106,6 +106,9 @@ def parser() -> argparse.ArgumentParser:
     budget(opt)
     opt.add_argument("--profile")
     opt.add_argument("--max-depth", type=int)
+    opt.add_argument("--camera-sampling", choices=("path", "aimed", "axis"))
+    opt.add_argument("--path-resolution", type=float)
+    opt.add_argument("--guard-frames", type=int)
     opt.add_argument("--population", type=int)
     opt.add_argument("--generations", type=int)
     opt.add_argument("--seed", type=int)
@@ -144,10 +147,13 @@ def _apply_scene_options(ext: str, props, args: argparse.Namespace) -> None:
     for arg, prop in (("filter_period", "filter_period"), ("profile", "profile"), ("max_depth", "max_depth"),
                       ("population", "population"), ("generations", "generations"), ("seed", "seed"),
                       ("threshold_power", "threshold_power"), ("threshold_error", "threshold_error"),
-                      ("frame_step", "frame_step")):
+                      ("frame_step", "frame_step"), ("path_resolution", "path_resolution"),
+                      ("guard_frames", "guard_frames")):
         value = getattr(args, arg, None)
         if value is not None:
             setattr(props, prop, value)
+    if getattr(args, "camera_sampling", None):
+        props.camera_sampling = args.camera_sampling.upper()
     if getattr(args, "resolution", None):
         try:
             w, h = (int(v) for v in args.resolution.lower().split("x"))

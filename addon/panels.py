@@ -58,10 +58,18 @@ class VIEW3D_PT_power_budget(bpy.types.Panel):
                              rows=4)
 
         col = layout.column(align=True)
-        col.label(text="Subdivision")
-        col.prop(props, "threshold_power")
-        col.prop(props, "threshold_error")
+        col.label(text="Camera samples")
+        col.prop(props, "camera_sampling", text="")
         col.prop(props, "max_depth")
+        path_mode = props.camera_sampling == "PATH"
+        sub = col.column(align=True)
+        sub.active = path_mode
+        sub.prop(props, "path_resolution")
+        sub.prop(props, "guard_frames")
+        sub = col.column(align=True)
+        sub.active = not path_mode  # frontier-difference thresholds split the paper's view cubes only
+        sub.prop(props, "threshold_power")
+        sub.prop(props, "threshold_error")
         col = layout.column(align=True)
         col.label(text="Optimiser")
         col.prop(props, "population")

@@ -41,7 +41,22 @@ class POWER_PG_scene(bpy.types.PropertyGroup):
                                    description="Subdivide where neighbouring frontiers differ by more power")
     threshold_error: FloatProperty(name="Error threshold", default=0.01, min=0.0, max=1.0,  # type: ignore
                                    precision=4, description="Subdivide where frontiers differ by more error")
-    max_depth: IntProperty(name="Max depth", default=2, min=0, max=8)  # type: ignore
+    camera_sampling: EnumProperty(  # type: ignore
+        name="Camera samples",
+        items=(("PATH", "Path cameras", "Measure each octree face the path looks up at the path camera most "
+                "like the frames looking it up, on a lattice refined by viewing distance (recommended)"),
+               ("AIMED", "Aimed view cubes", "The paper's six views per corner, aimed at what the path sees, "
+                "split where neighbouring frontiers differ"),
+               ("AXIS", "Axis view cubes", "The paper's six world-axis views per corner")),
+        default="PATH",
+    )
+    path_resolution: FloatProperty(name="Path resolution", default=0.25, min=0.01, max=10.0,  # type: ignore
+                                   description="Path cameras: octree leaves at most this times the viewing "
+                                   "distance wide")
+    guard_frames: IntProperty(name="Guard frames", default=2, min=0, max=8,  # type: ignore
+                              description="Path cameras: also price each frontier at this many more path "
+                              "cameras, keeping the worst error and power")
+    max_depth: IntProperty(name="Max depth", default=6, min=0, max=8)  # type: ignore
     population: IntProperty(name="Population", default=24, min=4, max=1000)  # type: ignore
     generations: IntProperty(name="Generations", default=25, min=1, max=1000)  # type: ignore
     seed: IntProperty(name="Seed", default=0, min=0)  # type: ignore

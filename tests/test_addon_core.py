@@ -140,8 +140,14 @@ def test_job_options_validate_and_build_the_payload() -> None:
     body = o.payload("a" * 64, {"version": 1, "fps": 24.0, "frames": []})
     assert body["parameters"] == ["max_depth"] and body["resolution"] == [32, 24]
     assert body["thresholds"] == {"power_w": 0.05, "error": 0.01}
+    assert body["options"]["view_sampling"] == "path" and body["options"]["guard_frames"] == 2
+    # the payload is what the service's schema accepts, field for field
+    from service.api.schemas import OptimizerOptions
+
+    assert OptimizerOptions(**body["options"]).model_dump(exclude={"min_depth"}) == body["options"]
     for bad in (dict(threshold_power_w=0), dict(threshold_error=2), dict(max_depth=9),
-                dict(resolution=(2, 2)), dict(parameters=())):
+                dict(resolution=(2, 2)), dict(parameters=()), dict(view_sampling="random"),
+                dict(path_resolution=0.0), dict(guard_frames=9)):
         with pytest.raises(ValueError):
             JobOptions(**bad)
 

@@ -33,7 +33,10 @@ class JobOptions:
     parameters: tuple[str, ...] | None = None  # None: all, minus inert (service default)
     threshold_power_w: float = 0.05
     threshold_error: float = 0.01
-    max_depth: int = 1
+    max_depth: int = 6
+    view_sampling: str = "path"  # "path" | "aimed" | "axis" (service.optimize.OptimizeOptions)
+    path_resolution: float = 0.25
+    guard_frames: int = 2
     population: int = 24
     generations: int = 25
     seed: int = 0
@@ -49,6 +52,12 @@ class JobOptions:
             raise ValueError(f"threshold_error must be <= 1, got {self.threshold_error}")
         if not 0 <= self.max_depth <= 8:
             raise ValueError(f"max_depth must be in 0..8, got {self.max_depth}")
+        if self.view_sampling not in ("path", "aimed", "axis"):
+            raise ValueError(f"view_sampling must be path, aimed or axis, got {self.view_sampling!r}")
+        if not (math.isfinite(self.path_resolution) and 0 < self.path_resolution <= 10):
+            raise ValueError(f"path_resolution must be in (0, 10], got {self.path_resolution}")
+        if not 0 <= self.guard_frames <= 8:
+            raise ValueError(f"guard_frames must be in 0..8, got {self.guard_frames}")
         w, h = self.resolution
         if not (4 <= w <= 1024 and 4 <= h <= 1024):
             raise ValueError(f"evaluation resolution must be within 4..1024 pixels, got {w}x{h}")
@@ -60,8 +69,9 @@ class JobOptions:
             "scene_id": scene_id,
             "camera_path": path_doc,
             "thresholds": {"power_w": self.threshold_power_w, "error": self.threshold_error},
-            "options": {"max_depth": self.max_depth, "population": self.population,
-                        "generations": self.generations, "seed": self.seed,
+            "options": {"max_depth": self.max_depth, "view_sampling": self.view_sampling,
+                        "path_resolution": self.path_resolution, "guard_frames": self.guard_frames,
+                        "population": self.population, "generations": self.generations, "seed": self.seed,
                         "exhaustive_limit": self.exhaustive_limit},
             "profile": self.profile,
             "resolution": [int(self.resolution[0]), int(self.resolution[1])],
