@@ -513,19 +513,25 @@ class OctreeBuilder:
         self._inherit_unsampled()
         self._report("done")
 
+    def _add_children(self, node: int, child_depth: int) -> list[int]:
+        """Append ``node``'s eight children (consecutive, in the store's child order); return them."""
+        (x, y, z), s, _ = self.nodes[node]
+        h = s // 2
+        first = len(self.nodes)
+        self.children[node] = first
+        for k in range(8):
+            self.nodes.append(((x + h * (k & 1), y + h * ((k >> 1) & 1), z + h * ((k >> 2) & 1)), h,
+                               child_depth))
+            self.children.append(-1)
+        return list(range(first, first + 8))
+
     def _split_plain(self, nodes: Sequence[int], child_depth: int) -> list[int]:
         """Split ``nodes`` and create their new corners without optimising anything."""
         children = []
         for n in nodes:
             (x, y, z), s, _ = self.nodes[n]
             h = s // 2
-            first = len(self.nodes)
-            self.children[n] = first
-            for k in range(8):
-                self.nodes.append(((x + h * (k & 1), y + h * ((k >> 1) & 1), z + h * ((k >> 2) & 1)), h,
-                                   child_depth))
-                self.children.append(-1)
-                children.append(first + k)
+            children += self._add_children(n, child_depth)
             for i, j, k in itertools.product(range(3), repeat=3):
                 self._corner((x + h * i, y + h * j, z + h * k))
         return children
@@ -629,13 +635,7 @@ class OctreeBuilder:
         for n in nodes:
             (x, y, z), s, _ = self.nodes[n]
             h = s // 2
-            first = len(self.nodes)
-            self.children[n] = first
-            for k in range(8):
-                self.nodes.append(((x + h * (k & 1), y + h * ((k >> 1) & 1), z + h * ((k >> 2) & 1)), h,
-                                   child_depth))
-                self.children.append(-1)
-                children.append(first + k)
+            children += self._add_children(n, child_depth)
             for i in range(3):
                 for j in range(3):
                     for k in range(3):
