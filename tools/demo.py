@@ -312,8 +312,8 @@ def write_samples(client: ServiceClient, store: ParetoStore, path: CameraPath, s
 
 
 def table2_markdown(rows: Sequence[Sequence[Any]]) -> str:
-    head = ("Demo", "Tris.", "Thld. (power, error)", "Preprocess", "Levels", "Corners", "Views", "Data size",
-            "Duration")
+    head = ("Demo", "Tris.", "Thld. (power, error) or path sampling", "Preprocess", "Levels", "Corners",
+            "Views", "Data size", "Duration")
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     lines += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
     return "\n".join(lines) + "\n"
@@ -466,7 +466,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         targets["background_view_frames"] = flat_share
         table2 = table2_markdown([(
             f"{args.scene} (ours)", f"{stats.get('triangles', '?'):,}" if stats else "?",
-            f"({meta['thresholds']['power_w']:g} W, {meta['thresholds']['error']:g})",
+            (f"path {meta.get('path_resolution', 0):g} x view dist., {meta.get('guard_frames', 0)} guards"
+             if meta.get("view_sampling") == "path" else
+             f"({meta['thresholds']['power_w']:g} W, {meta['thresholds']['error']:g})"),
             f"{opt_phase['wall_s'] / 60:.1f} min ({opt_phase['cpu_s'] / 60:.1f} CPU min)", st["depth"],
             st["corners"], st["unique_frontiers"], f"{st['size_bytes'] / 1024:.1f} KB", f"{duration:.0f} s"),
             *PAPER_TABLE2])
