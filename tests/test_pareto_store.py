@@ -414,6 +414,59 @@ def test_view_dirs_roundtrip_and_old_version_loads_as_axis_views() -> None:
                     np.zeros((8, 6), dtype=np.int64), [_frontier(0)], view_dirs=np.zeros((8, 6, 3)))
 
 
+def test_frontier_cameras_roundtrip_and_locate_matches_lookup() -> None:
+    """Version 3: one sample camera per frontier (path-sampled stores); every face sharing a frontier
+    reports its camera; `locate` is the lookup's (corner, view) without a budget."""
+    from service.pareto_store import quantise_directions, quantise_eyes
+
+    s = _store(subdivide=True)
+    rng = np.random.default_rng(5)
+    nf = len(s.frontiers)
+    eyes = s.root_min + rng.uniform(0, s.root_size, size=(nf, 3))
+    s.frontier_dirs = rng.normal(size=(nf, 3))
+    s.frontier_eyes = eyes
+    s.__post_init__()
+    text = s.to_json()
+    doc = json.loads(text)
+    assert doc["version"] == 3 and "frontier_dirs" in doc and "frontier_eyes" in doc
+    t = ParetoStore.from_json(text)
+    assert t.to_json() == text  # decoding and re-encoding is stable
+    assert np.allclose(t.frontier_eyes, quantise_eyes(eyes, s.root_min, s.root_size), atol=1e-12)
+    assert np.max(np.abs(t.frontier_eyes - eyes)) <= s.root_size / 65535
+    assert np.allclose(t.frontier_dirs, quantise_directions(s.frontier_dirs, fine=True))
+    for c in range(t.corner_coords.shape[0]):
+        for v in range(6):
+            eye, f, up = t.sample_camera(c, v)
+            fid = int(t.corner_views[c, v])
+            assert np.array_equal(eye, t.frontier_eyes[fid]) and np.array_equal(f, t.frontier_dirs[fid])
+            assert abs(float(f @ up)) < 0.96
+    for pos, d in (([0.3, 1.2, 0.5], [0, -1, 0.2]), ([1.9, 0.1, 1.0], [1, 0.1, -0.3])):
+        r = t.lookup(pos, direction=d, error_budget=0.05)
+        assert t.locate(pos, direction=d) == (r.corner, r.view)
+    bad = json.loads(text)
+    bad["frontier_eyes"] = bad["frontier_eyes"][:-4]
+    with pytest.raises(ValueError):
+        ParetoStore.from_dict(bad)
+    with pytest.raises(ValueError):  # both or neither
+        ParetoStore(PARAMS, s.root_min, s.root_size, s.lattice_depth, s.children, s.corner_coords,
+                    s.corner_views, s.frontiers, frontier_dirs=np.ones((nf, 3)))
+    with pytest.raises(ValueError):  # one per frontier
+        ParetoStore(PARAMS, s.root_min, s.root_size, s.lattice_depth, s.children, s.corner_coords,
+                    s.corner_views, s.frontiers, frontier_dirs=np.ones((nf + 1, 3)),
+                    frontier_eyes=np.ones((nf + 1, 3)))
+
+
+@given(st.lists(_unit_dirs, min_size=1, max_size=12))
+def test_fine_directions_are_within_a_hundredth_of_a_degree(vs) -> None:
+    from service.pareto_store import quantise_directions
+
+    d = np.asarray(vs, dtype=np.float64)
+    q = quantise_directions(d, fine=True)
+    u = d / np.linalg.norm(d, axis=1, keepdims=True)
+    assert np.all((q * u).sum(axis=1) > math.cos(math.radians(0.01)))
+    assert np.array_equal(quantise_directions(q, fine=True), q)
+
+
 @given(st.lists(st.tuples(st.floats(-50, 50), st.floats(-50, 50), st.floats(-5, 5)), min_size=1,
                 max_size=20), st.floats(0.0, 0.5))
 def test_root_cube_resting_on_the_path_still_contains_it(pts, pad) -> None:
