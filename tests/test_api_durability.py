@@ -52,10 +52,17 @@ def comparable(store_json: str) -> dict[str, Any]:
     return doc
 
 
-def durable_spec(scene_id: str) -> dict[str, Any]:
+def durable_spec(scene_id: str, sampling: str = "aimed") -> dict[str, Any]:
+    """A job long enough to be killed mid-way: the paper's view cubes (48 root views, then a split) do
+    more work on this 3-frame path than path sampling, which needs only the frames' few samples."""
     spec = tiny_job(scene_id, resolution=(24, 18), depth_values=(0, 1, 2))
     spec["options"]["max_depth"] = 1
+    spec["options"]["view_sampling"] = sampling
     return spec
+
+
+def path_spec(scene_id: str) -> dict[str, Any]:
+    return durable_spec(scene_id, "path")
 
 
 def run_uninterrupted(data_dir: Path, spec_of: Any, **settings: Any) -> tuple[dict[str, Any], str, int]:
@@ -137,8 +144,8 @@ def test_dask_local_cluster_gives_the_in_process_store(tmp_path: Path) -> None:
 def test_process_pool_service_gives_the_in_process_store(tmp_path: Path) -> None:
     """``--eval-workers 2``: a job's renders run in two local processes; the store (path sampling, the
     default) is the one the in-process service makes."""
-    _, local_store, _ = run_uninterrupted(tmp_path / "local", durable_spec)
-    _, pool_store, _ = run_uninterrupted(tmp_path / "pool", durable_spec, eval_workers=2)
+    _, local_store, _ = run_uninterrupted(tmp_path / "local", path_spec)
+    _, pool_store, _ = run_uninterrupted(tmp_path / "pool", path_spec, eval_workers=2)
     with server_thread(Settings(data_dir=tmp_path / "pool", eval_workers=2)) as url:
         assert httpx.get(f"{url}/health").json()["executor"] == "process-pool:2"
     assert comparable(pool_store) == comparable(local_store)
