@@ -257,6 +257,8 @@ class OctreeBuilder:
         self.sample_scale: dict[tuple[int, int], float] = {}  # median viewing distance of its frames
         self.frame_samples: list[tuple[int, int]] = []  # (corner, view) each path frame looks up
         self.t0 = time.perf_counter()
+        self._steps_done = 0
+        self._steps_planned = 0
         self.state = Progress(phase="root")
 
     # -- bookkeeping --------------------------------------------------------------------------------
@@ -268,8 +270,10 @@ class OctreeBuilder:
         s.evaluations = self.ev.evaluations
         s.cache_hits = self.ev.cache_hits
         s.elapsed_s = time.perf_counter() - self.t0
-        s.estimate_s = (s.elapsed_s / s.views_done * max(s.views_planned - s.views_done, 0)
-                        if s.views_done else None)
+        # time per search step (one generation, or one chunk of an enumeration, of one camera) so far,
+        # times the steps still planned: warm-started searches are shorter than full ones
+        s.estimate_s = (s.elapsed_s / self._steps_done * max(self._steps_planned - self._steps_done, 0)
+                        if self._steps_done else None)
         if self._progress_cb is not None:
             self._progress_cb(Progress(**vars(s)))
 
@@ -325,12 +329,24 @@ class OctreeBuilder:
 
     # -- searches -----------------------------------------------------------------------------------
 
+    def _search_steps(self, n_jobs: int, generations: int | None = None) -> int:
+        """Steps of ``n_jobs`` searches run together: chunks of the enumeration, or NSGA-II generations."""
+        if self.space.size <= self.cfg.exhaustive_limit:
+            n = math.prod(self.space.free_n_values)
+            return n_jobs * -(-n // max(1, 256 // max(1, n_jobs)))
+        return n_jobs * (generations or self.cfg.nsga.generations)
+
     def _optimise(self, jobs: Sequence[tuple[int, int, list[Indices]]], phase: str,
-                  generations: int | None = None) -> None:
+                  generations: int | None = None, planned: bool = False) -> None:
         """Frontiers for (corner, view, warm start) jobs, all searches in lockstep (``generations``
-        overrides the configured number, for short searches from a good warm start)."""
+        overrides the configured number, for short searches from a good warm start; ``planned``: their
+        steps were already counted in the progress estimate)."""
         if not jobs:
             return
+        steps_before = self._steps_done
+        stage_steps = self._search_steps(len(jobs), generations)
+        if not planned:
+            self._steps_planned += stage_steps
         nv = self.space.free_n_values
         cams = [self.camera(c, v) for c, v, _ in jobs]
         archives: list[Archive]
@@ -347,6 +363,7 @@ class OctreeBuilder:
                     for k, x in enumerate(part):
                         ev = res[j * len(part) + k]
                         archives[j].add(x, (ev.error, ev.power_w))
+                self._steps_done += len(jobs)
                 self._report(phase)
         else:
             algos = []
@@ -371,6 +388,7 @@ class OctreeBuilder:
                 for j, b in asks:
                     algos[j].tell([(r.error, r.power_w) for r in res[k:k + len(b)]])
                     k += len(b)
+                self._steps_done += len(asks)
                 self._report(phase)
             archives = [a.archive for a in algos]
         for (c, v, _), arch in zip(jobs, archives, strict=True):
@@ -378,6 +396,7 @@ class OctreeBuilder:
             self.frontiers.append(FrontierRecord(c, v, pts))
             self.corner_views[c][v] = len(self.frontiers) - 1
             self.state.views_done += 1
+        self._steps_done = max(self._steps_done, steps_before + stage_steps)  # searches that ended early
         self._report(phase)
 
     def _distances(self, pairs: Sequence[tuple[int, int, int]]) -> list[tuple[float, float]]:
@@ -496,6 +515,11 @@ class OctreeBuilder:
         anchors = list(range(0, len(order), stride))
         if anchors and anchors[-1] != len(order) - 1 and len(order) > 1:
             anchors.append(len(order) - 1)
+        warm_generations = min(self.cfg.warm_generations, self.cfg.nsga.generations)
+        self._steps_planned += self._search_steps(len(order) - len(anchors), warm_generations)
+        # pricing a frontier at a guard camera renders about a population's worth: one step each
+        guard_steps = sum(len(g) for g in guards.values())
+        self._steps_planned += guard_steps
         self._optimise([(*order[i], []) for i in anchors], "optimise path samples")
         anchor_set = set(anchors)
         jobs = []
@@ -508,8 +532,9 @@ class OctreeBuilder:
             fb = self.frontiers[self.corner_views[order[after][0]][order[after][1]]].settings()
             warm = [x for pair in itertools.zip_longest(fa, fb) for x in pair if x is not None]
             jobs.append((c, v, warm))
-        self._optimise(jobs, "refine path samples", generations=self.cfg.warm_generations)
+        self._optimise(jobs, "refine path samples", generations=warm_generations, planned=True)
         self._guard(guards)
+        self._steps_done += guard_steps
         self._inherit_unsampled()
         self._report("done")
 
