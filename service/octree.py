@@ -255,7 +255,6 @@ class OctreeBuilder:
         # "path" sampling: the camera behind each optimised (corner, view)
         self.sample_cams: dict[tuple[int, int], CameraSpec] = {}
         self.sample_scale: dict[tuple[int, int], float] = {}  # median viewing distance of its frames
-        self.frame_samples: list[tuple[int, int]] = []  # (corner, view) each path frame looks up
         self.t0 = time.perf_counter()
         self._steps_done = 0
         self._steps_planned = 0
@@ -577,11 +576,9 @@ class OctreeBuilder:
         assert self.path_matrices is not None
         skel = self._skeleton()
         groups: dict[tuple[int, int], list[int]] = {}
-        self.frame_samples = []
         for i, m in enumerate(self.path_matrices):
             cv = skel.locate(self.path_positions[i], matrix=m, fov=float(self.path_vfovs[i]),
                              aspect=float(self.path_aspects[i]))
-            self.frame_samples.append(cv)
             groups.setdefault(cv, []).append(i)
         return groups
 
@@ -609,8 +606,8 @@ class OctreeBuilder:
 
     def _guard(self, guards: dict[tuple[int, int], list[CameraSpec]]) -> None:
         """Price every frontier setting at its sample's guard cameras too and keep, per setting, the
-        worst error and power seen, then the Pareto-optimal points of that: the stored frontier then
-        bounds the frames between the sample and its guards, not just the sample itself."""
+        worst error and power seen: the stored frontier then bounds the frames between the sample and
+        its guards, not just the sample itself."""
         reqs: list[tuple[CameraSpec, Indices]] = []
         for cv, cams in guards.items():
             rec = self.frontiers[self.corner_views[cv[0]][cv[1]]]
@@ -628,13 +625,10 @@ class OctreeBuilder:
                 r = [next(res) for _ in rec.points]
                 e = np.maximum(e, [x.error for x in r])
                 pw = np.maximum(pw, [x.power_w for x in r])
-            order = np.lexsort((e, pw))
-            kept, best = [], math.inf
-            for i in order:
-                if e[i] < best:
-                    kept.append(int(i))
-                    best = float(e[i])
-            rec.points = [(rec.points[i][0], float(e[i]), float(pw[i])) for i in kept]
+            # points the worst case made dominated are dropped where every record becomes a store
+            # frontier (Frontier.from_points in to_store)
+            rec.points = [(x, float(ei), float(pi))
+                          for (x, _, _), ei, pi in zip(rec.points, e, pw, strict=True)]
 
     def _inherit_unsampled(self) -> None:
         """Views no path frame looks up take the frontier (and sample camera) of the sample nearest to

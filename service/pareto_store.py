@@ -15,7 +15,7 @@ Layout of a store (power-budget paper, sec. 4.2 and 6):
   axis itself (version 1, or ``view_dirs`` absent) or, since version 2, a per-(corner, view) direction
   aimed at what the path's cameras looking through that face see (``view_dirs``: int8 unit vectors,
   :func:`quantise_directions`). Since version 3 a store may instead give every *frontier* the camera
-  it was measured at (``frontier_dirs``: int8 directions, ``frontier_eyes``: uint16 positions over the
+  it was measured at (``frontier_dirs``: int16 directions, ``frontier_eyes``: uint16 positions over the
   root cube, :func:`quantise_eyes`): path-sampled stores measure each face the path looks up at the
   path camera that best represents the frames looking it up, away from the corner, and the faces
   that inherit that frontier share its camera. Lookup still picks the nearest corner and the face

@@ -265,8 +265,7 @@ def background_views(store: ParetoStore, path: CameraPath, frames: Sequence[int]
     for i in frames:
         f = path.frames[i]
         m = np.asarray(f.matrix_world, dtype=np.float64)
-        r = store.lookup(m[:3, 3], matrix=m, fov=f.vfov, aspect=f.aspect, error_budget=0.0)
-        hits.append((r.corner, r.view) in flat)
+        hits.append(store.locate(m[:3, 3], matrix=m, fov=f.vfov, aspect=f.aspect) in flat)
     return len(flat), 6 * n_corners, float(np.mean(hits)) if hits else 0.0
 
 
