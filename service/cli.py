@@ -90,15 +90,23 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--error-budget", type=_finite, metavar="E")
     q.add_argument("--json", action="store_true", help="print JSON")
 
-    s = sub.add_parser("serve", help="run the REST service")
-    s.add_argument("--host", default="127.0.0.1")
-    s.add_argument("--port", type=int, default=8765)
-    s.add_argument("--data-dir", type=Path, default=None)
-    s.add_argument("--dask-scheduler", default=None, metavar="ADDR")
-    s.add_argument("--token", default=None, help="bearer token (required for a non-loopback bind)")
-    s.add_argument("--eval-workers", type=int, default=None, metavar="N",
-                   help="local processes rendering a job's evaluations (default 1; ignored with Dask)")
+    add_serve_arguments(sub.add_parser("serve", help="run the REST service"))
     return p
+
+
+def add_serve_arguments(parser: argparse.ArgumentParser) -> None:
+    """The serve options of ``render-budget serve`` and ``python -m service.api.server`` (kept here, in
+    a module without web dependencies, so the other commands start fast)."""
+    parser.add_argument("--host", default="127.0.0.1", help="bind address (default 127.0.0.1)")
+    parser.add_argument("--port", type=int, default=8765)
+    parser.add_argument("--data-dir", type=Path, default=None,
+                        help="database and scene files (default: var/service)")
+    parser.add_argument("--dask-scheduler", default=None, metavar="ADDR",
+                        help="fan evaluations out to this Dask scheduler")
+    parser.add_argument("--token", default=None, help="bearer token (required for a non-loopback bind)")
+    parser.add_argument("--log-level", default="info")
+    parser.add_argument("--eval-workers", type=int, default=None, metavar="N",
+                        help="local processes rendering a job's evaluations (default 1; ignored with Dask)")
 
 
 class _Bar:
@@ -199,7 +207,8 @@ def _query(args: argparse.Namespace) -> int:
 def _serve(args: argparse.Namespace) -> int:
     from service.api.server import run
 
-    run(args.host, args.port, args.data_dir, args.dask_scheduler, args.token, eval_workers=args.eval_workers)
+    run(args.host, args.port, args.data_dir, args.dask_scheduler, args.token, log_level=args.log_level,
+        eval_workers=args.eval_workers)
     return 0
 
 

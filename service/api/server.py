@@ -8,6 +8,8 @@ from pathlib import Path
 
 import uvicorn
 
+from service.cli import add_serve_arguments
+
 from .app import create_app
 from .config import Settings
 
@@ -29,21 +31,9 @@ def run(host: str = "127.0.0.1", port: int = 8765, data_dir: str | Path | None =
                 timeout_graceful_shutdown=10, access_log=False)
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """The serve options, shared with ``render-budget serve``."""
-    parser.add_argument("--host", default="127.0.0.1", help="bind address (default 127.0.0.1)")
-    parser.add_argument("--port", type=int, default=8765)
-    parser.add_argument("--data-dir", default=None, help="database and scene files (default: var/service)")
-    parser.add_argument("--dask-scheduler", default=None, help="fan evaluations out to this Dask scheduler")
-    parser.add_argument("--token", default=None, help="require a bearer token on all but /health")
-    parser.add_argument("--log-level", default="info")
-    parser.add_argument("--eval-workers", type=int, default=None,
-                        help="local processes rendering a job's evaluations (default 1; ignored with Dask)")
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m service.api.server", description=__doc__)
-    add_arguments(parser)
+    add_serve_arguments(parser)
     args = parser.parse_args(argv)
     try:
         run(args.host, args.port, args.data_dir, args.dask_scheduler, args.token, log_level=args.log_level,
