@@ -12,6 +12,7 @@ import importlib
 _MODULE_NAMES = (
     "preferences",
     "properties",
+    "migration",
     "service_process",
     "camera_path",
     "playback",

@@ -186,7 +186,7 @@ def cmd_optimize(bpy: ModuleType, ext: str, args: argparse.Namespace) -> int:
     if args.record:
         if scene.camera is None:
             raise ValueError("the scene has no active camera")
-        cp.store_path(scene, cp.sample_animation(scene, scene.camera, scene.power_budget.frame_step))
+        cp.store_path(scene, cp.sample_animation(scene, scene.camera, scene.render_budget.frame_step))
     client = sp.client_for(bpy.context)
     bar = ProgressBar("optimize")
     t0 = time.monotonic()
@@ -194,7 +194,7 @@ def cmd_optimize(bpy: ModuleType, ext: str, args: argparse.Namespace) -> int:
     bar.done()
     sys.stdout.write(f"store: {summary} ({time.monotonic() - t0:.1f} s)\n")
     if args.store_out:
-        Path(args.store_out).write_text(scene.power_budget.store_text.as_string(), encoding="utf-8")
+        Path(args.store_out).write_text(scene.render_budget.store_text.as_string(), encoding="utf-8")
     if not args.no_save:
         target = args.save_as or bpy.data.filepath
         if not target:
@@ -221,7 +221,7 @@ def cmd_evaluate(bpy: ModuleType, ext: str, args: argparse.Namespace) -> int:
 
 def cmd_playback(bpy: ModuleType, ext: str, args: argparse.Namespace) -> int:
     scene = bpy.context.scene
-    props = scene.power_budget
+    props = scene.render_budget
     if props.store_text is None:
         raise ValueError("no Pareto store in this .blend: run optimize first")
     if scene.camera is None:
@@ -270,7 +270,7 @@ def main(argv: list[str] | None = None) -> int:
             bpy.ops.wm.open_mainfile(filepath=str(Path(args.blend).resolve()))
         ext = ensure_extension(bpy)
         _configure_service(bpy, ext, args)
-        _apply_scene_options(ext, bpy.context.scene.power_budget, args)
+        _apply_scene_options(ext, bpy.context.scene.render_budget, args)
         return COMMANDS[args.command](bpy, ext, args)
     except Exception as err:  # batch contract: one clear line and a non-zero status
         sys.stderr.write(f"render-budget batch {args.command} failed: {err}\n")

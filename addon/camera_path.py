@@ -9,7 +9,7 @@ from mathutils import Matrix
 from .core.path_sampling import build_path, camera_lens_from_viewport, frame_times, vertical_fov
 from .core.vendored import camera_path as path_format
 
-PATH_TEXT_PREFIX = "power_budget_path"
+PATH_TEXT_PREFIX = "render_budget_path"
 
 
 def render_resolution(scene: bpy.types.Scene) -> tuple[int, int]:
@@ -57,7 +57,7 @@ def sample_animation(scene: bpy.types.Scene, cam_obj: bpy.types.Object, step: in
 
 def store_path(scene: bpy.types.Scene, path: path_format.CameraPath) -> bpy.types.Text:
     """Keep the path JSON in a text datablock referenced by the scene (saved with the .blend)."""
-    props = scene.power_budget
+    props = scene.render_budget
     text = props.path_text
     if text is None:
         text = bpy.data.texts.new(f"{PATH_TEXT_PREFIX}_{scene.name}.json")
@@ -68,16 +68,16 @@ def store_path(scene: bpy.types.Scene, path: path_format.CameraPath) -> bpy.type
 
 
 def load_path(scene: bpy.types.Scene) -> path_format.CameraPath | None:
-    text = scene.power_budget.path_text
+    text = scene.render_budget.path_text
     if text is None:
         return None
     return path_format.CameraPath.from_json(text.as_string())
 
 
-class POWER_OT_record_path_animation(bpy.types.Operator):
+class RENDER_BUDGET_OT_record_path_animation(bpy.types.Operator):
     """Record the camera path from the active camera's animation over the frame range"""
 
-    bl_idname = "power.record_path_animation"
+    bl_idname = "render_budget.record_path_animation"
     bl_label = "Record Path from Animation"
     bl_options = {"REGISTER", "UNDO"}  # noqa: RUF012
 
@@ -88,7 +88,7 @@ class POWER_OT_record_path_animation(bpy.types.Operator):
             self.report({"ERROR"}, "the scene has no active camera")
             return {"CANCELLED"}
         try:
-            path = sample_animation(scene, cam, scene.power_budget.frame_step)
+            path = sample_animation(scene, cam, scene.render_budget.frame_step)
         except ValueError as err:
             self.report({"ERROR"}, str(err))
             return {"CANCELLED"}
@@ -109,10 +109,10 @@ def keyframe_pose(cam_obj: bpy.types.Object, frame: int, matrix: Matrix, lens: f
     cam_obj.data.keyframe_insert("lens", frame=frame)
 
 
-class POWER_OT_record_path_viewport(bpy.types.Operator):
+class RENDER_BUDGET_OT_record_path_viewport(bpy.types.Operator):
     """Record viewport navigation into a new keyframed camera at the scene's frame rate (ESC to stop)"""
 
-    bl_idname = "power.record_path_viewport"
+    bl_idname = "render_budget.record_path_viewport"
     bl_label = "Record Viewport Navigation"
     bl_options = {"REGISTER", "UNDO"}  # noqa: RUF012
 
@@ -163,7 +163,7 @@ class POWER_OT_record_path_viewport(bpy.types.Operator):
                 return {"CANCELLED"}
             scene.frame_end = self.frame - 1
             scene.camera = self.cam
-            store_path(scene, sample_animation(scene, self.cam, scene.power_budget.frame_step))
+            store_path(scene, sample_animation(scene, self.cam, scene.render_budget.frame_step))
             self.report({"INFO"}, f"recorded {self.frame - scene.frame_start} frames into {self.cam.name!r}")
             return {"FINISHED"}
         if event.type == "TIMER" and event.timer == self._timer:
@@ -179,5 +179,5 @@ class POWER_OT_record_path_viewport(bpy.types.Operator):
             self._finish(context)
 
 
-classes = (POWER_OT_record_path_animation, POWER_OT_record_path_viewport)
+classes = (RENDER_BUDGET_OT_record_path_animation, RENDER_BUDGET_OT_record_path_viewport)
 register, unregister = bpy.utils.register_classes_factory(classes)

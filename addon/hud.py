@@ -12,7 +12,7 @@ _handle = None
 
 def hud_lines(scene: bpy.types.Scene) -> list[tuple[str, tuple[float, float, float, float]]]:
     """Text lines and colours for the HUD (red when the prediction breaks the budget)."""
-    props = scene.power_budget
+    props = scene.render_budget
     if props.store_text is None:
         return []
     ok = (1.0, 1.0, 1.0, 1.0)
@@ -43,7 +43,7 @@ def draw_hud() -> None:
     from gpu_extras.batch import batch_for_shader
 
     scene = bpy.context.scene
-    if scene is None or not scene.power_budget.hud_enabled:
+    if scene is None or not scene.render_budget.hud_enabled:
         return
     lines = hud_lines(scene)
     if not lines:

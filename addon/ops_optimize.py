@@ -27,7 +27,7 @@ from .core.vendored import camera_path as path_format
 from .core.vendored import pareto_store
 
 log = logging.getLogger(__name__)
-STORE_TEXT_PREFIX = "power_budget_store"
+STORE_TEXT_PREFIX = "render_budget_store"
 
 
 # -- main-thread preparation ----------------------------------------------------------------------------
@@ -41,7 +41,7 @@ def check_scene(scene: bpy.types.Scene) -> None:
 
 
 def job_options(scene: bpy.types.Scene) -> JobOptions:
-    props = scene.power_budget
+    props = scene.render_budget
     searchable = [p for p in props.parameters if not p.inert]
     enabled = tuple(p.name for p in searchable if p.enabled)
     return JobOptions(
@@ -90,7 +90,7 @@ def ensure_path(scene: bpy.types.Scene) -> path_format.CameraPath:
     """The recorded path, recording it from the active camera's animation if there is none yet."""
     path = load_path(scene)
     if path is None:
-        path = sample_animation(scene, scene.camera, scene.power_budget.frame_step)
+        path = sample_animation(scene, scene.camera, scene.render_budget.frame_step)
         store_path(scene, path)
     return path
 
@@ -106,7 +106,7 @@ class Prepared:
 
 def prepare(scene: bpy.types.Scene) -> Prepared:
     check_scene(scene)
-    props = scene.power_budget
+    props = scene.render_budget
     validate_budget(props.budget_mode,
                     props.power_budget if props.budget_mode == "POWER" else props.error_budget)
     options = job_options(scene)
@@ -123,7 +123,7 @@ def prepare(scene: bpy.types.Scene) -> Prepared:
 def apply_outcome(scene: bpy.types.Scene, outcome: JobOutcome, path: path_format.CameraPath) -> str:
     """Keep the store in the .blend (text datablock), record ids and the results summary."""
     store = pareto_store.ParetoStore.from_json(outcome.store_text)  # validate before replacing anything
-    props = scene.power_budget
+    props = scene.render_budget
     text = props.store_text
     if text is None:
         text = bpy.data.texts.new(f"{STORE_TEXT_PREFIX}_{scene.name}.json")
@@ -144,7 +144,7 @@ def apply_outcome(scene: bpy.types.Scene, outcome: JobOutcome, path: path_format
 def fill_parameters(scene: bpy.types.Scene, inert: dict[str, str],
                     store: pareto_store.ParetoStore | None = None) -> None:
     """Show the parameter space: the store's parameters with values, then inert ones with their reason."""
-    props = scene.power_budget
+    props = scene.render_budget
     previous = {p.name: p.enabled for p in props.parameters}
     props.parameters.clear()
     for p in (store.parameters if store is not None else ()):
@@ -213,7 +213,7 @@ def _poll_queue() -> float | None:
     job = _active
     if job is None:
         return None
-    rt = bpy.context.window_manager.power_budget_runtime
+    rt = bpy.context.window_manager.render_budget_runtime
     finished = False
     while True:
         try:
@@ -245,10 +245,10 @@ def _poll_queue() -> float | None:
     return 0.25
 
 
-class POWER_OT_optimize(bpy.types.Operator):
+class RENDER_BUDGET_OT_optimize(bpy.types.Operator):
     """Optimise render settings along the camera path on the render-budget service"""
 
-    bl_idname = "power.optimize"
+    bl_idname = "render_budget.optimize"
     bl_label = "Optimize Power"
 
     @classmethod
@@ -257,7 +257,7 @@ class POWER_OT_optimize(bpy.types.Operator):
 
     def execute(self, context: bpy.types.Context) -> set[str]:
         wm = context.window_manager
-        rt = wm.power_budget_runtime
+        rt = wm.render_budget_runtime
         try:
             client = service_process.client_for(context)
             wm.progress_begin(0, 100)
@@ -282,7 +282,7 @@ class POWER_OT_optimize(bpy.types.Operator):
         global _active
         if bpy.app.background:
             return self.execute(context)
-        rt = context.window_manager.power_budget_runtime
+        rt = context.window_manager.render_budget_runtime
         try:
             client = service_process.client_for(context)
             prep = prepare(context.scene)
@@ -299,10 +299,10 @@ class POWER_OT_optimize(bpy.types.Operator):
         return {"FINISHED"}
 
 
-class POWER_OT_cancel_job(bpy.types.Operator):
+class RENDER_BUDGET_OT_cancel_job(bpy.types.Operator):
     """Cancel the running optimisation (the service stops the job; nothing in the .blend changes)"""
 
-    bl_idname = "power.cancel_job"
+    bl_idname = "render_budget.cancel_job"
     bl_label = "Cancel"
 
     @classmethod
@@ -312,14 +312,14 @@ class POWER_OT_cancel_job(bpy.types.Operator):
     def execute(self, context: bpy.types.Context) -> set[str]:
         if _active is not None:
             _active.cancel.set()
-            context.window_manager.power_budget_runtime.job_status = "cancelling"
+            context.window_manager.render_budget_runtime.job_status = "cancelling"
         return {"FINISHED"}
 
 
-class POWER_OT_load_store(bpy.types.Operator):
+class RENDER_BUDGET_OT_load_store(bpy.types.Operator):
     """Load a Pareto store from a JSON file (e.g. written by `render-budget optimize`) into the .blend"""
 
-    bl_idname = "power.load_store"
+    bl_idname = "render_budget.load_store"
     bl_label = "Load Store File"
 
     filepath: bpy.props.StringProperty(subtype="FILE_PATH")  # type: ignore[valid-type]
@@ -337,7 +337,7 @@ class POWER_OT_load_store(bpy.types.Operator):
         if path is None:
             self.report({"ERROR"}, "record a camera path first (the summary is computed along it)")
             return {"CANCELLED"}
-        outcome = JobOutcome("", scene.power_budget.scene_id, "", text)
+        outcome = JobOutcome("", scene.render_budget.scene_id, "", text)
         self.report({"INFO"}, apply_outcome(scene, outcome, path))
         return {"FINISHED"}
 
@@ -346,7 +346,7 @@ class POWER_OT_load_store(bpy.types.Operator):
         return {"RUNNING_MODAL"}
 
 
-classes = (POWER_OT_optimize, POWER_OT_cancel_job, POWER_OT_load_store)
+classes = (RENDER_BUDGET_OT_optimize, RENDER_BUDGET_OT_cancel_job, RENDER_BUDGET_OT_load_store)
 _register, _unregister = bpy.utils.register_classes_factory(classes)
 
 

@@ -20,7 +20,7 @@ IMAGE_NAME = "Power Budget Preview"
 
 def active_settings(scene: bpy.types.Scene) -> dict[str, Any] | None:
     """The settings playback applied on this frame (None: none yet, i.e. maximum quality)."""
-    props = scene.power_budget
+    props = scene.render_budget
     if props.store_text is None or not props.active_indices:
         return None
     store = pareto_store.ParetoStore.from_json(props.store_text.as_string())
@@ -37,7 +37,7 @@ def upload_scene_info(scene: bpy.types.Scene, client: ServiceClient) -> dict[str
     """Export and upload; returns the service's answer (id, statistics, inert parameters)."""
     with tempfile.TemporaryDirectory(prefix="render-budget-upload-") as tmp:
         info = client.upload_scene(export_glb(scene, tmp))
-    scene.power_budget.scene_id = str(info["id"])
+    scene.render_budget.scene_id = str(info["id"])
     return info
 
 
@@ -53,7 +53,7 @@ def render_preview(scene: bpy.types.Scene, client: ServiceClient, *, use_active:
     m[3] = [0.0, 0.0, 0.0, 1.0]
     body = {"scene_id": scene_id, "camera": {"matrix_world": m, "vfov": camera_vfov(cam, scene),
                                              "width": w, "height": h},
-            "profile": scene.power_budget.profile or "mobile",
+            "profile": scene.render_budget.profile or "mobile",
             "fps": scene.render.fps / scene.render.fps_base,
             "format": fmt.lower()}
     if settings is not None:
@@ -68,16 +68,16 @@ def render_preview(scene: bpy.types.Scene, client: ServiceClient, *, use_active:
     image = bpy.data.images.load(str(target), check_existing=False)
     image.name = IMAGE_NAME
     image.pack()  # keep the preview in the .blend, independent of the cache folder
-    image["power_budget"] = json.dumps({"energy": result.metadata.get("energy"),
+    image["render_budget"] = json.dumps({"energy": result.metadata.get("energy"),
                                         "counters": result.metadata.get("counters"),
                                         "settings": settings, "frame": scene.frame_current})
     return image
 
 
-class POWER_OT_preview(bpy.types.Operator):
+class RENDER_BUDGET_OT_preview(bpy.types.Operator):
     """Render the current frame with the simulator (active or maximum-quality settings) into an image"""
 
-    bl_idname = "power.preview"
+    bl_idname = "render_budget.preview"
     bl_label = "Preview Frame"
 
     use_active: bpy.props.BoolProperty(name="Active settings", default=True)  # type: ignore[valid-type]
@@ -97,10 +97,10 @@ class POWER_OT_preview(bpy.types.Operator):
         return {"FINISHED"}
 
 
-class POWER_OT_analyze_scene(bpy.types.Operator):
+class RENDER_BUDGET_OT_analyze_scene(bpy.types.Operator):
     """Upload the scene and list the parameters that cannot change it (greyed out, with the reason)"""
 
-    bl_idname = "power.analyze_scene"
+    bl_idname = "render_budget.analyze_scene"
     bl_label = "Analyse Scene"
 
     def execute(self, context: bpy.types.Context) -> set[str]:
@@ -114,8 +114,8 @@ class POWER_OT_analyze_scene(bpy.types.Operator):
             self.report({"ERROR"}, f"Analyse scene failed: {err}")
             return {"CANCELLED"}
         store = None
-        if scene.power_budget.store_text is not None:
-            store = pareto_store.ParetoStore.from_json(scene.power_budget.store_text.as_string())
+        if scene.render_budget.store_text is not None:
+            store = pareto_store.ParetoStore.from_json(scene.render_budget.store_text.as_string())
         fill_parameters(scene, info.get("inert_parameters") or {}, store)
         stats = info.get("stats") or {}
         self.report({"INFO"}, f"{stats.get('triangles', '?')} triangles, "
@@ -123,5 +123,5 @@ class POWER_OT_analyze_scene(bpy.types.Operator):
         return {"FINISHED"}
 
 
-classes = (POWER_OT_preview, POWER_OT_analyze_scene)
+classes = (RENDER_BUDGET_OT_preview, RENDER_BUDGET_OT_analyze_scene)
 register, unregister = bpy.utils.register_classes_factory(classes)

@@ -67,7 +67,7 @@ def evaluate_scene(scene: bpy.types.Scene, client: ServiceClient, out_dir: str |
                    progress: Callable[[int, int], None] | None = None, frame_step: int | None = None,
                    samples: bool = True) -> dict:
     """Run the whole evaluation for a scene with a store and a path; return the written files."""
-    props = scene.power_budget
+    props = scene.render_budget
     if props.store_text is None:
         raise ValueError("no Pareto store in this .blend: run Optimize Power first")
     path = load_path(scene)
@@ -104,10 +104,10 @@ def evaluate_scene(scene: bpy.types.Scene, client: ServiceClient, out_dir: str |
     return written
 
 
-class POWER_OT_evaluate_path(bpy.types.Operator):
+class RENDER_BUDGET_OT_evaluate_path(bpy.types.Operator):
     """Render every path frame with the presets and the optimised settings; write a report folder"""
 
-    bl_idname = "power.evaluate_path"
+    bl_idname = "render_budget.evaluate_path"
     bl_label = "Evaluate Path"
 
     directory: bpy.props.StringProperty(subtype="DIR_PATH")  # type: ignore[valid-type]
@@ -139,5 +139,5 @@ class POWER_OT_evaluate_path(bpy.types.Operator):
         return {"RUNNING_MODAL"}
 
 
-classes = (POWER_OT_evaluate_path,)
+classes = (RENDER_BUDGET_OT_evaluate_path,)
 register, unregister = bpy.utils.register_classes_factory(classes)

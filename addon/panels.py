@@ -7,7 +7,7 @@ import bpy
 from . import ops_optimize, service_process
 
 
-class POWER_UL_parameters(bpy.types.UIList):
+class RENDER_BUDGET_UL_parameters(bpy.types.UIList):
     """Parameter space: searchable parameters with their values; inert ones greyed out with the reason."""
 
     def draw_item(self, context, layout, data, item, icon, active_data, active_propname, index=0):
@@ -22,23 +22,23 @@ class POWER_UL_parameters(bpy.types.UIList):
             row.label(text=item.values)
 
 
-class VIEW3D_PT_power_budget(bpy.types.Panel):
-    bl_label = "Power Budget"
-    bl_idname = "VIEW3D_PT_power_budget"
+class VIEW3D_PT_render_budget(bpy.types.Panel):
+    bl_label = "Render Budget"
+    bl_idname = "VIEW3D_PT_render_budget"
     bl_space_type = "VIEW_3D"
     bl_region_type = "UI"
-    bl_category = "Power Budget"
+    bl_category = "Render Budget"
 
     def draw(self, context: bpy.types.Context) -> None:
         layout = self.layout
-        props = context.scene.power_budget
-        rt = context.window_manager.power_budget_runtime
+        props = context.scene.render_budget
+        rt = context.window_manager.render_budget_runtime
 
         box = layout.box()
         row = box.row(align=True)
-        row.operator("power.service_start", icon="URL")
+        row.operator("render_budget.service_start", icon="URL")
         if service_process.local_running():
-            row.operator("power.service_stop", text="", icon="X")
+            row.operator("render_budget.service_stop", text="", icon="X")
         if rt.service_status:
             box.label(text=rt.service_status)
         box.prop_search(props, "profile", props, "profiles", text="Profile")
@@ -46,16 +46,16 @@ class VIEW3D_PT_power_budget(bpy.types.Panel):
         col = layout.column(align=True)
         col.label(text="Camera path")
         row = col.row(align=True)
-        row.operator("power.record_path_animation", icon="CAMERA_DATA")
-        row.operator("power.record_path_viewport", icon="REC")
+        row.operator("render_budget.record_path_animation", icon="CAMERA_DATA")
+        row.operator("render_budget.record_path_viewport", icon="REC")
         col.prop(props, "path_text", text="")
         col.prop(props, "frame_step")
 
         row = layout.row()
         row.label(text="Parameter space")
-        row.operator("power.analyze_scene", text="", icon="VIEWZOOM")
-        layout.template_list("POWER_UL_parameters", "", props, "parameters", props, "parameters_index",
-                             rows=4)
+        row.operator("render_budget.analyze_scene", text="", icon="VIEWZOOM")
+        layout.template_list("RENDER_BUDGET_UL_parameters", "", props, "parameters", props,
+                             "parameters_index", rows=4)
 
         col = layout.column(align=True)
         col.label(text="Camera samples")
@@ -88,9 +88,9 @@ class VIEW3D_PT_power_budget(bpy.types.Panel):
 
         row = layout.row(align=True)
         row.scale_y = 1.4
-        row.operator("power.optimize", icon="PLAY")
+        row.operator("render_budget.optimize", icon="PLAY")
         if ops_optimize.job_running():
-            row.operator("power.cancel_job", text="", icon="CANCEL")
+            row.operator("render_budget.cancel_job", text="", icon="CANCEL")
         if rt.job_running or rt.job_status:
             layout.progress(factor=rt.job_progress, type="BAR", text=rt.job_status or "")
 
@@ -109,10 +109,10 @@ class VIEW3D_PT_power_budget(bpy.types.Panel):
             if props.clamped:
                 box.label(text="camera outside the optimised space", icon="ERROR")
         row = layout.row(align=True)
-        row.operator("power.preview", icon="RENDER_STILL")
-        row.operator("power.evaluate_path", icon="GRAPH")
+        row.operator("render_budget.preview", icon="RENDER_STILL")
+        row.operator("render_budget.evaluate_path", icon="GRAPH")
         layout.prop(props, "report_frame_step")
-        layout.operator("power.load_store", icon="FILE")
+        layout.operator("render_budget.load_store", icon="FILE")
 
 
 def _wrap(text: str, width: int) -> list[str]:
@@ -128,5 +128,5 @@ def _wrap(text: str, width: int) -> list[str]:
     return out
 
 
-classes = (POWER_UL_parameters, VIEW3D_PT_power_budget)
+classes = (RENDER_BUDGET_UL_parameters, VIEW3D_PT_render_budget)
 register, unregister = bpy.utils.register_classes_factory(classes)

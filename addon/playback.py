@@ -9,6 +9,7 @@ from bpy.app.handlers import persistent
 
 from .camera_path import camera_vfov, render_resolution, scene_fps
 from .core.playback_logic import PlaybackFrame, StoreCache
+from .handlers import add_handler, remove_handler
 
 _cache = StoreCache()
 _written: dict[int, tuple] = {}  # per scene: the last answer written to its properties
@@ -26,7 +27,7 @@ def budget_of(props: bpy.types.PropertyGroup) -> tuple[str, float]:
 
 def update_scene(scene: bpy.types.Scene) -> PlaybackFrame | None:
     """Look up, filter and write this frame's settings; returns what was written (None: nothing to do)."""
-    props = scene.power_budget
+    props = scene.render_budget
     text = props.store_text
     if text is None or not props.playback_enabled:
         return None
@@ -84,19 +85,12 @@ def on_load(*_args: object) -> None:
 _HANDLERS = ((bpy.app.handlers.frame_change_post, on_frame_change), (bpy.app.handlers.load_post, on_load))
 
 
-def _remove_by_name(handlers: list, fn: object) -> None:
-    for h in list(handlers):
-        if getattr(h, "__name__", None) == fn.__name__ and getattr(h, "__module__", None) == fn.__module__:
-            handlers.remove(h)
-
-
 def register() -> None:
     for handlers, fn in _HANDLERS:
-        _remove_by_name(handlers, fn)  # a reload must not stack a second copy
-        handlers.append(fn)
+        add_handler(handlers, fn)
 
 
 def unregister() -> None:
     for handlers, fn in _HANDLERS:
-        _remove_by_name(handlers, fn)
+        remove_handler(handlers, fn)
     reset()

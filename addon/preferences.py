@@ -6,7 +6,7 @@ import bpy
 from bpy.props import BoolProperty, EnumProperty, IntProperty, StringProperty
 
 
-class POWER_AP_preferences(bpy.types.AddonPreferences):
+class RENDER_BUDGET_AP_preferences(bpy.types.AddonPreferences):
     bl_idname = __package__
 
     service_mode: EnumProperty(  # type: ignore[valid-type]
@@ -56,7 +56,7 @@ class POWER_AP_preferences(bpy.types.AddonPreferences):
         col.prop(self, "default_profile")
 
 
-def get(context: bpy.types.Context | None = None) -> POWER_AP_preferences:
+def get(context: bpy.types.Context | None = None) -> RENDER_BUDGET_AP_preferences:
     """This add-on's preferences (raises a clear error when the add-on is not enabled as an extension)."""
     ctx = context or bpy.context
     addon = ctx.preferences.addons.get(__package__)
@@ -65,5 +65,5 @@ def get(context: bpy.types.Context | None = None) -> POWER_AP_preferences:
     return addon.preferences
 
 
-classes = (POWER_AP_preferences,)
+classes = (RENDER_BUDGET_AP_preferences,)
 register, unregister = bpy.utils.register_classes_factory(classes)

@@ -14,7 +14,7 @@ from bpy.props import (
 )
 
 
-class POWER_PG_parameter(bpy.types.PropertyGroup):
+class RENDER_BUDGET_PG_parameter(bpy.types.PropertyGroup):
     """One parameter of the search space as the service reported it for this scene."""
 
     # `name` (built in) is the parameter's RenderSettings field name.
@@ -25,16 +25,16 @@ class POWER_PG_parameter(bpy.types.PropertyGroup):
     reason: StringProperty(name="Reason")  # type: ignore
 
 
-class POWER_PG_profile(bpy.types.PropertyGroup):
+class RENDER_BUDGET_PG_profile(bpy.types.PropertyGroup):
     """A hardware profile name offered by the service (for the profile search field)."""
 
 
-class POWER_PG_scene(bpy.types.PropertyGroup):
+class RENDER_BUDGET_PG_scene(bpy.types.PropertyGroup):
     """Per-scene settings, inputs of a job and outputs of playback; all saved with the .blend."""
 
     profile: StringProperty(name="Profile", default="", description="Hardware profile (empty: default)")  # type: ignore
-    profiles: CollectionProperty(type=POWER_PG_profile)  # type: ignore
-    parameters: CollectionProperty(type=POWER_PG_parameter)  # type: ignore
+    profiles: CollectionProperty(type=RENDER_BUDGET_PG_profile)  # type: ignore
+    parameters: CollectionProperty(type=RENDER_BUDGET_PG_parameter)  # type: ignore
     parameters_index: IntProperty()  # type: ignore
 
     threshold_power: FloatProperty(name="Power threshold (W)", default=0.05, min=0.0, soft_max=5.0,  # type: ignore
@@ -102,7 +102,7 @@ class POWER_PG_scene(bpy.types.PropertyGroup):
     playback_status: StringProperty(name="Playback status")  # type: ignore
 
 
-class POWER_PG_runtime(bpy.types.PropertyGroup):
+class RENDER_BUDGET_PG_runtime(bpy.types.PropertyGroup):
     """Job progress shown in the panel; runtime only (WindowManager data is not saved)."""
 
     job_running: BoolProperty()  # type: ignore
@@ -111,17 +111,18 @@ class POWER_PG_runtime(bpy.types.PropertyGroup):
     service_status: StringProperty()  # type: ignore
 
 
-classes = (POWER_PG_parameter, POWER_PG_profile, POWER_PG_scene, POWER_PG_runtime)
+classes = (RENDER_BUDGET_PG_parameter, RENDER_BUDGET_PG_profile, RENDER_BUDGET_PG_scene,
+           RENDER_BUDGET_PG_runtime)
 _register, _unregister = bpy.utils.register_classes_factory(classes)
 
 
 def register() -> None:
     _register()
-    bpy.types.Scene.power_budget = PointerProperty(type=POWER_PG_scene)
-    bpy.types.WindowManager.power_budget_runtime = PointerProperty(type=POWER_PG_runtime)
+    bpy.types.Scene.render_budget = PointerProperty(type=RENDER_BUDGET_PG_scene)
+    bpy.types.WindowManager.render_budget_runtime = PointerProperty(type=RENDER_BUDGET_PG_runtime)
 
 
 def unregister() -> None:
-    del bpy.types.WindowManager.power_budget_runtime
-    del bpy.types.Scene.power_budget
+    del bpy.types.WindowManager.render_budget_runtime
+    del bpy.types.Scene.render_budget
     _unregister()

@@ -16,7 +16,7 @@ from .core.local_service import LocalService
 _local: LocalService | None = None
 
 
-def _data_dir(prefs: preferences.POWER_AP_preferences) -> Path:
+def _data_dir(prefs: preferences.RENDER_BUDGET_AP_preferences) -> Path:
     if prefs.data_dir:
         return Path(bpy.path.abspath(prefs.data_dir))
     return Path(bpy.utils.extension_path_user(__package__, path="service", create=True))
@@ -54,10 +54,10 @@ def local_running() -> bool:
     return _local is not None and _local.running()
 
 
-class POWER_OT_service_start(bpy.types.Operator):
+class RENDER_BUDGET_OT_service_start(bpy.types.Operator):
     """Start the local render-budget service (or check that the configured URL answers)"""
 
-    bl_idname = "power.service_start"
+    bl_idname = "render_budget.service_start"
     bl_label = "Connect to Service"
 
     def execute(self, context: bpy.types.Context) -> set[str]:
@@ -67,10 +67,10 @@ class POWER_OT_service_start(bpy.types.Operator):
         except Exception as err:  # report any failure to the user, nothing else to clean up
             self.report({"ERROR"}, str(err))
             return {"CANCELLED"}
-        wm = context.window_manager.power_budget_runtime
+        wm = context.window_manager.render_budget_runtime
         wm.service_status = f"connected: {client.base_url} (version {health.get('version', '?')})"
         profiles = health.get("profiles") or []
-        scene_props = context.scene.power_budget
+        scene_props = context.scene.render_budget
         scene_props.profiles.clear()
         for name in profiles:
             scene_props.profiles.add().name = str(name)
@@ -78,19 +78,19 @@ class POWER_OT_service_start(bpy.types.Operator):
         return {"FINISHED"}
 
 
-class POWER_OT_service_stop(bpy.types.Operator):
+class RENDER_BUDGET_OT_service_stop(bpy.types.Operator):
     """Stop the local render-budget service started by this add-on"""
 
-    bl_idname = "power.service_stop"
+    bl_idname = "render_budget.service_stop"
     bl_label = "Stop Local Service"
 
     def execute(self, context: bpy.types.Context) -> set[str]:
         stop_local()
-        context.window_manager.power_budget_runtime.service_status = "stopped"
+        context.window_manager.render_budget_runtime.service_status = "stopped"
         return {"FINISHED"}
 
 
-classes = (POWER_OT_service_start, POWER_OT_service_stop)
+classes = (RENDER_BUDGET_OT_service_start, RENDER_BUDGET_OT_service_stop)
 _register, _unregister = bpy.utils.register_classes_factory(classes)
 
 

@@ -171,7 +171,7 @@ def bench_blender(store_json: str, mats: list[np.ndarray]) -> tuple[list[Sample]
         cam.keyframe_insert("rotation_euler", frame=i + 1)
     text = bpy.data.texts.new("store.json")
     text.from_string(store_json)
-    props = sc.power_budget
+    props = sc.render_budget
     props.store_text = text
     props.budget_mode, props.error_budget = "ERROR", 0.02
     # handler work only: the camera is moved first (outside the timing), then update_scene is timed.

@@ -74,15 +74,16 @@ def ext_module(name: str):
 
 # -- registration --------------------------------------------------------------------------------------
 def _leftovers() -> list[str]:
-    found = [n for n in dir(bpy.types) if n.startswith(("POWER_", "VIEW3D_PT_power"))]
-    if hasattr(bpy.types.Scene, "power_budget"):
-        found.append("Scene.power_budget")
-    if hasattr(bpy.types.WindowManager, "power_budget_runtime"):
-        found.append("WindowManager.power_budget_runtime")
+    prefixes = ("POWER_", "RENDER_BUDGET_", "VIEW3D_PT_power", "VIEW3D_PT_render_budget")
+    found = [n for n in dir(bpy.types) if n.startswith(prefixes)]
+    if hasattr(bpy.types.Scene, "render_budget"):
+        found.append("Scene.render_budget")
+    if hasattr(bpy.types.WindowManager, "render_budget_runtime"):
+        found.append("WindowManager.render_budget_runtime")
     for hs in (bpy.app.handlers.frame_change_post, bpy.app.handlers.load_post):
         found += [h.__name__ for h in hs if (getattr(h, "__module__", "") or "").startswith(EXT_MODULE)]
     try:
-        bpy.ops.power.optimize.get_rna_type()
+        bpy.ops.render_budget.optimize.get_rna_type()
         found.append("operator power.optimize")
     except KeyError:
         pass
@@ -92,15 +93,51 @@ def _leftovers() -> list[str]:
 def test_enable_disable_reenable_leaves_nothing_behind(ext) -> None:
     hud = ext_module("hud")
     assert not hud.is_registered()  # background mode: no draw handler at all
-    assert "POWER_OT_optimize" in dir(bpy.types) and hasattr(bpy.types.Scene, "power_budget")
+    assert "RENDER_BUDGET_OT_optimize" in dir(bpy.types) and hasattr(bpy.types.Scene, "render_budget")
     disable_dev()
     assert _leftovers() == []
     assert EXT_MODULE not in bpy.context.preferences.addons
     enable_dev(bpy, Path())  # the dev repo is still registered; re-enable from it
     handlers = [h for h in bpy.app.handlers.frame_change_post if h.__module__.startswith(EXT_MODULE)]
     assert len(handlers) == 1  # re-enabling does not stack handlers
-    assert "POWER_OT_optimize" in dir(bpy.types)
+    assert "RENDER_BUDGET_OT_optimize" in dir(bpy.types)
     assert not ext_module("hud").is_registered()
+
+
+def test_every_operator_the_panel_offers_is_registered(ext) -> None:
+    import inspect
+    import re
+
+    offered = set(re.findall(r'operator\("([a-z_]+\.[a-z_]+)"', inspect.getsource(ext_module("panels"))))
+    assert len(offered) >= 8
+    for idname in sorted(offered):
+        group, name = idname.split(".")
+        getattr(getattr(bpy.ops, group), name).get_rna_type()  # KeyError when not registered
+
+
+def test_a_file_saved_with_the_old_settings_group_is_migrated_once(scene, tmp_path) -> None:
+    """Files saved before the rename hold ``Scene.power_budget``; Blender keeps it as raw ID properties."""
+    path_text = bpy.data.texts.new("power_budget_path")
+    path_text.write('{"version": 1}')
+    scene["power_budget"] = {"budget_mode": 0, "power_budget": 3.25, "error_budget": 0.015, "max_depth": 3,
+                             "parameters": [{"name": "max_depth", "values": "0,1,2", "value_count": 3,
+                                             "enabled": False}]}
+    scene["power_budget"]["path_text"] = path_text
+    blend = tmp_path / "old.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    bpy.ops.wm.open_mainfile(filepath=str(blend))
+    sc = bpy.context.scene
+    props = sc.render_budget
+    assert "power_budget" not in sc.keys()
+    assert (props.budget_mode, props.power_budget, props.max_depth) == ("POWER", 3.25, 3)
+    assert math.isclose(props.error_budget, 0.015, rel_tol=1e-6)
+    assert props.path_text is not None and props.path_text.as_string() == '{"version": 1}'
+    assert [(p.name, p.values, p.value_count, p.enabled) for p in props.parameters] == [
+        ("max_depth", "0,1,2", 3, False)]
+    props.power_budget = 5.0  # migrated once: a later load keeps what the user changed
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    bpy.ops.wm.open_mainfile(filepath=str(blend))
+    assert bpy.context.scene.render_budget.power_budget == 5.0
 
 
 # -- camera paths ---------------------------------------------------------------------------------------
@@ -124,11 +161,11 @@ def test_recorded_path_matches_matrix_world_with_parent_and_lens_animation(scene
         cam.data.lens = lens
         cam.data.keyframe_insert("lens", frame=f)
     sc.frame_set(10)
-    assert bpy.ops.power.record_path_animation() == {"FINISHED"}
+    assert bpy.ops.render_budget.record_path_animation() == {"FINISHED"}
     assert sc.frame_current == 10  # restored
     from service.camera_path import CameraPath
 
-    path = CameraPath.from_json(sc.power_budget.path_text.as_string())
+    path = CameraPath.from_json(sc.render_budget.path_text.as_string())
     assert len(path) == 25 and path.fps == 24.0 and path.frames[-1].time == pytest.approx(24 / 24)
     depsgraph = bpy.context.evaluated_depsgraph_get()
     lenses = set()
@@ -175,14 +212,14 @@ def test_viewport_keyframes_reproduce_the_sampled_poses(scene) -> None:
 
 def test_record_without_camera_is_reported(scene) -> None:
     with pytest.raises(RuntimeError, match="no active camera"):
-        bpy.ops.power.record_path_animation()
+        bpy.ops.render_budget.record_path_animation()
 
 
 # -- playback from a store in the .blend ------------------------------------------------------------------
 def _load_store(tmp_path: Path):
     f = tmp_path / "store.json"
     f.write_text(synthetic_store().to_json())
-    assert bpy.ops.power.load_store(filepath=str(f)) == {"FINISHED"}
+    assert bpy.ops.render_budget.load_store(filepath=str(f)) == {"FINISHED"}
 
 
 def test_playback_follows_store_and_filter_and_survives_save_reload(scene, tmp_path) -> None:
@@ -191,9 +228,9 @@ def test_playback_follows_store_and_filter_and_survives_save_reload(scene, tmp_p
     sc = scene
     cam = turning_camera(sc)
     add_cube(sc)
-    bpy.ops.power.record_path_animation()
+    bpy.ops.render_budget.record_path_animation()
     _load_store(tmp_path)
-    props = sc.power_budget
+    props = sc.render_budget
     assert "views" in props.summary and props.store_text is not None
     props.budget_mode, props.error_budget, props.filter_period = "ERROR", 0.01, 0.5
 
@@ -221,10 +258,10 @@ def test_playback_follows_store_and_filter_and_survives_save_reload(scene, tmp_p
     blend = tmp_path / "played.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(blend))
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
-    assert bpy.context.scene.power_budget.store_text is None
+    assert bpy.context.scene.render_budget.store_text is None
     bpy.ops.wm.open_mainfile(filepath=str(blend))
     sc = bpy.context.scene
-    props = sc.power_budget
+    props = sc.render_budget
     assert props.store_text is not None and props.path_text is not None
     assert props.store_text.as_string() == synthetic_store().to_json()
     assert play() == seen
@@ -234,9 +271,9 @@ def test_budget_change_during_playback_goes_through_the_filter(scene, tmp_path) 
     sc = scene
     turning_camera(sc)
     add_cube(sc)
-    bpy.ops.power.record_path_animation()
+    bpy.ops.render_budget.record_path_animation()
     _load_store(tmp_path)
-    props = sc.power_budget
+    props = sc.render_budget
     props.budget_mode, props.power_budget, props.filter_period = "POWER", 10.0, 1.0
     sc.frame_set(1)
     generous = props.target_indices
@@ -269,18 +306,18 @@ def test_optimize_with_service_down_keeps_the_blend_intact(scene, tmp_path) -> N
     sc = scene
     turning_camera(sc, 12)
     add_cube(sc)
-    bpy.ops.power.record_path_animation()
+    bpy.ops.render_budget.record_path_animation()
     _load_store(tmp_path)
-    store_before = sc.power_budget.store_text.as_string()
-    path_before = sc.power_budget.path_text.as_string()
+    store_before = sc.render_budget.store_text.as_string()
+    path_before = sc.render_budget.path_text.as_string()
     _point_at_dead_service()
     with pytest.raises(RuntimeError, match="no render-budget service"):
-        bpy.ops.power.optimize()
-    assert sc.power_budget.store_text.as_string() == store_before
-    assert sc.power_budget.path_text.as_string() == path_before
-    assert bpy.context.window_manager.power_budget_runtime.job_status.startswith("failed")
+        bpy.ops.render_budget.optimize()
+    assert sc.render_budget.store_text.as_string() == store_before
+    assert sc.render_budget.path_text.as_string() == path_before
+    assert bpy.context.window_manager.render_budget_runtime.job_status.startswith("failed")
     with pytest.raises(RuntimeError, match="no render-budget service"):
-        bpy.ops.power.preview()
+        bpy.ops.render_budget.preview()
 
 
 @pytest.mark.parametrize(("mode", "field", "value", "message"),
@@ -290,11 +327,11 @@ def test_optimize_rejects_invalid_settings(scene, mode, field, value, message) -
     turning_camera(scene, 6)
     add_cube(scene)
     _point_at_dead_service()
-    props = scene.power_budget
+    props = scene.render_budget
     props.budget_mode = mode
     setattr(props, field, value)
     with pytest.raises(RuntimeError, match=message):
-        bpy.ops.power.optimize()
+        bpy.ops.render_budget.optimize()
     assert props.store_text is None
 
 
@@ -302,11 +339,11 @@ def test_optimize_refuses_empty_scene_and_missing_camera(scene) -> None:
     _point_at_dead_service()
     add_camera(scene)
     with pytest.raises(RuntimeError, match="empty scene"):
-        bpy.ops.power.optimize()
+        bpy.ops.render_budget.optimize()
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     add_cube(bpy.context.scene)
     with pytest.raises(RuntimeError, match="no active camera"):
-        bpy.ops.power.optimize()
+        bpy.ops.render_budget.optimize()
 
 
 def test_evaluate_without_store_is_reported(scene) -> None:
@@ -314,7 +351,7 @@ def test_evaluate_without_store_is_reported(scene) -> None:
     add_cube(scene)
     _point_at_dead_service()
     with pytest.raises(RuntimeError, match="no Pareto store"):
-        bpy.ops.power.evaluate_path(directory=str(Path(sys.prefix)))
+        bpy.ops.render_budget.evaluate_path(directory=str(Path(sys.prefix)))
 
 
 def test_hud_text_flags_a_broken_budget(scene, tmp_path) -> None:
@@ -322,9 +359,9 @@ def test_hud_text_flags_a_broken_budget(scene, tmp_path) -> None:
     turning_camera(scene, 6)
     add_cube(scene)
     assert hud.hud_lines(scene) == []  # nothing to show without a store
-    bpy.ops.power.record_path_animation()
+    bpy.ops.render_budget.record_path_animation()
     _load_store(tmp_path)
-    props = scene.power_budget
+    props = scene.render_budget
     props.budget_mode, props.power_budget = "POWER", 10.0
     scene.frame_set(2)
     lines = hud.hud_lines(scene)
@@ -340,9 +377,9 @@ def test_panel_and_preferences_refer_to_existing_properties(ext) -> None:
     """Drawing needs a window; check statically that every property the UI draws exists."""
     import ast
 
-    scene_props = set(bpy.types.Scene.bl_rna.properties["power_budget"].fixed_type.properties.keys())
+    scene_props = set(bpy.types.Scene.bl_rna.properties["render_budget"].fixed_type.properties.keys())
     wm_rna = bpy.types.WindowManager.bl_rna
-    runtime = set(wm_rna.properties["power_budget_runtime"].fixed_type.properties.keys())
+    runtime = set(wm_rna.properties["render_budget_runtime"].fixed_type.properties.keys())
     src = Path(ext.__file__).parent / "panels.py"
     for node in ast.walk(ast.parse(src.read_text())):
         if isinstance(node, ast.Call) and getattr(node.func, "attr", "") in {"prop", "prop_search"}:

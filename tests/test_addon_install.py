@@ -26,12 +26,12 @@ out = {}
 res = bpy.ops.extensions.package_install_files(filepath=zip_path, repo="user_default", enable_on_install=True)
 out["install"] = sorted(res)
 def state():
-    names = [n for n in dir(bpy.types) if n.startswith(("POWER_", "VIEW3D_PT_power"))]
+    names = [n for n in dir(bpy.types) if n.startswith(("RENDER_BUDGET_", "VIEW3D_PT_render_budget"))]
     handlers = [h.__module__ for hs in (bpy.app.handlers.frame_change_post, bpy.app.handlers.load_post)
                 for h in hs if (getattr(h, "__module__", "") or "").startswith(mod)]
     return {"enabled": mod in bpy.context.preferences.addons, "types": len(names), "handlers": handlers,
-            "scene_prop": hasattr(bpy.types.Scene, "power_budget"),
-            "wm_prop": hasattr(bpy.types.WindowManager, "power_budget_runtime")}
+            "scene_prop": hasattr(bpy.types.Scene, "render_budget"),
+            "wm_prop": hasattr(bpy.types.WindowManager, "render_budget_runtime")}
 out["after_install"] = state()
 import importlib
 ps = importlib.import_module(mod + "._vendored.pareto_store")
@@ -87,7 +87,7 @@ def test_zip_installs_enables_disables_and_reenables_cleanly(zip_path: Path, tmp
     assert out["install"] == ["FINISHED"]
     on, off = out["after_install"], out["after_disable"]
     assert on["enabled"] and on["types"] >= 10 and on["scene_prop"] and on["wm_prop"]
-    assert len(on["handlers"]) == 2
+    assert len(on["handlers"]) == 3  # playback: frame change + load; migration: load
     assert out["vendored_store"] == "render-budget/pareto-store" and out["hud"] is False
     for st in (off, out["after_second_disable"]):
         assert st == {"enabled": False, "types": 0, "handlers": [], "scene_prop": False, "wm_prop": False}

@@ -85,7 +85,7 @@ def build_scene() -> bpy.types.Scene:
         cam.rotation_euler = (math.radians(80), 0.0, a + math.pi / 2)
         cam.keyframe_insert("location", frame=i + 1)
         cam.keyframe_insert("rotation_euler", frame=i + 1)
-    props = sc.power_budget
+    props = sc.render_budget
     for name in PARAMETERS:
         item = props.parameters.add()
         item.name = name
@@ -99,8 +99,8 @@ def build_scene() -> bpy.types.Scene:
 def optimized(ext, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """Optimize once (synchronous operator path) and save the .blend."""
     sc = build_scene()
-    assert bpy.ops.power.optimize() == {"FINISHED"}
-    assert sc.power_budget.store_text is not None
+    assert bpy.ops.render_budget.optimize() == {"FINISHED"}
+    assert sc.render_budget.store_text is not None
     blend = tmp_path_factory.mktemp("blend") / "optimized.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(blend))
     return blend
@@ -125,7 +125,7 @@ def test_optimize_end_to_end_store_in_blend_and_playback_matches_query(optimized
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     bpy.ops.wm.open_mainfile(filepath=str(optimized))  # the store survived save and reload
     sc = bpy.context.scene
-    props = sc.power_budget
+    props = sc.render_budget
     text = props.store_text.as_string()
     store = ParetoStore.from_json(text)
     assert props.store_id and props.job_id and "views" in props.summary
@@ -191,16 +191,16 @@ def test_gui_path_worker_thread_and_queue(ext) -> None:
     job.thread.join(600)
     assert not job.thread.is_alive()
     assert ops._poll_queue() is None  # drained: job finished, timer would stop
-    rt = bpy.context.window_manager.power_budget_runtime
+    rt = bpy.context.window_manager.render_budget_runtime
     assert rt.job_status.startswith("done"), rt.job_status
-    assert rt.job_progress == 1.0 and sc.power_budget.store_text is not None
+    assert rt.job_progress == 1.0 and sc.render_budget.store_text is not None
 
 
 def test_cancel_from_the_gui_path(ext, service) -> None:
     ops = m("ops_optimize")
     sc = build_scene()
-    sc.power_budget.seed = 12345  # a job the cache has not seen
-    sc.power_budget.max_depth = 2
+    sc.render_budget.seed = 12345  # a job the cache has not seen
+    sc.render_budget.max_depth = 2
     client = m("service_process").client_for(bpy.context)
     prep = ops.prepare(sc)
     job = ops._ActiveJob(prep, threading.Thread())
@@ -214,8 +214,8 @@ def test_cancel_from_the_gui_path(ext, service) -> None:
     job.thread.join(120)
     assert not job.thread.is_alive()
     assert ops._poll_queue() is None
-    rt = bpy.context.window_manager.power_budget_runtime
-    assert "cancelled" in rt.job_status and sc.power_budget.store_text is None
+    rt = bpy.context.window_manager.render_budget_runtime
+    assert "cancelled" in rt.job_status and sc.render_budget.store_text is None
     assert "service state: cancelled" in rt.job_status
     job_id = re.search(r"job (\S+) cancelled", rt.job_status).group(1)
     assert ServiceClient(service.url).job(job_id)["state"] == "cancelled"
@@ -225,7 +225,7 @@ def test_cancel_from_the_gui_path(ext, service) -> None:
 def test_preview_renders_into_an_image(ext, fmt: str) -> None:
     sc = build_scene()
     sc.frame_set(3)
-    assert bpy.ops.power.preview(format=fmt, scale=0.5, use_active=False) == {"FINISHED"}
+    assert bpy.ops.render_budget.preview(format=fmt, scale=0.5, use_active=False) == {"FINISHED"}
     img = bpy.data.images[m("ops_preview").IMAGE_NAME]
     assert tuple(img.size) == (48, 27) and img.packed_file is not None
     px = np.empty(48 * 27 * 4, dtype=np.float32)

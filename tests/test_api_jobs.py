@@ -156,8 +156,8 @@ def test_two_concurrent_jobs_and_queries_during_them(client: httpx.Client, scene
     query = {"position": [0.0, -3.0, 1.5], "direction": [0.0, 1.0, -0.3], "error_budget": 0.05}
     expected = client.post(f"/stores/{store_id}/query", json=query).json()
     # New resolutions: nothing in the evaluation cache, so both jobs really render.
-    a = client.post("/jobs", json=tiny_job(scene["id"], resolution=(20, 15))).json()
-    b = client.post("/jobs", json=tiny_job(scene["id"], resolution=(24, 18))).json()
+    a = client.post("/jobs", json=tiny_job(scene["id"], resolution=(160, 120))).json()
+    b = client.post("/jobs", json=tiny_job(scene["id"], resolution=(176, 132))).json()
     answers: list[dict[str, Any]] = []
     both_running = False
     stop = threading.Event()
