@@ -1,9 +1,13 @@
 """Headless batch runs of the add-on: optimize, evaluate, playback.
 
-    blender -b scene.blend --python-exit-code 1 -P addon/batch.py -- optimize --url http://127.0.0.1:8765
-    python -m addon.batch --blend scene.blend optimize --serve          # the same through the bpy module
+    blender -b scene.blend --python-exit-code 1 -P addon/batch.py -- --url http://127.0.0.1:8765 optimize
+    python -m addon.batch --blend scene.blend --serve optimize          # the same through the bpy module
+    python -m addon.batch --blend scene.blend --serve evaluate --out report/
 
-Prints a text progress bar; exits non-zero (with the reason on stderr) on any failure.
+The service options (--url, --token, --serve, --python, --data-dir, --timeout) come before the command;
+each command's own options after it (`python -m addon.batch optimize --help`). ``evaluate`` runs the
+evaluation campaign of ``make demo`` under the scene's power and error budgets and writes the same report
+folder. Prints a text progress bar; exits non-zero (with the reason on stderr) on any failure.
 """
 
 from __future__ import annotations
@@ -155,11 +159,8 @@ def _apply_scene_options(ext: str, props, args: argparse.Namespace) -> None:
     if getattr(args, "camera_sampling", None):
         props.camera_sampling = args.camera_sampling.upper()
     if getattr(args, "resolution", None):
-        try:
-            w, h = (int(v) for v in args.resolution.lower().split("x"))
-        except ValueError:
-            raise ValueError(f"--resolution must look like 64x36, got {args.resolution!r}") from None
-        props.eval_width, props.eval_height = w, h
+        parse_size = importlib.import_module(f"{ext}.core.campaign").parse_size
+        props.eval_width, props.eval_height = parse_size(args.resolution)
 
 
 def _configure_service(bpy: ModuleType, ext: str, args: argparse.Namespace) -> None:

@@ -3,7 +3,7 @@ min) and with the store's budget-driven settings (temporal filter included), as 
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
@@ -71,8 +71,9 @@ def budget_kept(mode: str, value: float, power_w: float, error: float) -> bool:
 
 def evaluate_path(client: ServiceClient, store: pareto_store.ParetoStore, path: camera_path.CameraPath,
                   spec: EvalSpec, *, progress: Callable[[int, int], None] | None = None,
-                  frames: Sequence[int] | None = None, concurrency: int = 4) -> list[FrameRow]:
+                  concurrency: int = 4) -> list[FrameRow]:
     """Rows for every (sampled frame, mode); errors and power measured by the service, not predicted.
+    A row's ``frame`` is the index into the path.
 
     The settings of every frame are decided first (the budget-driven mode runs the temporal filter over
     the path in order, exactly as playback does); the evaluations then go out `concurrency` at a time.
@@ -80,14 +81,10 @@ def evaluate_path(client: ServiceClient, store: pareto_store.ParetoStore, path: 
     validate_budget(spec.budget_mode, spec.budget_value)
     presets = preset_settings(store)
     driver = PlaybackDriver(store, spec.filter_period_s)
-    picked = list(range(0, len(path), max(1, spec.frame_step)))
-    numbers = list(frames) if frames is not None else picked
-    if len(numbers) != len(picked):
-        raise ValueError("frames must give one frame number per sampled path frame")
     Job = tuple[int, camera_path.CameraFrame, str, dict[str, Any], tuple[float, float] | None]
     jobs: list[Job] = []
-    for number, i in zip(numbers, picked, strict=True):
-        f = path.frames[i]
+    for number in range(0, len(path), max(1, spec.frame_step)):
+        f = path.frames[number]
         for mode in spec.modes:
             predicted = None
             if mode == "ours":

@@ -13,14 +13,6 @@ from .vendored import camera_path
 VIEWPORT_SENSOR_MM = 72.0
 
 
-def matrix_tuple(matrix: Sequence[Sequence[float]]) -> tuple[tuple[float, ...], ...]:
-    """Copy any 4x4 row-major matrix (mathutils.Matrix, list, ndarray) into nested float tuples."""
-    rows = tuple(tuple(float(v) for v in row) for row in matrix)
-    if len(rows) != 4 or any(len(r) != 4 for r in rows):
-        raise ValueError("expected a 4x4 matrix")
-    return rows
-
-
 def vertical_fov(
     lens_mm: float,
     sensor_width_mm: float,
@@ -82,10 +74,3 @@ def build_path(samples: Sequence[tuple[float, Sequence[Sequence[float]], float, 
                    for t, m, v, r in samples)
     return camera_path.CameraPath(frames, float(fps))
 
-
-def max_matrix_deviation(a: camera_path.CameraPath, b: camera_path.CameraPath) -> float:
-    """Largest absolute element difference between two equally long paths' matrices."""
-    if len(a) != len(b):
-        raise ValueError(f"paths differ in length: {len(a)} vs {len(b)}")
-    return max(float(np.abs(fa.matrix_world - fb.matrix_world).max())
-               for fa, fb in zip(a.frames, b.frames, strict=True))

@@ -74,11 +74,6 @@ class RenderResult:
     render_resolution: tuple[int, int]  # (width, height) actually traced
     extra: dict[str, Any] = field(default_factory=dict)
 
-    @property
-    def traced_ratio(self) -> float:
-        """Samples traced per pixel of the render resolution."""
-        return self.counters["samples_traced"] / max(1, self.counters["pixels"])
-
 
 @dataclass
 class StereoResult:
