@@ -260,16 +260,6 @@ def world_color(rgb: Vec3) -> None:
     bpy.context.scene[ENVIRONMENT_KEY] = list(rgb)
 
 
-def write_exr(path: Path, rgb: np.ndarray) -> None:
-    """(H, W, 3) float32 RGB to an OpenEXR file (ZIP-compressed half would lose the sun's range: float)."""
-    import OpenEXR
-
-    data = np.ascontiguousarray(rgb, dtype=np.float32)
-    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    with OpenEXR.File(header, {"RGB": data}) as f:
-        f.write(str(path))
-
-
 def world_exr(path: Path, strength: float = 1.0) -> None:
     """Equirectangular environment: Blender world node tree + scene extra naming the file (relative)."""
     world = bpy.data.worlds.new("World")

@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from sim_core.image import linear_to_srgb, upsample_bilinear
 
 from service.eval_cache import CacheKey, EvalCache, Evaluation
 from service.executors import Executor, InProcessExecutor
@@ -39,38 +40,7 @@ from service.params import Indices, ParameterSpace
 PIPELINE_VERSION = "v1"
 METRICS = ("ssim", "ssim_gaussian", "flip")
 
-__all__ = ["METRICS", "CameraSpec", "Evaluation", "Evaluator", "SceneHandle", "evaluate", "tone_map",
-           "upsample_bilinear"]
-
-
-def tone_map(image: np.ndarray) -> np.ndarray:
-    """Fixed display transform: clamp linear RGB to [0, 1], apply the sRGB OETF; float64 out."""
-    x = np.clip(np.asarray(image, dtype=np.float64), 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
-
-
-def upsample_bilinear(image: np.ndarray, height: int, width: int) -> np.ndarray:
-    """Bilinear resize of an (h, w[, c]) image to (height, width), pixel centres aligned."""
-    img = np.asarray(image, dtype=np.float64)
-    h, w = img.shape[:2]
-    if (h, w) == (height, width):
-        return img
-
-    def coords(n_out: int, n_in: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        x = (np.arange(n_out) + 0.5) * (n_in / n_out) - 0.5
-        x = np.clip(x, 0, n_in - 1)
-        x0 = np.floor(x).astype(np.int64)
-        x1 = np.minimum(x0 + 1, n_in - 1)
-        return x0, x1, x - x0
-
-    y0, y1, fy = coords(height, h)
-    x0, x1, fx = coords(width, w)
-    extra = (None,) * (img.ndim - 2)
-    fy = fy[(slice(None), None, *extra)]
-    fx = fx[(None, slice(None), *extra)]
-    top = img[y0][:, x0] * (1 - fx) + img[y0][:, x1] * fx
-    bot = img[y1][:, x0] * (1 - fx) + img[y1][:, x1] * fx
-    return top * (1 - fy) + bot * fy
+__all__ = ["METRICS", "CameraSpec", "Evaluation", "Evaluator", "SceneHandle", "evaluate"]
 
 
 @dataclass(frozen=True)
@@ -243,8 +213,8 @@ def _image(result: Any) -> np.ndarray:
 
 
 def _error(metric: str, reference: np.ndarray, image: np.ndarray) -> float:
-    ref = tone_map(reference)
-    img = tone_map(upsample_bilinear(image, ref.shape[0], ref.shape[1]))
+    ref = linear_to_srgb(reference)
+    img = linear_to_srgb(upsample_bilinear(image, ref.shape[0], ref.shape[1]))
     if metric == "ssim":
         e = 1.0 - ssim(ref, img, data_range=1.0)
     elif metric == "ssim_gaussian":

@@ -8,6 +8,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+from sim_core.image import write_exr
 
 from .. import common as c
 
@@ -106,7 +107,7 @@ def build(out_dir: Path) -> c.SceneSpec:
 
     c.sun_light("Sun", tuple(SUN_DIRECTION), strength=3.0, angle_deg=1.0)
     env_path = out_dir / "environment.exr"
-    c.write_exr(env_path, sky(*ENV_SIZE))
+    write_exr(env_path, sky(*ENV_SIZE))
     c.world_exr(env_path)
 
     def eye(t: float) -> np.ndarray:  # fly down the valley, following the river, 20-35 m above it

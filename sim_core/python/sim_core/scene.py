@@ -14,57 +14,12 @@ from typing import Any
 import numpy as np
 
 from . import _core
+from .loaders import load_gltf, load_obj
 from .scene_data import CameraData, Light, Material, SceneData
 
 # Blender's default world colour: what a scene without an environment sees.
 DEFAULT_ENVIRONMENT = (0.050876, 0.050876, 0.050876)
 _LIGHT_KINDS = {"point": 0, "spot": 1, "sun": 2}
-
-
-def load_exr(path: str | os.PathLike[str]) -> np.ndarray:
-    """Read an OpenEXR image as (H, W, 3) float32 linear RGB (an equirectangular environment map).
-
-    Raises FileNotFoundError when the file is missing and ValueError when it is not a readable RGB EXR or
-    holds non-finite or negative values.
-    """
-    import OpenEXR
-
-    p = os.fspath(path)
-    if not os.path.isfile(p):
-        raise FileNotFoundError(f"EXR file not found: {p}")
-    try:
-        with OpenEXR.File(p) as f:
-            channels = f.channels()
-            if "RGB" in channels:
-                rgb = np.asarray(channels["RGB"].pixels, dtype=np.float32)
-            elif "RGBA" in channels:
-                rgb = np.asarray(channels["RGBA"].pixels, dtype=np.float32)[..., :3]
-            elif all(c in channels for c in "RGB"):
-                rgb = np.stack([np.asarray(channels[c].pixels, dtype=np.float32) for c in "RGB"], axis=-1)
-            else:
-                raise ValueError(f"{p}: EXR has no R, G, B channels ({sorted(channels)})")
-    except ValueError:
-        raise
-    except Exception as exc:
-        raise ValueError(f"{p}: not a readable EXR file ({exc})") from None
-    if rgb.ndim != 3 or rgb.shape[2] != 3:
-        raise ValueError(f"{p}: expected an (H, W, 3) image, got shape {rgb.shape}")
-    if not np.all(np.isfinite(rgb)) or np.any(rgb < 0):
-        raise ValueError(f"{p}: environment map must be finite and >= 0")
-    return np.ascontiguousarray(rgb)
-
-
-def smooth_normals(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """Area-weighted per-vertex normals (for meshes that come without normals)."""
-    p = np.asarray(positions, dtype=np.float64)
-    t = np.asarray(triangles, dtype=np.int64)
-    fn = np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]])
-    vn = np.zeros_like(p)
-    for k in range(3):
-        np.add.at(vn, t[:, k], fn)
-    length = np.linalg.norm(vn, axis=1, keepdims=True)
-    vn = np.divide(vn, length, out=np.zeros_like(vn), where=length > 0)
-    return vn.astype(np.float32)
 
 
 def _as_array(value: Any, name: str, dtype: type, ncols: int | None) -> np.ndarray:
@@ -305,15 +260,11 @@ class Scene:
     @classmethod
     def from_obj(cls, path: str | os.PathLike[str]) -> Scene:
         """Wavefront OBJ (Y-up files are converted to the Z-up world frame by the loader)."""
-        from .loaders.obj import load_obj
-
         return cls.from_scene_data(load_obj(path))
 
     @classmethod
     def from_gltf(cls, path: str | os.PathLike[str]) -> Scene:
         """glTF 2.0 (.glb/.gltf) as Blender exports it: meshes, materials, punctual lights, cameras."""
-        from .loaders.gltf import load_gltf
-
         return cls.from_scene_data(load_gltf(path))
 
     # ---- queries --------------------------------------------------------------------------------

@@ -33,6 +33,8 @@ from typing import Any
 
 import numpy as np
 
+from ..geometry import smooth_normals
+from ..image import load_exr, srgb_to_linear
 from ..scene_data import CameraData, Light, Material, SceneData
 
 #: glTF (Y-up) to Blender (Z-up) world frame: (x, y, z) -> (x, -z, y).
@@ -361,22 +363,6 @@ def _primitive_triangles(doc: _Document, prim: dict[str, Any], vcount: int, what
     return np.stack([np.full(k.size, idx[0]), idx[k + 1], idx[k + 2]], axis=1)  # fan
 
 
-def _vertex_normals(positions: np.ndarray, tris: np.ndarray) -> np.ndarray:
-    """Area-weighted vertex normals for primitives that carry none."""
-    p0 = positions[tris[:, 0]]
-    face = np.cross(positions[tris[:, 1]] - p0, positions[tris[:, 2]] - p0)
-    normals = np.zeros_like(positions)
-    for k in range(3):
-        np.add.at(normals, tris[:, k], face)
-    length = np.linalg.norm(normals, axis=1, keepdims=True)
-    fallback = np.array([0.0, 0.0, 1.0])
-    return np.where(length > 0, normals / np.where(length > 0, length, 1.0), fallback)
-
-
-def _srgb_to_linear(c: np.ndarray) -> np.ndarray:
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
-
-
 def _image_bytes(doc: _Document, image_index: int) -> bytes:
     images = doc.gltf.get("images", [])
     if not 0 <= image_index < len(images):
@@ -430,7 +416,7 @@ def _texture_mean(doc: _Document, texture_index: int, cache: dict[int, np.ndarra
                     rgb = np.asarray(im.convert("RGB"), dtype=np.float64) / 255.0
         except (OSError, ValueError, Image.DecompressionBombWarning, Image.DecompressionBombError) as exc:
             raise ValueError(f"{doc.path}: texture image {source} cannot be decoded ({exc})") from None
-        cache[source] = _srgb_to_linear(rgb).reshape(-1, 3).mean(axis=0)
+        cache[source] = srgb_to_linear(rgb).reshape(-1, 3).mean(axis=0)
     return cache[source]
 
 
@@ -501,8 +487,6 @@ def _environment(doc: _Document) -> np.ndarray | tuple[float, float, float] | No
         exr = doc.path.parent / value
         if not exr.is_file():
             raise FileNotFoundError(f"{doc.path}: environment map {value!r} not found next to the scene")
-        from ..scene import load_exr  # the one EXR reader (late: scene.py imports the loaders)
-
         return load_exr(exr)
     rgb = np.asarray(value, dtype=np.float64).reshape(-1)
     if rgb.shape != (3,) or not np.all(np.isfinite(rgb)):
@@ -680,7 +664,7 @@ def _load(p: Path) -> SceneData:
         filled = []
         starts = np.cumsum([0] + [part.shape[0] for part in pos_parts[:-1]])
         for part_pos, part_nrm, part_tri, start in zip(pos_parts, nrm_parts, tri_parts, starts, strict=True):
-            filled.append(part_nrm if part_nrm is not None else _vertex_normals(part_pos, part_tri - start))
+            filled.append(part_nrm if part_nrm is not None else smooth_normals(part_pos, part_tri - start))
         normals = np.concatenate(filled).astype(np.float32)
     if positions.shape[0] > np.iinfo(np.uint32).max:
         raise ValueError(f"{doc.path}: too many vertices for 32-bit indices")
