@@ -25,6 +25,7 @@ from .core.job_runner import JobOptions, JobOutcome, JobUpdate, run_job
 from .core.playback_logic import predicted_path_summary, summary_text, validate_budget
 from .core.vendored import camera_path as path_format
 from .core.vendored import pareto_store
+from .scene_export import export_glb
 
 log = logging.getLogger(__name__)
 STORE_TEXT_PREFIX = "render_budget_store"
@@ -71,21 +72,6 @@ def _default_profile() -> str:
         return "mobile"
 
 
-def export_glb(scene: bpy.types.Scene, directory: str | Path) -> Path:
-    """The scene as glTF binary: modifiers applied, lights and cameras included, Y up (glTF's frame)."""
-    path = Path(directory) / "scene.glb"
-    window = bpy.context.window
-    with bpy.context.temp_override(scene=scene, **({"window": window} if window else {})):
-        if bpy.context.object is not None and bpy.context.object.mode != "OBJECT":
-            bpy.ops.object.mode_set(mode="OBJECT")
-        bpy.ops.export_scene.gltf(filepath=str(path), export_format="GLB", export_apply=True,
-                                  export_lights=True, export_cameras=True, export_yup=True,
-                                  use_active_scene=True)
-    if not path.is_file():
-        raise RuntimeError("glTF export produced no file")
-    return path
-
-
 def ensure_path(scene: bpy.types.Scene) -> path_format.CameraPath:
     """The recorded path, recording it from the active camera's animation if there is none yet."""
     path = load_path(scene)
@@ -113,7 +99,7 @@ def prepare(scene: bpy.types.Scene) -> Prepared:
     path = ensure_path(scene)
     tmp = tempfile.TemporaryDirectory(prefix="render-budget-export-")
     try:
-        glb = export_glb(scene, tmp.name)
+        glb = export_glb(scene, Path(tmp.name) / "scene.glb")
     except Exception:
         tmp.cleanup()
         raise

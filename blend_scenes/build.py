@@ -25,6 +25,9 @@ PACKAGE_DIR = Path(__file__).resolve().parent
 REPO_ROOT = PACKAGE_DIR.parent
 DEFAULT_OUT = PACKAGE_DIR / "build"
 SCENE_FILES = ("scene.blend", "scene.glb", "path.json", "stats.json")
+#: The add-on's helpers the build uses (path sampling, fov, export): part of every scene's hash.
+ADDON_SOURCES = tuple(REPO_ROOT / "addon" / f for f in ("camera_path.py", "scene_export.py",
+                                                        "core/path_sampling.py"))
 
 
 def _scene_names() -> tuple[str, ...]:
@@ -37,7 +40,7 @@ def generator_hash(name: str) -> str:
     """Hash of everything that determines a scene's content (sources and the models it loads)."""
     h = hashlib.sha256()
     gen = PACKAGE_DIR / "scenes" / f"{name}.py"
-    sources = [gen, PACKAGE_DIR / "common.py", PACKAGE_DIR / "build.py"]
+    sources = [gen, PACKAGE_DIR / "common.py", PACKAGE_DIR / "build.py", *ADDON_SOURCES]
     text = gen.read_text()
     models = sorted(set(re.findall(r"[\"']([\w-]+\.obj)[\"']", text)))  # quoted model file names
     sources += [REPO_ROOT / "assets" / "models" / m for m in models]
@@ -129,7 +132,10 @@ def stats_line(name: str, stats: dict[str, Any]) -> str:
 
 def build_scene(name: str, out_dir: Path) -> dict[str, Any]:
     """Run one generator in this process's bpy and write its files; returns the statistics."""
-    import bpy
+    import bpy  # late: build() first keeps Blender's user configuration out of the home directory
+
+    from addon.camera_path import sample_animation
+    from addon.scene_export import export_glb
 
     from . import common
 
@@ -144,16 +150,16 @@ def build_scene(name: str, out_dir: Path) -> dict[str, Any]:
     clearance, problems = common.camera_clearance(spec.camera)
     if problems:
         raise RuntimeError(f"{name}: camera path clips geometry: {'; '.join(problems[:6])}")
-    path_doc = common.sample_camera_path(spec.camera)
-    common.write_camera_path(path_doc, scene_dir / "path.json")
-    common.export_glb(scene_dir / "scene.glb")
+    path = sample_animation(bpy.context.scene, spec.camera)
+    path.save(scene_dir / "path.json")
+    export_glb(bpy.context.scene, scene_dir / "scene.glb")
     bpy.ops.wm.save_as_mainfile(filepath=str(scene_dir / "scene.blend"), compress=True, check_existing=False)
     stats = {"name": name, "description": spec.description, **scene_statistics(scene_dir / "scene.glb")}
     stats.update({
-        "frames": len(path_doc["frames"]),
-        "fps": path_doc["fps"],
-        "duration_s": path_doc["frames"][-1]["time"],
-        "resolution": path_doc["frames"][0]["resolution"],
+        "frames": len(path),
+        "fps": path.fps,
+        "duration_s": path.frames[-1].time,
+        "resolution": list(path.frames[0].resolution),
         "extra_files": [p.name for p in spec.extra_files],
         "camera_min_clearance_m": round(clearance, 3),
         "blender_version": bpy.app.version_string,
