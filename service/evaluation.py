@@ -20,9 +20,9 @@ from __future__ import annotations
 
 import hashlib
 import math
+import tempfile
 import threading
 import time
-from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,8 +31,10 @@ from typing import Any
 import numpy as np
 from sim_core.image import linear_to_srgb, upsample_bilinear
 
+import sim_core
 from service.eval_cache import CacheKey, EvalCache, Evaluation
 from service.executors import Executor, InProcessExecutor
+from service.lru import LRUCache
 from service.metrics import flip, ssim
 from service.params import Indices, ParameterSpace
 
@@ -81,17 +83,13 @@ class CameraSpec:
         """The tracer's camera (built once per process and key)."""
         cam = _CAMERAS.get(self._key)  # type: ignore[attr-defined]
         if cam is None:
-            import sim_core
-
             target = tuple(e + f for e, f in zip(self.eye, self.forward, strict=True))
             cam = sim_core.Camera.look_at(self.eye, target, self.up, self.vfov, self.width, self.height)
-            if len(_CAMERAS) > 4096:
-                _CAMERAS.clear()
-            _CAMERAS[self._key] = cam  # type: ignore[attr-defined]
+            _CAMERAS.put(self._key, cam)  # type: ignore[attr-defined]
         return cam
 
 
-_CAMERAS: dict[str, Any] = {}
+_CAMERAS: LRUCache[str, Any] = LRUCache(4096)
 
 
 class SceneHandle:
@@ -116,7 +114,7 @@ class SceneHandle:
         if scene is None:
             scene = _load_scene(self.path, None)  # type: ignore[arg-type]
         self.content_hash = str(scene.content_hash)
-        _remember_scene(self.content_hash, scene)
+        _SCENES.put(self.content_hash, scene)
         self._scene = scene
 
     def get(self) -> Any:
@@ -132,7 +130,7 @@ class SceneHandle:
                         raise RuntimeError("this scene has no file or loader for a worker process")
                     if str(s.content_hash) != self.content_hash:
                         raise RuntimeError("the worker loaded a different scene (content hash differs)")
-                    _remember_scene(self.content_hash, s)
+                    _SCENES.put(self.content_hash, s)
             self._scene = s
         return self._scene
 
@@ -151,12 +149,8 @@ class SceneHandle:
 
 
 def _load_scene(path: str, data: bytes | None) -> Any:
-    import sim_core
-
     p = Path(path)
     if data is not None and not p.exists():
-        import tempfile
-
         tmp = Path(tempfile.mkdtemp(prefix="render-budget-scene-")) / p.name
         tmp.write_bytes(data)
         p = tmp
@@ -172,26 +166,15 @@ def load_scene(path: str | Path, *, ship_bytes: bool = False) -> SceneHandle:
     return SceneHandle(path=path, ship_bytes=ship_bytes)
 
 
-# worker-process state: scenes by content hash, profiles by name, reference images (LRU)
-_LOCK = threading.Lock()
-_SCENES: dict[str, Any] = {}
+# worker-process state: the few most recent scenes by content hash (a long-lived worker sees many jobs),
+# profiles by name, reference images (64x36 references are ~27 KB: a whole lockstep batch of samples fits)
+_LOCK = threading.Lock()  # one scene load at a time
+_SCENES: LRUCache[str, Any] = LRUCache(8)
 _PROFILES: dict[str, Any] = {}
-_REFS: OrderedDict[tuple[str, ...], np.ndarray] = OrderedDict()
-_REF_CAPACITY = 512  # 64x36 references are ~27 KB: a whole lockstep batch of samples fits
-_SCENE_CAPACITY = 8
-
-
-def _remember_scene(content_hash: str, scene: Any) -> None:
-    """Keep the few most recent scenes of this process (a long-lived worker sees many jobs)."""
-    _SCENES.pop(content_hash, None)
-    _SCENES[content_hash] = scene
-    while len(_SCENES) > _SCENE_CAPACITY:
-        _SCENES.pop(next(iter(_SCENES)))
+_REFS: LRUCache[tuple[str, ...], np.ndarray] = LRUCache(512)
 
 
 def _profile(name: str) -> Any:
-    import sim_core
-
     p = _PROFILES.get(name)
     if p is None:
         p = sim_core.load_profile(name)
@@ -200,8 +183,6 @@ def _profile(name: str) -> Any:
 
 
 def _render(scene: Any, camera: CameraSpec, settings: Any, threads: int | None) -> Any:
-    import sim_core
-
     return sim_core.render(scene, camera.to_camera(), settings, threads=threads)
 
 
@@ -230,8 +211,6 @@ def _price(result: Any, profile: str, fps: float, pixel_ratio: float = 1.0
            ) -> tuple[float, float, dict[str, float]]:
     """Power (W) and frame time at ``pixel_ratio`` times the rendered pixel count, and the breakdown
     (energy per block at the rendered size)."""
-    import sim_core
-
     rep = sim_core.price(result, _profile(profile), fps)
     dynamic = float(rep.dynamic_energy_j)
     static_w = float(rep.power_w) - dynamic * fps
@@ -245,16 +224,10 @@ def _reference(scene: Any, scene_hash: str, camera: CameraSpec, space: Parameter
                threads: int | None) -> np.ndarray:
     mq = space.max_quality_indices()
     key = (scene_hash, camera.key(), repr(sorted(space.fields_of(mq).items())))
-    with _LOCK:
-        ref = _REFS.get(key)
-        if ref is not None:
-            _REFS.move_to_end(key)
-            return ref
-    ref = _image(_render(scene, camera, space.to_settings(mq), threads))
-    with _LOCK:
-        _REFS[key] = ref
-        while len(_REFS) > _REF_CAPACITY:
-            _REFS.popitem(last=False)
+    ref = _REFS.get(key)
+    if ref is None:
+        ref = _image(_render(scene, camera, space.to_settings(mq), threads))
+        _REFS.put(key, ref)
     return ref
 
 
