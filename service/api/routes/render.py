@@ -162,8 +162,9 @@ def evaluate_settings(body: EvaluateRequest, storage: StorageDep, scenes: Scenes
         raise ApiError(422, f"camera: {exc}") from exc
     space, indices = settings_indices(body.settings)
     try:
+        pixels = None if body.power_resolution is None else math.prod(body.power_resolution)
         ev = evaluate(scene, spec, indices, space, profile=body.profile, fps=body.fps,
-                      threads=settings.render_threads)
+                      threads=settings.render_threads, target_pixels=pixels)
     except ValueError as exc:
         raise ApiError(422, str(exc)) from exc
     return EvaluateResponse(error=float(ev.error), power_w=float(ev.power_w),
