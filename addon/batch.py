@@ -57,7 +57,7 @@ def ensure_extension(bpy: ModuleType) -> str:
     for name in bpy.context.preferences.addons.keys():
         if name.endswith("." + EXT_ID):
             return name
-    import addon_utils
+    import addon_utils  # lazy: a Blender module, like bpy (this script is handed bpy by main)
 
     for mod in addon_utils.modules(refresh=False):
         if mod.__name__.endswith("." + EXT_ID):
@@ -263,7 +263,7 @@ def main(argv: list[str] | None = None) -> int:
     if argv is None:
         argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:]
     args = parser().parse_args(argv)
-    import bpy
+    import bpy  # lazy: --help and argument errors need no Blender
 
     ext = ""
     try:

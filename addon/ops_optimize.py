@@ -18,7 +18,7 @@ from pathlib import Path
 
 import bpy
 
-from . import playback, service_process
+from . import playback, preferences, service_process
 from .camera_path import load_path, sample_animation, store_path
 from .core.client import ServiceClient
 from .core.job_runner import JobOptions, JobOutcome, JobUpdate, run_job
@@ -65,8 +65,6 @@ def job_options(scene: bpy.types.Scene) -> JobOptions:
 
 def _default_profile() -> str:
     try:
-        from . import preferences
-
         return preferences.get().default_profile or "mobile"
     except RuntimeError:
         return "mobile"

@@ -15,11 +15,19 @@ import importlib
 import json
 import os
 import re
+import struct
 import sys
 import tempfile
 import time
 from pathlib import Path
 from typing import Any
+
+import numpy as np
+from sim_core.loaders import load_gltf
+
+import sim_core
+
+from .scenes import SCENES
 
 PACKAGE_DIR = Path(__file__).resolve().parent
 REPO_ROOT = PACKAGE_DIR.parent
@@ -28,12 +36,6 @@ SCENE_FILES = ("scene.blend", "scene.glb", "path.json", "stats.json")
 #: The add-on's helpers the build uses (path sampling, fov, export): part of every scene's hash.
 ADDON_SOURCES = tuple(REPO_ROOT / "addon" / f for f in ("camera_path.py", "scene_export.py",
                                                         "core/path_sampling.py"))
-
-
-def _scene_names() -> tuple[str, ...]:
-    from .scenes import SCENES
-
-    return SCENES
 
 
 def generator_hash(name: str) -> str:
@@ -66,11 +68,6 @@ def is_cached(name: str, out_dir: Path) -> bool:
 
 def scene_statistics(glb: Path) -> dict[str, Any]:
     """Counts and effects of the exported scene, as sim_core's loader reads it."""
-    import numpy as np
-    from sim_core.loaders import load_gltf
-
-    import sim_core
-
     sd = load_gltf(glb)
     simulated = sim_core.Scene.from_scene_data(sd)  # the scene must load in the simulator, BVH and all
     raw = _glb_json(glb)
@@ -117,8 +114,6 @@ def scene_statistics(glb: Path) -> dict[str, Any]:
 
 
 def _glb_json(glb: Path) -> dict[str, Any]:
-    import struct
-
     data = glb.read_bytes()
     (length,) = struct.unpack_from("<I", data, 12)
     return json.loads(data[20 : 20 + length])
@@ -132,15 +127,17 @@ def stats_line(name: str, stats: dict[str, Any]) -> str:
 
 def build_scene(name: str, out_dir: Path) -> dict[str, Any]:
     """Run one generator in this process's bpy and write its files; returns the statistics."""
-    import bpy  # late: build() first keeps Blender's user configuration out of the home directory
+    # lazy: bpy (and what imports it) only after build() has kept Blender's user configuration out of
+    # the home directory
+    import bpy
 
     from addon.camera_path import sample_animation
     from addon.scene_export import export_glb
 
     from . import common
 
-    if name not in _scene_names():
-        raise ValueError(f"unknown scene {name!r}; choose from {', '.join(_scene_names())}")
+    if name not in SCENES:
+        raise ValueError(f"unknown scene {name!r}; choose from {', '.join(SCENES)}")
     scene_dir = out_dir / name
     scene_dir.mkdir(parents=True, exist_ok=True)
     (scene_dir / "stats.json").unlink(missing_ok=True)
@@ -176,9 +173,9 @@ def build(names: list[str] | None = None, out_dir: Path = DEFAULT_OUT, force: bo
     if "bpy" not in sys.modules:  # keep Blender's user config out of the home directory
         os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp(prefix="blend-scenes-"))
     results = []
-    for name in names or list(_scene_names()):
-        if name not in _scene_names():
-            raise ValueError(f"unknown scene {name!r}; choose from {', '.join(_scene_names())}")
+    for name in names or list(SCENES):
+        if name not in SCENES:
+            raise ValueError(f"unknown scene {name!r}; choose from {', '.join(SCENES)}")
         if not force and is_cached(name, out_dir):
             stats = json.loads((out_dir / name / "stats.json").read_text())
             print(f"[cached] {stats['summary']}", flush=True)

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+import sim_core
 from service.camera_path import CameraPath
 from service.eval_cache import EvalCache
 from service.evaluation import METRICS, Evaluator, SceneHandle
@@ -103,8 +104,6 @@ def resolve_space(scene: Any, space: ParameterSpace, path: CameraPath, threads: 
     The renders start from the space's maximum, its minimum and a middle setting, so settings that only
     adaptive modes read (similarity threshold, multi-rate) are tried where they can matter; the camera
     is the path's first frame."""
-    import sim_core
-
     mq = space.max_quality_indices()
     low = tuple(0 for _ in space.parameters)
     mid = tuple(len(p.values) // 2 for p in space.parameters)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import base64
 import json
 import math
 import urllib.error
@@ -176,8 +177,6 @@ class ServiceClient:
 
 
 def _image_from_json(doc: dict[str, Any]) -> RenderedImage:
-    import base64
-
     for key in ("image_base64", "image", "data"):
         if isinstance(doc.get(key), str):
             data = base64.b64decode(doc[key])

@@ -183,10 +183,10 @@ def budget_list(budget: Budget | Sequence[Budget] | None) -> list[Budget]:
 def plot_over_time(rows: Sequence[FrameRow], out_dir: str | Path,
                    budget: Budget | Sequence[Budget] | None = None) -> list[Path]:
     """Power and error over time per mode (the paper's Figures 9-11) as PNGs. Needs matplotlib."""
-    import matplotlib
+    import matplotlib  # lazy: optional (a stock Blender lacks it), ImportError tells the caller
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # lazy: after choosing the non-GUI backend
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)

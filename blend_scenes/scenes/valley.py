@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import bpy
 import numpy as np
 from sim_core.image import write_exr
 
@@ -88,8 +89,7 @@ def build(out_dir: Path) -> c.SceneSpec:
     c.box("Water", (SIZE, SIZE, 0.2), (0.0, 0.0, WATER_LEVEL - 0.1), water)
 
     rng = np.random.default_rng(11)
-    import bpy  # bmesh-free icosphere through the primitive operator, then shared by all boulders
-
+    # bmesh-free icosphere through the primitive operator, then shared by all boulders
     bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=3, radius=1.0)
     ico = bpy.context.active_object
     boulder = ico.data

@@ -16,6 +16,10 @@ from typing import Any
 
 import numpy as np
 
+from .camera import Camera
+from .render import render
+from .settings import RenderSettings
+
 __all__ = ["SceneAnalysis", "analyze", "inert_parameters"]
 
 
@@ -90,8 +94,6 @@ def analyze(scene: Any) -> SceneAnalysis:
 
 
 def _default_camera(scene: Any, width: int, height: int) -> Any:
-    from . import Camera
-
     cams = list(getattr(scene, "cameras", []) or [])
     if cams:
         c = cams[0]
@@ -129,8 +131,6 @@ def inert_parameters(scene: Any, space: Mapping[str, Sequence[Any]], camera: Any
     context, all its values give the same image (bit for bit) and the same counters. ``camera`` defaults
     to the scene's first camera or one framing its bounds.
     """
-    from . import RenderSettings, render
-
     fields = {f.name for f in dataclasses.fields(RenderSettings)}
     for name, values in space.items():
         if name not in fields:

@@ -18,6 +18,8 @@ from typing import Any
 
 import numpy as np
 
+from . import _core
+
 __all__ = [
     "COMPARATOR_TABLE",
     "ComparatorStats",
@@ -100,8 +102,6 @@ class Profile:
     @property
     def cache(self) -> Any:
         """The node/triangle cache geometry as the native ``CacheConfig`` (pass to ``render(cache=...)``)."""
-        from . import _core
-
         return _core.CacheConfig(self.cache_size_bytes, self.cache_line_bytes, self.cache_ways)
 
     @classmethod
@@ -197,8 +197,6 @@ def _table_columns() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np
 
 def comparator_stats(histogram: np.ndarray | None, energy_scale: float = 1.0) -> ComparatorStats:
     """Price a chain-length histogram with Table 4.1 (J, scaled by ``energy_scale`` for the process)."""
-    from . import _core
-
     bits = int(_core.COMPARATOR_BITS)
     if histogram is None:
         h = np.zeros(bits + 1, dtype=np.int64)
