@@ -292,19 +292,9 @@ def _filtered_reads_per_lookup(settings: Any) -> int:
     return 9 * 3  # Bartlett, or settings unknown (a plain counter mapping): price the dearer lookup
 
 
-def price(result: Any, profile: Profile | str | Path, fps: float, *, scene: Any = None) -> EnergyReport:
-    """Price one rendered frame: energy and cycles by block, frame time, deadline, power, perf/W.
-
-    ``result`` is a ``RenderResult`` (its ``counters``, ``comparator_histogram`` and, when present,
-    ``settings``) or a plain mapping of counter names to counts. A block whose counters are 0 costs
-    exactly 0 J and 0 cycles. ``scene`` (optional): when given and its environment is a constant colour,
-    environment lookups of missed rays cost nothing (a constant is a register, not a map lookup).
-    """
-    prof = load_profile(profile) if not isinstance(profile, Profile) else profile
-    if isinstance(fps, bool) or not isinstance(fps, (int, float)) or not math.isfinite(fps) or fps <= 0:
-        raise ValueError(f"fps must be a finite positive number, got {fps!r}")
-    fps = float(fps)
-    c, hist, settings = _counters_of(result)
+def _block_costs(prof: Profile, c: Mapping[str, int], hist: np.ndarray | None, settings: Any, scene: Any
+                 ) -> tuple[dict[str, float], dict[str, float], ComparatorStats]:
+    """Energy (J) and cycles of every block for the counted events (the first half of :func:`price`)."""
 
     def n(name: str) -> int:
         return c.get(name, 0)
@@ -358,6 +348,28 @@ def price(result: Any, profile: Profile | str | Path, fps: float, *, scene: Any 
         if not math.isfinite(v):
             raise ValueError(f"energy of block {k!r} is not finite")
 
+    return energy, cycles, comp
+
+
+def price(result: Any, profile: Profile | str | Path, fps: float, *, scene: Any = None) -> EnergyReport:
+    """Price one rendered frame: energy and cycles by block, frame time, deadline, power, perf/W.
+
+    ``result`` is a ``RenderResult`` (its ``counters``, ``comparator_histogram`` and, when present,
+    ``settings``) or a plain mapping of counter names to counts. A block whose counters are 0 costs
+    exactly 0 J and 0 cycles. ``scene`` (optional): when given and its environment is a constant colour,
+    environment lookups of missed rays cost nothing (a constant is a register, not a map lookup).
+    """
+    prof = load_profile(profile) if not isinstance(profile, Profile) else profile
+    if isinstance(fps, bool) or not isinstance(fps, (int, float)) or not math.isfinite(fps) or fps <= 0:
+        raise ValueError(f"fps must be a finite positive number, got {fps!r}")
+    fps = float(fps)
+    c, hist, settings = _counters_of(result)
+
+    def n(name: str) -> int:
+        return c.get(name, 0)
+
+    energy, cycles, comp = _block_costs(prof, c, hist, settings, scene)
+    clk, thr = prof.clock, prof.throughput
     unit_time = {
         "srp": sum(cycles[b] for b in BLOCKS if BLOCK_UNIT[b] == "srp") / clk["srp_hz"],
         # Traversal and intersection pipelines (and the cache ports feeding them) work concurrently.

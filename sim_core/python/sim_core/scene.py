@@ -63,6 +63,45 @@ def _environment(env: Any) -> tuple[np.ndarray, np.ndarray | None]:
     raise ValueError(f"environment must be an RGB triple or an (H, W, 3) map, got shape {arr.shape}")
 
 
+def _non_degenerate(pos: np.ndarray, tri: np.ndarray) -> np.ndarray:
+    """Triangles to keep: no repeated vertex and a non-zero area (computed in double precision)."""
+    p64 = pos.astype(np.float64)
+    e1 = p64[tri[:, 1]] - p64[tri[:, 0]]
+    e2 = p64[tri[:, 2]] - p64[tri[:, 0]]
+    area2 = np.linalg.norm(np.cross(e1, e2), axis=1)
+    return (area2 > 0) & (tri[:, 0] != tri[:, 1]) & (tri[:, 1] != tri[:, 2]) & (tri[:, 0] != tri[:, 2])
+
+
+def _triangle_ids(values: Any, name: str, n_tri: int) -> np.ndarray:
+    """Per-triangle ids as uint32 (zeros when not given), one per triangle."""
+    if values is None:
+        return np.zeros(n_tri, np.uint32)
+    ids = _as_array(values, name, np.int64, None)
+    if ids.shape[0] != n_tri:
+        raise ValueError(f"{name} must have one entry per triangle ({n_tri}), got {ids.shape[0]}")
+    return ids.astype(np.uint32)
+
+
+def _effects(mats: Sequence[Material], lights: Sequence[Light], environment_map: bool) -> list[str]:
+    """What the scene's content can show (``stats["effects"]``)."""
+    effects = []
+    if lights:
+        effects.append("direct_light")
+    if any(m.is_reflective for m in mats):
+        effects.append("reflection")
+    if any(m.metallic > 0 and m.roughness > 0 for m in mats):
+        effects.append("glossy")
+    if any(m.is_refractive for m in mats):
+        effects.append("refraction")
+    if any(max(m.emission) > 0 for m in mats):
+        effects.append("emission")
+    if any(light.radius > 0 for light in lights):
+        effects.append("soft_shadows")
+    if environment_map:
+        effects.append("environment_map")
+    return effects
+
+
 def _material_table(materials: Sequence[Material]) -> np.ndarray:
     rows = []
     for m in materials:
@@ -157,38 +196,19 @@ class Scene:
                 raise ValueError(f"normals must have one row per vertex ({pos.shape[0]}), got {nrm.shape[0]}")
         mats = list(materials) if materials else [Material()]
         mtab = _material_table(mats)
-        if material_ids is None:
-            mid = np.zeros(n_tri, np.uint32)
-        else:
-            mid = _as_array(material_ids, "material_ids", np.int64, None)
-            if mid.shape[0] != n_tri:
-                raise ValueError(
-                    f"material_ids must have one entry per triangle ({n_tri}), got {mid.shape[0]}"
-                )
-            if mid.size and mid.max() >= len(mats):
-                raise ValueError(f"material id {int(mid.max())} out of range (have {len(mats)} materials)")
-            mid = mid.astype(np.uint32)
-        if object_ids is None:
-            oid = np.zeros(n_tri, np.uint32)
-        else:
-            oid = _as_array(object_ids, "object_ids", np.int64, None)
-            if oid.shape[0] != n_tri:
-                raise ValueError(f"object_ids must have one entry per triangle ({n_tri}), got {oid.shape[0]}")
-            if oid.size and oid.max() >= 2**31:
-                raise ValueError("object ids must be < 2**31")
-            oid = oid.astype(np.uint32)
+        mid = _triangle_ids(material_ids, "material_ids", n_tri)
+        if mid.size and mid.max() >= len(mats):
+            raise ValueError(f"material id {int(mid.max())} out of range (have {len(mats)} materials)")
+        oid = _triangle_ids(object_ids, "object_ids", n_tri)
+        if oid.size and oid.max() >= 2**31:
+            raise ValueError("object ids must be < 2**31")
         lts = list(lights) if lights else []
         if len(lts) > 32:
             raise ValueError(f"at most 32 lights are supported (one shadow bit each), got {len(lts)}")
         ltab = _light_table(lts)
         env_color, env_map = _environment(environment)
 
-        # Degenerate triangles: repeated vertices or zero area (computed in double precision).
-        p64 = pos.astype(np.float64)
-        e1 = p64[tri[:, 1]] - p64[tri[:, 0]]
-        e2 = p64[tri[:, 2]] - p64[tri[:, 0]]
-        area2 = np.linalg.norm(np.cross(e1, e2), axis=1)
-        keep = (area2 > 0) & (tri[:, 0] != tri[:, 1]) & (tri[:, 1] != tri[:, 2]) & (tri[:, 0] != tri[:, 2])
+        keep = _non_degenerate(pos, tri)
         dropped = int(n_tri - np.count_nonzero(keep))
         if not np.any(keep):
             raise ValueError(f"empty scene: all {n_tri} triangles are degenerate (zero area)")
@@ -213,28 +233,13 @@ class Scene:
             else:
                 h.update(str(arr.shape).encode())
                 h.update(np.ascontiguousarray(arr).tobytes())
-        effects = []
-        if lts:
-            effects.append("direct_light")
-        if any(m.is_reflective for m in mats):
-            effects.append("reflection")
-        if any(m.metallic > 0 and m.roughness > 0 for m in mats):
-            effects.append("glossy")
-        if any(m.is_refractive for m in mats):
-            effects.append("refraction")
-        if any(max(m.emission) > 0 for m in mats):
-            effects.append("emission")
-        if any(light.radius > 0 for light in lts):
-            effects.append("soft_shadows")
-        if env_map is not None:
-            effects.append("environment_map")
         stats = {
             "triangles": int(np.count_nonzero(keep)),
             "degenerate_dropped": dropped,
             "materials": len(mats),
             "lights": len(lts),
             "objects": int(np.unique(oid[keep]).size),
-            "effects": effects,
+            "effects": _effects(mats, lts, env_map is not None),
         }
         scene = cls(native, stats, h.hexdigest(), mats, lts, list(cameras or []), source)
         scene.object_names = [str(n) for n in object_names] if object_names else []

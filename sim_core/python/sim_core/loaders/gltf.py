@@ -539,6 +539,8 @@ def load_gltf(path: str | os.PathLike[str]) -> SceneData:
         raise ValueError(f"{p}: glTF too large or too deeply nested to load ({type(exc).__name__})") from exc
 
 
+# Long: one walk over the node hierarchy filling per-primitive parts (positions, normals, ids) that are
+# concatenated at the end; the module (over 500 lines) is the one glTF reader, helpers included.
 def _load(p: Path) -> SceneData:
     doc = _read_document(p)
     gltf = doc.gltf

@@ -102,6 +102,8 @@ def _parse_simple(lines: list[str]) -> tuple[np.ndarray, np.ndarray] | None:
     return verts.reshape(-1, 3), idx.reshape(-1, 3) - 1
 
 
+# Long: one pass over the file's lines whose face, object and material state (a dozen running lists) is
+# local to that pass; split into parts it would only be handed around.
 def load_obj(path: str | os.PathLike[str], *, up_axis: Literal["Y", "Z"] = "Y") -> SceneData:
     """Load an OBJ into flat arrays in the project's Z-up world frame.
 
