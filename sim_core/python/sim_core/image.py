@@ -9,8 +9,7 @@ from __future__ import annotations
 
 import io
 import os
-import tempfile
-from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 import OpenEXR
@@ -39,8 +38,10 @@ def upsample_bilinear(image: np.ndarray, height: int, width: int) -> np.ndarray:
 
 
 def linear_to_srgb(image: np.ndarray) -> np.ndarray:
-    """The display transform: linear values clamped to [0, 1], then the sRGB OETF; float64 out."""
-    x = np.clip(np.asarray(image, dtype=np.float64), 0.0, 1.0)
+    """The display transform: linear values clamped to [0, 1] (NaN as 0, +Inf as 1), then the sRGB OETF;
+    float64 out."""
+    x = np.nan_to_num(np.asarray(image, dtype=np.float64), nan=0.0, posinf=1.0, neginf=0.0)
+    x = np.clip(x, 0.0, 1.0)
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
 
 
@@ -81,29 +82,23 @@ def load_exr(path: str | os.PathLike[str]) -> np.ndarray:
     return np.ascontiguousarray(rgb)
 
 
-def write_exr(path: str | os.PathLike[str], image: np.ndarray) -> None:
-    """(H, W, 3) linear RGB to a ZIP-compressed 32-bit float OpenEXR file (half floats would lose a
-    sun's range)."""
+def write_exr(target: str | os.PathLike[str] | BinaryIO, image: np.ndarray) -> None:
+    """(H, W, 3) linear RGB as a ZIP-compressed 32-bit float scanline OpenEXR, to a file or a binary
+    stream (half floats would lose a sun's range)."""
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     with OpenEXR.File(header, {"RGB": np.ascontiguousarray(image, dtype=np.float32)}) as f:
-        f.write(os.fspath(path))
+        f.write(target if isinstance(target, io.IOBase) else os.fspath(target))
 
 
-def encode_exr(image: np.ndarray, tmp_dir: str | os.PathLike[str] | None = None) -> bytes:
-    """The bytes of :func:`write_exr`'s file (OpenEXR writes files only: it goes through ``tmp_dir``)."""
-    fd, name = tempfile.mkstemp(suffix=".exr", dir=tmp_dir)
-    os.close(fd)
-    tmp = Path(name)
-    try:
-        write_exr(tmp, image)
-        return tmp.read_bytes()
-    finally:
-        tmp.unlink(missing_ok=True)
+def encode_exr(image: np.ndarray) -> bytes:
+    """:func:`write_exr`'s bytes, written in memory."""
+    buf = io.BytesIO()
+    write_exr(buf, image)
+    return buf.getvalue()
 
 
 def encode_png(image: np.ndarray) -> bytes:
     """Linear float RGB -> 8-bit sRGB PNG (NaN shows black, +Inf white)."""
-    x = np.nan_to_num(np.asarray(image, dtype=np.float64), nan=0.0, posinf=1.0, neginf=0.0)
     buf = io.BytesIO()
-    Image.fromarray((linear_to_srgb(x) * 255.0 + 0.5).astype(np.uint8), "RGB").save(buf, format="PNG")
+    Image.fromarray((linear_to_srgb(image) * 255.0 + 0.5).astype(np.uint8), "RGB").save(buf, format="PNG")
     return buf.getvalue()
