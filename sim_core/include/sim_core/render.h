@@ -1,7 +1,7 @@
-// The tile-based Whitted ray tracer: shading of one sample (primary ray, shadow rays, mirror/glossy
-// reflection, Fresnel refraction, ambient occlusion) with every event counted, and the frame driver that
-// hands tiles to threads. The sampling schedule inside a tile (1 spp, FSAA, adaptive under/supersampling,
-// multi-rate) lives in sampling.h; stereo reprojection in stereo.h.
+// The tile-based ray tracer's frame driver: it hands tiles to threads, each tile with its own context
+// (counters, cache model, comparator histogram), and sums them in tile order. Shading of one sample lives
+// in shader.h, the sampling schedule inside a tile (1 spp, FSAA, adaptive under/supersampling, multi-rate)
+// in sampling.h, stereo reprojection in stereo.h.
 #pragma once
 #include <cstdint>
 #include <vector>
@@ -12,45 +12,9 @@
 #include "sim_core/counters.h"
 #include "sim_core/scene.h"
 #include "sim_core/settings.h"
+#include "sim_core/shader.h"
 
 namespace sim_core {
-
-// What the similarity test needs to know about a sample besides its colour (seed sec. 3: object id,
-// normal, position, shadow bits), for the primary hit and for the first reflection/refraction hits.
-struct SampleGeometry {
-  std::int32_t object = -1;  // primary hit object, -1 on a miss
-  Vec3 normal;               // shading normal at the primary hit
-  Vec3 position;             // primary hit point (world)
-  float depth = kInf;        // camera-space depth of the primary hit
-  std::uint32_t shadow_bits = 0;  // bit l: light l is occluded at the primary hit
-  std::int32_t sec_object[2] = {-2, -2};  // reflection / refraction hit object (-1 environment, -2 no ray)
-  Vec3 sec_normal[2];
-  std::uint32_t sec_shadow_bits = 0;
-};
-
-struct SampleResult {
-  Vec3 color;
-  SampleGeometry geom;
-};
-
-// Per-tile state of the T&I unit model: counters, node/triangle cache, comparator histogram.
-struct TileContext {
-  const Scene& scene;
-  const RenderSettings& settings;
-  const Camera& camera;
-  CacheModel cache;
-  Counters counters;
-  ComparatorHistogram histogram{};
-  float cos_threshold;  // cos(normal_threshold); > 1 when nothing may pass
-  float ao_distance;
-
-  TileContext(const Scene& s, const RenderSettings& st, const Camera& c, const CacheConfig& cc);
-  void finish();  // folds cache statistics into the counters
-};
-
-// Traces and shades the primary sample through continuous pixel coordinates (px, py) of the camera.
-// `key` identifies the sample (its global sample-grid coordinates) and seeds all its random numbers.
-SampleResult trace_sample(TileContext& ctx, float px, float py, std::uint32_t key);
 
 // Statistics of one tile.
 struct TileStat {
