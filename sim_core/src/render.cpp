@@ -1,10 +1,8 @@
 #include "sim_core/render.h"
 
 #include <algorithm>
-#include <cmath>
-#include <stdexcept>
 
-#include "sim_core/sampling.h"
+#include "sim_core/adaptive_sampling.h"
 
 namespace sim_core {
 
@@ -20,37 +18,41 @@ void FrameBuffers::allocate(int w, int h) {
   kind.assign(n, 0);
 }
 
-RenderOutput render_frame(const Scene& scene, const Camera& camera, const RenderSettings& settings, int threads,
-                          const MultirateState* previous, const CacheConfig& cache) {
-  settings.validate();
-  camera.validate();
-  cache.validate();
-  RenderOutput out;
-  const int ts = settings.tile_size;
-  const int tx = (camera.width + ts - 1) / ts, ty = (camera.height + ts - 1) / ts;
-  const int ntiles = tx * ty;
-  out.fb.allocate(camera.width, camera.height);
-  out.tiles.resize(ntiles);
+void FrameBuffers::store(std::size_t p, Vec3 c, const SampleGeometry& g, SampleKind sample_kind) {
+  color[3 * p] = c.x; color[3 * p + 1] = c.y; color[3 * p + 2] = c.z;
+  depth[p] = g.depth;
+  object[p] = g.object;
+  if (g.object >= 0) {
+    normal[3 * p] = g.normal.x; normal[3 * p + 1] = g.normal.y; normal[3 * p + 2] = g.normal.z;
+  }
+  position[3 * p] = g.position.x; position[3 * p + 1] = g.position.y; position[3 * p + 2] = g.position.z;
+  kind[p] = sample_kind;
+}
+
+TileStat TileGrid::tile(std::size_t t) const {
+  TileStat s;
+  s.x0 = static_cast<int>(t % static_cast<std::size_t>(tiles_x)) * tile_size;
+  s.y0 = static_cast<int>(t / static_cast<std::size_t>(tiles_x)) * tile_size;
+  s.width = std::min(tile_size, width - s.x0);
+  s.height = std::min(tile_size, height - s.y0);
+  return s;
+}
+
+void render_tiles(const Scene& scene, const Camera& camera, const RenderSettings& settings, const CacheConfig& cache,
+                  const TileGrid& grid, int threads, RenderOutput* out, const TileRenderer& render) {
+  const std::size_t ntiles = static_cast<std::size_t>(grid.count());
+  out->tiles.resize(ntiles);
   std::vector<Counters> tile_counters(ntiles);
   std::vector<ComparatorHistogram> tile_hist(ntiles);
-  const bool use_prev = settings.multirate && settings.adaptive() && previous &&
-                        previous->matches(tx, ty, ts, camera.width, camera.height);
-  const int k = settings.subgrid();
-
-  parallel_chunks(static_cast<std::size_t>(ntiles), threads, 1, [&](std::size_t begin, std::size_t end) {
+  parallel_chunks(ntiles, threads, 1, [&](std::size_t begin, std::size_t end) {
     for (std::size_t t = begin; t < end; ++t) {
-      const int x0 = static_cast<int>(t % tx) * ts, y0 = static_cast<int>(t / tx) * ts;
-      const int w = std::min(ts, camera.width - x0), h = std::min(ts, camera.height - y0);
-      int spacing = 1;
-      if (settings.adaptive()) {
-        spacing = settings.block;
-        if (use_prev) spacing = multirate_block(previous->block[t], previous->ratio[t], previous->checks[t], settings);
-      }
       TileContext ctx(scene, settings, camera, cache);
-      TileStat& stat = out.tiles[t];
-      render_tile(ctx, out.fb, x0, y0, w, h, k, spacing, &stat);
-      ctx.counters.pixels += static_cast<std::uint64_t>(w) * h;
-      ctx.counters.framebuffer_bytes += static_cast<std::uint64_t>(w) * h * kFramebufferPixelBytes;
+      TileStat& stat = out->tiles[t];
+      stat = grid.tile(t);
+      render(ctx, stat, t);
+      const std::uint64_t pixels = static_cast<std::uint64_t>(stat.width) * stat.height;
+      ctx.counters.pixels += pixels;
+      ctx.counters.framebuffer_bytes += pixels * kFramebufferPixelBytes;
       ctx.finish();
       stat.rays_total = ctx.counters.rays_total;
       stat.bvh_node_visits = ctx.counters.bvh_node_visits;
@@ -60,14 +62,37 @@ RenderOutput render_frame(const Scene& scene, const Camera& camera, const Render
       tile_hist[t] = ctx.histogram;
     }
   });
-  for (int t = 0; t < ntiles; ++t) {
-    out.counters += tile_counters[t];
-    for (std::size_t i = 0; i < out.histogram.size(); ++i) out.histogram[i] += tile_hist[t][i];
+  for (std::size_t t = 0; t < ntiles; ++t) {
+    out->counters += tile_counters[t];
+    for (std::size_t i = 0; i < out->histogram.size(); ++i) out->histogram[i] += tile_hist[t][i];
   }
+}
+
+RenderOutput render_frame(const Scene& scene, const Camera& camera, const RenderSettings& settings, int threads,
+                          const MultirateState* previous, const CacheConfig& cache) {
+  settings.validate();
+  camera.validate();
+  cache.validate();
+  RenderOutput out;
+  const TileGrid grid(camera.width, camera.height, settings.tile_size);
+  out.fb.allocate(camera.width, camera.height);
+  const bool use_prev = settings.multirate && settings.adaptive() && previous &&
+                        previous->matches(grid.tiles_x, grid.tiles_y, grid.tile_size, camera.width, camera.height);
+  const int k = settings.subgrid();
+  render_tiles(scene, camera, settings, cache, grid, threads, &out, [&](TileContext& ctx, TileStat& stat, std::size_t t) {
+    int spacing = 1;
+    if (settings.adaptive()) {
+      spacing = settings.block;
+      if (use_prev) spacing = multirate_block(previous->block[t], previous->ratio[t], previous->checks[t], settings);
+    }
+    render_tile(ctx, out.fb, stat.x0, stat.y0, stat.width, stat.height, k, spacing, &stat);
+  });
+  const std::size_t ntiles = out.tiles.size();
   MultirateState& ms = out.multirate;
-  ms.tiles_x = tx; ms.tiles_y = ty; ms.tile_size = ts; ms.width = camera.width; ms.height = camera.height;
+  ms.tiles_x = grid.tiles_x; ms.tiles_y = grid.tiles_y; ms.tile_size = grid.tile_size;
+  ms.width = camera.width; ms.height = camera.height;
   ms.block.resize(ntiles); ms.ratio.resize(ntiles); ms.checks.resize(ntiles);
-  for (int t = 0; t < ntiles; ++t) {
+  for (std::size_t t = 0; t < ntiles; ++t) {
     ms.block[t] = out.tiles[t].block;
     ms.ratio[t] = out.tiles[t].similarity_ratio;
     ms.checks[t] = out.tiles[t].similarity_checks;

@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "sim_core/sampler.h"
+#include "sim_core/low_discrepancy.h"
 
 namespace sim_core {
 namespace {

@@ -1,9 +1,10 @@
 // The tile-based ray tracer's frame driver: it hands tiles to threads, each tile with its own context
 // (counters, cache model, comparator histogram), and sums them in tile order. Shading of one sample lives
 // in shader.h, the sampling schedule inside a tile (1 spp, FSAA, adaptive under/supersampling, multi-rate)
-// in sampling.h, stereo reprojection in stereo.h.
+// in adaptive_sampling.h, stereo reprojection in stereo.h.
 #pragma once
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include "sim_core/cache.h"
@@ -38,6 +39,9 @@ struct MultirateState {
   }
 };
 
+// How a pixel's value came about (the sample_kind AOV).
+enum SampleKind : std::uint8_t { kSampleTraced = 0, kSampleInterpolated = 1, kSampleReused = 2 };
+
 struct FrameBuffers {
   int width = 0, height = 0;
   std::vector<float> color;         // H*W*3 linear RGB
@@ -45,8 +49,19 @@ struct FrameBuffers {
   std::vector<float> normal;        // H*W*3 shading normal, 0 on miss
   std::vector<float> position;      // H*W*3 primary hit point (world), 0 on miss
   std::vector<std::int32_t> object; // H*W, -1 on miss
-  std::vector<std::uint8_t> kind;   // H*W: 0 traced, 1 interpolated, 2 reused
+  std::vector<std::uint8_t> kind;   // H*W SampleKind
   void allocate(int w, int h);
+  // Writes pixel p: its colour and the geometry of its (centre) sample; the normal stays 0 on a miss.
+  void store(std::size_t p, Vec3 color, const SampleGeometry& g, SampleKind sample_kind);
+};
+
+// The tiles of a frame, row-major: tile t covers [x0, x0 + width) x [y0, y0 + height), clipped to the frame.
+struct TileGrid {
+  int width, height, tile_size, tiles_x, tiles_y;
+  TileGrid(int w, int h, int ts)
+      : width(w), height(h), tile_size(ts), tiles_x((w + ts - 1) / ts), tiles_y((h + ts - 1) / ts) {}
+  int count() const { return tiles_x * tiles_y; }
+  TileStat tile(std::size_t t) const;  // rect set, statistics zero
 };
 
 struct RenderOutput {
@@ -56,6 +71,14 @@ struct RenderOutput {
   ComparatorHistogram histogram{};
   MultirateState multirate;
 };
+
+// Renders every tile of `grid` on `threads` threads. Each tile gets its own TileContext (cold cache) and its
+// TileStat with the rect set; render(ctx, stat, t) traces the tile and writes its pixels. The driver then
+// folds the tile's pixels, frame-buffer flush and cache statistics into its counters and adds every tile's
+// counters and comparator histogram to `out` in tile order (the same totals for any thread count).
+using TileRenderer = std::function<void(TileContext& ctx, TileStat& stat, std::size_t tile)>;
+void render_tiles(const Scene& scene, const Camera& camera, const RenderSettings& settings, const CacheConfig& cache,
+                  const TileGrid& grid, int threads, RenderOutput* out, const TileRenderer& render);
 
 // Renders `camera` (already at render resolution) with `settings`. `previous` may be null.
 RenderOutput render_frame(const Scene& scene, const Camera& camera, const RenderSettings& settings, int threads,
