@@ -13,11 +13,8 @@ namespace {
 
 void check_exact_at_full_rate(const Scene& s) {
   const Camera cam = test::make_camera();
-  const CacheConfig cache{16384, 64, 4};
-  RenderSettings st;
-  st.shadow_samples = 4;
-  st.ao_samples = 2;
-  st.tile_size = 8;
+  const CacheConfig cache = test::kCache;
+  RenderSettings st = test::make_settings();
   st.normal_threshold_deg = -1.f;  // nothing is similar
   for (int block : {2, 3, 4}) {
     RenderSettings ref = st, adaptive = st;

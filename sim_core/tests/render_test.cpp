@@ -40,11 +40,8 @@ void check_tile_sums(const RenderOutput& o) {
 
 void check_render(const Scene& s) {
   const Camera cam = test::make_camera();
-  const CacheConfig cache{16384, 64, 4};
-  RenderSettings st;
-  st.shadow_samples = 4;
-  st.ao_samples = 2;
-  st.tile_size = 8;
+  const CacheConfig cache = test::kCache;
+  RenderSettings st = test::make_settings();
   for (int mode = 0; mode < 4; ++mode) {
     st.mode = static_cast<SamplingMode>(mode);
     const RenderOutput a = render_frame(s, cam, st, 1, nullptr, cache);

@@ -22,7 +22,7 @@ void check_hit_and_miss(const Scene& s) {
   st.shadow_samples = 4;
   st.ao_samples = 3;
   st.max_depth = 2;
-  const CacheConfig cache{16384, 64, 4};
+  const CacheConfig cache = test::kCache;
   TileContext ctx(s, st, cam, cache);
   // The image centre looks at the sphere (object 0).
   const SampleResult hit = trace_sample(ctx, 20.f, 15.f, 7u);

@@ -12,11 +12,8 @@ using namespace sim_core;
 int main() {
   const Scene s = test::make_scene();
   const Camera cam = test::make_camera();
-  const CacheConfig cache{16384, 64, 4};
-  RenderSettings st;
-  st.shadow_samples = 4;
-  st.ao_samples = 2;
-  st.tile_size = 8;
+  const CacheConfig cache = test::kCache;
+  RenderSettings st = test::make_settings();
   const StereoOutput same_eye = render_stereo(s, cam, cam, st, 2, nullptr, cache);
   CHECK(same_eye.reuse_ratio == 1.0);
   CHECK(same_eye.left.fb.color == same_eye.right.fb.color);

@@ -1,13 +1,15 @@
 // A small test scene shared by the tracer's native tests: a bumpy closed sphere (UV-sphere with jittered
-// radii, object 0, metallic) on a ground quad (object 1, diffuse) under one point light, and a camera that
-// sees both.
+// radii, object 0, metallic) on a ground quad (object 1, diffuse) under one point light, a camera that
+// sees both, and the settings and cache the tests render it with.
 #pragma once
 #include <cmath>
 #include <random>
 #include <vector>
 
+#include "sim_core/cache.h"
 #include "sim_core/camera.h"
 #include "sim_core/scene.h"
+#include "sim_core/settings.h"
 
 namespace sim_core::test {
 
@@ -67,5 +69,15 @@ inline Camera make_camera(int width = 40, int height = 30) {
   cam.height = height;
   return cam;
 }
+
+// Settings that exercise soft shadows, ambient occlusion and several 8-pixel tiles, with a small cache.
+inline RenderSettings make_settings() {
+  RenderSettings st;
+  st.shadow_samples = 4;
+  st.ao_samples = 2;
+  st.tile_size = 8;
+  return st;
+}
+inline constexpr CacheConfig kCache{16384, 64, 4};
 
 }  // namespace sim_core::test

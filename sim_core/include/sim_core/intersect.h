@@ -24,6 +24,8 @@
 namespace sim_core {
 
 inline constexpr float kInf = std::numeric_limits<float>::infinity();
+// Far-distance scale of the robust slab test: 1 + 2 * gamma(3) (Ize 2013).
+inline constexpr float kSlabRobust = 1.0000004f;
 
 struct Ray {
   Vec3 origin;
@@ -82,17 +84,13 @@ struct PreparedRay {
 };
 
 // Robust slab test (Ize 2013 / pbrt: far distance scaled by 1 + 2*gamma(3) so rounding never culls a box
-// the exact ray hits). Returns the entry distance or +inf when the box is missed within [tmin, tmax].
-inline float box_entry(const BvhNode& n, const PreparedRay& r, float tmin, float tmax) {
-  constexpr float kRobust = 1.0000004f;  // 1 + 2 * gamma(3)
-  const float* lo = n.lo;
-  const float* hi = n.hi;
-  const float x0 = ((r.sign[0] ? hi : lo)[0] - r.org[0]) * r.inv[0];
-  const float x1 = ((r.sign[0] ? lo : hi)[0] - r.org[0]) * r.inv[0];
-  const float y0 = ((r.sign[1] ? hi : lo)[1] - r.org[1]) * r.inv[1];
-  const float y1 = ((r.sign[1] ? lo : hi)[1] - r.org[1]) * r.inv[1];
-  const float z0 = ((r.sign[2] ? hi : lo)[2] - r.org[2]) * r.inv[2];
-  const float z1 = ((r.sign[2] ? lo : hi)[2] - r.org[2]) * r.inv[2];
+// the exact ray hits) of the box whose planes nearer / farther along the ray are `near` / `far` (per axis).
+// Writes the entry distance; true when the box is entered within [tmin, tmax].
+inline bool slab_entry(const float near[3], const float far[3], const PreparedRay& r, float tmin, float tmax,
+                       float* entry) {
+  const float x0 = (near[0] - r.org[0]) * r.inv[0], x1 = (far[0] - r.org[0]) * r.inv[0];
+  const float y0 = (near[1] - r.org[1]) * r.inv[1], y1 = (far[1] - r.org[1]) * r.inv[1];
+  const float z0 = (near[2] - r.org[2]) * r.inv[2], z1 = (far[2] - r.org[2]) * r.inv[2];
   // Written so a NaN (0 * inf on a slab plane) never tightens the interval.
   float tn = x0 > tmin ? x0 : tmin;
   tn = y0 > tn ? y0 : tn;
@@ -100,14 +98,22 @@ inline float box_entry(const BvhNode& n, const PreparedRay& r, float tmin, float
   float tf = x1 < tmax ? x1 : tmax;
   tf = y1 < tf ? y1 : tf;
   tf = z1 < tf ? z1 : tf;
-  return tn <= tf * kRobust ? tn : kInf;
+  *entry = tn;
+  return tn <= tf * kSlabRobust;
+}
+
+// Entry distance of a BVH node's box, or +inf when it is missed within [tmin, tmax].
+inline float box_entry(const BvhNode& n, const PreparedRay& r, float tmin, float tmax) {
+  const float near[3] = {(r.sign[0] ? n.hi : n.lo)[0], (r.sign[1] ? n.hi : n.lo)[1], (r.sign[2] ? n.hi : n.lo)[2]};
+  const float far[3] = {(r.sign[0] ? n.lo : n.hi)[0], (r.sign[1] ? n.lo : n.hi)[1], (r.sign[2] ? n.lo : n.hi)[2]};
+  float tn;
+  return slab_entry(near, far, r, tmin, tmax, &tn) ? tn : kInf;
 }
 
 // Entry distances of both children of an interior node (nodes c and c + 1, one 64-byte pair).
 inline void box_entry_pair(const BvhNode* pair, const PreparedRay& r, float tmin, float tmax, float* t0,
                            float* t1) {
 #if SIM_CORE_SSE
-  constexpr float kRobust = 1.0000004f;
   // Lane 3 of each load is the node's first/count word; it is never read out of the horizontal reductions.
   const __m128 lo0 = _mm_loadu_ps(pair[0].lo), hi0 = _mm_loadu_ps(pair[0].hi);
   const __m128 lo1 = _mm_loadu_ps(pair[1].lo), hi1 = _mm_loadu_ps(pair[1].hi);
@@ -125,7 +131,7 @@ inline void box_entry_pair(const BvhNode* pair, const PreparedRay& r, float tmin
   tn = _mm_max_ps(_mm_max_ps(tn, nz), vmin);
   __m128 tf = _mm_min_ps(ff, _mm_shuffle_ps(ff, ff, _MM_SHUFFLE(2, 3, 0, 1)));
   tf = _mm_min_ps(_mm_min_ps(tf, fz), vmax);
-  const __m128 ok = _mm_cmple_ps(tn, _mm_mul_ps(tf, _mm_set1_ps(kRobust)));
+  const __m128 ok = _mm_cmple_ps(tn, _mm_mul_ps(tf, _mm_set1_ps(kSlabRobust)));
   const int mask = _mm_movemask_ps(ok);
   *t0 = (mask & 1) ? _mm_cvtss_f32(tn) : kInf;
   *t1 = (mask & 4) ? _mm_cvtss_f32(_mm_movehl_ps(tn, tn)) : kInf;
@@ -384,7 +390,7 @@ struct PreparedRay4 {
     ox = _mm_set1_ps(r.org[0]); oy = _mm_set1_ps(r.org[1]); oz = _mm_set1_ps(r.org[2]);
     ix = _mm_set1_ps(r.inv[0]); iy = _mm_set1_ps(r.inv[1]); iz = _mm_set1_ps(r.inv[2]);
     vtmin = _mm_set1_ps(tmin);
-    robust = _mm_set1_ps(1.0000004f);
+    robust = _mm_set1_ps(kSlabRobust);
 #else
     (void)tmin;
 #endif
@@ -411,17 +417,9 @@ inline int box_entry4(const Bvh4Node& n, const PreparedRay& r, const PreparedRay
 #else
   int mask = 0;
   for (int i = 0; i < 4; ++i) {
-    const float x0 = (n.box[q.nx][i] - r.org[0]) * r.inv[0], x1 = (n.box[q.fx][i] - r.org[0]) * r.inv[0];
-    const float y0 = (n.box[q.ny][i] - r.org[1]) * r.inv[1], y1 = (n.box[q.fy][i] - r.org[1]) * r.inv[1];
-    const float z0 = (n.box[q.nz][i] - r.org[2]) * r.inv[2], z1 = (n.box[q.fz][i] - r.org[2]) * r.inv[2];
-    float a = x0 > tmin ? x0 : tmin;
-    a = y0 > a ? y0 : a;
-    a = z0 > a ? z0 : a;
-    float b = x1 < tmax ? x1 : tmax;
-    b = y1 < b ? y1 : b;
-    b = z1 < b ? z1 : b;
-    tn[i] = a;
-    if (a <= b * 1.0000004f) mask |= 1 << i;
+    const float near[3] = {n.box[q.nx][i], n.box[q.ny][i], n.box[q.nz][i]};
+    const float far[3] = {n.box[q.fx][i], n.box[q.fy][i], n.box[q.fz][i]};
+    if (slab_entry(near, far, r, tmin, tmax, &tn[i])) mask |= 1 << i;
   }
   return mask;
 #endif
