@@ -297,7 +297,7 @@ struct ClosestHitQuery {
   }
 };
 
-// Binary-tree triangle tests only: the 4-wide tree has no any-hit leaf test yet (block4), so
+// Shadow and ambient-occlusion rays. It has a binary-tree leaf test only: without a 4-wide one (block4),
 // traverse_bvh4 does not compile with this query until one is written.
 struct AnyHitQuery {
   bool occluded = false;
