@@ -26,6 +26,7 @@ import numpy as np
 from sim_core.loaders import load_gltf
 
 import sim_core
+from service.camera_path import CameraPath
 
 from .scenes import SCENES
 
@@ -119,6 +120,16 @@ def _glb_json(glb: Path) -> dict[str, Any]:
     return json.loads(data[20 : 20 + length])
 
 
+def compact(path: CameraPath) -> CameraPath:
+    """The path as the scene files keep it: times to the microsecond, matrices to 7 decimals (small files
+    that stay byte-stable across platforms)."""
+    doc = path.to_dict()
+    for frame in doc["frames"]:
+        frame["time"] = round(frame["time"], 6)
+        frame["matrix_world"] = [[round(v, 7) for v in row] for row in frame["matrix_world"]]
+    return CameraPath.from_dict(doc)
+
+
 def stats_line(name: str, stats: dict[str, Any]) -> str:
     return (f"{name}: {stats['triangles']:,} triangles, {stats['materials']} materials, "
             f"{stats['lights']} lights, {stats['objects']} objects, {stats['frames']} frames "
@@ -147,7 +158,7 @@ def build_scene(name: str, out_dir: Path) -> dict[str, Any]:
     clearance, problems = common.camera_clearance(spec.camera)
     if problems:
         raise RuntimeError(f"{name}: camera path clips geometry: {'; '.join(problems[:6])}")
-    path = sample_animation(bpy.context.scene, spec.camera)
+    path = compact(sample_animation(bpy.context.scene, spec.camera))
     path.save(scene_dir / "path.json")
     export_glb(bpy.context.scene, scene_dir / "scene.glb")
     bpy.ops.wm.save_as_mainfile(filepath=str(scene_dir / "scene.blend"), compress=True, check_existing=False)
