@@ -46,6 +46,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from service import options
 from service.evaluation import CameraSpec, Evaluator
 from service.nsga import NSGA2, Archive, NSGAConfig, enumerate_space
 from service.params import Indices, ParameterSpace
@@ -66,9 +67,6 @@ N_VIEWS = 6
 CUBE_EDGES: tuple[tuple[int, int], ...] = tuple(
     (k, k | (1 << a)) for a in range(3) for k in range(8) if not k & (1 << a)
 )
-
-
-VIEW_SAMPLING = ("axis", "aimed", "path")
 
 
 def aimed_directions(corner: np.ndarray, positions: np.ndarray, forwards: np.ndarray,
@@ -162,20 +160,9 @@ class OctreeConfig:
     warm_generations: int = 5  # "path" sampling: generations of the warm-started searches in between
 
     def __post_init__(self) -> None:
-        if self.view_sampling not in VIEW_SAMPLING:
-            raise ValueError(f"view_sampling must be one of {VIEW_SAMPLING}")
-        if not (self.threshold_power_w > 0 and self.threshold_error > 0):
-            raise ValueError("thresholds must be positive")
-        if not 0 <= self.max_depth <= 12:
-            raise ValueError("max_depth must be in 0..12")
-        if not 0 <= self.min_depth <= self.max_depth:
-            raise ValueError("min_depth must be in 0..max_depth")
-        if self.margin < 0:
-            raise ValueError("margin must be >= 0")
-        if not (math.isfinite(self.path_resolution) and self.path_resolution > 0):
-            raise ValueError("path_resolution must be a positive finite number")
-        if not 0 <= self.guard_frames <= 8:
-            raise ValueError("guard_frames must be in 0..8")
+        options.check({name: getattr(self, name) for name in (
+            "threshold_power_w", "threshold_error", "max_depth", "min_depth", "margin", "view_sampling",
+            "path_resolution", "guard_frames")})
 
 
 def frontier_distance(projected: np.ndarray, target: np.ndarray, scale: tuple[float, float]

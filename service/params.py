@@ -152,6 +152,21 @@ class ParameterSpace:
 
     # -- meaning ------------------------------------------------------------------------------------
 
+    def index_of(self, name: str, value: Any) -> int:
+        """Index of ``value`` among parameter ``name``'s values (the names and values a store query
+        returns and clients send back); ``True`` and ``1`` are different values, as JSON clients send
+        both. ValueError names an unknown parameter or value."""
+        if name not in self.names:
+            raise ValueError(f"unknown parameter {name!r}; known: {list(self.names)}")
+        p = self.parameters[self.names.index(name)]
+        for i, v in enumerate(p.values):
+            if (isinstance(v, bool) or isinstance(value, bool)) and not (
+                    isinstance(v, bool) and isinstance(value, bool)):
+                continue
+            if v == value:
+                return i
+        raise ValueError(f"{value!r} is not a value of {name!r}; values: {list(p.values)}")
+
     def values_of(self, indices: Sequence[int]) -> dict[str, Any]:
         self.validate(indices)
         return {p.name: p.values[i] for p, i in zip(self.parameters, indices, strict=True)}

@@ -159,10 +159,9 @@ def tiny_job(scene_id: str, *, resolution: tuple[int, int] = (16, 12), seed: int
                   "shadow_samples": [1], "ao_samples": [0], "env_filter": ["off"],
                   "resolution_scale": [1.0], "normal_threshold_deg": [20.0], "multirate": [False]},
         "parameters": ["sampling", "max_depth"],
-        "options": {"max_depth": 0, "population": 4, "generations": 2, "seed": seed, "exhaustive_limit": 64},
-        "thresholds": {"power_w": 0.05, "error": 0.01},
+        "options": {"max_depth": 0, "population": 4, "generations": 2, "seed": seed, "exhaustive_limit": 64,
+                    "eval_width": resolution[0], "eval_height": resolution[1]},
         "profile": "mobile",
-        "resolution": list(resolution),
     }
 
 

@@ -55,12 +55,12 @@ def zip_path(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_zip_contains_addon_and_vendored_store(zip_path: Path) -> None:
     names = set(zipfile.ZipFile(zip_path).namelist())
     for required in ("blender_manifest.toml", "__init__.py", "core/client.py", "playback.py", "hud.py",
-                     "_vendored/pareto_store.py", "_vendored/camera_path.py"):
+                     "_vendored/pareto_store.py", "_vendored/camera_path.py", "_vendored/options.py"):
         assert required in names
     assert not any("__pycache__" in n for n in names)
     # the vendored files are byte copies of the service modules (one implementation)
     z = zipfile.ZipFile(zip_path)
-    for name in ("pareto_store.py", "camera_path.py"):
+    for name in ("pareto_store.py", "camera_path.py", "options.py"):
         assert z.read(f"_vendored/{name}") == (REPO_ROOT / "service" / name).read_bytes()
 
 

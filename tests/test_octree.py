@@ -14,7 +14,7 @@ from service.camera_path import CameraPath
 from service.eval_cache import EvalCache
 from service.executors import InProcessExecutor
 from service.octree import CUBE_EDGES, Cancelled, densify, frontier_distance
-from service.optimize import OptimizeOptions, optimize_path
+from service.optimize import OptimizeConfig, optimize_path
 from service.params import default_space
 from service.pareto_store import ParetoStore
 
@@ -52,11 +52,11 @@ def _path() -> CameraPath:
     return CameraPath.from_positions(pos, dirs, vfov=0.7, resolution=(320, 240))
 
 
-def _options(**kw) -> OptimizeOptions:
+def _options(**kw) -> OptimizeConfig:
     base = dict(threshold_power_w=0.01, threshold_error=0.005, max_depth=1, population=6, generations=3,
                 exhaustive_limit=0, eval_width=16, eval_height=12, seed=3, view_sampling="aimed")
     base.update(kw)
-    return OptimizeOptions(**base)
+    return OptimizeConfig(**base)
 
 
 SPACE = default_space().subset(["sampling", "max_depth", "resolution_scale"])
@@ -174,24 +174,24 @@ def test_cli_optimize_then_query(tmp_path, capsys) -> None:
 
 def test_options_validation() -> None:
     with pytest.raises(ValueError):
-        OptimizeOptions(min_depth=3, max_depth=2)
+        OptimizeConfig(min_depth=3, max_depth=2)
     with pytest.raises(ValueError):
-        OptimizeOptions(threshold_power_w=0.0)
+        OptimizeConfig(threshold_power_w=0.0)
     with pytest.raises(ValueError):
-        OptimizeOptions(metric="mse")
+        OptimizeConfig(metric="mse")
     with pytest.raises(ValueError):
-        OptimizeOptions(eval_height=4)
+        OptimizeConfig(eval_height=4)
 
 
 @pytest.mark.slow
 def test_min_depth_splits_and_similar_frontiers_are_inherited(scene) -> None:
     """Thresholds nothing exceeds: only min_depth splits the root, and every new corner inherits."""
     cache = EvalCache()
-    store, _ = _run(scene, cache=cache, threshold_power_w=1e6, threshold_error=1.0, min_depth=1)
+    store, _ = _run(scene, cache=cache, threshold_power_w=1e4, threshold_error=1.0, min_depth=1)
     st = store.stats()
     assert st["depth"] == 1 and st["corners"] == 27
     assert store.meta["views_optimised"] == 48 == st["unique_frontiers"]
-    root_only, _ = _run(scene, cache=cache, threshold_power_w=1e6, threshold_error=1.0)
+    root_only, _ = _run(scene, cache=cache, threshold_power_w=1e4, threshold_error=1.0)
     assert root_only.stats()["corners"] == 8 and root_only.meta["evaluations"] == 0
 
 
@@ -233,7 +233,7 @@ def test_axis_and_aimed_view_sampling(scene) -> None:
     assert all(float(aimed.sample_direction(c, 2) @ [0, 1, 0]) > 0 for c in range(8))
     assert any(not np.allclose(aimed.sample_direction(c, 2), [0, 1, 0]) for c in range(8))
     with pytest.raises(ValueError):
-        OptimizeOptions(view_sampling="random")
+        OptimizeConfig(view_sampling="random")
 
 
 def _orbit_path(n: int = 12) -> CameraPath:
@@ -317,6 +317,6 @@ def test_path_sampling_without_guards_and_determinism(scene) -> None:
         for fr in store.frontiers:
             assert np.all(np.diff(fr.power_w) >= 0) and np.all(np.diff(fr.error) <= 0)
     with pytest.raises(ValueError):
-        OptimizeOptions(path_resolution=0.0)
+        OptimizeConfig(path_resolution=0.0)
     with pytest.raises(ValueError):
-        OptimizeOptions(guard_frames=-1)
+        OptimizeConfig(guard_frames=-1)

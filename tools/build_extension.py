@@ -22,7 +22,7 @@ from pathlib import Path
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 ADDON_DIR = REPO_ROOT / "addon"
-VENDORED = ("pareto_store.py", "camera_path.py")
+VENDORED = ("pareto_store.py", "camera_path.py", "options.py")
 ALLOWED_VENDORED_IMPORTS = {"numpy", "__future__"}
 _IGNORE = shutil.ignore_patterns("__pycache__", "*.pyc", ".*", "tests")
 
