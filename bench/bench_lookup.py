@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from service.pareto_store import Frontier, ParetoStore, StoredParameter, TemporalFilter, pack_array
+from service.store import Frontier, ParetoStore, StoredParameter, TemporalFilter, pack_array
 
 
 def generated_store(depth: int = 4, seed: int = 0) -> ParetoStore:

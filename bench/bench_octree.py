@@ -29,7 +29,7 @@ from service.executors import InProcessExecutor
 from service.octree import frontier_distance
 from service.optimize import OptimizeConfig, optimize_path
 from service.params import default_space
-from service.pareto_store import TemporalFilter
+from service.store import TemporalFilter
 
 
 def orbit_path(n: int = 24, res: tuple[int, int] = (160, 120)) -> CameraPath:

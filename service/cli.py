@@ -152,7 +152,7 @@ def _optimize(args: argparse.Namespace) -> int:
 
 
 def _query(args: argparse.Namespace) -> int:
-    from service.pareto_store import ParetoStore
+    from service.store import ParetoStore
 
     store = ParetoStore.from_json(args.store.read_bytes())
     matrix = None

@@ -43,6 +43,7 @@ import time
 import zlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -50,7 +51,7 @@ from service import options
 from service.evaluation import CameraSpec, Evaluator
 from service.nsga import NSGA2, Archive, NSGAConfig, enumerate_space
 from service.params import Indices, ParameterSpace
-from service.pareto_store import (
+from service.store import (
     VIEW_FORWARD,
     VIEW_UP,
     Frontier,
@@ -58,7 +59,6 @@ from service.pareto_store import (
     face_of,
     quantise_directions,
     quantise_eyes,
-    root_cube,
     view_up,
 )
 
@@ -79,7 +79,7 @@ def aimed_directions(corner: np.ndarray, positions: np.ndarray, forwards: np.nda
     direction from the corner to the weighted mean target. When that direction leaves face k's
     hemisphere (the corner is on the far side of what those frames look at) the weighted mean forward
     is used instead, and a face no frame looks through keeps its axis. Unit vectors, quantised as the
-    store keeps them (:func:`service.pareto_store.quantise_directions`)."""
+    store keeps them (:func:`service.store.quantise_directions`)."""
     c = np.asarray(corner, dtype=np.float64).reshape(3)
     P = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
     F = np.asarray(forwards, dtype=np.float64).reshape(-1, 3)
@@ -105,6 +105,31 @@ def aimed_directions(corner: np.ndarray, positions: np.ndarray, forwards: np.nda
             if float(np.linalg.norm(m)) > 1e-6:
                 out[k] = m / np.linalg.norm(m)
     return quantise_directions(out)
+
+
+def root_cube(positions: Any, pad_fraction: float = 0.1, min_size: float = 1.0, *,
+              rest_on_path: bool = False) -> tuple[np.ndarray, float]:
+    """Cubic root box around camera positions: the bounding box, padded by ``pad_fraction`` of its
+    largest side on every side, made cubic about its centre; at least ``min_size`` wide so that
+    degenerate paths (one point, a line, a plane) still get a proper cube. Returns (min corner, side).
+
+    ``rest_on_path`` lifts the cube so its bottom lies below the path's lowest point by
+    ``pad_fraction`` of the path's *vertical* extent instead of centring it vertically: for a flat
+    path (a walk or an orbit above a floor) the lower corners then stay near camera height rather
+    than far below the ground."""
+    p = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    if p.shape[0] == 0 or not np.all(np.isfinite(p)):
+        raise ValueError("need at least one finite position")
+    if not (pad_fraction >= 0 and min_size > 0):
+        raise ValueError("pad_fraction must be >= 0 and min_size > 0")
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    extent = float((hi - lo).max())
+    size = max(extent * (1.0 + 2.0 * pad_fraction), float(min_size))
+    centre = (lo + hi) / 2
+    root_min = centre - size / 2
+    if rest_on_path:
+        root_min[2] = max(root_min[2], lo[2] - pad_fraction * float(hi[2] - lo[2]))
+    return root_min, size
 
 
 class Cancelled(Exception):

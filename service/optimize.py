@@ -23,7 +23,7 @@ from service.executors import Executor
 from service.nsga import NSGAConfig
 from service.octree import Cancelled, OctreeBuilder, OctreeConfig, Progress
 from service.params import ParameterSpace
-from service.pareto_store import ParetoStore
+from service.store import ParetoStore
 
 __all__ = ["Cancelled", "OptimizeConfig", "Progress", "optimize_path"]
 

@@ -3,7 +3,7 @@
 A parameter has a name, values ordered from cheapest to best (or the other way: ``max_quality`` says
 which index is the best), and for every value the ``sim_core.RenderSettings`` fields it sets. A
 settings vector is one value index per parameter, packed 4 bits per parameter into a 32-bit integer
-by :mod:`service.pareto_store` (the one packing implementation). Parameters found inert for a scene
+by :mod:`service.store` (the one packing implementation). Parameters found inert for a scene
 (``sim_core.inert_parameters``) are *fixed* at their maximum-quality value: they stay in the packed
 vector, so stores from different scenes read alike, but the search skips them.
 
@@ -18,7 +18,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from service.pareto_store import (
+from service.store import (
     MAX_PARAMS,
     MAX_VALUES_PER_PARAM,
     StoredParameter,

@@ -12,7 +12,7 @@ import pytest
 from addon.core import client as client_mod
 from addon.core.job_runner import JobRequest, describe
 from addon.core.local_service import free_port, serve_command
-from addon.core.path_sampling import build_path, camera_lens_from_viewport, frame_times, vertical_fov
+from addon.core.path_sampling import build_path, frame_times
 from addon.core.playback_logic import PlaybackDriver, StoreCache, predicted_path_summary, validate_budget
 from addon.core.report import (
     FrameRow,
@@ -24,6 +24,7 @@ from addon.core.report import (
     write_csv,
     write_report,
 )
+from service.store.camera import camera_lens_from_viewport, vertical_fov
 from tests.addon_support import synthetic_store
 
 

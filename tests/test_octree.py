@@ -16,7 +16,7 @@ from service.executors import InProcessExecutor
 from service.octree import CUBE_EDGES, Cancelled, densify, frontier_distance
 from service.optimize import OptimizeConfig, optimize_path
 from service.params import default_space
-from service.pareto_store import ParetoStore
+from service.store import ParetoStore
 
 MODELS = Path(__file__).resolve().parent.parent / "assets" / "models"
 
@@ -197,7 +197,7 @@ def test_min_depth_splits_and_similar_frontiers_are_inherited(scene) -> None:
 
 def test_aimed_directions_look_at_what_the_path_sees() -> None:
     from service.octree import aimed_directions
-    from service.pareto_store import VIEW_FORWARD, face_of
+    from service.store import VIEW_FORWARD, face_of
 
     # an orbit of radius 4 at height 1.5 around a subject at the origin, cameras looking at it
     ang = np.linspace(0, 2 * np.pi, 64, endpoint=False)
@@ -301,7 +301,7 @@ def test_path_sampling_without_guards_and_determinism(scene) -> None:
     assert fine.stats()["depth"] > coarse.stats()["depth"]
     assert fine.meta["views_optimised"] >= coarse.meta["views_optimised"]
     from service.evaluation import CameraSpec, Evaluator
-    from service.pareto_store import unpack_indices, view_up
+    from service.store import unpack_indices, view_up
 
     ev = Evaluator(scene, SPACE, cache=cache, profile="mobile", fps=30.0, target_pixels=320 * 240)
     step = coarse.stats()["power_step_w"]

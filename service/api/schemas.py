@@ -13,6 +13,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, StringConstraints, create_model, model_validator
 
 from service import options
+from service.store.camera import check_affine
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Vec3 = tuple[Finite, Finite, Finite]
@@ -30,22 +31,6 @@ Pixels = Annotated[int, Field(ge=1, le=8192)]
 
 class StrictModel(BaseModel):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
-
-
-def _check_affine(m: Matrix4, name: str) -> None:
-    if tuple(m[3]) != (0.0, 0.0, 0.0, 1.0):
-        raise ValueError(f"{name} must be an affine 4x4 matrix with last row [0, 0, 0, 1]")
-    # Scale each column to unit max-magnitude first: only the axes' directions matter, and huge but finite
-    # entries must not overflow the determinant.
-    scale = [max(abs(m[i][j]) for i in range(3)) or 1.0 for j in range(3)]
-    m = tuple(tuple(m[i][j] / scale[j] for j in range(3)) for i in range(3))  # type: ignore[assignment]
-    det = (
-        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
-        - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
-    )
-    if not math.isfinite(det) or abs(det) < 1e-12:
-        raise ValueError(f"{name} must have an invertible 3x3 part")
 
 
 # -- scenes --------------------------------------------------------------------------------------------
@@ -78,7 +63,7 @@ class CameraFrame(StrictModel):
         if self.matrix_world is not None:
             if any(v is not None for v in (self.position, self.rotation_quaternion, self.direction)):
                 raise ValueError("give matrix_world or position + orientation, not both")
-            _check_affine(self.matrix_world, "matrix_world")
+            check_affine(self.matrix_world, "matrix_world")
         elif self.position is None:
             raise ValueError("a frame needs matrix_world or position")
         elif (self.rotation_quaternion is None) == (self.direction is None):
@@ -244,7 +229,7 @@ class StoreQuery(StrictModel):
         if self.direction is not None and math.hypot(*self.direction) < 1e-12:
             raise ValueError("direction must be non-zero")
         if self.matrix is not None:
-            _check_affine(self.matrix, "matrix")
+            check_affine(self.matrix, "matrix")
         return self
 
 
@@ -268,7 +253,7 @@ class CameraIn(StrictModel):
 
     @model_validator(mode="after")
     def _affine(self) -> CameraIn:
-        _check_affine(self.matrix_world, "matrix_world")
+        check_affine(self.matrix_world, "matrix_world")
         return self
 
 

@@ -13,6 +13,7 @@ import numpy as np
 from fastapi import APIRouter
 
 from service.storage import Storage
+from service.store.camera import unit_axes
 
 from ..deps import ScenesDep, SettingsDep, StorageDep
 from ..errors import ApiError, ErrorResponse
@@ -30,12 +31,8 @@ def scene_or_404(storage: Storage, scenes: Any, scene_id: str) -> Any:
 
 
 def camera_matrix(cam: CameraIn) -> np.ndarray:
-    """The camera's world matrix with unit-length axes (a camera's scale means nothing; huge but finite
-    entries must not overflow later arithmetic)."""
-    m = np.asarray(cam.matrix_world, dtype=np.float64)
-    axes = m[:3, :3] / np.abs(m[:3, :3]).max(axis=0)
-    m[:3, :3] = axes / np.linalg.norm(axes, axis=0)
-    return m
+    """The camera's world matrix with unit-length axes (:func:`service.store.camera.unit_axes`)."""
+    return unit_axes(cam.matrix_world)
 
 
 def make_camera(cam: CameraIn, max_pixels: int) -> Any:
