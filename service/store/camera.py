@@ -60,10 +60,17 @@ def _cross(a: tuple[float, float, float], b: tuple[float, float, float]) -> tupl
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
+Rotation = tuple[float, float, float, float, float, float, float, float, float]  # 3x3, row-major
+
+
 def look_rotation(direction: Any, up: Any = None) -> np.ndarray:
     """Rotation (3x3, columns right, up, backward) of a camera looking along ``direction`` with ``up``
     (default world +Z, or +Y when looking within about 0.06 degrees of straight up or down). Any
     finite non-zero lengths; ValueError for zero vectors or an ``up`` parallel to the direction."""
+    return np.array(_look_floats(direction, up)).reshape(3, 3)
+
+
+def _look_floats(direction: Any, up: Any) -> Rotation:
     fx, fy, fz = _scale_free(vec3(direction, "direction"), "direction")
     n = math.sqrt(fx * fx + fy * fy + fz * fz)
     fx, fy, fz = fx / n, fy / n, fz / n
@@ -78,34 +85,69 @@ def look_rotation(direction: Any, up: Any = None) -> np.ndarray:
         rn = math.sqrt(r[0] ** 2 + r[1] ** 2 + r[2] ** 2)
     r = (r[0] / rn, r[1] / rn, r[2] / rn)
     tu = _cross(r, (fx, fy, fz))
-    return np.array([[r[0], tu[0], -fx], [r[1], tu[1], -fy], [r[2], tu[2], -fz]])
+    return (r[0], tu[0], -fx, r[1], tu[1], -fy, r[2], tu[2], -fz)
+
+
+def _matrix_rows(matrix: Any) -> list[list[float]]:
+    """A 4x4 or 3x3 matrix as rows of floats (plain Python for lists and arrays: the per-frame path)."""
+    rows = None
+    if isinstance(matrix, np.ndarray) and matrix.dtype == np.float64:
+        if matrix.shape in ((4, 4), (3, 3)):
+            rows = matrix.tolist()
+    elif isinstance(matrix, (list, tuple)) and len(matrix) in (3, 4):
+        try:
+            if all(isinstance(r, (list, tuple)) and len(r) == len(matrix) for r in matrix):
+                rows = [[float(v) for v in r] for r in matrix]
+        except (TypeError, ValueError):
+            rows = None  # numpy says what is wrong
+    if rows is None:
+        m = np.asarray(matrix, dtype=np.float64)
+        if m.shape not in ((4, 4), (3, 3)):
+            raise ValueError("matrix must be a finite 4x4 or 3x3 array")
+        rows = m.tolist()
+    if not all(math.isfinite(v) for row in rows for v in row):
+        raise ValueError("matrix must be a finite 4x4 or 3x3 array")
+    return rows
+
+
+def _matrix_floats(matrix: Any) -> Rotation:
+    """The rotation of a camera matrix with unit columns, in the same operations (so to the bit) as
+    numpy's ``r / |r|.max(axis=0)`` then ``/ np.linalg.norm(axis=0)``."""
+    m = _matrix_rows(matrix)
+    cols = []
+    for j in range(3):
+        c0, c1, c2 = m[0][j], m[1][j], m[2][j]
+        big = max(abs(c0), abs(c1), abs(c2))
+        if big == 0:
+            raise ValueError("matrix has a degenerate rotation")
+        c0, c1, c2 = c0 / big, c1 / big, c2 / big  # scale-free first: huge entries must not overflow
+        n = math.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+        if n < 1e-12 or not math.isfinite(n):
+            raise ValueError("matrix has a degenerate rotation")
+        cols.append((c0 / n, c1 / n, c2 / n))  # remove scale
+    (a0, a1, a2), (b0, b1, b2), (e0, e1, e2) = cols
+    return (a0, b0, e0, a1, b1, e1, a2, b2, e2)
 
 
 def matrix_rotation(matrix: Any) -> np.ndarray:
     """The rotation of a 4x4 (or 3x3) camera matrix with its scale removed (unit columns); finite but
     huge or tiny entries are fine. ValueError for a non-finite matrix or a zero column."""
-    m = np.asarray(matrix, dtype=np.float64)
-    if m.shape not in ((4, 4), (3, 3)) or not np.all(np.isfinite(m)):
-        raise ValueError("matrix must be a finite 4x4 or 3x3 array")
-    r = m[:3, :3]
-    big = np.abs(r).max(axis=0)
-    if np.any(big == 0):
-        raise ValueError("matrix has a degenerate rotation")
-    r = r / big  # scale-free first: huge but finite entries must not overflow the norms
-    norms = np.linalg.norm(r, axis=0)
-    if np.any(norms < 1e-12) or not np.all(np.isfinite(r)):
-        raise ValueError("matrix has a degenerate rotation")
-    return r / norms  # remove scale
+    return np.array(_matrix_floats(matrix)).reshape(3, 3)
+
+
+def rotation_floats(direction: Any = None, matrix: Any = None, up: Any = None) -> Rotation:
+    """:func:`camera_rotation` as nine floats (row-major): what the per-frame lookup works with."""
+    if (direction is None) == (matrix is None):
+        raise ValueError("give exactly one of direction or matrix")
+    if matrix is not None:
+        return _matrix_floats(matrix)
+    return _look_floats(direction, up)
 
 
 def camera_rotation(direction: Any = None, matrix: Any = None, up: Any = None) -> np.ndarray:
     """3x3 camera-to-world rotation from Blender's 4x4 (or 3x3) ``matrix_world``
     (:func:`matrix_rotation`) or from a view ``direction`` with ``up`` (:func:`look_rotation`)."""
-    if (direction is None) == (matrix is None):
-        raise ValueError("give exactly one of direction or matrix")
-    if matrix is not None:
-        return matrix_rotation(matrix)
-    return look_rotation(direction, up)
+    return np.array(rotation_floats(direction, matrix, up)).reshape(3, 3)
 
 
 def unit_axes(matrix: Any) -> np.ndarray:
@@ -214,7 +256,9 @@ def frustum_rays(vfov: float, aspect: float) -> tuple[np.ndarray, np.ndarray]:
 def frustum_face(rotation: np.ndarray, rays: np.ndarray, weights: np.ndarray) -> int:
     """View-cube face that receives the largest (solid-angle weighted) part of a camera's frustum: the
     view cube is a cube map around the camera, and a frustum ray lands on the face of its largest
-    direction component."""
+    direction component. One matrix product over the 64 rays: in plain Python this costs more (a
+    corner-ray shortcut plus an exact two-face split measured 12.6 us against numpy's 7.3 us, and a
+    third face is in view for half of all random poses)."""
     d = np.asarray(rotation) @ rays  # (3, N) world directions
     # scores in the order +X, +Y, +Z, -X, -Y, -Z; the largest is the face a ray lands on
     face = np.concatenate((d, -d)).argmax(axis=0)

@@ -17,7 +17,7 @@ from . import camera, codec, format
 from .camera import VIEW_FORWARD, VIEW_UP, view_up
 from .frontier import Frontier
 from .lookup import LookupIndex, LookupResult
-from .packing import MAX_PARAMS, MAX_VALUES_PER_PARAM, StoredParameter, settings_of, unpack_indices
+from .packing import MAX_PARAMS, MAX_VALUES_PER_PARAM, StoredParameter, settings_of
 
 
 def _finite_vec3(v: Any, name: str) -> np.ndarray:
@@ -67,7 +67,7 @@ class ParetoStore:
             if len(prm.values) > MAX_VALUES_PER_PARAM:
                 raise ValueError(f"parameter {prm.name!r} has more than 16 values")
         self._index = LookupIndex(self.root_min, self.root_size, self.lattice_depth, self.children,
-                                  self.corner_coords)
+                                  self.corner_coords, self.corner_views, self.parameters)
 
     def _check_tree(self) -> None:
         n_nodes = self.children.size
@@ -156,7 +156,8 @@ class ParetoStore:
 
     def find_leaf(self, position: Any) -> tuple[int, np.ndarray, bool]:
         """Leaf containing ``position`` (clamped into the root); returns (leaf, clamped position, clamped)."""
-        return self._index.find_leaf(position)
+        leaf, q, clamped = self._index.find_leaf(position)
+        return leaf, np.asarray(q), clamped
 
     def choose_view(self, rotation: np.ndarray, vfov: float, aspect: float) -> int:
         """View-cube face that receives the largest (solid-angle weighted) part of the camera frustum."""
@@ -166,7 +167,7 @@ class ParetoStore:
                aspect: float | None = None, up: Any = None) -> tuple[int, int]:
         """(corner, view) whose frontier :meth:`lookup` would read for this camera (no budget needed);
         the optimiser uses it to group path frames by the sample that will serve them."""
-        rot = camera.camera_rotation(direction, matrix, up)
+        rot = camera.rotation_floats(direction, matrix, up)
         vf = self.vfov if fov is None else float(fov)
         asp = self.aspect if aspect is None else float(aspect)
         _, corner, view, _ = self._index.locate(position, rot, vf, asp)
@@ -183,19 +184,21 @@ class ParetoStore:
         budget = float(power_budget if power_budget is not None else error_budget)  # type: ignore[arg-type]
         if not math.isfinite(budget):
             raise ValueError("budget must be finite")
-        rot = camera.camera_rotation(direction, matrix, up)
+        index = self._index
+        rot = camera.rotation_floats(direction, matrix, up)
         vf = camera.check_fov(self.vfov if fov is None else fov)
         asp = camera.check_aspect(self.aspect if aspect is None else aspect)
-        leaf, corner, view, clamped = self._index.locate(position, rot, vf, asp)
-        fr = self.frontier(corner, view)
+        leaf, corner, view, clamped = index.locate(position, rot, vf, asp)
+        fid = index.views[corner][view]
+        fr = index.frontier_lists(fid, self.frontiers[fid])
         if power_budget is not None:
             i, infeasible = fr.under_power(budget)
         else:
             i, infeasible = fr.under_error(budget)
-        packed = int(fr.packed[i])
-        indices = unpack_indices(packed, self.n_params)
-        return LookupResult(indices, packed, self.settings_of(indices), float(fr.power_w[i]),
-                            float(fr.error[i]), clamped, infeasible, corner, view, leaf)
+        packed = fr.packed[i]
+        indices, settings = index.decoded(packed)
+        return LookupResult(indices, packed, dict(settings), fr.power[i], fr.error[i], clamped, infeasible,
+                            corner, view, leaf)
 
     # -- serialisation ----------------------------------------------------------------------------
 

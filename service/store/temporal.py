@@ -34,16 +34,17 @@ class TemporalFilter:
         a = (now_s - self._t0) / self.period_s
         if a >= 1.0:
             return self._target
-        return tuple(math.floor((1.0 - a) * o + a * n + 0.5) for o, n in zip(self._old, self._target,
-                                                                                strict=True))
+        b = 1.0 - a
+        floor = math.floor
+        return tuple([floor(b * o + a * n + 0.5) for o, n in zip(self._old, self._target, strict=True)])
 
     def update(self, target_indices: Sequence[int], now_s: float) -> tuple[int, ...]:
         """Settings to use at time ``now_s`` (seconds) given the current target indices."""
         now = float(now_s)
         if not math.isfinite(now):
             raise ValueError("now_s must be finite")
-        target = tuple(int(v) for v in target_indices)
-        if any(v < 0 for v in target):
+        target = tuple(map(int, target_indices))
+        if target and min(target) < 0:
             raise ValueError("indices must be non-negative")
         if self._target is None or now < self._last_t:
             self._old, self._target, self._t0 = None, target, now
