@@ -21,7 +21,7 @@ from service.eval_cache import EvalCache
 from service.evaluation import Evaluator, SceneHandle
 from service.executors import Executor
 from service.nsga import NSGAConfig
-from service.octree import Cancelled, OctreeBuilder, OctreeConfig, Progress
+from service.octree import Cancelled, OctreeBuilder, OctreeConfig, PathFrames, Progress
 from service.params import ParameterSpace
 from service.store import ParetoStore
 
@@ -127,12 +127,10 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, config: O
     forwards = targets = None
     if config.view_sampling in ("aimed", "path"):
         forwards, targets = path_targets(handle.get(), path)
-    builder = OctreeBuilder(evaluator, space, path.positions(), cfg, progress, should_cancel,
-                            path_forwards=forwards, path_targets=targets,
-                            path_matrices=np.stack([np.asarray(f.matrix_world, dtype=np.float64)
-                                                    for f in frames]),
-                            path_vfovs=np.asarray([f.vfov for f in frames]),
-                            path_aspects=np.asarray([f.aspect for f in frames]))
+    frames_in = PathFrames(path.positions(), forwards, targets,
+                           np.stack([np.asarray(f.matrix_world, dtype=np.float64) for f in frames]),
+                           np.asarray([f.vfov for f in frames]), np.asarray([f.aspect for f in frames]))
+    builder = OctreeBuilder(evaluator, space, frames_in, cfg, progress, should_cancel)
     builder.run()
     meta = {
         "thresholds": {"power_w": config.threshold_power_w, "error": config.threshold_error},
