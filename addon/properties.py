@@ -86,7 +86,8 @@ class RENDER_BUDGET_PG_scene(bpy.types.PropertyGroup):
 
 def _option_property(opt: option_schema.Option) -> Any:
     """The Blender property of one optimiser option."""
-    text = {"name": opt.label, "description": opt.help[:1].upper() + opt.help[1:]}
+    text = {"name": opt.label, "description": opt.help[:1].upper() + opt.help[1:]
+            + (". 0 leaves it to that default" if opt.optional else "")}
     if opt.choices:
         labels = opt.choice_labels or opt.choices
         return EnumProperty(items=tuple((c, label, "") for c, label in zip(opt.choices, labels, strict=True)),

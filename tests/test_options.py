@@ -163,7 +163,7 @@ def test_addon_properties_have_the_schema_default_and_bounds(scene_props) -> Non
     for opt in PUBLIC:
         prop = rna[opt.name]
         assert values[opt.name] == opt.default, opt.name  # 0.05 read back as 0.05, 0 as None
-        assert prop.description.lower() == opt.help.lower()
+        assert prop.description.lower().startswith(opt.help.lower())
         if opt.choices:
             assert tuple(item.identifier for item in prop.enum_items) == opt.choices
             continue

@@ -96,7 +96,7 @@ class LookupIndex:
         self._frustum_cache: dict[tuple[float, float], tuple[np.ndarray, np.ndarray]] = {}
         self._last_frustum: tuple[float, float, tuple[np.ndarray, np.ndarray]] | None = None
         self._frontiers: dict[int, _FrontierLists] = {}
-        self._decoded: dict[int, tuple[tuple[int, ...], dict[str, Any]]] = {}
+        self._decoded: dict[int, tuple[tuple[int, ...], dict[str, Any], bool]] = {}
 
     def _walk(self, children: np.ndarray, corner_coords: np.ndarray) -> None:
         """Each node's lattice origin and size, each leaf's eight corner ids (child order)."""
@@ -205,9 +205,13 @@ class LookupIndex:
         return lists
 
     def decoded(self, packed: int) -> tuple[tuple[int, ...], dict[str, Any]]:
-        """Value indices and ``{name: value}`` of a packed setting (computed once per setting)."""
+        """Value indices and a fresh ``{name: value}`` of a packed setting (decoded once per setting;
+        callers may change the dict they get)."""
         hit = self._decoded.get(packed)
         if hit is None:
             indices = unpack_indices(packed, len(self.parameters))
-            hit = self._decoded[packed] = (indices, settings_of(self.parameters, indices))
-        return hit
+            settings = settings_of(self.parameters, indices)
+            shared = not any(isinstance(v, list) for v in settings.values())  # lists are made afresh
+            hit = self._decoded[packed] = (indices, settings, shared)
+        indices, settings, shared = hit
+        return indices, dict(settings) if shared else settings_of(self.parameters, indices)

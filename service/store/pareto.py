@@ -197,7 +197,7 @@ class ParetoStore:
             i, infeasible = fr.under_error(budget)
         packed = fr.packed[i]
         indices, settings = index.decoded(packed)
-        return LookupResult(indices, packed, dict(settings), fr.power[i], fr.error[i], clamped, infeasible,
+        return LookupResult(indices, packed, settings, fr.power[i], fr.error[i], clamped, infeasible,
                             corner, view, leaf)
 
     # -- serialisation ----------------------------------------------------------------------------
