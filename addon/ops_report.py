@@ -17,6 +17,7 @@ from .core import campaign
 from .core import report as report_data
 from .core.client import ServiceClient
 from .core.playback_logic import validate_budget
+from .core.vendored import options as option_schema
 from .ops_preview import upload_scene_info
 
 log = logging.getLogger(__name__)
@@ -56,7 +57,9 @@ def evaluate_scene(scene: bpy.types.Scene, client: ServiceClient, out_dir: str |
     info = upload_scene_info(scene, client)
     spec = campaign.CampaignSpec(
         scene_id=str(info["id"]), profile=props.profile or None,
-        resolution=(props.eval_width, props.eval_height), power_resolution=path.frames[0].resolution,
+        resolution=option_schema.eval_resolution(props.eval_width or None, props.eval_height,
+                                                 path.frames[0].aspect),
+        power_resolution=path.frames[0].resolution,
         frame_step=frame_step or props.report_frame_step, filter_period_s=props.filter_period,
         error_budget=budgets[0], power_budget=budgets[1], samples=3 if samples else 0)
     name = Path(bpy.data.filepath).stem or "untitled"

@@ -4,8 +4,9 @@
 
 1. builds the scene with Blender's bpy module (``python -m blend_scenes.build --scene NAME``, cached);
 2. starts ``render-budget serve`` on 127.0.0.1 (a free port, data and SQLite caches in ``var/service``);
-3. uploads the scene and optimises its camera path as a service job (preview resolution, the service's
-   default optimiser options; ``addon.core.job_runner`` follows and cancels it);
+3. uploads the scene and optimises its camera path as a service job (the optimiser options of
+   ``service.options`` given on the command line, the service's defaults for the rest;
+   ``addon.core.job_runner`` follows and cancels it);
 4. runs the evaluation campaign (``addon.core.campaign``: the same code as the Blender add-on's
    *Evaluate Path*): the paper's four presets, the store under a power budget and under an error budget,
    the report folder (Table 3, per-frame CSV, plots, sample frames, store, summary, Table 2);
@@ -29,8 +30,9 @@ from pathlib import Path
 from typing import Any
 
 from addon.core import campaign, report
-from addon.core.job_runner import follow_job
+from addon.core.job_runner import JobRequest, follow_job
 from addon.core.local_service import LocalService, free_port
+from service import options as option_schema
 from service.camera_path import CameraPath
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
@@ -50,16 +52,10 @@ def parser() -> argparse.ArgumentParser:
     ap.add_argument("--data-dir", type=Path, default=REPO_ROOT / "var" / "service",
                     help="the local service's data folder (scenes, stores, SQLite caches)")
     ap.add_argument("--resolution", type=campaign.parse_size, default=None,
-                    help="preview resolution WxH for optimisation and evaluation (default: height 36, "
-                         "width from the path's aspect)")
+                    help="preview resolution WxH for optimisation and evaluation (sets --eval-width and "
+                         "--eval-height; default: height 36, width from the path's aspect)")
     ap.add_argument("--frames", type=int, default=90,
                     help="evaluate about this many path frames, evenly spaced (default 90; 0 = all)")
-    ap.add_argument("--max-depth", type=int, default=None, help="octree depth (default: the service's)")
-    ap.add_argument("--population", type=int, default=None)
-    ap.add_argument("--generations", type=int, default=None)
-    ap.add_argument("--seed", type=int, default=None)
-    ap.add_argument("--threshold-power", type=float, default=None, help="subdivision threshold (W)")
-    ap.add_argument("--threshold-error", type=float, default=None, help="subdivision threshold (1 - SSIM)")
     ap.add_argument("--error-budget", type=float, default=campaign.TARGET_ERROR)
     ap.add_argument("--power-budget", type=float, default=None,
                     help="watts (default: automatic, see --power-budget-from)")
@@ -77,21 +73,17 @@ def parser() -> argparse.ArgumentParser:
     ap.add_argument("--concurrency", type=int, default=2, help="evaluations in flight")
     ap.add_argument("--job-timeout", type=float, default=3600.0, help="seconds before giving up")
     ap.add_argument("--skip-build", action="store_true", help="use the built scene as it is")
+    option_schema.add_arguments(ap.add_argument_group("optimiser options (the service's defaults unless "
+                                                      "given)"), with_defaults=False)
     return ap
 
 
-def job_payload(args: argparse.Namespace, scene_id: str, path_doc: dict[str, Any],
-                resolution: tuple[int, int]) -> dict[str, Any]:
-    """The optimisation job: only the options given on the command line, the service's defaults else."""
-    options = {k: v for k, v in (("max_depth", args.max_depth), ("population", args.population),
-                                 ("generations", args.generations), ("seed", args.seed)) if v is not None}
-    thresholds = {k: v for k, v in (("power_w", args.threshold_power), ("error", args.threshold_error))
-                  if v is not None}
-    payload: dict[str, Any] = {"scene_id": scene_id, "camera_path": path_doc, "resolution": list(resolution),
-                               "options": options, "profile": "mobile"}
-    if thresholds:
-        payload["thresholds"] = thresholds
-    return payload
+def job_request(args: argparse.Namespace) -> JobRequest:
+    """The optimisation job: the options given on the command line; the service fills in the rest."""
+    given = option_schema.from_arguments(args)
+    if args.resolution is not None:
+        given["eval_width"], given["eval_height"] = args.resolution
+    return JobRequest(profile="mobile", options=given)
 
 
 def process_cpu_s(pid: int) -> float | None:
@@ -151,7 +143,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     say(f"  {stats.get('summary', scene_dir / 'scene.glb')}")
     clock.stop("scene", t)
 
-    resolution = args.resolution or campaign.size_for_path(path, 36)
+    request = job_request(args)
+    resolution = campaign.size_for_path(path, request.option("eval_height"), request.option("eval_width"))
     # the service renders a job's evaluations on every core, like the add-on's local service
     service = LocalService(sys.executable, free_port(), args.data_dir, eval_workers=os.cpu_count() or 1)
     say(f"== service: render-budget serve on {service.url}, data in {args.data_dir}")
@@ -169,7 +162,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         say(f"== optimise the path ({len(path)} frames, {campaign.path_duration(path):.1f} s) at "
             f"{resolution[0]}x{resolution[1]} through the service")
         t = clock.start()
-        job = client.submit_job(job_payload(args, info["id"], path_doc, resolution))
+        job = client.submit_job(request.payload(info["id"], path_doc))
         say(f"  job {job['id']} queued")
         last = [""]
 
@@ -178,7 +171,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                 last[0] = update.text
                 say(f"  {update.text}")
 
-        job = follow_job(client, job, progress=show, poll_s=1.0, timeout_s=args.job_timeout)
+        per_view = request.option("population") * request.option("generations")
+        job = follow_job(client, job, evals_per_view=per_view, progress=show, poll_s=1.0,
+                         timeout_s=args.job_timeout)
         opt = clock.stop("optimise", t)
         store_text = client.store_text(job["store_id"])
         spec = campaign.CampaignSpec(

@@ -35,7 +35,7 @@ from . import report
 from .client import ServiceClient
 from .evaluate_path import EvalSpec, camera_payload, evaluate_path, preset_settings
 from .playback_logic import PlaybackDriver, validate_budget
-from .vendored import camera_path, pareto_store
+from .vendored import camera_path, options, pareto_store
 
 try:  # CPU time of finished child processes too (Unix)
     import resource
@@ -83,11 +83,10 @@ def parse_size(text: str, minimum: int = 8) -> tuple[int, int]:
     return w, h
 
 
-def size_for_path(path: CameraPath, height: int) -> tuple[int, int]:
-    """An image ``height`` pixels tall with the path's (median) aspect: the optimiser's preview size
-    (height 36) and the sample frames' (height 72)."""
-    aspect = float(np.median([f.aspect for f in path.frames]))
-    return max(8, round(height * aspect)), height
+def size_for_path(path: CameraPath, height: int, width: int | None = None) -> tuple[int, int]:
+    """An image ``height`` pixels tall, ``width`` wide or else with the path's (median) aspect, as the
+    optimiser sizes its evaluation images (``service.options.eval_resolution``)."""
+    return options.eval_resolution(width, height, float(np.median([f.aspect for f in path.frames])))
 
 
 def frame_step(path_frames: int, about: int) -> int:

@@ -1,4 +1,5 @@
-"""Camera-path maths shared by recording, export and playback (pure: no bpy)."""
+"""Camera-path helpers shared by recording, export and playback (pure: no bpy; the camera maths itself
+ is `service.store.camera`, vendored as `core.vendored.camera`)."""
 
 from __future__ import annotations
 
@@ -8,47 +9,6 @@ from collections.abc import Sequence
 import numpy as np
 
 from .vendored import camera_path
-
-#: Blender's 3D viewport treats its lens as if the sensor were 72 mm wide (twice a 36 mm camera sensor).
-VIEWPORT_SENSOR_MM = 72.0
-
-
-def vertical_fov(
-    angle_x: float,
-    angle_y: float,
-    sensor_fit: str,
-    width: int,
-    height: int,
-    pixel_aspect_x: float = 1.0,
-    pixel_aspect_y: float = 1.0,
-) -> float:
-    """Vertical field of view (radians) of a perspective Blender camera for a render size.
-
-    ``angle_x`` / ``angle_y`` are the camera's own lens angles over the sensor width / height (Blender's
-    ``Camera.angle_x`` / ``angle_y``: the lens and sensor converted once, by Blender). Follows Blender's
-    sensor-fit rule: AUTO fits the sensor width to the larger image side, HORIZONTAL fits the width to
-    the image width, VERTICAL fits the sensor height to the image height.
-    """
-    for name, angle in (("angle_x", angle_x), ("angle_y", angle_y)):
-        if not (math.isfinite(angle) and 0.0 < angle < math.pi):
-            raise ValueError(f"{name} must be a lens angle in (0, pi) radians, got {angle}")
-    if width <= 0 or height <= 0:
-        raise ValueError(f"resolution must be positive, got {width}x{height}")
-    shown_w, shown_h = width * pixel_aspect_x, height * pixel_aspect_y  # the displayed image's shape
-    if sensor_fit == "VERTICAL":
-        return float(angle_y)
-    if sensor_fit not in ("AUTO", "HORIZONTAL"):
-        raise ValueError(f"unknown sensor_fit {sensor_fit!r}")
-    if sensor_fit == "HORIZONTAL" or shown_w >= shown_h:
-        return 2.0 * math.atan(math.tan(angle_x / 2.0) * shown_h / shown_w)
-    return float(angle_x)  # AUTO, portrait: the sensor width spans the image height
-
-
-def camera_lens_from_viewport(viewport_lens_mm: float, sensor_width_mm: float) -> float:
-    """Lens of a camera with `sensor_width_mm` that frames like the viewport (viewport sensor is 72 mm)."""
-    if viewport_lens_mm <= 0 or sensor_width_mm <= 0:
-        raise ValueError("lens and sensor width must be positive")
-    return viewport_lens_mm * sensor_width_mm / VIEWPORT_SENSOR_MM
 
 
 def frame_times(frame_start: int, frame_end: int, fps: float, step: int = 1) -> list[tuple[int, float]]:
@@ -72,3 +32,10 @@ def build_path(samples: Sequence[tuple[float, Sequence[Sequence[float]], float, 
                    for t, m, v, r in samples)
     return camera_path.CameraPath(frames, float(fps))
 
+
+def max_matrix_deviation(a: camera_path.CameraPath, b: camera_path.CameraPath) -> float:
+    """Largest absolute element difference between two equally long paths' matrices."""
+    if len(a) != len(b):
+        raise ValueError(f"paths differ in length: {len(a)} vs {len(b)}")
+    return max(float(np.abs(fa.matrix_world - fb.matrix_world).max())
+               for fa, fb in zip(a.frames, b.frames, strict=True))
