@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import asdict, field, make_dataclass
+from dataclasses import field, make_dataclass
 from typing import Any
 
 import numpy as np
@@ -153,6 +153,3 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, config: O
     }
     return builder.to_store(profile=config.profile, fps=config.fps, aspect=aspect, meta=meta)
 
-
-def options_dict(config: OptimizeConfig) -> dict[str, Any]:
-    return asdict(config)
