@@ -92,7 +92,7 @@ def _raise(exc: BaseException) -> None:
 def _option_schema() -> ModuleType:
     """The optimiser's option schema (service/options.py, stdlib only): from the source tree or an
     installed project, else the copy inside a staged extension next to this file."""
-    try:
+    try:  # lazy, with a fallback: a script inside Blender may not see the project's packages
         from service import options
     except ImportError:
         here = Path(__file__).resolve().parent
