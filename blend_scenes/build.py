@@ -35,8 +35,8 @@ REPO_ROOT = PACKAGE_DIR.parent
 DEFAULT_OUT = PACKAGE_DIR / "build"
 SCENE_FILES = ("scene.blend", "scene.glb", "path.json", "stats.json")
 #: The add-on's helpers the build uses (path sampling, fov, export): part of every scene's hash.
-ADDON_SOURCES = tuple(REPO_ROOT / "addon" / f for f in ("camera_path.py", "scene_export.py",
-                                                        "core/path_sampling.py"))
+ADDON_SOURCES = tuple(REPO_ROOT / f for f in ("addon/camera_path.py", "addon/scene_export.py",
+                                              "addon/core/path_sampling.py", "service/store/camera.py"))
 
 
 def generator_hash(name: str) -> str:
