@@ -7,8 +7,10 @@
 
 namespace sim_core {
 
-Environment::Environment(const float* rgb, int width, int height) : width_(width), height_(height) {
+Environment::Environment(const float* rgb, int width, int height, float rotation_z)
+    : width_(width), height_(height), cos_rot_(std::cos(rotation_z)), sin_rot_(std::sin(rotation_z)) {
   if (width < 1 || height < 1) throw std::invalid_argument("environment map must be at least 1x1");
+  if (!std::isfinite(rotation_z)) throw std::invalid_argument("environment rotation must be finite");
   rgb_.assign(rgb, rgb + static_cast<std::size_t>(width) * height * 3);
   double sum[3] = {0, 0, 0}, wsum = 0;
   for (int row = 0; row < height; ++row) {
@@ -30,18 +32,21 @@ Environment::Environment(const float* rgb, int width, int height) : width_(width
 
 Environment::~Environment() = default;
 Environment::Environment(Environment&& o) noexcept
-    : constant_(o.constant_), mean_(o.mean_), width_(o.width_), height_(o.height_), rgb_(std::move(o.rgb_)) {
+    : constant_(o.constant_), mean_(o.mean_), width_(o.width_), height_(o.height_), cos_rot_(o.cos_rot_),
+      sin_rot_(o.sin_rot_), rgb_(std::move(o.rgb_)) {
   if (!is_map()) mean_ = constant_;
 }
 Environment& Environment::operator=(Environment&& o) noexcept {
   constant_ = o.constant_; mean_ = o.mean_; width_ = o.width_; height_ = o.height_; rgb_ = std::move(o.rgb_);
+  cos_rot_ = o.cos_rot_; sin_rot_ = o.sin_rot_;
   if (!is_map()) mean_ = constant_;
   filters_[0].reset(); filters_[1].reset();
   return *this;
 }
 
-Vec3 Environment::radiance(Vec3 d) const {
+Vec3 Environment::radiance(Vec3 direction) const {
   if (!is_map()) return constant_;
+  const Vec3 d = to_map(direction);
   const float len = length(d);
   const float z = std::min(1.f, std::max(-1.f, d.z / len));
   const float u = 0.5f - std::atan2(d.y, d.x) / (2.f * kPi);
@@ -63,7 +68,7 @@ const EnvironmentFilter* Environment::filter(int order) const {
 Vec3 Environment::filtered(Vec3 direction, float cone_half_angle, int order) const {
   if (!is_map()) return constant_;  // a constant environment is its own filtered value
   if (order != 1 && order != 2) throw std::invalid_argument("environment filter order must be 1 or 2");
-  return filter(order)->lookup(direction, cone_half_angle);
+  return filter(order)->lookup(to_map(direction), cone_half_angle);
 }
 
 }  // namespace sim_core

@@ -29,6 +29,25 @@ struct TileRecorder {
 
 enum class RayKind { kPrimary, kReflection, kGlossy, kRefraction };
 
+// Cut-out layers a ray may pass before the surface counts as opaque (a bound, so no scene can hang it).
+constexpr int kMaxCutoutLayers = 64;
+// Glossy rays a rough reflection spawns at the primary hit (one deeper down the ray tree).
+constexpr int kGlossyRays = 4;
+
+// The footprint of a ray (ray cones, Ray Tracing Gems ch. 20): width at its origin and spread angle;
+// the width at distance t is width + spread * t. It picks texture mip levels.
+struct RayCone {
+  float width = 0.f;
+  float spread = 0.f;
+  float at(float t) const { return width + spread * t; }
+};
+
+// What a glossy reflection averages: a cone around the mirror direction (the SAT filter's footprint).
+struct Lobe {
+  Vec3 axis;
+  float half_angle = 0.f;
+};
+
 Vec3 schlick(Vec3 f0, float cos_theta) {
   const float m = std::min(1.f, std::max(0.f, 1.f - cos_theta));
   const float m2 = m * m, w = m2 * m2 * m;
@@ -43,15 +62,105 @@ float fresnel_dielectric(float cos_i, float eta) {
   const float rp = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
   return 0.5f * (rs * rs + rp * rp);
 }
-float smoothstep(float e0, float e1, float x) {
-  if (e0 == e1) return x >= e1 ? 1.f : 0.f;
-  const float t = std::min(1.f, std::max(0.f, (x - e0) / (e1 - e0)));
+
+// Normal-incidence reflectance of a dielectric of index `ior` in air: ((ior - 1) / (ior + 1))^2 (0.04 at 1.5,
+// 0 at 1: Principled BSDF's specular from its IOR at the default IOR level).
+float dielectric_f0(float ior) {
+  const float r = (ior - 1.f) / (ior + 1.f);
+  return r * r;
+}
+// GGX roughness of a material (Principled BSDF: alpha = roughness^2), floored so lobes stay finite.
+float ggx_alpha(float roughness) {
+  const float r = std::max(roughness, 0.02f);
+  return r * r;
+}
+// Half angle of the cone the SAT filter averages for a glossy reflection: 3 alpha (the median reflected
+// angle of GGX is ~2 alpha, its lobe's long tail reaches well beyond), at most the filter's widest cone.
+float glossy_cone(float roughness) {
+  return std::min(3.f * ggx_alpha(roughness), EnvironmentFilter::kMaxConeHalfAngle);
+}
+// Cycles' spot cone: smoothstep over the outer `blend` fraction of (1 - cos(half angle)); a hard edge
+// when blend is 0. `from_light` is the unit direction from the light to the point.
+float spot_attenuation(const Light& L, Vec3 from_light) {
+  const float c = dot(from_light, L.direction);
+  const float cos_half = std::cos(L.spot_angle);
+  if (!(c > cos_half)) return 0.f;
+  const float width = (1.f - cos_half) * L.spot_blend;
+  if (!(width > 0.f)) return 1.f;
+  const float t = std::min(1.f, (c - cos_half) / width);
   return t * t * (3.f - 2.f * t);
 }
 
-// Half angle of the cone a glossy reflection samples (and the SAT filter averages over).
-float glossy_cone(float roughness) {
-  return std::min(roughness, 1.f) * EnvironmentFilter::kMaxConeHalfAngle;
+// Projected solid angle of a planar polygon (vertices relative to the receiving point) above the plane
+// with unit normal n: Lambert's formula after clipping the polygon to n's hemisphere (Sutherland-Hodgman).
+// The irradiance of a uniform Lambertian emitter of radiance L is L times this.
+float projected_solid_angle(const Vec3* vertices, int count, Vec3 n) {
+  constexpr int kMax = 24;
+  Vec3 clipped[kMax];
+  int m = 0;
+  for (int i = 0; i < count && m < kMax - 1; ++i) {
+    const Vec3 a = vertices[i], b = vertices[(i + 1) % count];
+    const float da = dot(a, n), db = dot(b, n);
+    if (da > 0.f) clipped[m++] = a;
+    if ((da > 0.f) != (db > 0.f)) clipped[m++] = a + (b - a) * (da / (da - db));
+  }
+  if (m < 3) return 0.f;
+  float sum = 0.f;
+  for (int i = 0; i < m; ++i) {
+    const Vec3 a = normalize(clipped[i]), b = normalize(clipped[(i + 1) % m]);
+    const Vec3 c = cross(a, b);
+    const float len = length(c);
+    if (!(len > 0.f)) continue;
+    sum += std::atan2(len, dot(a, b)) * dot(c, n) / len;
+  }
+  return 0.5f * std::fabs(sum);
+}
+
+// Outline of an area light for the irradiance formula: its 4 corners, or an area-preserving 16-gon for
+// an ellipse (circumradius scaled by sqrt(pi / (8 sin(pi / 8))) so the polygon's area is the ellipse's).
+int area_outline(const Light& L, Vec3 origin, Vec3* out) {
+  const Vec3 c = L.position - origin;
+  const Vec3 hu = L.axis_u * (0.5f * L.size_u), hv = L.axis_v * (0.5f * L.size_v);
+  if (L.shape == AreaShape::kRectangle) {
+    out[0] = c - hu - hv; out[1] = c + hu - hv; out[2] = c + hu + hv; out[3] = c - hu + hv;
+    return 4;
+  }
+  constexpr int kSides = 16;
+  const float k = 1.0129670f;
+  for (int i = 0; i < kSides; ++i) {
+    const float phi = 2.f * kPi * static_cast<float>(i) / kSides;
+    out[i] = c + hu * (k * std::cos(phi)) + hv * (k * std::sin(phi));
+  }
+  return kSides;
+}
+
+// Point of an area light nearest to where the ray (origin, unit dir) meets its plane, clamped to its
+// shape; the centre when the ray leaves away from the light.
+Vec3 area_nearest_point(const Light& L, Vec3 origin, Vec3 dir) {
+  const float denom = dot(dir, L.direction);
+  if (!(denom < 0.f)) return L.position;
+  const float t = dot(L.position - origin, L.direction) / denom;
+  const Vec3 q = origin + dir * t - L.position;
+  float du = dot(q, L.axis_u), dv = dot(q, L.axis_v);
+  const float hu = 0.5f * L.size_u, hv = 0.5f * L.size_v;
+  if (L.shape == AreaShape::kRectangle) {
+    du = std::min(hu, std::max(-hu, du));
+    dv = std::min(hv, std::max(-hv, dv));
+  } else {
+    const float r = std::sqrt((du / hu) * (du / hu) + (dv / hv) * (dv / hv));
+    if (r > 1.f) { du /= r; dv /= r; }
+  }
+  return L.position + L.axis_u * du + L.axis_v * dv;
+}
+
+// A point of an area light's emitting surface from a unit-square sample (uniform over the shape).
+Vec3 area_point(const Light& L, Sample2 s) {
+  float x = s.u - 0.5f, y = s.v - 0.5f;
+  if (L.shape == AreaShape::kEllipse) {
+    concentric_disk(s, &x, &y);
+    x *= 0.5f; y *= 0.5f;
+  }
+  return L.position + L.axis_u * (x * L.size_u) + L.axis_v * (y * L.size_v);
 }
 
 // Where a ray sits in its sample's ray tree: bounce depth and branch code (root 1, reflection child
@@ -61,7 +170,8 @@ struct Branch {
   std::uint32_t path;
   int depth;
   std::uint32_t random_key() const { return hash_combine(key, path); }
-  Branch reflected() const { return {key, path * 3u + 1u, depth + 1}; }
+  // Glossy ray i of a reflection gets its own random numbers (i << 20 stays clear of depth-4 codes).
+  Branch reflected(std::uint32_t i = 0) const { return {key, (path * 3u + 1u) + (i << 20), depth + 1}; }
   Branch refracted() const { return {key, path * 3u + 2u, depth + 1}; }
 };
 
@@ -73,10 +183,13 @@ struct HitInfo {  // what the caller (primary sample) records about a ray's firs
   std::uint32_t shadow_bits = 0;
 };
 
-// Geometry of a ray's hit, oriented towards the incoming ray.
+// Geometry of a ray's hit, oriented towards the incoming ray, with its textured base colour and alpha.
 struct SurfacePoint {
   const TriRecord* tri;
   const Material* mat;
+  Vec3 base_color;  // material base colour times its texture (linear)
+  float alpha;      // material alpha times the texture's alpha
+  float cone_width; // the ray footprint's width here (texture level of detail, shadow-ray alpha tests)
   Vec3 p;           // hit point
   Vec3 dir;         // unit incoming direction
   Vec3 view;        // -dir
@@ -88,38 +201,51 @@ struct SurfacePoint {
   Vec3 origin_in;   // spawn point for rays entering the surface (refraction)
 };
 
-// The material's scattering terms at a hit: Lambert diffuse plus normalised Blinn-Phong specular with
-// Schlick's Fresnel, scaled by the opaque (non-transmitted) fraction.
+// The material's scattering terms at a hit: Lambert diffuse plus normalised Blinn-Phong specular (exponent
+// 2 / alpha^2 - 2 for GGX alpha = roughness^2) with Schlick's Fresnel (f0 from the IOR for dielectrics),
+// scaled by the opaque (non-transmitted) fraction. Metals take their specular colour from the (textured)
+// base colour.
 struct SurfaceBrdf {
   Vec3 base_color;
   float opaque;
   Vec3 diffuse_albedo;
   Vec3 f0;
+  float alpha;
   float shininess;
   float spec_norm;
 
-  explicit SurfaceBrdf(const Material& mat)
-      : base_color(mat.base_color),
+  SurfaceBrdf(const Material& mat, Vec3 base)
+      : base_color(base),
         opaque(1.f - mat.transmission),
-        diffuse_albedo(mat.base_color * ((1.f - mat.metallic) * opaque)),
-        f0(lerp(Vec3(0.04f, 0.04f, 0.04f), mat.base_color, mat.metallic)) {
-    const float r = std::max(mat.roughness, 0.02f);
-    shininess = std::min(2.f / (r * r * r * r) - 2.f, 1.0e4f);
+        diffuse_albedo(base * ((1.f - mat.metallic) * opaque)),
+        f0(lerp(Vec3(1.f, 1.f, 1.f) * dielectric_f0(mat.ior), base, mat.metallic)),
+        alpha(ggx_alpha(mat.roughness)) {
+    shininess = std::min(2.f / (alpha * alpha) - 2.f, 1.0e4f);
     spec_norm = (shininess + 8.f) / (8.f * kPi);
   }
   // BRDF value for light arriving from unit `to_light`, seen from unit `view`, about shading normal n.
-  Vec3 eval(Vec3 n, Vec3 to_light, Vec3 view) const {
+  // A light of angular radius `source_angle` widens the lobe to alpha + source_angle / 2 (Karis 2013,
+  // "Real Shading in Unreal Engine 4"): its highlight spreads over the emitter instead of peaking.
+  Vec3 eval(Vec3 n, Vec3 to_light, Vec3 view, float source_angle = 0.f) const {
     const Vec3 h = normalize(to_light + view);
-    const float spec = spec_norm * std::pow(std::max(dot(n, h), 0.f), shininess);
+    float s = shininess, norm = spec_norm;
+    if (source_angle > 0.f) {
+      const float a = std::min(1.f, alpha + 0.5f * source_angle);
+      s = std::min(2.f / (a * a) - 2.f, 1.0e4f);
+      norm = (s + 8.f) / (8.f * kPi);
+    }
+    const float spec = norm * std::pow(std::max(dot(n, h), 0.f), s);
     return diffuse_albedo * (1.f / kPi) + schlick(f0, std::max(dot(h, view), 0.f)) * (spec * opaque);
   }
 };
 
 // Light arriving at a surface point from one light, before shadowing.
 struct LightArrival {
-  Vec3 to_light;  // unit direction towards the light (its centre)
-  float n_dot_l;
-  Vec3 radiance;  // after distance falloff and spot cone
+  Vec3 to_light;       // unit direction the specular lobe is evaluated in (centre, or an area light's
+                       // point nearest the mirror direction)
+  Vec3 to_centre;      // unit direction towards the light's centre (shadow rays of hard shadows)
+  Vec3 irradiance;     // unshadowed, cosine at the receiver included (colour x intensity x geometry)
+  float source_angle;  // angular radius of the emitter seen from the point (0: a point or a sun disk of 0)
 };
 
 // How much of a hit's light goes into each secondary ray (the Fresnel split of reflection/refraction).
@@ -135,8 +261,10 @@ class Shader {
   explicit Shader(TileContext& ctx) : ctx_(ctx), rec_{ctx} {}
 
   // Radiance along `ray`. `info` (may be null) receives the first hit; `geom` (primary ray only) the
-  // first hits of its reflection/refraction rays.
-  Vec3 trace(const Ray& ray, RayKind kind, Branch branch, float cone, HitInfo* info, SampleGeometry* geom);
+  // first hits of its reflection/refraction rays. `lobe` (glossy rays only) is what a filtered
+  // environment lookup averages when the ray leaves the scene.
+  Vec3 trace(const Ray& ray, RayKind kind, Branch branch, RayCone cone, const Lobe* lobe, HitInfo* info,
+             SampleGeometry* geom);
 
  private:
   TileContext& ctx_;
@@ -144,25 +272,36 @@ class Shader {
 
   void count_ray(RayKind kind);
   // Environment phase: what a ray that leaves the scene sees (cone-filtered for glossy rays when asked).
-  Vec3 environment(const Ray& ray, RayKind kind, float cone);
-  // Primary-hit phase: hit point, oriented normals and spawn points.
-  SurfacePoint surface_at(const Ray& ray, const Hit& hit) const;
+  Vec3 environment(const Ray& ray, RayKind kind, const Lobe* lobe);
+  // Primary-hit phase: hit point, oriented normals, spawn points, then the texture phase (textured base
+  // colour and alpha, mip level from the ray cone's width here).
+  SurfacePoint surface_at(const Ray& ray, const Hit& hit, float cone_width);
+  Rgba texture_sample(const Material& mat, std::uint32_t tri, const Hit& hit, float cone_width, float cos_incidence);
+  // Alpha phase: whether a hit of a cut-out material lets the ray through (clip: alpha below the cutoff;
+  // hashed: alpha below a per-sample random threshold). Counts the test.
+  bool cut_out(const Material& mat, float alpha, std::uint32_t random_key, int layer);
+  // Any hit before ray.tmax, looking through cut-outs (plain any-hit traversal when the scene has none).
+  bool occluded(Ray ray, std::uint32_t random_key, float cone_width);
   // Direct-light phase: every light's contribution, shadowed by shadow rays; sets one shadow bit per
   // occluded light.
   void add_direct_light(const SurfacePoint& s, const SurfaceBrdf& brdf, std::uint32_t random_key, Vec3* color,
                         std::uint32_t* shadow_bits);
-  bool light_arrival(const Light& light, const SurfacePoint& s, LightArrival* out) const;
-  // Fraction of shadow rays towards `light` that reach it (1 with shadows off); counts its shadow bit.
-  float light_visibility(const Light& light, std::size_t index, const SurfacePoint& s, Vec3 to_light,
+  bool light_arrival(const Light& light, const SurfacePoint& s, LightArrival* out);
+  bool area_arrival(const Light& light, const SurfacePoint& s, LightArrival* out);
+  // Fraction of shadow rays towards `light` that reach it (1 with shadows off): one ray to its centre
+  // (hard), or N stratified points on its emitter (sphere disk, sun cone, area surface); counts its bit.
+  float light_visibility(const Light& light, std::size_t index, const SurfacePoint& s, const LightArrival& a,
                          std::uint32_t random_key, std::uint32_t* shadow_bits);
   // Ambient phase: the environment's mean radiance on the diffuse term, occluded by AO rays.
   void add_ambient_light(const SurfacePoint& s, const SurfaceBrdf& brdf, std::uint32_t random_key, Vec3* color);
   float ambient_visibility(const SurfacePoint& s, std::uint32_t random_key);
-  // Secondary-ray phases (Whitted): the Fresnel split, then reflection and refraction.
+  // Secondary-ray phases (Whitted): the Fresnel split, then reflection (mirror, or a few GGX-distributed
+  // glossy rays whose escapes read the cone-filtered environment) and refraction.
   SecondaryWeights secondary_weights(const SurfacePoint& s, const SurfaceBrdf& brdf) const;
-  void add_reflection(const SurfacePoint& s, Vec3 weight, Branch branch, SampleGeometry* geom, Vec3* color);
+  void add_reflection(const SurfacePoint& s, Vec3 weight, Branch branch, RayCone cone, SampleGeometry* geom,
+                      Vec3* color);
   void add_refraction(const SurfacePoint& s, const SurfaceBrdf& brdf, const SecondaryWeights& w, Branch branch,
-                      SampleGeometry* geom, Vec3* color);
+                      RayCone cone, SampleGeometry* geom, Vec3* color);
 };
 
 void Shader::count_ray(RayKind kind) {
@@ -175,18 +314,40 @@ void Shader::count_ray(RayKind kind) {
   }
 }
 
-Vec3 Shader::trace(const Ray& ray, RayKind kind, Branch branch, float cone, HitInfo* info,
+// Where a ray continues after passing through the surface it hit at `hit` (alpha cut-outs): just behind
+// the surface, same direction, what is left of its extent.
+Ray continue_past(const Ray& ray, const Hit& hit, Vec3 p, Vec3 ng) {
+  Ray next = ray;
+  next.origin = offset_ray_origin(p, dot(ray.dir, ng) > 0.f ? ng : -ng);
+  next.tmin = 0.f;
+  next.tmax = ray.tmax - hit.t;
+  return next;
+}
+
+Vec3 Shader::trace(const Ray& ray, RayKind kind, Branch branch, RayCone cone, const Lobe* lobe, HitInfo* info,
                    SampleGeometry* geom) {
   count_ray(kind);
-  const Hit hit = ctx_.scene.closest(ray, rec_);
-  if (!hit.hit()) {
-    if (info) info->object = -1;
-    return environment(ray, kind, cone);
-  }
-  ++ctx_.counters.shading_evals;
-  const SurfacePoint s = surface_at(ray, hit);
-  const SurfaceBrdf brdf(*s.mat);
+  const float dir_len = length(ray.dir);
   const std::uint32_t random_key = branch.random_key();
+  Ray r = ray;
+  float travelled = 0.f;  // distance from ray.origin to r.origin (past cut-out layers)
+  Hit hit;
+  SurfacePoint s;
+  for (int layer = 0;; ++layer) {
+    hit = ctx_.scene.closest(r, rec_);
+    if (!hit.hit()) {
+      if (info) info->object = -1;
+      return environment(r, kind, lobe);
+    }
+    ++ctx_.counters.shading_evals;
+    s = surface_at(r, hit, cone.at(travelled + hit.t * dir_len));
+    if (!s.mat->cuts_out || layer + 1 >= kMaxCutoutLayers || !cut_out(*s.mat, s.alpha, random_key, layer)) break;
+    travelled += hit.t * dir_len;
+    r = continue_past(r, hit, s.p, s.ng);
+    ++ctx_.counters.rays_alpha;
+    ++ctx_.counters.rays_total;
+  }
+  const SurfaceBrdf brdf(*s.mat, s.base_color);
   Vec3 color = s.mat->emission;
   std::uint32_t shadow_bits = 0;
   add_direct_light(s, brdf, random_key, &color, &shadow_bits);
@@ -200,23 +361,43 @@ Vec3 Shader::trace(const Ray& ray, RayKind kind, Branch branch, float cone, HitI
   }
   if (branch.depth < ctx_.settings.max_depth) {
     const SecondaryWeights w = secondary_weights(s, brdf);
-    if (max_component(w.reflection) > 0.f) add_reflection(s, w.reflection, branch, geom, &color);
-    if (w.refracts && w.refraction > 0.f) add_refraction(s, brdf, w, branch, geom, &color);
+    const RayCone here{s.cone_width, cone.spread};
+    if (max_component(w.reflection) > 0.f) add_reflection(s, w.reflection, branch, here, geom, &color);
+    if (w.refracts && w.refraction > 0.f) add_refraction(s, brdf, w, branch, here, geom, &color);
   }
   return color;
 }
 
-Vec3 Shader::environment(const Ray& ray, RayKind kind, float cone) {
+Vec3 Shader::environment(const Ray& ray, RayKind kind, const Lobe* lobe) {
   const Environment& env = ctx_.scene.environment();
-  if (kind == RayKind::kGlossy && ctx_.settings.env_filter != EnvFilter::kOff && env.is_map()) {
+  if (kind == RayKind::kGlossy && lobe && ctx_.settings.env_filter != EnvFilter::kOff && env.is_map()) {
     ++ctx_.counters.env_filtered_lookups;
-    return env.filtered(ray.dir, cone, static_cast<int>(ctx_.settings.env_filter));
+    return env.filtered(lobe->axis, lobe->half_angle, static_cast<int>(ctx_.settings.env_filter));
   }
   if (env.is_map()) ++ctx_.counters.env_lookups;  // a constant colour needs no lookup
   return env.radiance(ray.dir);
 }
 
-SurfacePoint Shader::surface_at(const Ray& ray, const Hit& hit) const {
+Rgba Shader::texture_sample(const Material& mat, std::uint32_t tri, const Hit& hit, float cone_width,
+                            float cos_incidence) {
+  const Scene& scene = ctx_.scene;
+  const Texture& tex = scene.texture(mat.base_color_texture);
+  const TriTexcoord* tc = scene.texcoord(tri);
+  float u = 0.f, v = 0.f, lod = kInf;  // without UVs a texture contributes its mean (the 1x1 level)
+  if (tc) {
+    scene.uv_at(tri, hit.b0, hit.b1, hit.b2, &u, &v);
+    lod = texture_lod(tc->lod_bias, tex.width(), tex.height(), cone_width, cos_incidence);
+  }
+  ++ctx_.counters.texture_fetches;
+  const std::uint64_t base = kTextureBaseAddress + scene.texture_base(mat.base_color_texture);
+  const std::uint32_t bytes = tex.texel_bytes();
+  return tex.sample(u, v, lod, [&](std::uint64_t offset) {
+    ++ctx_.counters.texel_reads;
+    ctx_.texture_cache.access(base + offset, bytes);
+  });
+}
+
+SurfacePoint Shader::surface_at(const Ray& ray, const Hit& hit, float cone_width) {
   const Scene& scene = ctx_.scene;
   SurfacePoint s;
   s.tri = &scene.tri(hit.tri);
@@ -236,7 +417,48 @@ SurfacePoint Shader::surface_at(const Ray& ray, const Hit& hit) const {
   s.n_dot_v = std::max(dot(s.n, s.view), 0.f);
   s.origin_out = offset_ray_origin(s.p, s.ng);
   s.origin_in = offset_ray_origin(s.p, -s.ng);
+  s.cone_width = cone_width;
+  s.base_color = s.mat->base_color;
+  s.alpha = s.mat->alpha;
+  if (s.mat->base_color_texture >= 0) {
+    const Rgba t = texture_sample(*s.mat, hit.tri, hit, cone_width, dot(s.dir, s.ng));
+    s.base_color = s.base_color * t.rgb;
+    s.alpha *= t.a;
+  }
   return s;
+}
+
+bool Shader::cut_out(const Material& mat, float alpha, std::uint32_t random_key, int layer) {
+  ++ctx_.counters.alpha_tests;
+  if (mat.alpha_mode == AlphaMode::kClip) return alpha < mat.alpha_cutoff;
+  const std::uint32_t akey = hash_combine(random_key, (static_cast<std::uint32_t>(SamplePurpose::kAlpha) << 8) +
+                                                          static_cast<std::uint32_t>(layer));
+  return alpha <= u32_to_unit(hash_u32(akey));  // hashed: passes through with probability 1 - alpha
+}
+
+bool Shader::occluded(Ray ray, std::uint32_t random_key, float cone_width) {
+  const Scene& scene = ctx_.scene;
+  if (!scene.has_cutouts()) return scene.occluded(ray, rec_);
+  // Cut-outs need the hit's material and texture: closest hits, layer by layer (what an any-hit shader
+  // does on a GPU).
+  for (int layer = 0; layer < kMaxCutoutLayers; ++layer) {
+    const Hit hit = scene.closest(ray, rec_);
+    if (!hit.hit()) return false;
+    const TriRecord& tri = scene.tri(hit.tri);
+    const Material& mat = scene.materials()[tri.material];
+    if (!mat.cuts_out) return true;
+    float alpha = mat.alpha;
+    const Vec3 ng = scene.shading(hit.tri).ng;
+    if (mat.base_color_texture >= 0)
+      alpha *= texture_sample(mat, hit.tri, hit, cone_width, dot(normalize(ray.dir), ng)).a;
+    if (!cut_out(mat, alpha, random_key, layer)) return true;
+    const float* v = tri.v;
+    const Vec3 p = Vec3(v[0], v[1], v[2]) * hit.b0 + Vec3(v[3], v[4], v[5]) * hit.b1 + Vec3(v[6], v[7], v[8]) * hit.b2;
+    ray = continue_past(ray, hit, p, ng);
+    ++ctx_.counters.rays_alpha;
+    ++ctx_.counters.rays_total;
+  }
+  return true;  // a wall of cut-out layers counts as opaque
 }
 
 void Shader::add_direct_light(const SurfacePoint& s, const SurfaceBrdf& brdf, std::uint32_t random_key,
@@ -247,72 +469,110 @@ void Shader::add_direct_light(const SurfacePoint& s, const SurfaceBrdf& brdf, st
   for (std::size_t li = 0; li < light_count; ++li) {
     LightArrival a;
     if (!light_arrival(lights[li], s, &a)) continue;
-    const float visibility = light_visibility(lights[li], li, s, a.to_light, random_key, shadow_bits);
+    const float visibility = light_visibility(lights[li], li, s, a, random_key, shadow_bits);
     if (visibility <= 0.f) continue;
-    *color += brdf.eval(s.n, a.to_light, s.view) * a.radiance * (a.n_dot_l * visibility);
+    *color += brdf.eval(s.n, a.to_light, s.view, a.source_angle) * a.irradiance * visibility;
   }
 }
 
-bool Shader::light_arrival(const Light& L, const SurfacePoint& s, LightArrival* out) const {
+bool Shader::light_arrival(const Light& L, const SurfacePoint& s, LightArrival* out) {
+  if (L.kind == LightKind::kArea) return area_arrival(L, s, out);
   Vec3 to_light;
-  float dist = kInf;
+  float falloff = 1.f;  // 1 / distance^2 (sun: 1)
+  float source_angle = 0.f;
   if (L.kind == LightKind::kSun) {
     to_light = -L.direction;
+    source_angle = L.radius;
   } else {
     const Vec3 d = L.position - s.p;
-    dist = length(d);
+    const float dist = length(d);
     if (!(dist > 0.f)) return false;
     to_light = d / dist;
+    // A sphere light of radius R lights like a disk facing the point (Cycles' soft falloff):
+    // irradiance I / (d^2 + R^2), which stays finite on the light's surface.
+    falloff = 1.f / (dist * dist + L.radius * L.radius);
+    if (L.radius > 0.f) source_angle = std::atan2(L.radius, dist);
   }
   const float n_dot_l = dot(s.n, to_light);
   if (n_dot_l <= 0.f || dot(s.ng, to_light) <= 0.f) return false;  // facing away: no light, no shadow ray
-  Vec3 radiance = L.color * L.intensity;
-  if (L.kind != LightKind::kSun) radiance = radiance / (dist * dist);
-  if (L.kind == LightKind::kSpot) {
-    const float c = dot(-to_light, L.direction);
-    radiance = radiance * smoothstep(std::cos(L.spot_angle), std::cos(L.spot_angle * 0.85f), c);
-  }
-  if (max_component(radiance) <= 0.f) return false;
+  Vec3 irradiance = L.color * (L.intensity * falloff * n_dot_l);
+  if (L.kind == LightKind::kSpot) irradiance = irradiance * spot_attenuation(L, -to_light);
+  if (max_component(irradiance) <= 0.f) return false;
   out->to_light = to_light;
-  out->n_dot_l = n_dot_l;
-  out->radiance = radiance;
+  out->to_centre = to_light;
+  out->irradiance = irradiance;
+  out->source_angle = source_angle;
   return true;
 }
 
-float Shader::light_visibility(const Light& L, std::size_t index, const SurfacePoint& s, Vec3 to_light,
+bool Shader::area_arrival(const Light& L, const SurfacePoint& s, LightArrival* out) {
+  ++ctx_.counters.area_light_evals;
+  // One-sided: only points in front of the emitting face receive light.
+  if (!(dot(s.p - L.position, L.direction) > 0.f)) return false;
+  Vec3 outline[16];
+  const int count = area_outline(L, s.p, outline);
+  const float g = projected_solid_angle(outline, count, s.n);  // irradiance per unit radiance
+  if (!(g > 0.f)) return false;
+  const Vec3 centre = L.position - s.p;
+  const float dist = length(centre);
+  if (!(dist > 0.f)) return false;
+  out->to_centre = centre / dist;
+  out->to_light = normalize(area_nearest_point(L, s.p, reflect(s.dir, s.n)) - s.p);
+  out->irradiance = L.color * (L.intensity * g);
+  out->source_angle = std::sqrt(g / kPi);  // the cone of equal projected solid angle
+  return max_component(out->irradiance) > 0.f;
+}
+
+float Shader::light_visibility(const Light& L, std::size_t index, const SurfacePoint& s, const LightArrival& a,
                                std::uint32_t random_key, std::uint32_t* shadow_bits) {
   const RenderSettings& st = ctx_.settings;
   if (st.shadow_samples <= 0) return 1.f;
-  // Soft shadows sample the light's sphere (point, spot) or cone of directions (sun).
-  const bool soft = L.radius > 0.f && st.shadow_samples > 1;
+  const bool area = L.kind == LightKind::kArea;
+  const bool soft = (area || L.radius > 0.f) && st.shadow_samples > 1;
   const int ns = soft ? st.shadow_samples : 1;
-  int blocked = 0;
+  // Visible fraction of the light. Points of an area light are weighted by how much they light the
+  // point (cos at the receiver x cos at the emitter / d^2): near parts of a large emitter matter more.
+  float open = 0.f, total = 0.f;
+  bool any_blocked = false;
   const std::uint32_t skey = hash_combine(random_key, (static_cast<std::uint32_t>(SamplePurpose::kShadow) << 8) +
                                                           static_cast<std::uint32_t>(index));
   Vec3 t, b;
-  onb(to_light, &t, &b);
+  onb(a.to_centre, &t, &b);
   for (int i = 0; i < ns; ++i) {
     Ray sr;
     sr.origin = s.origin_out;
+    float weight = 1.f;
     if (L.kind == LightKind::kSun) {
-      sr.dir = soft ? uniform_cone(r2_sample(skey, i), to_light, L.radius) : to_light;
+      sr.dir = soft ? uniform_cone(r2_sample(skey, i), a.to_centre, L.radius) : a.to_centre;
       sr.tmax = kInf;
     } else {
       Vec3 target = L.position;
-      if (soft) {
+      if (soft && area) {
+        target = area_point(L, r2_sample(skey, i));
+      } else if (soft) {
         float dx, dy;
         concentric_disk(r2_sample(skey, i), &dx, &dy);
         target = target + t * (dx * L.radius) + b * (dy * L.radius);
       }
       sr.dir = target - sr.origin;
       sr.tmax = 1.f - 1e-4f;  // stop just short of the light
+      if (soft && area) {
+        const float d2 = dot(sr.dir, sr.dir);
+        weight = std::max(0.f, dot(sr.dir, s.n)) * std::max(0.f, -dot(sr.dir, L.direction)) / (d2 * d2);
+        if (!(weight > 0.f)) continue;  // a point below the horizon or behind the emitter: no light, no ray
+      }
     }
     ++ctx_.counters.rays_shadow;
     ++ctx_.counters.rays_total;
-    if (ctx_.scene.occluded(sr, rec_)) ++blocked;
+    total += weight;
+    if (occluded(sr, hash_combine(skey, static_cast<std::uint32_t>(i)), s.cone_width)) {
+      any_blocked = true;
+    } else {
+      open += weight;
+    }
   }
-  if (blocked > 0 && index < 32) *shadow_bits |= 1u << index;
-  return 1.f - static_cast<float>(blocked) / static_cast<float>(ns);
+  if (any_blocked && index < 32) *shadow_bits |= 1u << index;
+  return total > 0.f ? open / total : 0.f;
 }
 
 void Shader::add_ambient_light(const SurfacePoint& s, const SurfaceBrdf& brdf, std::uint32_t random_key,
@@ -336,7 +596,7 @@ float Shader::ambient_visibility(const SurfacePoint& s, std::uint32_t random_key
     ar.tmax = ctx_.ao_distance;
     ++ctx_.counters.rays_ao;
     ++ctx_.counters.rays_total;
-    if (!ctx_.scene.occluded(ar, rec_)) ++open;
+    if (!occluded(ar, hash_combine(akey, static_cast<std::uint32_t>(i)), s.cone_width)) ++open;
   }
   return static_cast<float>(open) / static_cast<float>(samples);
 }
@@ -366,46 +626,51 @@ SecondaryWeights Shader::secondary_weights(const SurfacePoint& s, const SurfaceB
   return w;
 }
 
-void Shader::add_reflection(const SurfacePoint& s, Vec3 weight, Branch branch, SampleGeometry* geom,
+void Shader::add_reflection(const SurfacePoint& s, Vec3 weight, Branch branch, RayCone cone, SampleGeometry* geom,
                             Vec3* color) {
   const Material& mat = *s.mat;
-  Vec3 rdir = reflect(s.dir, s.n);
-  if (dot(rdir, s.ng) <= 0.f) rdir = reflect(s.dir, s.ng);
+  Vec3 mirror = reflect(s.dir, s.n);
+  if (dot(mirror, s.ng) <= 0.f) mirror = reflect(s.dir, s.ng);
   const bool glossy = mat.roughness > 1e-3f && !mat.refracts();
-  RayKind kind = RayKind::kReflection;
-  float cone = 0.f;
+  Lobe lobe{mirror, 0.f};
+  int rays = 1;
+  RayCone next = cone;
   if (glossy) {
-    kind = RayKind::kGlossy;
-    cone = glossy_cone(mat.roughness);
-    if (ctx_.settings.env_filter == EnvFilter::kOff) {
-      // Point-sampled glossy lobe: one ray in the cone (the filtered path traces the mirror ray and
-      // lets the summed-area table average the environment over the cone instead).
-      const std::uint32_t gkey =
-          hash_combine(branch.random_key(), static_cast<std::uint32_t>(SamplePurpose::kGlossy) << 8);
-      const Vec3 g = uniform_cone(r2_sample(gkey, 0), rdir, cone);
-      if (dot(g, s.ng) > 0.f) rdir = g;
-    }
+    lobe.half_angle = glossy_cone(mat.roughness);
+    rays = branch.depth == 0 ? kGlossyRays : 1;
+    next.spread += lobe.half_angle;  // what one glossy ray sees is blurred by its share of the lobe
   }
-  Ray rr;
-  rr.origin = s.origin_out;
-  rr.dir = rdir;
-  HitInfo sec;
-  const Vec3 c = trace(rr, kind, branch.reflected(), cone, geom ? &sec : nullptr, nullptr);
-  *color += c * weight;
-  if (geom) {
-    geom->sec_object[0] = sec.object;
-    geom->sec_normal[0] = sec.normal;
-    geom->sec_shadow_bits |= sec.shadow_bits;
+  const std::uint32_t gkey = hash_combine(branch.random_key(), static_cast<std::uint32_t>(SamplePurpose::kGlossy) << 8);
+  const float alpha = ggx_alpha(mat.roughness);
+  for (int i = 0; i < rays; ++i) {
+    Ray rr;
+    rr.origin = s.origin_out;
+    rr.dir = mirror;
+    if (glossy) {
+      // A GGX microfacet normal, the view mirrored about it (stratified over the rays by the R2 sequence).
+      const Vec3 g = reflect(s.dir, ggx_normal(r2_sample(gkey, static_cast<std::uint32_t>(i)), s.n, alpha));
+      if (dot(g, s.ng) > 0.f) rr.dir = g;
+    }
+    HitInfo sec;
+    const Vec3 c = trace(rr, glossy ? RayKind::kGlossy : RayKind::kReflection,
+                         branch.reflected(static_cast<std::uint32_t>(i)), next, glossy ? &lobe : nullptr,
+                         (geom && i == 0) ? &sec : nullptr, nullptr);
+    *color += c * weight * (1.f / static_cast<float>(rays));
+    if (geom && i == 0) {
+      geom->sec_object[0] = sec.object;
+      geom->sec_normal[0] = sec.normal;
+      geom->sec_shadow_bits |= sec.shadow_bits;
+    }
   }
 }
 
 void Shader::add_refraction(const SurfacePoint& s, const SurfaceBrdf& brdf, const SecondaryWeights& w,
-                            Branch branch, SampleGeometry* geom, Vec3* color) {
+                            Branch branch, RayCone cone, SampleGeometry* geom, Vec3* color) {
   Ray tr;
   tr.origin = s.origin_in;
   tr.dir = w.refraction_dir;
   HitInfo sec;
-  const Vec3 c = trace(tr, RayKind::kRefraction, branch.refracted(), 0.f, geom ? &sec : nullptr, nullptr);
+  const Vec3 c = trace(tr, RayKind::kRefraction, branch.refracted(), cone, nullptr, geom ? &sec : nullptr, nullptr);
   *color += c * brdf.base_color * w.refraction;
   if (geom) {
     geom->sec_object[1] = sec.object;
@@ -416,10 +681,12 @@ void Shader::add_refraction(const SurfacePoint& s, const SurfaceBrdf& brdf, cons
 
 }  // namespace
 
-TileContext::TileContext(const Scene& s, const RenderSettings& st, const Camera& c, const CacheConfig& cc)
-    : scene(s), settings(st), camera(c), cache(cc) {
+TileContext::TileContext(const Scene& s, const RenderSettings& st, const Camera& c, const CacheConfig& cc,
+                         const CacheConfig& texture_cc)
+    : scene(s), settings(st), camera(c), cache(cc), texture_cache(texture_cc) {
   cos_threshold = st.normal_threshold_deg < 0.f ? 2.f : std::cos(st.normal_threshold_deg * kPi / 180.f);
   ao_distance = st.ao_distance > 0.f ? st.ao_distance : 0.1f * s.diagonal();
+  pixel_spread = 2.f * c.tan_half() / static_cast<float>(std::max(1, c.height)) / static_cast<float>(st.subgrid());
 }
 
 void TileContext::finish() {
@@ -427,6 +694,9 @@ void TileContext::finish() {
   counters.cache_accesses += cs.accesses;
   counters.cache_misses += cs.misses;
   counters.dram_bytes_read += cs.dram_bytes;
+  const CacheStats& ts = texture_cache.stats();  // texel reads are counted as they happen
+  counters.texture_cache_misses += ts.misses;
+  counters.texture_dram_bytes += ts.dram_bytes;
 }
 
 SampleResult trace_sample(TileContext& ctx, float px, float py, std::uint32_t key) {
@@ -435,7 +705,8 @@ SampleResult trace_sample(TileContext& ctx, float px, float py, std::uint32_t ke
   const Ray ray = ctx.camera.primary(px, py);
   SampleResult out;
   HitInfo info;
-  out.color = shader.trace(ray, RayKind::kPrimary, Branch{key, 1u, 0}, 0.f, &info, &out.geom);
+  out.color = shader.trace(ray, RayKind::kPrimary, Branch{key, 1u, 0}, RayCone{0.f, ctx.pixel_spread}, nullptr, &info,
+                           &out.geom);
   out.geom.object = info.object;
   if (info.object >= 0) {
     out.geom.normal = info.normal;

@@ -13,7 +13,8 @@ using namespace sim_core;
 namespace {
 
 std::uint64_t rays_by_kind(const Counters& c) {
-  return c.rays_primary + c.rays_shadow + c.rays_reflection + c.rays_refraction + c.rays_ao + c.rays_glossy;
+  return c.rays_primary + c.rays_shadow + c.rays_reflection + c.rays_refraction + c.rays_ao + c.rays_glossy +
+         c.rays_alpha;
 }
 
 void check_hit_and_miss(const Scene& s) {

@@ -1,5 +1,6 @@
 // What a ray that leaves the scene sees: a constant colour or an equirectangular map in the world frame
-// (Z up, Blender's convention, same mapping as env_filter.h). Glossy lookups can go through the
+// (Z up, Blender's convention, same mapping as env_filter.h), optionally turned about +Z (Blender's Mapping
+// node rotation: the map is read at R_z(rotation) * direction). Glossy lookups can go through the
 // summed-area-table filter of env_filter.h (box or Bartlett), built lazily per filter order.
 #pragma once
 #include <memory>
@@ -15,8 +16,8 @@ class Environment {
  public:
   Environment() = default;
   explicit Environment(Vec3 constant) : constant_(constant), mean_(constant) {}
-  // rgb: (height, width, 3) float32 linear, row 0 at the top; copied.
-  Environment(const float* rgb, int width, int height);
+  // rgb: (height, width, 3) float32 linear, row 0 at the top; copied. rotation_z in radians.
+  Environment(const float* rgb, int width, int height, float rotation_z = 0.f);
   ~Environment();
   Environment(Environment&&) noexcept;
   Environment& operator=(Environment&&) noexcept;
@@ -33,7 +34,9 @@ class Environment {
   Vec3 constant_{0.f, 0.f, 0.f};
   Vec3 mean_{0.f, 0.f, 0.f};
   int width_ = 0, height_ = 0;
+  float cos_rot_ = 1.f, sin_rot_ = 0.f;
   std::vector<float> rgb_;
+  Vec3 to_map(Vec3 d) const { return Vec3(cos_rot_ * d.x - sin_rot_ * d.y, sin_rot_ * d.x + cos_rot_ * d.y, d.z); }
   mutable std::mutex filter_mutex_;
   mutable std::unique_ptr<EnvironmentFilter> filters_[2];
   const EnvironmentFilter* filter(int order) const;

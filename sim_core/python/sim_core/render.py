@@ -19,6 +19,8 @@ from .settings import RenderSettings
 
 # Default node/triangle cache of the T&I unit model when no hardware profile provides one.
 DEFAULT_CACHE = (32 * 1024, 64, 4)
+# Default texture cache of the shading cores (the native kDefaultTextureCache).
+DEFAULT_TEXTURE_CACHE = (16 * 1024, 64, 4)
 
 COUNTER_NAMES: tuple[str, ...] = (
     "rays_primary",
@@ -49,6 +51,13 @@ COUNTER_NAMES: tuple[str, ...] = (
     "samples_interpolated",
     "samples_reused",
     "pixels",
+    "rays_alpha",
+    "alpha_tests",
+    "area_light_evals",
+    "texture_fetches",
+    "texel_reads",
+    "texture_cache_misses",
+    "texture_dram_bytes",
 )
 
 
@@ -90,9 +99,9 @@ class StereoResult:
     depth_mismatches: int = 0  # farther samples showing through a reprojected nearer surface
 
 
-def _cache_args(cache: Any) -> tuple[int, int, int]:
+def _cache_args(cache: Any, default: tuple[int, int, int] = DEFAULT_CACHE) -> tuple[int, int, int]:
     if cache is None:
-        return DEFAULT_CACHE
+        return default
     if isinstance(cache, dict):
         vals = (cache.get("size_bytes"), cache.get("line_bytes", 64), cache.get("ways", 4))
     elif isinstance(cache, tuple | list):
@@ -184,12 +193,15 @@ def render(
     threads: int | None = None,
     previous: Any = None,
     cache: Any = None,
+    texture_cache: Any = None,
 ) -> RenderResult:
     """Render one frame; multithreaded over tiles with the GIL released.
 
     previous: the previous frame's RenderResult (or its multirate_state) for multi-rate tiles.
     cache: node/triangle cache of the T&I unit (CacheConfig, dict or (size_bytes, line_bytes, ways));
       None uses DEFAULT_CACHE; size 0 disables it (every fetch goes to DRAM).
+    texture_cache: the shading cores' texture cache, same forms (a profile's ``texture_cache``); None uses
+      DEFAULT_TEXTURE_CACHE. Only scenes with textures touch it.
     """
     settings = _check(scene, camera, settings)
     w, h = _render_size(camera, settings)
@@ -203,6 +215,7 @@ def render(
         _threads(threads),
         _previous(previous),
         *_cache_args(cache),
+        *_cache_args(texture_cache, DEFAULT_TEXTURE_CACHE),
     )
     return _result(d, camera, settings, (w, h))
 
@@ -215,6 +228,7 @@ def render_stereo(
     threads: int | None = None,
     previous: Any = None,
     cache: Any = None,
+    texture_cache: Any = None,
 ) -> StereoResult:
     """Render a stereo pair around `camera` (eyes at -/+ eye_separation / 2 along its right axis).
 
@@ -242,6 +256,7 @@ def render_stereo(
         _threads(threads),
         _previous(previous),
         *_cache_args(cache),
+        *_cache_args(texture_cache, DEFAULT_TEXTURE_CACHE),
     )
     return StereoResult(
         left=_result(d["left"], left, settings, (w, h)),

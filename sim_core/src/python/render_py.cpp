@@ -95,18 +95,21 @@ void bind_render(nb::module_& m) {
       "render_frame",
       [](const Scene& scene, CameraFrame frame, float vfov, int width, int height, const RenderSettings& settings,
          int threads, const MultirateState* previous, std::uint32_t cache_size, std::uint32_t cache_line,
-         std::uint32_t cache_ways) {
+         std::uint32_t cache_ways, std::uint32_t texture_cache_size, std::uint32_t texture_cache_line,
+         std::uint32_t texture_cache_ways) {
         const Camera cam = camera_from_frame(frame, vfov, width, height);
         const CacheConfig cc{cache_size, cache_line, cache_ways};
+        const CacheConfig tc{texture_cache_size, texture_cache_line, texture_cache_ways};
         RenderOutput out;
         {
           nb::gil_scoped_release release;
-          out = render_frame(scene, cam, settings, threads, previous, cc);
+          out = render_frame(scene, cam, settings, threads, previous, cc, tc);
         }
         return render_output_dict(out);
       },
       "scene"_a, "frame"_a, "vfov"_a, "width"_a, "height"_a, "settings"_a, "threads"_a, "previous"_a.none(),
-      "cache_size"_a, "cache_line"_a, "cache_ways"_a,
+      "cache_size"_a, "cache_line"_a, "cache_ways"_a, "texture_cache_size"_a, "texture_cache_line"_a,
+      "texture_cache_ways"_a,
       "Renders one frame. frame rows: position, right, up, forward (unit) of the camera.");
 }
 

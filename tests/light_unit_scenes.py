@@ -1,0 +1,177 @@
+"""Light units against Cycles: one small scene per Blender light type, rendered by Cycles and by the simulator.
+
+Each case is a diffuse plane with a diffuse cube on it (so soft-shadow size matters), a black world and one
+light made the Blender way (type, watts or W/m^2, radius / angle / shape / size, spot size and blend, an
+object rotation). Cycles renders it with ``diffuse_bounces = 0`` (the simulated GPU traces no diffuse
+inter-reflection); the simulator gets the same light through ``Light.from_blender`` (what a depsgraph
+translation does) and the same camera. Both images are linear; the check is their mean brightness.
+Shared by ``tests/test_light_units_cycles.py`` (small, few samples) and ``bench/bench_light_units.py``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+from typing import Any
+
+import numpy as np
+
+ALBEDO = 0.8
+CAMERA_LOCATION = (0.0, -6.0, 4.5)
+CAMERA_TARGET = (0.0, 0.5, 0.0)
+CAMERA_FOV = math.radians(55.0)
+PLANE_HALF = 30.0
+
+#: Blender light data per case: type, energy and the light's own settings, plus the object's placement.
+CASES: dict[str, dict[str, Any]] = {
+    "point": dict(type="POINT", energy=1000.0, shadow_soft_size=0.0, location=(1.5, -1.0, 3.0)),
+    "point_radius": dict(type="POINT", energy=600.0, shadow_soft_size=0.8, location=(1.2, -1.0, 2.2)),
+    "spot": dict(type="SPOT", energy=1500.0, shadow_soft_size=0.0, spot_size=math.radians(50), spot_blend=0.0,
+                 location=(0.0, -2.0, 4.0), rotation=(math.radians(25), 0.0, 0.0)),
+    "spot_blend": dict(type="SPOT", energy=1500.0, shadow_soft_size=0.3, spot_size=math.radians(50),
+                       spot_blend=0.7, location=(0.0, -2.0, 4.0), rotation=(math.radians(25), 0.0, 0.0)),
+    "sun": dict(type="SUN", energy=3.0, angle=0.0, rotation=(math.radians(35), 0.0, math.radians(30))),
+    "sun_angle": dict(type="SUN", energy=3.0, angle=math.radians(12), rotation=(math.radians(35), 0.0,
+                                                                                 math.radians(30))),
+    "area_square": dict(type="AREA", energy=400.0, shape="SQUARE", size=1.0, location=(0.8, -0.8, 2.5),
+                        rotation=(math.radians(20), 0.0, math.radians(40))),
+    "area_rectangle": dict(type="AREA", energy=500.0, shape="RECTANGLE", size=3.0, size_y=0.6,
+                           location=(0.0, -1.0, 1.8), rotation=(math.radians(-15), math.radians(10), 0.4)),
+    "area_disk": dict(type="AREA", energy=500.0, shape="DISK", size=2.0, location=(0.5, 0.0, 2.0)),
+    "area_ellipse": dict(type="AREA", energy=500.0, shape="ELLIPSE", size=2.5, size_y=1.0,
+                         location=(-0.5, -0.5, 1.6), rotation=(0.0, math.radians(20), 0.6),
+                         scale=(1.3, 0.8, 1.0)),
+}
+
+_LIGHT_SETTINGS = ("shadow_soft_size", "spot_size", "spot_blend", "angle", "shape", "size", "size_y")
+
+
+def _look_at_matrix(eye: tuple[float, float, float], target: tuple[float, float, float]) -> np.ndarray:
+    """Blender camera world matrix looking from eye at target (local -Z forward, +Y up)."""
+    e, t = np.asarray(eye, float), np.asarray(target, float)
+    fwd = (t - e) / np.linalg.norm(t - e)
+    right = np.cross(fwd, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, fwd)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = right, up, -fwd, e
+    return m
+
+
+def _cube() -> tuple[np.ndarray, np.ndarray]:
+    c = np.array([[x, y, z] for z in (0.0, 1.0) for y in (-0.5, 0.5) for x in (-0.5, 0.5)])
+    quads = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
+    tris = [t for a, b, c2, d in quads for t in ((a, b, c2), (a, c2, d))]
+    return c, np.asarray(tris)
+
+
+def blender_light_matrix(case: dict[str, Any]) -> np.ndarray:
+    """The light object's world matrix (XYZ Euler rotation, scale, location) as Blender composes it."""
+    rx, ry, rz = case.get("rotation", (0.0, 0.0, 0.0))
+    cx, sx, cy, sy, cz, sz = math.cos(rx), math.sin(rx), math.cos(ry), math.sin(ry), math.cos(rz), math.sin(rz)
+    rot_x = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    rot_y = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    rot_z = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    m = np.eye(4)
+    m[:3, :3] = rot_z @ rot_y @ rot_x @ np.diag(case.get("scale", (1.0, 1.0, 1.0)))
+    m[:3, 3] = case.get("location", (0.0, 0.0, 5.0))
+    return m
+
+
+def simulator_mean(name: str, size: int = 48, settings: Any = None) -> tuple[float, np.ndarray]:
+    """Mean linear brightness (and the image) of the case rendered by the simulator."""
+    from sim_core import Camera, Light, Material, RenderSettings, Scene, render
+
+    case = CASES[name]
+    plane = np.array([[-PLANE_HALF, -PLANE_HALF, 0], [PLANE_HALF, -PLANE_HALF, 0], [PLANE_HALF, PLANE_HALF, 0],
+                      [-PLANE_HALF, PLANE_HALF, 0]], float)
+    cube_p, cube_t = _cube()
+    pos = np.vstack([plane, cube_p])
+    tri = np.vstack([[[0, 1, 2], [0, 2, 3]], cube_t + 4])
+    kwargs = {k: case[k] for k in _LIGHT_SETTINGS if k in case}
+    light = Light.from_blender(case["type"], blender_light_matrix(case), case["energy"], **kwargs)
+    # ior 1: no specular layer, like Cycles' Diffuse BSDF.
+    diffuse = Material(base_color=(ALBEDO, ALBEDO, ALBEDO), roughness=1.0, ior=1.0)
+    scene = Scene.from_arrays(pos, tri, materials=[diffuse],
+                              lights=[light], environment=(0.0, 0.0, 0.0))
+    cam = Camera.from_blender(_look_at_matrix(CAMERA_LOCATION, CAMERA_TARGET), CAMERA_FOV, size, size)
+    r = render(scene, cam, settings or RenderSettings.max_quality())
+    return float(r.image.mean()), r.image
+
+
+def cycles_mean(name: str, size: int = 48, samples: int = 64) -> tuple[float, np.ndarray]:
+    """Mean linear brightness (and the image) of the case rendered by Cycles (CPU, bpy module)."""
+    import bpy
+    import OpenEXR
+
+    case = CASES[name]
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    sc = bpy.context.scene
+    sc.render.engine = "CYCLES"
+    sc.cycles.device = "CPU"
+    sc.cycles.samples = samples
+    sc.cycles.use_denoising = False
+    sc.cycles.diffuse_bounces = 0
+    sc.cycles.max_bounces = 1
+    sc.cycles.seed = 1
+    sc.render.resolution_x = sc.render.resolution_y = size
+    sc.render.resolution_percentage = 100
+    sc.view_settings.view_transform = "Standard"
+    world = bpy.data.worlds.new("black")
+    world.color = (0.0, 0.0, 0.0)
+    if world.node_tree is None:  # Blender < 5 makes the node tree on request
+        world.use_nodes = True
+    for node in world.node_tree.nodes:  # a new world's Background node is grey: make it black
+        if node.type == "BACKGROUND":
+            node.inputs["Strength"].default_value = 0.0
+    sc.world = world
+    mat = bpy.data.materials.new("diffuse")
+    mat.use_nodes = True
+    nodes = mat.node_tree.nodes
+    nodes.clear()
+    out = nodes.new("ShaderNodeOutputMaterial")
+    bsdf = nodes.new("ShaderNodeBsdfDiffuse")
+    bsdf.inputs["Color"].default_value = (ALBEDO, ALBEDO, ALBEDO, 1.0)
+    mat.node_tree.links.new(bsdf.outputs[0], out.inputs[0])
+    cube_p, cube_t = _cube()
+    plane = [(-PLANE_HALF, -PLANE_HALF, 0), (PLANE_HALF, -PLANE_HALF, 0), (PLANE_HALF, PLANE_HALF, 0),
+             (-PLANE_HALF, PLANE_HALF, 0)]
+    for mesh_name, verts, faces in (("plane", plane, [(0, 1, 2, 3)]),
+                                    ("cube", [tuple(v) for v in cube_p], [tuple(t) for t in cube_t])):
+        mesh = bpy.data.meshes.new(mesh_name)
+        mesh.from_pydata(verts, [], faces)
+        mesh.materials.append(mat)
+        sc.collection.objects.link(bpy.data.objects.new(mesh_name, mesh))
+    cam_data = bpy.data.cameras.new("camera")
+    cam_data.angle = CAMERA_FOV
+    cam = bpy.data.objects.new("camera", cam_data)
+    sc.collection.objects.link(cam)
+    from mathutils import Matrix
+
+    cam.matrix_world = Matrix(_look_at_matrix(CAMERA_LOCATION, CAMERA_TARGET).tolist())
+    sc.camera = cam
+    light_data = bpy.data.lights.new("light", case["type"])
+    light_data.energy = case["energy"]
+    for key in _LIGHT_SETTINGS:
+        if key in case and hasattr(light_data, key):
+            setattr(light_data, key, case[key])
+    light = bpy.data.objects.new("light", light_data)
+    sc.collection.objects.link(light)
+    light.location = case.get("location", (0.0, 0.0, 5.0))
+    light.rotation_euler = case.get("rotation", (0.0, 0.0, 0.0))
+    light.scale = case.get("scale", (1.0, 1.0, 1.0))
+    bpy.context.view_layer.update()
+    # The matrix the simulator uses must be Blender's own.
+    assert np.allclose(np.array(light.matrix_world), blender_light_matrix(case), atol=1e-5)
+    path = os.path.join(tempfile.mkdtemp(prefix="cycles-light-"), "render.exr")
+    sc.render.image_settings.file_format = "OPEN_EXR"
+    sc.render.image_settings.color_depth = "32"
+    sc.render.filepath = path
+    bpy.ops.render.render(write_still=True)
+    with OpenEXR.File(path) as f:
+        channels = f.channels()
+        key = "RGBA" if "RGBA" in channels else "RGB"
+        image = np.asarray(channels[key].pixels, dtype=np.float64)[..., :3]
+    os.remove(path)
+    return float(image.mean()), image
