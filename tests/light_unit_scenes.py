@@ -1,4 +1,4 @@
-"""Light units against Cycles: one small scene per Blender light type, rendered by Cycles and by the simulator.
+"""Light units against Cycles: a small scene per Blender light type, rendered by Cycles and by the simulator.
 
 Each case is a diffuse plane with a diffuse cube on it (so soft-shadow size matters), a black world and one
 light made the Blender way (type, watts or W/m^2, radius / angle / shape / size, spot size and blend, an
@@ -69,7 +69,8 @@ def _cube() -> tuple[np.ndarray, np.ndarray]:
 def blender_light_matrix(case: dict[str, Any]) -> np.ndarray:
     """The light object's world matrix (XYZ Euler rotation, scale, location) as Blender composes it."""
     rx, ry, rz = case.get("rotation", (0.0, 0.0, 0.0))
-    cx, sx, cy, sy, cz, sz = math.cos(rx), math.sin(rx), math.cos(ry), math.sin(ry), math.cos(rz), math.sin(rz)
+    cx, sx, cy, sy = math.cos(rx), math.sin(rx), math.cos(ry), math.sin(ry)
+    cz, sz = math.cos(rz), math.sin(rz)
     rot_x = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
     rot_y = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
     rot_z = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
@@ -84,8 +85,8 @@ def simulator_mean(name: str, size: int = 48, settings: Any = None) -> tuple[flo
     from sim_core import Camera, Light, Material, RenderSettings, Scene, render
 
     case = CASES[name]
-    plane = np.array([[-PLANE_HALF, -PLANE_HALF, 0], [PLANE_HALF, -PLANE_HALF, 0], [PLANE_HALF, PLANE_HALF, 0],
-                      [-PLANE_HALF, PLANE_HALF, 0]], float)
+    h = PLANE_HALF
+    plane = np.array([[-h, -h, 0], [h, -h, 0], [h, h, 0], [-h, h, 0]], float)
     cube_p, cube_t = _cube()
     pos = np.vstack([plane, cube_p])
     tri = np.vstack([[[0, 1, 2], [0, 2, 3]], cube_t + 4])

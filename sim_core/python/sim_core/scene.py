@@ -309,7 +309,8 @@ class Scene:
         h = hashlib.sha256()
         texture_parts: list[Any] = []
         for t in texs:
-            texture_parts += [t.image, np.frombuffer(f"{t.colorspace},{t.wrap_u},{t.wrap_v}".encode(), np.uint8)]
+            sampling = f"{t.colorspace},{t.wrap_u},{t.wrap_v}".encode()
+            texture_parts += [t.image, np.frombuffer(sampling, np.uint8)]
         rot = None if rotation == 0.0 else np.asarray([rotation], np.float64)
         # Parts a scene without UVs, textures or rotation lacks add nothing: old hashes stay valid.
         extra = [a for a in (uv, rot) if a is not None] + texture_parts

@@ -39,7 +39,8 @@ def _vec3(value: object, name: str) -> tuple[float, float, float]:
 
 def finite_clamped(image: np.ndarray, what: str, *, low: float = 0.0) -> np.ndarray:
     """``image`` as float32 with NaN/-inf and values below ``low`` set to ``low`` and +inf to the largest
-    finite value, warning once with the counts (HDRIs often hold tiny negative texels: clamp, never reject)."""
+    finite value, warning once with the counts (HDRIs often hold tiny negative texels: clamp, never
+    reject)."""
     arr = np.asarray(image, dtype=np.float32)
     bad_nan = ~np.isfinite(arr)
     below = np.isfinite(arr) & (arr < low)
@@ -82,7 +83,8 @@ class Texture:
         if arr.ndim == 2:
             arr = arr[:, :, None]
         if arr.ndim != 3 or arr.shape[2] not in (1, 2, 3, 4):
-            raise ValueError(f"{label}: image must be (H, W), (H, W, 1|2|3|4), got shape {np.shape(self.image)}")
+            shape = np.shape(self.image)
+            raise ValueError(f"{label}: image must be (H, W) or (H, W, 1|2|3|4), got shape {shape}")
         h, w = arr.shape[:2]
         if not (1 <= h <= MAX_TEXTURE_SIDE and 1 <= w <= MAX_TEXTURE_SIDE):
             raise ValueError(f"{label}: image size {w}x{h} outside 1..{MAX_TEXTURE_SIDE} a side")
@@ -115,10 +117,10 @@ class Texture:
         one = 255 if img.dtype == np.uint8 else 1.0
         if c in (1, 2):
             rgb = np.repeat(img[:, :, :1], 3, axis=2)
-            alpha = img[:, :, 1:2] if c == 2 else np.full(img.shape[:2] + (1,), one, img.dtype)
+            alpha = img[:, :, 1:2] if c == 2 else np.full((*img.shape[:2], 1), one, img.dtype)
         else:
             rgb = img[:, :, :3]
-            alpha = img[:, :, 3:4] if c == 4 else np.full(img.shape[:2] + (1,), one, img.dtype)
+            alpha = img[:, :, 3:4] if c == 4 else np.full((*img.shape[:2], 1), one, img.dtype)
         out = np.concatenate([rgb, alpha], axis=2)
         return np.ascontiguousarray(out, dtype=np.uint8 if img.dtype == np.uint8 else np.float32)
 
@@ -161,7 +163,8 @@ class Material:
         tex = self.base_color_texture
         if tex is not None:
             if isinstance(tex, bool) or not isinstance(tex, int | np.integer) or tex < 0:
-                raise ValueError(f"material base_color_texture must be a texture index >= 0 or None, got {tex!r}")
+                raise ValueError(f"material base_color_texture must be a texture index >= 0 or None"
+                                 f", got {tex!r}")
             object.__setattr__(self, "base_color_texture", int(tex))
 
     @property
@@ -294,11 +297,13 @@ class Light:
             raise ValueError(f"light energy must be >= 0, got {energy}")
         direction = -m[:3, 2]
         tangent = m[:3, 0]
-        common = dict(position=tuple(m[:3, 3]), color=tuple(np.asarray(color, dtype=np.float64)[:3]), name=name)
+        rgb = tuple(np.asarray(color, dtype=np.float64)[:3])
+        common: dict[str, Any] = dict(position=tuple(m[:3, 3]), color=rgb, name=name)
         if np.linalg.norm(direction) == 0:
             raise ValueError(f"light {name!r}: matrix_world has a zero Z axis (zero scale)")
         if k == "sun":
-            return cls(kind="sun", direction=tuple(direction), intensity=power, radius=0.5 * float(angle), **common)
+            return cls(kind="sun", direction=tuple(direction), intensity=power, radius=0.5 * float(angle),
+                       **common)
         if k in ("point", "spot"):
             return cls(
                 kind=k,  # type: ignore[arg-type]
