@@ -705,8 +705,11 @@ SampleResult trace_sample(TileContext& ctx, float px, float py, std::uint32_t ke
   const Ray ray = ctx.camera.primary(px, py);
   SampleResult out;
   HitInfo info;
-  out.color = shader.trace(ray, RayKind::kPrimary, Branch{key, 1u, 0}, RayCone{0.f, ctx.pixel_spread}, nullptr, &info,
-                           &out.geom);
+  // A pixel off the image centre subtends a smaller angle: cos^2 of its angle to the axis (radially), so a
+  // plane facing the camera gets the same texel footprint everywhere.
+  const float c = dot(ray.dir, ctx.camera.forward);
+  const RayCone cone{0.f, ctx.pixel_spread * c * c};
+  out.color = shader.trace(ray, RayKind::kPrimary, Branch{key, 1u, 0}, cone, nullptr, &info, &out.geom);
   out.geom.object = info.object;
   if (info.object >= 0) {
     out.geom.normal = info.normal;

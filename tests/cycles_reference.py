@@ -1,11 +1,13 @@
-"""Light units against Cycles: a small scene per Blender light type, rendered by Cycles and by the simulator.
+"""Cycles as the reference for light units and the world: small scenes rendered by Cycles and the simulator.
 
-Each case is a diffuse plane with a diffuse cube on it (so soft-shadow size matters), a black world and one
+Light cases: a diffuse plane with a diffuse cube on it (so soft-shadow size matters), a black world and one
 light made the Blender way (type, watts or W/m^2, radius / angle / shape / size, spot size and blend, an
-object rotation). Cycles renders it with ``diffuse_bounces = 0`` (the simulated GPU traces no diffuse
-inter-reflection); the simulator gets the same light through ``Light.from_blender`` (what a depsgraph
-translation does) and the same camera. Both images are linear; the check is their mean brightness.
-Shared by ``tests/test_light_units_cycles.py`` (small, few samples) and ``bench/bench_light_units.py``.
+object rotation and scale). Cycles renders it with ``diffuse_bounces = 0`` (the simulated GPU traces no
+diffuse inter-reflection); the simulator gets the same light through ``Light.from_blender`` (what a
+depsgraph translation does) and the same camera. Both images are linear; the check is their mean
+brightness. World case: one of Blender's bundled HDRIs as an Environment Texture, with a strength and a
+Mapping node's Z rotation, seen by a camera (no geometry). Shared by ``tests/test_cycles_reference.py``
+(small, few samples) and ``bench/bench_light_units.py``.
 """
 
 from __future__ import annotations
@@ -101,12 +103,9 @@ def simulator_mean(name: str, size: int = 48, settings: Any = None) -> tuple[flo
     return float(r.image.mean()), r.image
 
 
-def cycles_mean(name: str, size: int = 48, samples: int = 64) -> tuple[float, np.ndarray]:
-    """Mean linear brightness (and the image) of the case rendered by Cycles (CPU, bpy module)."""
+def _cycles_scene(size_x: int, size_y: int, samples: int) -> Any:
     import bpy
-    import OpenEXR
 
-    case = CASES[name]
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     sc = bpy.context.scene
     sc.render.engine = "CYCLES"
@@ -116,9 +115,48 @@ def cycles_mean(name: str, size: int = 48, samples: int = 64) -> tuple[float, np
     sc.cycles.diffuse_bounces = 0
     sc.cycles.max_bounces = 1
     sc.cycles.seed = 1
-    sc.render.resolution_x = sc.render.resolution_y = size
+    sc.render.resolution_x, sc.render.resolution_y = size_x, size_y
     sc.render.resolution_percentage = 100
     sc.view_settings.view_transform = "Standard"
+    return sc
+
+
+def _cycles_render(sc: Any) -> np.ndarray:
+    """Render the scene to a float EXR and read it back (linear RGB, row 0 at the top)."""
+    import bpy
+    import OpenEXR
+
+    path = os.path.join(tempfile.mkdtemp(prefix="cycles-reference-"), "render.exr")
+    sc.render.image_settings.file_format = "OPEN_EXR"
+    sc.render.image_settings.color_depth = "32"
+    sc.render.filepath = path
+    bpy.ops.render.render(write_still=True)
+    with OpenEXR.File(path) as f:
+        channels = f.channels()
+        key = "RGBA" if "RGBA" in channels else "RGB"
+        image = np.asarray(channels[key].pixels, dtype=np.float64)[..., :3]
+    os.remove(path)
+    return image
+
+
+def _camera(sc: Any, matrix: np.ndarray, angle: float) -> None:
+    import bpy
+    from mathutils import Matrix
+
+    cam_data = bpy.data.cameras.new("camera")
+    cam_data.angle = angle
+    cam = bpy.data.objects.new("camera", cam_data)
+    sc.collection.objects.link(cam)
+    cam.matrix_world = Matrix(matrix.tolist())
+    sc.camera = cam
+
+
+def cycles_mean(name: str, size: int = 48, samples: int = 64) -> tuple[float, np.ndarray]:
+    """Mean linear brightness (and the image) of the case rendered by Cycles (CPU, bpy module)."""
+    import bpy
+
+    case = CASES[name]
+    sc = _cycles_scene(size, size, samples)
     world = bpy.data.worlds.new("black")
     world.color = (0.0, 0.0, 0.0)
     if world.node_tree is None:  # Blender < 5 makes the node tree on request
@@ -128,7 +166,8 @@ def cycles_mean(name: str, size: int = 48, samples: int = 64) -> tuple[float, np
             node.inputs["Strength"].default_value = 0.0
     sc.world = world
     mat = bpy.data.materials.new("diffuse")
-    mat.use_nodes = True
+    if mat.node_tree is None:  # Blender < 5 makes the node tree on request
+        mat.use_nodes = True
     nodes = mat.node_tree.nodes
     nodes.clear()
     out = nodes.new("ShaderNodeOutputMaterial")
@@ -144,14 +183,7 @@ def cycles_mean(name: str, size: int = 48, samples: int = 64) -> tuple[float, np
         mesh.from_pydata(verts, [], faces)
         mesh.materials.append(mat)
         sc.collection.objects.link(bpy.data.objects.new(mesh_name, mesh))
-    cam_data = bpy.data.cameras.new("camera")
-    cam_data.angle = CAMERA_FOV
-    cam = bpy.data.objects.new("camera", cam_data)
-    sc.collection.objects.link(cam)
-    from mathutils import Matrix
-
-    cam.matrix_world = Matrix(_look_at_matrix(CAMERA_LOCATION, CAMERA_TARGET).tolist())
-    sc.camera = cam
+    _camera(sc, _look_at_matrix(CAMERA_LOCATION, CAMERA_TARGET), CAMERA_FOV)
     light_data = bpy.data.lights.new("light", case["type"])
     light_data.energy = case["energy"]
     for key in _LIGHT_SETTINGS:
@@ -165,14 +197,63 @@ def cycles_mean(name: str, size: int = 48, samples: int = 64) -> tuple[float, np
     bpy.context.view_layer.update()
     # The matrix the simulator uses must be Blender's own.
     assert np.allclose(np.array(light.matrix_world), blender_light_matrix(case), atol=1e-5)
-    path = os.path.join(tempfile.mkdtemp(prefix="cycles-light-"), "render.exr")
-    sc.render.image_settings.file_format = "OPEN_EXR"
-    sc.render.image_settings.color_depth = "32"
-    sc.render.filepath = path
-    bpy.ops.render.render(write_still=True)
-    with OpenEXR.File(path) as f:
-        channels = f.channels()
-        key = "RGBA" if "RGBA" in channels else "RGB"
-        image = np.asarray(channels[key].pixels, dtype=np.float64)[..., :3]
-    os.remove(path)
+    image = _cycles_render(sc)
     return float(image.mean()), image
+
+
+# ---- the world: an HDRI with strength and rotation ----------------------------------------------------
+
+WORLD_HDRI = "forest.exr"  # one of Blender's bundled studio-light HDRIs (it holds negative texels)
+WORLD_VIEW = ((0.0, 0.0, 0.0), (1.0, 0.6, 0.3))  # camera at the origin looking up and to the side
+WORLD_FOV = math.radians(70.0)  # Blender's camera angle: the horizontal field of view of a wide image
+
+
+def bundled_hdri(name: str = WORLD_HDRI) -> str:
+    import bpy
+
+    return os.path.join(bpy.utils.system_resource("DATAFILES"), "studiolights", "world", name)
+
+
+def cycles_world(strength: float, rotation_z: float, size: tuple[int, int] = (64, 32),
+                 samples: int = 16) -> np.ndarray:
+    """Cycles' background: Environment Texture (Generated coordinates through a Mapping node's Z rotation)
+    times ``strength``, seen by a camera at WORLD_VIEW."""
+    import bpy
+
+    sc = _cycles_scene(size[0], size[1], samples)
+    world = bpy.data.worlds.new("hdri")
+    if world.node_tree is None:
+        world.use_nodes = True
+    tree = world.node_tree
+    env = tree.nodes.new("ShaderNodeTexEnvironment")
+    env.image = bpy.data.images.load(bundled_hdri())
+    mapping = tree.nodes.new("ShaderNodeMapping")
+    mapping.inputs["Rotation"].default_value = (0.0, 0.0, rotation_z)
+    coords = tree.nodes.new("ShaderNodeTexCoord")
+    tree.links.new(coords.outputs["Generated"], mapping.inputs["Vector"])
+    tree.links.new(mapping.outputs["Vector"], env.inputs["Vector"])
+    background = next(n for n in tree.nodes if n.type == "BACKGROUND")
+    tree.links.new(env.outputs["Color"], background.inputs["Color"])
+    background.inputs["Strength"].default_value = strength
+    sc.world = world
+    _camera(sc, _look_at_matrix(*WORLD_VIEW), WORLD_FOV)
+    return _cycles_render(sc)
+
+
+def simulator_world(strength: float, rotation_z: float, size: tuple[int, int] = (64, 32)) -> np.ndarray:
+    """The simulator's view of the same world (the HDRI through load_exr, which clamps negative texels)."""
+    import warnings
+
+    import sim_core
+    from sim_core import Camera, RenderSettings, Scene, render
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        env = sim_core.load_exr(bundled_hdri())
+    far = np.array([[0, 0, -1e3], [1e-3, 0, -1e3], [0, 1e-3, -1e3]], np.float32)  # out of view
+    scene = Scene.from_arrays(far, np.array([[0, 1, 2]]), environment=env, environment_strength=strength,
+                              environment_rotation=rotation_z)
+    w, h = size
+    vfov = 2 * math.atan(math.tan(WORLD_FOV / 2) * h / w)
+    cam = Camera.from_blender(_look_at_matrix(*WORLD_VIEW), vfov, w, h)
+    return render(scene, cam, RenderSettings(mode="fsaa", block=4)).image
