@@ -48,10 +48,13 @@ struct Lobe {
   float half_angle = 0.f;
 };
 
+// Schlick's Fresnel, its grazing value f90 = min(1, 50 f0) (Karis 2013): no reflectance at all (f0 = 0, a
+// dielectric of IOR 1, like Principled BSDF at IOR 1) stays none at grazing angles.
 Vec3 schlick(Vec3 f0, float cos_theta) {
   const float m = std::min(1.f, std::max(0.f, 1.f - cos_theta));
   const float m2 = m * m, w = m2 * m2 * m;
-  return f0 + (Vec3(1.f, 1.f, 1.f) - f0) * w;
+  const float f90 = std::min(1.f, 50.f * max_component(f0));
+  return f0 + (Vec3(f90, f90, f90) - f0) * w;
 }
 // Exact unpolarised Fresnel reflectance of a dielectric interface; eta = n_i / n_t.
 float fresnel_dielectric(float cos_i, float eta) {
@@ -339,7 +342,6 @@ Vec3 Shader::trace(const Ray& ray, RayKind kind, Branch branch, RayCone cone, co
       if (info) info->object = -1;
       return environment(r, kind, lobe);
     }
-    ++ctx_.counters.shading_evals;
     s = surface_at(r, hit, cone.at(travelled + hit.t * dir_len));
     if (!s.mat->cuts_out || layer + 1 >= kMaxCutoutLayers || !cut_out(*s.mat, s.alpha, random_key, layer)) break;
     travelled += hit.t * dir_len;
@@ -347,6 +349,7 @@ Vec3 Shader::trace(const Ray& ray, RayKind kind, Branch branch, RayCone cone, co
     ++ctx_.counters.rays_alpha;
     ++ctx_.counters.rays_total;
   }
+  ++ctx_.counters.shading_evals;  // the surface that stops the ray (cut-out layers cost alpha tests)
   const SurfaceBrdf brdf(*s.mat, s.base_color);
   Vec3 color = s.mat->emission;
   std::uint32_t shadow_bits = 0;

@@ -83,8 +83,8 @@ ENVIRONMENT_EXTRAS_KEY = "render_budget_environment"
 #: Light extras key for the emitter size glTF cannot express: radius in metres for point and spot lights,
 #: angular radius in radians for sun lights (Blender's shadow_soft_size, and half its sun angle).
 LIGHT_RADIUS_EXTRAS_KEY = "render_budget_radius"
-#: Largest texture side kept; bigger images are downscaled (with a warning) when decoded.
-MAX_TEXTURE_SIDE = 8192
+#: Largest texture side the loader keeps; bigger images are downscaled (with a warning) when decoded.
+MAX_LOADED_TEXTURE_SIDE = 8192
 _WRAPS = {10497: "repeat", 33071: "clamp", 33648: "mirror"}
 _ALPHA_MODES = {"OPAQUE": "opaque", "MASK": "clip", "BLEND": "hashed"}
 
@@ -471,12 +471,12 @@ class _TextureTable:
                 with Image.open(io.BytesIO(_image_bytes(doc, source))) as im:
                     alpha = im.mode in ("RGBA", "LA", "PA", "RGBa", "La") or "transparency" in im.info
                     rgb = im.convert("RGBA" if alpha else "RGB")
-                    if max(rgb.size) > MAX_TEXTURE_SIDE:
+                    if max(rgb.size) > MAX_LOADED_TEXTURE_SIDE:
                         warnings.simplefilter("default")
                         size = f"{rgb.size[0]}x{rgb.size[1]}"
                         warnings.warn(f"{doc.path}: image {source} ({size}) downscaled to at most "
-                                      f"{MAX_TEXTURE_SIDE} texels a side", stacklevel=2)
-                        rgb.thumbnail((MAX_TEXTURE_SIDE, MAX_TEXTURE_SIDE))
+                                      f"{MAX_LOADED_TEXTURE_SIDE} texels a side", stacklevel=2)
+                        rgb.thumbnail((MAX_LOADED_TEXTURE_SIDE, MAX_LOADED_TEXTURE_SIDE))
                     pixels = np.asarray(rgb, dtype=np.uint8)
         except (OSError, ValueError, Image.DecompressionBombWarning, Image.DecompressionBombError) as exc:
             raise ValueError(f"{doc.path}: texture image {source} cannot be decoded ({exc})") from None
