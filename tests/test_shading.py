@@ -177,14 +177,16 @@ def test_degenerate_and_huge_uvs_render_finite() -> None:
     pos, tri, _ = _quad(4.0)
     tex = _checker(8)
     mat = Material(base_color=(1, 1, 1), roughness=1.0, ior=1.0, base_color_texture=0)
-    for uvs in (np.full((4, 2), 0.3), np.array([[1e6, 1e6], [1e6 + 3, 1e6], [1e6 + 3, 1e6 + 3], [1e6, 1e6 + 3]])):
+    huge = 1e6 + np.array([[0, 0], [3, 0], [3, 3], [0, 3]])
+    grazing = Camera.look_at((0, -2.0, 0.01), (0, 2.0, 0.0), (0, 0, 1), 0.5, 16, 16)
+    for uvs in (np.full((4, 2), 0.3), huge):
         scene = Scene.from_arrays(pos, tri, uvs=uvs, textures=[tex], materials=[mat], lights=[SUN],
                                   environment=(0, 0, 0))
-        for cam in (_top_camera(16), Camera.look_at((0, -2.0, 0.01), (0, 2.0, 0.0), (0, 0, 1), 0.5, 16, 16)):
+        for cam in (_top_camera(16), grazing):
             img = render(scene, cam, RenderSettings(shadow_samples=0), threads=1).image
             assert np.all(np.isfinite(img)) and img.min() >= 0.0 and img.max() <= 1.0 + 1e-5
-    flat = Scene.from_arrays(pos, tri, uvs=np.full((4, 2), 0.3), textures=[tex], materials=[mat], lights=[SUN],
-                             environment=(0, 0, 0))
+    flat = Scene.from_arrays(pos, tri, uvs=np.full((4, 2), 0.3), textures=[tex], materials=[mat],
+                             lights=[SUN], environment=(0, 0, 0))
     img = render(flat, _top_camera(16, fov=0.5), RenderSettings(shadow_samples=0), threads=1).image
     native = sim_core._core.NativeTexture.from_rgba8(tex.rgba(), True, 0, 0)
     assert np.allclose(img, native.sample(0.3, 0.3, 0.0)[:3], atol=1e-6)  # the finest level at (0.3, 0.3)
