@@ -333,11 +333,11 @@ def _digest(store: ParetoStore) -> str:
 
 # Stores the optimiser wrote before the octree was split into lattice, search scheduler and sampling
 # strategies (and before the store became a package): the same seed must still give the same bytes.
-# Re-recorded when the renders themselves changed (issue 12's shading: GGX glossy rays, f0 from the IOR,
-# Cycles' light falloffs), with the octree code unchanged.
+# Re-recorded when the renders themselves changed (issue 12's shading: GGX specular and glossy rays, f0 from
+# the IOR, Principled layering, SH ambient, Cycles' light falloffs), with the octree code unchanged.
 RECORDED = {
-    "axis_d1_min1": "f0007e3b14a370ca46bab9ff15eca1cb2f8264afdf9b50716cf46360eeef6519",
-    "path_d4_guard0": "476284926f6ac3639e9d29aba4e22d4628543cb6c3d4ad659f3b6cd9b9594fc0",
+    "axis_d1_min1": "bdab84ec8df28bb099c8a6617d45ecf37d3b61ec01590bfa6e405ad46cb10546",
+    "path_d4_guard0": "cc051676f95a628ee488623d1a7c52dd5b9beeb2209f2e52b1cbb0cd91952b60",
 }
 
 

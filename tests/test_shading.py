@@ -275,10 +275,10 @@ def _stripes_and_floor(metal: Material) -> Scene:
     mirror images are horizontal bands across the floor."""
     floor, tri, _ = _quad(8.0)
     bands, btri, mids = [], [], []
-    for i in range(12):
+    for i in range(40):  # 10 m high, 20 m wide: what a rough lobe reflects is wall, not the black sky
         z0 = i * 0.25
         base = 4 * i
-        bands += [[-4.0, 2.0, z0], [4.0, 2.0, z0], [4.0, 2.0, z0 + 0.25], [-4.0, 2.0, z0 + 0.25]]
+        bands += [[-10.0, 2.0, z0], [10.0, 2.0, z0], [10.0, 2.0, z0 + 0.25], [-10.0, 2.0, z0 + 0.25]]
         btri += [[base, base + 1, base + 2], [base, base + 2, base + 3]]
         mids += [1 + i % 2] * 2
     pos = np.vstack([floor, np.asarray(bands, np.float32)])

@@ -33,6 +33,8 @@ enum class RayKind { kPrimary, kReflection, kGlossy, kRefraction };
 constexpr int kMaxCutoutLayers = 64;
 // Glossy rays a rough reflection spawns at the primary hit (one deeper down the ray tree).
 constexpr int kGlossyRays = 4;
+// An area light's specular term integrates its emitter as kAreaCells x kAreaCells cells.
+constexpr int kAreaCells = 4;
 
 // The footprint of a ray (ray cones, Ray Tracing Gems ch. 20): width at its origin and spread angle;
 // the width at distance t is width + spread * t. It picks texture mip levels.
@@ -66,6 +68,13 @@ float fresnel_dielectric(float cos_i, float eta) {
   return 0.5f * (rs * rs + rp * rp);
 }
 
+// Share of a material's specular reflection that reflection rays trace: all of a metal's, and a
+// dielectric's fading out as its roughness reaches Material::kReflectRoughness. The rest (rough lobes)
+// reflects the environment's cosine-convolved radiance in the ambient phase.
+float reflection_gloss(const Material& mat) {
+  const float smooth = std::min(1.f, std::max(0.f, 1.f - mat.roughness / Material::kReflectRoughness));
+  return mat.metallic + (1.f - mat.metallic) * smooth;
+}
 // Normal-incidence reflectance of a dielectric of index `ior` in air: ((ior - 1) / (ior + 1))^2 (0.04 at 1.5,
 // 0 at 1: Principled BSDF's specular from its IOR at the default IOR level).
 float dielectric_f0(float ior) {
@@ -137,25 +146,6 @@ int area_outline(const Light& L, Vec3 origin, Vec3* out) {
   return kSides;
 }
 
-// Point of an area light nearest to where the ray (origin, unit dir) meets its plane, clamped to its
-// shape; the centre when the ray leaves away from the light.
-Vec3 area_nearest_point(const Light& L, Vec3 origin, Vec3 dir) {
-  const float denom = dot(dir, L.direction);
-  if (!(denom < 0.f)) return L.position;
-  const float t = dot(L.position - origin, L.direction) / denom;
-  const Vec3 q = origin + dir * t - L.position;
-  float du = dot(q, L.axis_u), dv = dot(q, L.axis_v);
-  const float hu = 0.5f * L.size_u, hv = 0.5f * L.size_v;
-  if (L.shape == AreaShape::kRectangle) {
-    du = std::min(hu, std::max(-hu, du));
-    dv = std::min(hv, std::max(-hv, dv));
-  } else {
-    const float r = std::sqrt((du / hu) * (du / hu) + (dv / hv) * (dv / hv));
-    if (r > 1.f) { du /= r; dv /= r; }
-  }
-  return L.position + L.axis_u * du + L.axis_v * dv;
-}
-
 // A point of an area light's emitting surface from a unit-square sample (uniform over the shape).
 Vec3 area_point(const Light& L, Sample2 s) {
   float x = s.u - 0.5f, y = s.v - 0.5f;
@@ -168,14 +158,18 @@ Vec3 area_point(const Light& L, Sample2 s) {
 
 // Where a ray sits in its sample's ray tree: bounce depth and branch code (root 1, reflection child
 // 3p + 1, refraction child 3p + 2). Random numbers hash (sample key, branch), never the tracing order.
+// `tile` (0..3) is the sample's place in a 2x2 block of the sample grid: glossy lobes are sampled with a
+// fixed stratified pattern per place, so the 2x2 block (an FSAA pixel's sub-samples, or neighbouring
+// pixels) covers 4x the lobe directions, without noise.
 struct Branch {
   std::uint32_t key;
   std::uint32_t path;
   int depth;
+  std::uint32_t tile = 0;
   std::uint32_t random_key() const { return hash_combine(key, path); }
   // Glossy ray i of a reflection gets its own random numbers (i << 20 stays clear of depth-4 codes).
-  Branch reflected(std::uint32_t i = 0) const { return {key, (path * 3u + 1u) + (i << 20), depth + 1}; }
-  Branch refracted() const { return {key, path * 3u + 2u, depth + 1}; }
+  Branch reflected(std::uint32_t i = 0) const { return {key, (path * 3u + 1u) + (i << 20), depth + 1, tile}; }
+  Branch refracted() const { return {key, path * 3u + 2u, depth + 1, tile}; }
 };
 
 struct HitInfo {  // what the caller (primary sample) records about a ray's first hit
@@ -204,51 +198,53 @@ struct SurfacePoint {
   Vec3 origin_in;   // spawn point for rays entering the surface (refraction)
 };
 
-// The material's scattering terms at a hit: Lambert diffuse plus normalised Blinn-Phong specular (exponent
-// 2 / alpha^2 - 2 for GGX alpha = roughness^2) with Schlick's Fresnel (f0 from the IOR for dielectrics),
-// scaled by the opaque (non-transmitted) fraction. Metals take their specular colour from the (textured)
-// base colour.
+// The material's scattering terms at a hit: Lambert diffuse under a GGX microfacet specular lobe (alpha =
+// roughness^2 as in the Principled BSDF; Trowbridge-Reitz distribution, height-correlated Smith
+// visibility, Schlick's Fresnel with f0 from the IOR for dielectrics), scaled by the opaque
+// (non-transmitted) fraction. As in Principled BSDF, the diffuse base is what the dielectric specular
+// layer lets through (1 - its Fresnel reflectance at the view angle). Metals take their specular colour
+// from the (textured) base colour.
 struct SurfaceBrdf {
   Vec3 base_color;
   float opaque;
   Vec3 diffuse_albedo;
   Vec3 f0;
   float alpha;
-  float shininess;
-  float spec_norm;
 
-  SurfaceBrdf(const Material& mat, Vec3 base)
+  SurfaceBrdf(const Material& mat, Vec3 base, float n_dot_v)
       : base_color(base),
         opaque(1.f - mat.transmission),
-        diffuse_albedo(base * ((1.f - mat.metallic) * opaque)),
         f0(lerp(Vec3(1.f, 1.f, 1.f) * dielectric_f0(mat.ior), base, mat.metallic)),
         alpha(ggx_alpha(mat.roughness)) {
-    shininess = std::min(2.f / (alpha * alpha) - 2.f, 1.0e4f);
-    spec_norm = (shininess + 8.f) / (8.f * kPi);
+    const float layer = 1.f - schlick(Vec3(1.f, 1.f, 1.f) * dielectric_f0(mat.ior), n_dot_v).x;
+    diffuse_albedo = base * ((1.f - mat.metallic) * opaque * layer);
   }
-  // BRDF value for light arriving from unit `to_light`, seen from unit `view`, about shading normal n.
-  // A light of angular radius `source_angle` widens the lobe to alpha + source_angle / 2 (Karis 2013,
-  // "Real Shading in Unreal Engine 4"): its highlight spreads over the emitter instead of peaking.
-  Vec3 eval(Vec3 n, Vec3 to_light, Vec3 view, float source_angle = 0.f) const {
+  Vec3 diffuse() const { return diffuse_albedo * (1.f / kPi); }
+  // Specular BRDF for light arriving from unit `to_light`, seen from unit `view`, about shading normal n.
+  // A light of angular radius `widen` widens the lobe to alpha + widen / 2 (Karis 2013, "Real Shading in
+  // Unreal Engine 4"): its highlight spreads over the emitter instead of peaking at one point.
+  Vec3 specular(Vec3 n, Vec3 to_light, Vec3 view, float widen = 0.f) const {
+    if (!(opaque > 0.f) || !(max_component(f0) > 0.f)) return Vec3();
+    const float n_l = std::max(dot(n, to_light), 1e-4f), n_v = std::max(dot(n, view), 1e-4f);
     const Vec3 h = normalize(to_light + view);
-    float s = shininess, norm = spec_norm;
-    if (source_angle > 0.f) {
-      const float a = std::min(1.f, alpha + 0.5f * source_angle);
-      s = std::min(2.f / (a * a) - 2.f, 1.0e4f);
-      norm = (s + 8.f) / (8.f * kPi);
-    }
-    const float spec = norm * std::pow(std::max(dot(n, h), 0.f), s);
-    return diffuse_albedo * (1.f / kPi) + schlick(f0, std::max(dot(h, view), 0.f)) * (spec * opaque);
+    // Floored at 0.01 (roughness 0.1): a point light on a near-mirror is a highlight of bounded
+    // brightness rather than one firefly pixel.
+    const float a = std::min(1.f, std::max(0.01f, alpha + 0.5f * std::max(widen, 0.f)));
+    const float a2 = a * a;
+    const float n_h = std::max(dot(n, h), 0.f);
+    const float q = n_h * n_h * (a2 - 1.f) + 1.f;
+    const float d = a2 / (kPi * q * q);
+    // Height-correlated Smith visibility G / (4 n.l n.v) (Heitz 2014).
+    const float vis = 0.5f / (n_l * std::sqrt(n_v * n_v * (1.f - a2) + a2) + n_v * std::sqrt(n_l * n_l * (1.f - a2) + a2));
+    return schlick(f0, std::max(dot(h, view), 0.f)) * (d * vis * opaque);
   }
 };
 
 // Light arriving at a surface point from one light, before shadowing.
 struct LightArrival {
-  Vec3 to_light;       // unit direction the specular lobe is evaluated in (centre, or an area light's
-                       // point nearest the mirror direction)
-  Vec3 to_centre;      // unit direction towards the light's centre (shadow rays of hard shadows)
-  Vec3 irradiance;     // unshadowed, cosine at the receiver included (colour x intensity x geometry)
-  float source_angle;  // angular radius of the emitter seen from the point (0: a point or a sun disk of 0)
+  Vec3 to_centre;   // unit direction towards the light's centre (shadow rays of hard shadows)
+  Vec3 irradiance;  // unshadowed, cosine at the receiver included (colour x intensity x geometry)
+  Vec3 specular;    // unshadowed radiance the specular lobe reflects of this light
 };
 
 // How much of a hit's light goes into each secondary ray (the Fresnel split of reflection/refraction).
@@ -289,15 +285,16 @@ class Shader {
   // occluded light.
   void add_direct_light(const SurfacePoint& s, const SurfaceBrdf& brdf, std::uint32_t random_key, Vec3* color,
                         std::uint32_t* shadow_bits);
-  bool light_arrival(const Light& light, const SurfacePoint& s, LightArrival* out);
-  bool area_arrival(const Light& light, const SurfacePoint& s, LightArrival* out);
+  bool light_arrival(const Light& light, const SurfacePoint& s, const SurfaceBrdf& brdf, LightArrival* out);
+  bool area_arrival(const Light& light, const SurfacePoint& s, const SurfaceBrdf& brdf, LightArrival* out);
   // Fraction of shadow rays towards `light` that reach it (1 with shadows off): one ray to its centre
   // (hard), or N stratified points on its emitter (sphere disk, sun cone, area surface); counts its bit.
   float light_visibility(const Light& light, std::size_t index, const SurfacePoint& s, const LightArrival& a,
                          std::uint32_t random_key, std::uint32_t* shadow_bits);
-  // Ambient phase: the environment's mean radiance on the diffuse term, occluded by AO rays.
+  // Ambient phase: the environment's irradiance at the normal (SH for a map) on the diffuse term and its
+  // prefiltered reflection on the rough specular share reflection rays leave out, occluded by AO rays.
   void add_ambient_light(const SurfacePoint& s, const SurfaceBrdf& brdf, std::uint32_t random_key, Vec3* color);
-  float ambient_visibility(const SurfacePoint& s, std::uint32_t random_key);
+  float ambient_visibility(const SurfacePoint& s, std::uint32_t random_key, Vec3* open_radiance);
   // Secondary-ray phases (Whitted): the Fresnel split, then reflection (mirror, or a few GGX-distributed
   // glossy rays whose escapes read the cone-filtered environment) and refraction.
   SecondaryWeights secondary_weights(const SurfacePoint& s, const SurfaceBrdf& brdf) const;
@@ -350,7 +347,7 @@ Vec3 Shader::trace(const Ray& ray, RayKind kind, Branch branch, RayCone cone, co
     ++ctx_.counters.rays_total;
   }
   ++ctx_.counters.shading_evals;  // the surface that stops the ray (cut-out layers cost alpha tests)
-  const SurfaceBrdf brdf(*s.mat, s.base_color);
+  const SurfaceBrdf brdf(*s.mat, s.base_color, s.n_dot_v);
   Vec3 color = s.mat->emission;
   std::uint32_t shadow_bits = 0;
   add_direct_light(s, brdf, random_key, &color, &shadow_bits);
@@ -471,15 +468,15 @@ void Shader::add_direct_light(const SurfacePoint& s, const SurfaceBrdf& brdf, st
   const std::size_t light_count = brdf.opaque > 0.f ? lights.size() : 0;
   for (std::size_t li = 0; li < light_count; ++li) {
     LightArrival a;
-    if (!light_arrival(lights[li], s, &a)) continue;
+    if (!light_arrival(lights[li], s, brdf, &a)) continue;
     const float visibility = light_visibility(lights[li], li, s, a, random_key, shadow_bits);
     if (visibility <= 0.f) continue;
-    *color += brdf.eval(s.n, a.to_light, s.view, a.source_angle) * a.irradiance * visibility;
+    *color += (brdf.diffuse() * a.irradiance + a.specular) * visibility;
   }
 }
 
-bool Shader::light_arrival(const Light& L, const SurfacePoint& s, LightArrival* out) {
-  if (L.kind == LightKind::kArea) return area_arrival(L, s, out);
+bool Shader::light_arrival(const Light& L, const SurfacePoint& s, const SurfaceBrdf& brdf, LightArrival* out) {
+  if (L.kind == LightKind::kArea) return area_arrival(L, s, brdf, out);
   Vec3 to_light;
   float falloff = 1.f;  // 1 / distance^2 (sun: 1)
   float source_angle = 0.f;
@@ -501,28 +498,47 @@ bool Shader::light_arrival(const Light& L, const SurfacePoint& s, LightArrival* 
   Vec3 irradiance = L.color * (L.intensity * falloff * n_dot_l);
   if (L.kind == LightKind::kSpot) irradiance = irradiance * spot_attenuation(L, -to_light);
   if (max_component(irradiance) <= 0.f) return false;
-  out->to_light = to_light;
   out->to_centre = to_light;
   out->irradiance = irradiance;
-  out->source_angle = source_angle;
+  out->specular = brdf.specular(s.n, to_light, s.view, source_angle) * irradiance;
   return true;
 }
 
-bool Shader::area_arrival(const Light& L, const SurfacePoint& s, LightArrival* out) {
+bool Shader::area_arrival(const Light& L, const SurfacePoint& s, const SurfaceBrdf& brdf, LightArrival* out) {
   ++ctx_.counters.area_light_evals;
   // One-sided: only points in front of the emitting face receive light.
   if (!(dot(s.p - L.position, L.direction) > 0.f)) return false;
   Vec3 outline[16];
   const int count = area_outline(L, s.p, outline);
-  const float g = projected_solid_angle(outline, count, s.n);  // irradiance per unit radiance
+  const float g = projected_solid_angle(outline, count, s.n);  // irradiance per unit radiance (exact)
   if (!(g > 0.f)) return false;
   const Vec3 centre = L.position - s.p;
   const float dist = length(centre);
   if (!(dist > 0.f)) return false;
+  const Vec3 radiance = L.color * L.intensity;
   out->to_centre = centre / dist;
-  out->to_light = normalize(area_nearest_point(L, s.p, reflect(s.dir, s.n)) - s.p);
-  out->irradiance = L.color * (L.intensity * g);
-  out->source_angle = std::sqrt(g / kPi);  // the cone of equal projected solid angle
+  out->irradiance = radiance * g;
+  // Specular: the emitter as kAreaCells x kAreaCells equal-area cells, each a small source at its centre
+  // whose lobe is widened by the cell's angular size (a filtered quadrature: smooth highlights of the
+  // emitter's shape, no single-point overestimate for large lights).
+  out->specular = Vec3();
+  if (max_component(brdf.f0) > 0.f && brdf.opaque > 0.f) {
+    const float cell_area = L.area() / static_cast<float>(kAreaCells * kAreaCells);
+    for (int j = 0; j < kAreaCells; ++j)
+      for (int i = 0; i < kAreaCells; ++i) {
+        const Sample2 cell{(i + 0.5f) / kAreaCells, (j + 0.5f) / kAreaCells};
+        const Vec3 d = area_point(L, cell) - s.p;
+        const float d2 = dot(d, d), len = std::sqrt(d2);
+        if (!(len > 0.f)) continue;
+        const Vec3 l = d / len;
+        const float cos_r = dot(s.n, l), cos_e = -dot(l, L.direction);
+        if (!(cos_r > 0.f && cos_e > 0.f)) continue;
+        const float solid = cell_area * cos_e / d2;  // the cell's solid angle
+        const float widen = std::sqrt(solid / kPi);  // its equivalent cone's half angle
+        out->specular += brdf.specular(s.n, l, s.view, widen) * (solid * cos_r);
+      }
+    out->specular = out->specular * radiance;
+  }
   return max_component(out->irradiance) > 0.f;
 }
 
@@ -580,17 +596,33 @@ float Shader::light_visibility(const Light& L, std::size_t index, const SurfaceP
 
 void Shader::add_ambient_light(const SurfacePoint& s, const SurfaceBrdf& brdf, std::uint32_t random_key,
                                Vec3* color) {
-  const Vec3 ambient = ctx_.scene.environment().mean();
-  if (!(max_component(brdf.diffuse_albedo) > 0.f && max_component(ambient) > 0.f)) return;
-  const float ao = ambient_visibility(s, random_key);
-  *color += brdf.diffuse_albedo * ambient * ao;
+  const Environment& env = ctx_.scene.environment();
+  if (!(max_component(env.mean()) > 0.f)) return;
+  const float rough = 1.f - reflection_gloss(*s.mat);
+  const bool diffuse = max_component(brdf.diffuse_albedo) > 0.f;
+  const bool specular = rough > 0.f && brdf.opaque > 0.f && max_component(brdf.f0) > 0.f;
+  if (!diffuse && !specular) return;
+  // Diffuse: the environment's irradiance / pi over the directions AO rays find open (with no AO rays,
+  // unoccluded at the normal). Rough specular (the share reflection rays do not trace): the cosine-
+  // convolved environment around the mirror direction, a wide lobe's prefiltered reflection, times the
+  // open fraction.
+  Vec3 open_radiance;
+  const float open = ambient_visibility(s, random_key, &open_radiance);
+  Vec3 ambient;
+  if (diffuse)
+    ambient += brdf.diffuse_albedo * (ctx_.settings.ao_samples > 0 ? open_radiance : env.diffuse_radiance(s.n));
+  if (specular)
+    ambient += schlick(brdf.f0, s.n_dot_v) * env.diffuse_radiance(reflect(s.dir, s.n)) * (rough * brdf.opaque * open);
+  *color += ambient;
 }
 
-float Shader::ambient_visibility(const SurfacePoint& s, std::uint32_t random_key) {
+float Shader::ambient_visibility(const SurfacePoint& s, std::uint32_t random_key, Vec3* open_radiance) {
   const int samples = ctx_.settings.ao_samples;
   if (samples <= 0) return 1.f;
+  const Environment& env = ctx_.scene.environment();
   const std::uint32_t akey = hash_combine(random_key, static_cast<std::uint32_t>(SamplePurpose::kAo) << 8);
   int open = 0;
+  Vec3 sum;
   for (int i = 0; i < samples; ++i) {
     Ray ar;
     ar.origin = s.origin_out;
@@ -599,8 +631,14 @@ float Shader::ambient_visibility(const SurfacePoint& s, std::uint32_t random_key
     ar.tmax = ctx_.ao_distance;
     ++ctx_.counters.rays_ao;
     ++ctx_.counters.rays_total;
-    if (!occluded(ar, hash_combine(akey, static_cast<std::uint32_t>(i)), s.cone_width)) ++open;
+    if (!occluded(ar, hash_combine(akey, static_cast<std::uint32_t>(i)), s.cone_width)) {
+      ++open;
+      // Cosine-distributed directions: the mean of the (smooth) radiance over the open ones estimates
+      // the occluded irradiance / pi, light from the blocked directions removed, not scaled.
+      sum += env.smooth_radiance(ar.dir);
+    }
   }
+  *open_radiance = sum * (1.f / static_cast<float>(samples));
   return static_cast<float>(open) / static_cast<float>(samples);
 }
 
@@ -609,11 +647,7 @@ SecondaryWeights Shader::secondary_weights(const SurfacePoint& s, const SurfaceB
   SecondaryWeights w;
   Vec3 specular;             // reflection of the opaque part (metal or smooth dielectric coat)
   float dielectric = 0.f;    // Fresnel reflection of the transmissive part
-  if (mat.reflects()) {
-    const float gloss = mat.metallic + (1.f - mat.metallic) *
-                                           std::min(1.f, std::max(0.f, 1.f - mat.roughness / Material::kReflectRoughness));
-    specular = schlick(brdf.f0, s.n_dot_v) * (gloss * brdf.opaque);
-  }
+  if (mat.reflects()) specular = schlick(brdf.f0, s.n_dot_v) * (reflection_gloss(mat) * brdf.opaque);
   if (mat.refracts()) {
     const float eta = s.front ? 1.f / mat.ior : mat.ior;
     const float fr = fresnel_dielectric(s.n_dot_v, eta);
@@ -629,36 +663,81 @@ SecondaryWeights Shader::secondary_weights(const SurfacePoint& s, const SurfaceB
   return w;
 }
 
+// The cone a filtered environment lookup averages, kept above the surface: a cone reaching under the
+// horizon (grazing views) keeps its upper edge and brings its lower edge up to the horizon.
+Lobe above_horizon(Vec3 axis, float half_angle, Vec3 ng) {
+  Lobe lobe{axis, half_angle};
+  const float elevation = std::asin(std::min(1.f, std::max(-1.f, dot(axis, ng))));
+  if (elevation >= half_angle) return lobe;
+  const Vec3 along = axis - ng * dot(axis, ng);
+  const float len = length(along);
+  if (!(len > 0.f)) return lobe;
+  const float e = 0.5f * (elevation + half_angle);
+  lobe.axis = normalize(along * (std::cos(e) / len) + ng * std::sin(e));
+  lobe.half_angle = e;
+  return lobe;
+}
+
+// Smith's Lambda of GGX for a direction at cosine c to the normal (Heitz 2014).
+float smith_lambda(float c, float alpha) {
+  const float c2 = std::max(c * c, 1e-8f);
+  return 0.5f * (std::sqrt(1.f + alpha * alpha * (1.f - c2) / c2) - 1.f);
+}
+
 void Shader::add_reflection(const SurfacePoint& s, Vec3 weight, Branch branch, RayCone cone, SampleGeometry* geom,
                             Vec3* color) {
   const Material& mat = *s.mat;
   Vec3 mirror = reflect(s.dir, s.n);
   if (dot(mirror, s.ng) <= 0.f) mirror = reflect(s.dir, s.ng);
   const bool glossy = mat.roughness > 1e-3f && !mat.refracts();
-  Lobe lobe{mirror, 0.f};
-  int rays = 1;
+  // Directions to trace and their weights. A mirror: one ray. A rough lobe: GGX microfacet normals
+  // (stratified by the R2 sequence), the view mirrored about each, weighted by G2 (v.h) / ((n.h) (n.v))
+  // (the importance-sampling weight of D(h) (n.h)) and normalised to the weights' sum: the energy single
+  // scattering loses at grazing angles comes back, as Cycles' multiscatter GGX returns it. A glossy ray
+  // that leaves the scene reads the filtered environment around its own direction over most of the
+  // lobe's cone, so the rays together span the lobe's off-specular spread at grazing views.
+  struct Dir { Vec3 d; float w; };
+  Dir dirs[kGlossyRays];
+  int count = 0;
+  float total = 0.f;
+  const float lobe_cone = glossy ? glossy_cone(mat.roughness) : 0.f;
   RayCone next = cone;
   if (glossy) {
-    lobe.half_angle = glossy_cone(mat.roughness);
-    rays = branch.depth == 0 ? kGlossyRays : 1;
-    next.spread += lobe.half_angle;  // what one glossy ray sees is blurred by its share of the lobe
+    const int rays = branch.depth == 0 ? kGlossyRays : 1;
+    const float alpha = ggx_alpha(mat.roughness);
+    next.spread += lobe_cone / std::sqrt(static_cast<float>(rays));  // one ray's share of the blur
+    // Lobe directions: a fixed stratified set (not rotated per sample: a rough reflection is smooth, not
+    // noisy), a different quarter of it at each place of the 2x2 sample block.
+    const std::uint32_t gkey = static_cast<std::uint32_t>(SamplePurpose::kGlossy) << 8;
+    const float n_v = std::max(s.n_dot_v, 1e-4f);
+    for (int i = 0; i < rays; ++i) {
+      const Vec3 h = ggx_normal(r2_sample(gkey, static_cast<std::uint32_t>(i + rays * static_cast<int>(branch.tile))),
+                                s.n, alpha);
+      const Vec3 l = reflect(s.dir, h);
+      const float n_l = dot(l, s.n), n_h = dot(h, s.n), v_h = dot(s.view, h);
+      if (!(dot(l, s.ng) > 0.f && n_l > 0.f && n_h > 0.f && v_h > 0.f)) continue;  // below the surface
+      const float g2 = 1.f / (1.f + smith_lambda(n_v, alpha) + smith_lambda(n_l, alpha));
+      const float w = g2 * v_h / (n_h * n_v);
+      if (!(w > 0.f) || !std::isfinite(w)) continue;
+      dirs[count++] = {l, w};
+      total += w;
+    }
   }
-  const std::uint32_t gkey = hash_combine(branch.random_key(), static_cast<std::uint32_t>(SamplePurpose::kGlossy) << 8);
-  const float alpha = ggx_alpha(mat.roughness);
-  for (int i = 0; i < rays; ++i) {
+  if (count == 0) {  // a mirror, or no lobe sample above the surface: the mirror direction
+    dirs[0] = {mirror, 1.f};
+    count = 1;
+    total = 1.f;
+  }
+  for (int i = 0; i < count; ++i) {
     Ray rr;
     rr.origin = s.origin_out;
-    rr.dir = mirror;
-    if (glossy) {
-      // A GGX microfacet normal, the view mirrored about it (stratified over the rays by the R2 sequence).
-      const Vec3 g = reflect(s.dir, ggx_normal(r2_sample(gkey, static_cast<std::uint32_t>(i)), s.n, alpha));
-      if (dot(g, s.ng) > 0.f) rr.dir = g;
-    }
+    rr.dir = dirs[i].d;
     HitInfo sec;
+    const Lobe own = above_horizon(dirs[i].d, 0.75f * lobe_cone, s.ng);
     const Vec3 c = trace(rr, glossy ? RayKind::kGlossy : RayKind::kReflection,
-                         branch.reflected(static_cast<std::uint32_t>(i)), next, glossy ? &lobe : nullptr,
+                         branch.reflected(static_cast<std::uint32_t>(i)), next, glossy ? &own : nullptr,
                          (geom && i == 0) ? &sec : nullptr, nullptr);
-    *color += c * weight * (1.f / static_cast<float>(rays));
+    *color += c * weight * (dirs[i].w / total);
     if (geom && i == 0) {
       geom->sec_object[0] = sec.object;
       geom->sec_normal[0] = sec.normal;
@@ -712,7 +791,11 @@ SampleResult trace_sample(TileContext& ctx, float px, float py, std::uint32_t ke
   // plane facing the camera gets the same texel footprint everywhere.
   const float c = dot(ray.dir, ctx.camera.forward);
   const RayCone cone{0.f, ctx.pixel_spread * c * c};
-  out.color = shader.trace(ray, RayKind::kPrimary, Branch{key, 1u, 0}, cone, nullptr, &info, &out.geom);
+  const int k = ctx.settings.subgrid();
+  const auto sx = static_cast<std::uint32_t>(std::floor(px * static_cast<float>(k)));
+  const auto sy = static_cast<std::uint32_t>(std::floor(py * static_cast<float>(k)));
+  const Branch root{key, 1u, 0, (sx & 1u) + 2u * (sy & 1u)};
+  out.color = shader.trace(ray, RayKind::kPrimary, root, cone, nullptr, &info, &out.geom);
   out.geom.object = info.object;
   if (info.object >= 0) {
     out.geom.normal = info.normal;

@@ -25,14 +25,24 @@ class Environment {
   bool is_map() const { return width_ > 0; }
   // Nearest-texel radiance in `direction` (any length > 0).
   Vec3 radiance(Vec3 direction) const;
-  // Mean radiance over the whole sphere (solid-angle weighted): the ambient term.
+  // Mean radiance over the whole sphere (solid-angle weighted).
   Vec3 mean() const { return mean_; }
+  // Irradiance / pi on a surface with unit normal n, unoccluded: what a white Lambertian surface reflects
+  // of the environment (the ambient term). A map's is the order-2 spherical-harmonic irradiance
+  // (Ramamoorthi & Hanrahan 2001, 9 coefficients per channel, under 3 % error for any lighting), so a bright
+  // sky lights upward faces more than downward ones; a constant colour's is the colour itself.
+  Vec3 diffuse_radiance(Vec3 n) const;
+  // The map's radiance band-limited to the same 9 SH coefficients (a smooth version of the environment):
+  // averaged over cosine-distributed unoccluded directions it estimates the occluded ambient term.
+  Vec3 smooth_radiance(Vec3 direction) const;
   // Cone-filtered radiance (glossy reflection); order 1 box, 2 Bartlett. Requires the SAT filter.
   Vec3 filtered(Vec3 direction, float cone_half_angle, int order) const;
 
  private:
   Vec3 constant_{0.f, 0.f, 0.f};
   Vec3 mean_{0.f, 0.f, 0.f};
+  Vec3 sh_[9];  // radiance projected on the real SH basis up to order 2 (map frame)
+  Vec3 sh_evaluate(const Vec3* coefficients, Vec3 direction) const;
   int width_ = 0, height_ = 0;
   float cos_rot_ = 1.f, sin_rot_ = 0.f;
   std::vector<float> rgb_;
