@@ -15,7 +15,7 @@ import sim_core
 from sim_core import Camera, Light, Material, RenderSettings, Scene, Texture, price, render
 
 NEW_COUNTERS = ("rays_alpha", "alpha_tests", "area_light_evals", "texture_fetches", "texel_reads",
-                "texture_cache_misses", "texture_dram_bytes")
+                "texture_cache_misses", "texture_dram_bytes", "env_sh_evals")
 
 
 def _quad(size: float = 2.0, z: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

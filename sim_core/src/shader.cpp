@@ -609,10 +609,16 @@ void Shader::add_ambient_light(const SurfacePoint& s, const SurfaceBrdf& brdf, s
   Vec3 open_radiance;
   const float open = ambient_visibility(s, random_key, &open_radiance);
   Vec3 ambient;
-  if (diffuse)
-    ambient += brdf.diffuse_albedo * (ctx_.settings.ao_samples > 0 ? open_radiance : env.diffuse_radiance(s.n));
-  if (specular)
+  const bool map = env.is_map();  // a constant colour needs no SH evaluation
+  if (diffuse) {
+    const bool unoccluded = ctx_.settings.ao_samples <= 0;
+    ambient += brdf.diffuse_albedo * (unoccluded ? env.diffuse_radiance(s.n) : open_radiance);
+    if (map && unoccluded) ++ctx_.counters.env_sh_evals;
+  }
+  if (specular) {
     ambient += schlick(brdf.f0, s.n_dot_v) * env.diffuse_radiance(reflect(s.dir, s.n)) * (rough * brdf.opaque * open);
+    if (map) ++ctx_.counters.env_sh_evals;
+  }
   *color += ambient;
 }
 
@@ -636,6 +642,7 @@ float Shader::ambient_visibility(const SurfacePoint& s, std::uint32_t random_key
       // Cosine-distributed directions: the mean of the (smooth) radiance over the open ones estimates
       // the occluded irradiance / pi, light from the blocked directions removed, not scaled.
       sum += env.smooth_radiance(ar.dir);
+      if (env.is_map()) ++ctx_.counters.env_sh_evals;
     }
   }
   *open_radiance = sum * (1.f / static_cast<float>(samples));

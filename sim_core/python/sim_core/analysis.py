@@ -55,6 +55,8 @@ class SceneAnalysis:
             always.add("rays_refraction")
         if self.glossy and self.environment_map:
             always.add("env_filtered_lookups")
+        if self.environment_map:
+            always.add("env_sh_evals")
         if self.area_lights:
             always.add("area_light_evals")
         if self.textures:

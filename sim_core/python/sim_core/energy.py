@@ -52,7 +52,7 @@ COUNTERS: tuple[str, ...] = (
     "framebuffer_bytes", "gbuffer_prefetch_bytes", "cache_accesses", "cache_misses", "dram_bytes_read",
     "closest_hit_comparisons", "env_lookups", "env_filtered_lookups", "samples_traced",
     "samples_interpolated", "samples_reused", "pixels", "rays_alpha", "alpha_tests", "area_light_evals",
-    "texture_fetches", "texel_reads", "texture_cache_misses", "texture_dram_bytes",
+    "texture_fetches", "texel_reads", "texture_cache_misses", "texture_dram_bytes", "env_sh_evals",
 )
 
 # Which hardware unit each block runs on (units run concurrently; blocks on one unit add up, except the
@@ -72,7 +72,7 @@ _SECTIONS: dict[str, tuple[str, ...]] = {
                    "cache_line_accesses_per_cycle", "tile_buffer_accesses_per_cycle", "dram_bytes_per_s",
                    "texels_per_cycle"),
     "ops": ("raygen", "shading", "similarity", "interpolation", "reprojection", "env_lookup",
-            "env_filtered_lookup", "texture_filter", "alpha_test", "area_light"),
+            "env_filtered_lookup", "env_sh_eval", "texture_filter", "alpha_test", "area_light"),
     "energy_pj": ("srp_op", "traversal_step", "triangle_test", "tile_buffer_access", "cache_line_access",
                   "env_texel_read", "texel_read", "dram_read_byte", "dram_write_byte", "dma_byte"),
     "comparator": ("energy_scale",),
@@ -349,7 +349,8 @@ def price(result: Any, profile: Profile | str | Path, fps: float, *, scene: Any 
     env_map = scene is None or "environment_map" in (getattr(scene, "stats", {}) or {}).get("effects", ())
     lookups = n("env_lookups") if env_map else 0
     env_reads = lookups + n("env_filtered_lookups") * _filtered_reads_per_lookup(settings)
-    env_ops = lookups * ops["env_lookup"] + n("env_filtered_lookups") * ops["env_filtered_lookup"]
+    env_ops = (lookups * ops["env_lookup"] + n("env_filtered_lookups") * ops["env_filtered_lookup"]
+               + n("env_sh_evals") * ops["env_sh_eval"])
     energy["env_filter"] = (env_ops * e["srp_op"] + env_reads * e["env_texel_read"]) * pj
     cycles["env_filter"] = env_ops / thr["srp_ops_per_cycle"]
     # Shading features a scene may lack (their counters are then 0 and so is their cost): area lights,

@@ -58,6 +58,7 @@ COUNTER_NAMES: tuple[str, ...] = (
     "texel_reads",
     "texture_cache_misses",
     "texture_dram_bytes",
+    "env_sh_evals",
 )
 
 
