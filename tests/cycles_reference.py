@@ -257,3 +257,197 @@ def simulator_world(strength: float, rotation_z: float, size: tuple[int, int] = 
     vfov = 2 * math.atan(math.tan(WORLD_FOV / 2) * h / w)
     cam = Camera.from_blender(_look_at_matrix(*WORLD_VIEW), vfov, w, h)
     return render(scene, cam, RenderSettings(mode="fsaa", block=4)).image
+
+
+# ---- an artist's scene: textured cube, glossy sphere, rough metal floor, three lights, HDRI --------------
+
+# An 8x8-cell yellow / green checker: sRGB bytes, row 0 at the top.
+CHECKER = (((np.arange(64)[:, None] // 8 + np.arange(64)[None, :] // 8) % 2)[..., None]
+           * np.array([205, 110, 0]) + np.array([25, 60, 25])).astype(np.uint8)
+ARTIST_LIGHTS: dict[str, dict[str, Any]] = {
+    "area": dict(type="AREA", energy=300.0, shape="RECTANGLE", size=2.0, size_y=1.0,
+                 location=(2.5, -2.0, 3.5), rotation=(0.7, 0.0, 0.9)),
+    "point": dict(type="POINT", energy=200.0, shadow_soft_size=0.3, location=(-2.5, -1.5, 2.5)),
+    "sun": dict(type="SUN", energy=1.5, angle=math.radians(5), location=(0.0, 0.0, 5.0),
+                rotation=(0.6, 0.2, 2.0)),
+}
+ARTIST_CAMERA = dict(location=(0.0, -6.5, 2.6), rotation=(math.radians(72), 0.0, 0.0), lens=35.0)
+ARTIST_WORLD_STRENGTH = 0.8
+
+
+def _uv_box(size: float, centre: tuple[float, float, float], yaw: float) -> tuple:
+    """A cube as 6 quads with 0..1 UVs per face: (positions (24,3), quads (6,4), uvs (24,2), normals)."""
+    h = size / 2
+    faces = [((0, 0, 1), (1, 0, 0)), ((0, 0, -1), (1, 0, 0)), ((1, 0, 0), (0, 1, 0)),
+             ((-1, 0, 0), (0, -1, 0)), ((0, 1, 0), (-1, 0, 0)), ((0, -1, 0), (1, 0, 0))]
+    c, s = math.cos(yaw), math.sin(yaw)
+    rot = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+    pos, uv, nrm, quads = [], [], [], []
+    for n, t in faces:
+        n, t = np.asarray(n, float), np.asarray(t, float)
+        b = np.cross(n, t)
+        base = len(pos)
+        for du, dv in ((0, 0), (1, 0), (1, 1), (0, 1)):
+            pos.append(rot @ (n * h + t * (du - 0.5) * size + b * (dv - 0.5) * size) + centre)
+            uv.append((du, dv))
+            nrm.append(rot @ n)
+        quads.append((base, base + 1, base + 2, base + 3))
+    return np.asarray(pos), np.asarray(quads), np.asarray(uv, float), np.asarray(nrm)
+
+
+def _uv_sphere(radius: float, centre: tuple[float, float, float], nu: int = 48, nv: int = 24) -> tuple:
+    """A UV sphere as quads (poles as degenerate quads) with smooth normals and UVs."""
+    pos, uv, nrm = [], [], []
+    for j in range(nv + 1):
+        th = math.pi * j / nv
+        for i in range(nu + 1):
+            ph = 2 * math.pi * i / nu
+            n = np.array([math.sin(th) * math.cos(ph), math.sin(th) * math.sin(ph), math.cos(th)])
+            pos.append(np.asarray(centre) + radius * n)
+            nrm.append(n)
+            uv.append((i / nu, 1 - j / nv))
+    quads = [(j * (nu + 1) + i, (j + 1) * (nu + 1) + i, (j + 1) * (nu + 1) + i + 1, j * (nu + 1) + i + 1)
+             for j in range(nv) for i in range(nu)]
+    return np.asarray(pos), np.asarray(quads), np.asarray(uv, float), np.asarray(nrm)
+
+
+def _artist_meshes() -> list[tuple[str, tuple, dict[str, Any]]]:
+    h = 6.0
+    floor = (np.array([[-h, -h, 0], [h, -h, 0], [h, h, 0], [-h, h, 0]], float), np.array([[0, 1, 2, 3]]),
+             np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float), np.tile([0.0, 0.0, 1.0], (4, 1)))
+    return [
+        ("floor", floor, dict(base=(0.8, 0.8, 0.8), metallic=1.0, roughness=0.45)),
+        ("cube", _uv_box(1.5, (-1.2, 0.5, 0.75), 0.5),
+         dict(base=(1.0, 1.0, 1.0), roughness=0.5, texture=True)),
+        ("sphere", _uv_sphere(0.8, (1.3, 0.2, 0.8)), dict(base=(0.1, 0.2, 0.8), roughness=0.3)),
+    ]
+
+
+def _artist_camera_matrix() -> np.ndarray:
+    case = dict(rotation=ARTIST_CAMERA["rotation"], location=ARTIST_CAMERA["location"])
+    return blender_light_matrix(case)  # the same Euler composition as any Blender object
+
+
+def _artist_vfov(width: int, height: int) -> float:
+    hfov = 2 * math.atan(36.0 / 2 / ARTIST_CAMERA["lens"])  # Blender's 36 mm sensor, fit to the width
+    return 2 * math.atan(math.tan(hfov / 2) * height / width)
+
+
+def cycles_artist(size: tuple[int, int] = (320, 180), samples: int = 128, denoise: bool = True) -> np.ndarray:
+    """Cycles' render of the artist scene (glossy and transmission bounces 3, diffuse bounces 0)."""
+    import bpy
+
+    sc = _cycles_scene(size[0], size[1], samples)
+    sc.cycles.use_denoising = denoise
+    sc.cycles.glossy_bounces = sc.cycles.transmission_bounces = 3
+    sc.cycles.max_bounces = 4
+    image = bpy.data.images.new("checker", CHECKER.shape[1], CHECKER.shape[0])
+    rgba = np.concatenate([CHECKER, np.full((*CHECKER.shape[:2], 1), 255, np.uint8)], axis=2)
+    image.pixels.foreach_set((rgba[::-1].astype(np.float32) / 255.0).ravel())  # Blender's rows run upwards
+    image.pack()
+    for name, (pos, quads, uv, _normals), m in _artist_meshes():
+        mesh = bpy.data.meshes.new(name)
+        mesh.from_pydata([tuple(p) for p in pos], [], [tuple(q) for q in quads])
+        layer = mesh.uv_layers.new()
+        for loop in mesh.loops:
+            layer.data[loop.index].uv = tuple(uv[loop.vertex_index])
+        if name == "sphere":
+            for poly in mesh.polygons:
+                poly.use_smooth = True
+        mat = bpy.data.materials.new(name)
+        if mat.node_tree is None:
+            mat.use_nodes = True
+        bsdf = mat.node_tree.nodes["Principled BSDF"]
+        bsdf.inputs["Base Color"].default_value = (*m["base"], 1.0)
+        bsdf.inputs["Metallic"].default_value = m.get("metallic", 0.0)
+        bsdf.inputs["Roughness"].default_value = m["roughness"]
+        if m.get("texture"):
+            tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
+            tex.image = image
+            mat.node_tree.links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
+        mesh.materials.append(mat)
+        sc.collection.objects.link(bpy.data.objects.new(name, mesh))
+    for name, case in ARTIST_LIGHTS.items():
+        data = bpy.data.lights.new(name, case["type"])
+        data.energy = case["energy"]
+        for key in _LIGHT_SETTINGS:
+            if key in case:
+                setattr(data, key, case[key])
+        obj = bpy.data.objects.new(name, data)
+        sc.collection.objects.link(obj)
+        obj.location = case.get("location", (0.0, 0.0, 5.0))
+        obj.rotation_euler = case.get("rotation", (0.0, 0.0, 0.0))
+    world = bpy.data.worlds.new("hdri")
+    if world.node_tree is None:
+        world.use_nodes = True
+    env = world.node_tree.nodes.new("ShaderNodeTexEnvironment")
+    env.image = bpy.data.images.load(bundled_hdri())
+    background = next(n for n in world.node_tree.nodes if n.type == "BACKGROUND")
+    world.node_tree.links.new(env.outputs["Color"], background.inputs["Color"])
+    background.inputs["Strength"].default_value = ARTIST_WORLD_STRENGTH
+    sc.world = world
+    cam_data = bpy.data.cameras.new("camera")
+    cam_data.lens = ARTIST_CAMERA["lens"]
+    cam = bpy.data.objects.new("camera", cam_data)
+    sc.collection.objects.link(cam)
+    cam.location = ARTIST_CAMERA["location"]
+    cam.rotation_euler = ARTIST_CAMERA["rotation"]
+    sc.camera = cam
+    bpy.context.view_layer.update()
+    assert np.allclose(np.array(cam.matrix_world), _artist_camera_matrix(), atol=1e-5)
+    return _cycles_render(sc)
+
+
+def simulator_artist(size: tuple[int, int] = (320, 180), settings: Any = None) -> Any:
+    """The simulator's render (a RenderResult) of the same scene, built from the same description."""
+    import warnings
+
+    import sim_core
+    from sim_core import Camera, Light, Material, RenderSettings, Scene, Texture, render
+
+    pos, tri, uvs, nrm, mids = [], [], [], [], []
+    materials = []
+    base = 0
+    for index, (_name, (p, quads, uv, normals), m) in enumerate(_artist_meshes()):
+        tris = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+        pos.append(p)
+        uvs.append(uv)
+        nrm.append(normals)
+        tri.append(tris + base)
+        mids.append(np.full(len(tris), index))
+        base += len(p)
+        texture = 0 if m.get("texture") else None
+        materials.append(Material(base_color=m["base"], metallic=m.get("metallic", 0.0),
+                                  roughness=m["roughness"], base_color_texture=texture))
+    lights = []
+    for name, case in ARTIST_LIGHTS.items():
+        kwargs = {k: case[k] for k in _LIGHT_SETTINGS if k in case}
+        lights.append(Light.from_blender(case["type"], blender_light_matrix(case), case["energy"], name=name,
+                                         **kwargs))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # forest.exr's negative texels are clamped
+        env = sim_core.load_exr(bundled_hdri())
+    mid = np.concatenate(mids)
+    scene = Scene.from_arrays(np.vstack(pos), np.vstack(tri), normals=np.vstack(nrm), uvs=np.vstack(uvs),
+                              textures=[Texture(CHECKER, name="checker")], materials=materials,
+                              material_ids=mid, object_ids=mid, lights=lights, environment=env,
+                              environment_strength=ARTIST_WORLD_STRENGTH)
+    w, h = size
+    cam = Camera.from_blender(_artist_camera_matrix(), _artist_vfov(w, h), w, h)
+    return render(scene, cam, settings or RenderSettings.max_quality())
+
+
+def display(linear: np.ndarray) -> np.ndarray:
+    """Blender's Standard view transform: clip to [0, 1] and sRGB-encode."""
+    x = np.clip(linear, 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+
+
+def fidelity(cycles: np.ndarray, simulated: np.ndarray) -> tuple[float, float]:
+    """(mean display luminance ratio simulated / Cycles, 1 - SSIM of the display images)."""
+    from skimage.metrics import structural_similarity
+
+    lum = np.array([0.2126, 0.7152, 0.0722])
+    a, b = display(cycles), display(simulated)
+    ratio = float((b @ lum).mean() / (a @ lum).mean())
+    return ratio, 1.0 - float(structural_similarity(a, b, channel_axis=2, data_range=1.0))
