@@ -28,19 +28,54 @@ struct CacheStats {
 class CacheModel {
  public:
   explicit CacheModel(const CacheConfig& config);
-  // Touches every line that [address, address + bytes) spans.
-  void access(std::uint64_t address, std::uint32_t bytes);
+  // Touches every line that [address, address + bytes) spans. Inline: the tracer calls it for every node
+  // and triangle fetch.
+  void access(std::uint64_t address, std::uint32_t bytes) {
+    if (bytes == 0) return;
+    if (!config_.enabled()) {
+      // No cache: every fetch is a DRAM read of whole 32-byte bursts.
+      stats_.accesses += 1;
+      stats_.misses += 1;
+      stats_.dram_bytes += (bytes + 31u) / 32u * 32u;
+      return;
+    }
+    const std::uint64_t first = address >> line_shift_;
+    const std::uint64_t last = (address + bytes - 1) >> line_shift_;
+    for (std::uint64_t line = first; line <= last; ++line) access_line(line);
+  }
   const CacheStats& stats() const { return stats_; }
   void reset();
 
  private:
+  struct Way {
+    std::uint64_t tag;       // line number, ~0 = invalid
+    std::uint64_t last_use;  // LRU timestamp (0 = never used)
+  };
   CacheConfig config_;
-  std::uint32_t sets_ = 0;
+  std::uint64_t set_mask_ = 0;  // sets - 1 (the set count is a power of two)
   std::uint32_t line_shift_ = 0;
   std::uint64_t clock_ = 0;
-  std::vector<std::uint64_t> tags_;      // sets_ * ways, ~0 = invalid
-  std::vector<std::uint64_t> last_use_;  // LRU timestamps
+  // The line of the previous access: it is resident and already the most recently used line of its set,
+  // so touching it again changes no replacement decision (same hits and misses as the full lookup).
+  std::uint64_t last_line_ = ~std::uint64_t{0};
+  std::vector<Way> ways_;  // sets * ways, one set's ways contiguous
   CacheStats stats_;
+
+  void access_line(std::uint64_t line) {
+    ++stats_.accesses;
+    ++clock_;
+    if (line == last_line_) return;
+    last_line_ = line;
+    Way* set = &ways_[static_cast<std::size_t>(line & set_mask_) * config_.ways];
+    std::uint32_t victim = 0;
+    for (std::uint32_t w = 0; w < config_.ways; ++w) {
+      if (set[w].tag == line) { set[w].last_use = clock_; return; }
+      if (set[w].last_use < set[victim].last_use) victim = w;
+    }
+    ++stats_.misses;
+    stats_.dram_bytes += config_.line_bytes;
+    set[victim] = {line, clock_};
+  }
 };
 
 }  // namespace sim_core
