@@ -21,10 +21,11 @@ import bpy
 from . import playback, service_process
 from .camera_path import load_path, sample_animation, store_path
 from .core.client import ServiceClient
-from .core.job_runner import JobOptions, JobOutcome, JobUpdate, run_job
+from .core.job_runner import JobOutcome, JobRequest, JobUpdate, run_job
 from .core.playback_logic import predicted_path_summary, summary_text, validate_budget
 from .core.vendored import camera_path as path_format
 from .core.vendored import pareto_store
+from .properties import option_values
 
 log = logging.getLogger(__name__)
 STORE_TEXT_PREFIX = "render_budget_store"
@@ -40,25 +41,15 @@ def check_scene(scene: bpy.types.Scene) -> None:
         raise ValueError("the scene has no renderable geometry (empty scene)")
 
 
-def job_options(scene: bpy.types.Scene) -> JobOptions:
+def job_request(scene: bpy.types.Scene) -> JobRequest:
     props = scene.render_budget
     searchable = [p for p in props.parameters if not p.inert]
     enabled = tuple(p.name for p in searchable if p.enabled)
-    return JobOptions(
+    return JobRequest(
         profile=props.profile or _default_profile(),
         # None lets the service search its whole default space (minus what is inert for this scene)
         parameters=enabled if searchable else None,
-        threshold_power_w=props.threshold_power,
-        threshold_error=props.threshold_error,
-        max_depth=props.max_depth,
-        view_sampling=props.camera_sampling.lower(),
-        path_resolution=props.path_resolution,
-        guard_frames=props.guard_frames,
-        population=props.population,
-        generations=props.generations,
-        seed=props.seed,
-        exhaustive_limit=props.exhaustive_limit,
-        resolution=(props.eval_width, props.eval_height),
+        options=option_values(props),
     )
 
 
@@ -100,7 +91,7 @@ class Prepared:
     scene_name: str
     glb: Path
     path: path_format.CameraPath
-    options: JobOptions
+    request: JobRequest
     tmpdir: tempfile.TemporaryDirectory = field(repr=False)
 
 
@@ -109,7 +100,7 @@ def prepare(scene: bpy.types.Scene) -> Prepared:
     props = scene.render_budget
     validate_budget(props.budget_mode,
                     props.power_budget if props.budget_mode == "POWER" else props.error_budget)
-    options = job_options(scene)
+    request = job_request(scene)
     path = ensure_path(scene)
     tmp = tempfile.TemporaryDirectory(prefix="render-budget-export-")
     try:
@@ -117,7 +108,7 @@ def prepare(scene: bpy.types.Scene) -> Prepared:
     except Exception:
         tmp.cleanup()
         raise
-    return Prepared(scene.name, glb, path, options, tmp)
+    return Prepared(scene.name, glb, path, request, tmp)
 
 
 def apply_outcome(scene: bpy.types.Scene, outcome: JobOutcome, path: path_format.CameraPath) -> str:
@@ -165,7 +156,7 @@ def run_sync(scene: bpy.types.Scene, client: ServiceClient,
     """The whole optimisation on the calling (main) thread: for background mode, batch and tests."""
     prep = prepare(scene)
     try:
-        outcome = run_job(client, prep.glb, prep.path.to_dict(), prep.options, progress=progress,
+        outcome = run_job(client, prep.glb, prep.path.to_dict(), prep.request, progress=progress,
                           timeout_s=timeout_s)
     finally:
         prep.tmpdir.cleanup()
@@ -191,7 +182,7 @@ def job_running() -> bool:
 def _worker(job: _ActiveJob, client: ServiceClient) -> None:
     """HTTP only: never touches bpy. Posts ('progress'|'done'|'error', payload) messages."""
     try:
-        outcome = run_job(client, job.prep.glb, job.prep.path.to_dict(), job.prep.options,
+        outcome = run_job(client, job.prep.glb, job.prep.path.to_dict(), job.prep.request,
                           progress=lambda u: job.messages.put(("progress", u)),
                           should_cancel=job.cancel.is_set)
         job.messages.put(("done", outcome))

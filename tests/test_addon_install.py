@@ -34,7 +34,7 @@ def state():
             "wm_prop": hasattr(bpy.types.WindowManager, "render_budget_runtime")}
 out["after_install"] = state()
 import importlib
-ps = importlib.import_module(mod + "._vendored.pareto_store")
+ps = importlib.import_module(mod + "._vendored.store")
 out["vendored_store"] = ps.FORMAT_NAME
 out["hud"] = importlib.import_module(mod + ".hud").is_registered()
 addon_utils.disable(mod, default_set=True)
@@ -55,13 +55,16 @@ def zip_path(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_zip_contains_addon_and_vendored_store(zip_path: Path) -> None:
     names = set(zipfile.ZipFile(zip_path).namelist())
     for required in ("blender_manifest.toml", "__init__.py", "core/client.py", "playback.py", "hud.py",
-                     "_vendored/pareto_store.py", "_vendored/camera_path.py"):
+                     "_vendored/store/__init__.py", "_vendored/store/camera.py", "_vendored/camera_path.py",
+                     "_vendored/options.py"):
         assert required in names
     assert not any("__pycache__" in n for n in names)
     # the vendored files are byte copies of the service modules (one implementation)
     z = zipfile.ZipFile(zip_path)
-    for name in ("pareto_store.py", "camera_path.py"):
-        assert z.read(f"_vendored/{name}") == (REPO_ROOT / "service" / name).read_bytes()
+    service = REPO_ROOT / "service"
+    store_files = sorted((service / "store").glob("*.py"))
+    for src in [service / "camera_path.py", service / "options.py", *store_files]:
+        assert z.read(f"_vendored/{src.relative_to(service).as_posix()}") == src.read_bytes()
 
 
 def test_manifest_rejects_a_trailing_full_stop(tmp_path: Path) -> None:

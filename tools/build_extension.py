@@ -4,8 +4,9 @@ own extension build (`blender --command extension build`, or its CLI script insi
     python tools/build_extension.py --out dist/          # writes dist/render_budget-<version>.zip
     python tools/build_extension.py --stage-only DIR     # staged folder only (for dev loading)
 
-The store format lives in one place (service/pareto_store.py, service/camera_path.py); this step copies
-those files into the staged extension as `<id>/_vendored/`, so the source tree never holds two copies.
+The store format, camera maths and option schema live in one place (the service/store/ package,
+service/camera_path.py, service/options.py); this step copies them into the staged extension as
+`<id>/_vendored/`, so the source tree never holds two copies.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from pathlib import Path
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 ADDON_DIR = REPO_ROOT / "addon"
-VENDORED = ("pareto_store.py", "camera_path.py")
+VENDORED = ("store", "camera_path.py", "options.py")  # files or packages under service/
 ALLOWED_VENDORED_IMPORTS = {"numpy", "__future__"}
 _IGNORE = shutil.ignore_patterns("__pycache__", "*.pyc", ".*", "tests")
 
@@ -35,13 +36,14 @@ def manifest() -> dict:
 def _check_vendored_imports(path: Path) -> None:
     """The vendored modules run inside a stock Blender: stdlib + numpy + each other only."""
     tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
-    local = {Path(v).stem for v in VENDORED}
+    in_package = path.parent != REPO_ROOT / "service"
+    local = {p.stem for p in path.parent.glob("*.py")} if in_package else {Path(v).stem for v in VENDORED}
     for node in ast.walk(tree):
         names: list[str] = []
         if isinstance(node, ast.Import):
             names = [a.name.split(".")[0] for a in node.names]
         elif isinstance(node, ast.ImportFrom):
-            if node.level:  # relative import: must stay within the vendored pair
+            if node.level:  # relative import: must stay within the vendored modules
                 names = [node.module.split(".")[0]] if node.module else [a.name for a in node.names]
                 bad = [n for n in names if n not in local]
                 if bad:
@@ -68,10 +70,14 @@ def stage(dest_parent: str | Path) -> Path:
         encoding="utf-8")
     for name in VENDORED:
         src = REPO_ROOT / "service" / name
-        if not src.is_file():
+        if not src.exists():
             raise FileNotFoundError(f"service/{name} is missing: the extension cannot be built without it")
-        _check_vendored_imports(src)
-        shutil.copy2(src, vend / name)
+        for path in sorted(src.glob("*.py")) if src.is_dir() else [src]:
+            _check_vendored_imports(path)
+        if src.is_dir():
+            shutil.copytree(src, vend / name, ignore=_IGNORE)
+        else:
+            shutil.copy2(src, vend / name)
     return dest
 
 
