@@ -554,9 +554,10 @@ inline void traverse_bvh4(const Bvh4Node* nodes, const TriBlock4* blocks, const 
 }
 
 // Closest hit along r within (r.tmin, r.tmax) over the 4-wide BVH. Same boxes and triangle test as
-// intersect_closest (its leaves group the same triangles, small subtrees merged), so hit/miss and t agree
-// with it exactly; only which of two triangles at exactly the same t wins may differ (ties are broken by
-// visiting order).
+// intersect_closest (its leaves group the same triangles, small subtrees merged) and the same (t, index)
+// order, so hit/miss, t and triangle agree with it; they can differ only where two different triangles lie
+// at the same exact distance but their rounded t differ (coplanar duplicates seen from a ray starting on
+// them), and a walk that culls the box of the one with the smaller rounded t never tests it.
 template <class Recorder>
 inline Hit intersect_closest4(const Bvh4Node* nodes, const TriBlock4* blocks, const TriRecord* tris,
                               const Ray& ray, Recorder& rec) {
