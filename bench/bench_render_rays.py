@@ -30,14 +30,23 @@ from embreex.mesh_construction import TriangleMesh
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from blend_scenes.build import DEFAULT_OUT, build  # noqa: E402
-from service.camera_path import CameraPath  # noqa: E402
 from sim_core.loaders import load_gltf  # noqa: E402
 from sim_core.render import ANY_HIT_KINDS, RAY_KINDS  # noqa: E402
 
 import sim_core  # noqa: E402
+from blend_scenes.build import DEFAULT_OUT, build  # noqa: E402
+from service.camera_path import CameraPath  # noqa: E402
 
 EMBREE_INF = np.float32(1e37)  # Embree's "unbounded" tfar
+
+
+def trace_ours(native, width: int, any_hit: bool, o, d, tm):
+    """Our traversal alone: any-hit occlusion or closest hit over the tree of the given width."""
+    return (native.occluded if any_hit else native.intersect)(o, d, 1, width, tm)
+
+
+def trace_embree(es, any_hit: bool, o, d, etm):
+    return es.run(o, d, dists=etm, query="OCCLUDED" if any_hit else "INTERSECT")
 
 
 def cpu_time(fn, *args, **kwargs) -> float:
@@ -56,7 +65,8 @@ def main() -> None:
     args = ap.parse_args()
     build(args.scenes, args.out)
     settings = sim_core.RenderSettings.max_quality()
-    print(f"\nmax quality, {args.width}x{args.height}, one thread, median of {args.repeats} (process CPU time)")
+    print(f"\nmax quality, {args.width}x{args.height}, one thread, median of {args.repeats} "
+          "(process CPU time)")
     print(f"{'scene':<8} {'rays':<11} {'N':>9} {'render Mr/s':>11} {'bvh4 Mr/s':>10} {'bvh2 Mr/s':>10} "
           f"{'embree Mr/s':>11} {'bvh4/E':>7} {'render/E':>8} {'agree':>8}")
     for name in args.scenes:
@@ -78,27 +88,22 @@ def main() -> None:
                 groups.append((kind, kind in ANY_HIT_KINDS, o, d, tm, np.where(np.isinf(tm), EMBREE_INF, tm)))
         es.run(groups[0][2][:16], groups[0][3][:16])  # Embree builds its BVH lazily: outside the timing
 
-        def ours(width: int, any_hit: bool, o, d, tm):
-            return (native.occluded if any_hit else native.intersect)(o, d, 1, width, tm)
-
-        def embree(any_hit: bool, o, d, etm):
-            return es.run(o, d, dists=etm, query="OCCLUDED" if any_hit else "INTERSECT")
-
         times: dict[str, list[float]] = {}
         for _ in range(args.repeats):
             times.setdefault("render", []).append(cpu_time(sim_core.render, scene, cam, settings, threads=1))
             for kind, any_hit, o, d, tm, etm in groups:
-                times.setdefault(f"{kind}/bvh4", []).append(cpu_time(ours, 4, any_hit, o, d, tm))
-                times.setdefault(f"{kind}/bvh2", []).append(cpu_time(ours, 2, any_hit, o, d, tm))
-                times.setdefault(f"{kind}/embree", []).append(cpu_time(embree, any_hit, o, d, etm))
+                for width in (4, 2):
+                    t = cpu_time(trace_ours, native, width, any_hit, o, d, tm)
+                    times.setdefault(f"{kind}/bvh{width}", []).append(t)
+                times.setdefault(f"{kind}/embree", []).append(cpu_time(trace_embree, es, any_hit, o, d, etm))
         med = {k: float(np.median(v)) for k, v in times.items()}
         render_rate = total / med["render"] / 1e6
         sums = {"bvh4": 0.0, "bvh2": 0.0, "embree": 0.0}
         agree_total = 0
         for kind, any_hit, o, d, tm, etm in groups:
             n = len(o)
-            ref = embree(any_hit, o, d, etm) >= 0
-            got = ours(4, any_hit, o, d, tm)
+            ref = trace_embree(es, any_hit, o, d, etm) >= 0
+            got = trace_ours(native, 4, any_hit, o, d, tm)
             hit = got if any_hit else got[1] >= 0
             agree = int(np.sum(hit == ref))
             agree_total += agree

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from sim_core.render import ANY_HIT_KINDS, RAY_KINDS
 from tracer_scenes import effects_camera, effects_scene, teapot_camera, teapot_on_plane
 
@@ -61,14 +63,16 @@ def test_wide_walk_renders_the_binary_walks_images(which, effects, teapot):
 
 
 def test_exact_ties_are_resolved_the_same_way_by_both_walks():
-    """A quad duplicated exactly with another material (z-fighting, as where the chess board's squares lie
-    on its slab): every ray that hits it meets two triangles at exactly the same t, and both walks return
-    the one with the lower (leaf-order) index, whatever order they meet them in."""
+    """A quad stacked eight times with different objects (z-fighting, as where the chess board's squares
+    lie on its slab): every ray that hits it meets eight triangles at exactly the same t, spread over
+    several leaves the two walks visit in different orders (equal boxes: the binary walk takes the first
+    child, the 4-wide one the last); both return the lowest (leaf-order) index."""
     q = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], np.float32)
-    pos = np.vstack([q, q]).astype(np.float32)
-    tri = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
-    ids = np.array([0, 0, 1, 1])
-    mats = [Material(base_color=(0.8, 0.1, 0.1)), Material(base_color=(0.1, 0.1, 0.8))]
+    copies = 8
+    pos = np.vstack([q] * copies).astype(np.float32)
+    tri = np.vstack([np.array([[0, 1, 2], [0, 2, 3]]) + 4 * k for k in range(copies)])
+    ids = np.repeat(np.arange(copies), 2)
+    mats = [Material(base_color=(0.1 + 0.1 * k, 0.5, 0.9 - 0.1 * k)) for k in range(copies)]
     scene = Scene.from_arrays(pos, tri, material_ids=ids, object_ids=ids, materials=mats,
                               lights=[Light(kind="point", position=(0.0, 0.0, 3.0), intensity=20.0)])
     cam = Camera.look_at((0.3, -2.0, 2.5), (0.0, 0.0, 0.0), (0.0, 0.0, 1.0), 0.9, 40, 30)
@@ -77,6 +81,31 @@ def test_exact_ties_are_resolved_the_same_way_by_both_walks():
     assert (wide.aovs["object_id"] >= 0).sum() > 200
     np.testing.assert_array_equal(wide.image, binary.image)
     np.testing.assert_array_equal(wide.aovs["object_id"], binary.aovs["object_id"])
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), n=st.integers(1, 300), duplicates=st.integers(0, 40))
+def test_both_walks_return_the_same_hits_on_random_soups(seed: int, n: int, duplicates: int):
+    """Random triangle soups, some triangles duplicated exactly (ties at equal t), random rays and
+    segments: the 4-wide and the binary walk agree on t, triangle and occlusion for every ray."""
+    rng = np.random.default_rng(seed)
+    centres = rng.normal(size=(n, 1, 3)) * 3
+    pos = (centres + rng.normal(size=(n, 3, 3)) * rng.uniform(0.05, 1.5, size=(n, 1, 1))).reshape(-1, 3)
+    tri = np.arange(3 * n).reshape(n, 3)
+    # Up to 8 copies of a few triangles: exact ties, in leaves of their own (equal centroids split by count).
+    copied = tri[rng.integers(0, n, duplicates // 8 + 1)]
+    tri = np.vstack([tri, np.repeat(copied, duplicates % 8 + 1, axis=0)])
+    scene = Scene.from_arrays(pos.astype(np.float32), tri)
+    m = 2000
+    o = (rng.normal(size=(m, 3)) * 5).astype(np.float32)
+    d = (rng.normal(size=(m, 3)) - o * rng.uniform(0, 0.3, size=(m, 1))).astype(np.float32)
+    tmax = (rng.uniform(0, 10, m)).astype(np.float32)
+    t4, p4 = scene.native.intersect(o, d, 1, 4)
+    t2, p2 = scene.native.intersect(o, d, 1, 2)
+    np.testing.assert_array_equal(t4, t2)
+    np.testing.assert_array_equal(p4, p2)
+    occluded = [scene.native.occluded(o, d, 1, width, tmax) for width in (4, 2)]
+    np.testing.assert_array_equal(*occluded)
 
 
 @pytest.mark.parametrize("bvh_width,node_bytes", [(4, 128), (2, 32)])
