@@ -46,6 +46,21 @@ std::unique_ptr<Scene> make_scene(Arr2<float, 3> positions, Arr2<std::uint32_t, 
                                  std::move(env));
 }
 
+// A new 1-D numpy array of n elements owned by Python (freed with its last reference), filled through data().
+template <class T>
+class NumpyVector {
+ public:
+  explicit NumpyVector(std::size_t n)
+      : n_(n), data_(new T[n > 0 ? n : 1]), owner_(data_, [](void* p) noexcept { delete[] static_cast<T*>(p); }) {}
+  T* data() { return data_; }
+  nb::ndarray<nb::numpy, T, nb::ndim<1>> array() const { return {data_, {n_}, owner_}; }
+
+ private:
+  std::size_t n_;
+  T* data_;
+  nb::capsule owner_;
+};
+
 // Rows of a ray batch; checks that directions (and tmax, when given) match the origins.
 std::size_t batch_size(const Arr2<float, 3>& origins, const Arr2<float, 3>& directions,
                        const std::optional<Arr1<float>>& tmax) {
@@ -72,17 +87,14 @@ void bind_scene(nb::module_& m) {
           [](const Scene& s, Arr2<float, 3> origins, Arr2<float, 3> directions, int threads, int bvh_width,
              std::optional<Arr1<float>> tmax) {
             const std::size_t n = batch_size(origins, directions, tmax);
-            float* t = new float[n > 0 ? n : 1];
-            std::int64_t* prim = new std::int64_t[n > 0 ? n : 1];
-            nb::capsule t_owner(t, [](void* p) noexcept { delete[] static_cast<float*>(p); });
-            nb::capsule p_owner(prim, [](void* p) noexcept { delete[] static_cast<std::int64_t*>(p); });
+            NumpyVector<float> t(n);
+            NumpyVector<std::int64_t> prim(n);
             {
               nb::gil_scoped_release release;
-              s.intersect_many(origins.data(), directions.data(), n, t, prim, threads, bvh_width,
+              s.intersect_many(origins.data(), directions.data(), n, t.data(), prim.data(), threads, bvh_width,
                                tmax ? tmax->data() : nullptr);
             }
-            return nb::make_tuple(nb::ndarray<nb::numpy, float, nb::ndim<1>>(t, {n}, t_owner),
-                                  nb::ndarray<nb::numpy, std::int64_t, nb::ndim<1>>(prim, {n}, p_owner));
+            return nb::make_tuple(t.array(), prim.array());
           },
           "origins"_a, "directions"_a, "threads"_a = 1, "bvh_width"_a = 4, "tmax"_a = nb::none(),
           "Closest hits (t, original prim id) within (0, tmax) (default +inf).")
@@ -91,15 +103,14 @@ void bind_scene(nb::module_& m) {
           [](const Scene& s, Arr2<float, 3> origins, Arr2<float, 3> directions, int threads, int bvh_width,
              std::optional<Arr1<float>> tmax) {
             const std::size_t n = batch_size(origins, directions, tmax);
-            bool* hit = new bool[n > 0 ? n : 1];
-            nb::capsule owner(hit, [](void* p) noexcept { delete[] static_cast<bool*>(p); });
+            NumpyVector<bool> hit(n);
             {
               nb::gil_scoped_release release;
               static_assert(sizeof(bool) == sizeof(std::uint8_t), "bool must be one byte");
               s.occluded_many(origins.data(), directions.data(), tmax ? tmax->data() : nullptr, n,
-                              reinterpret_cast<std::uint8_t*>(hit), threads, bvh_width);
+                              reinterpret_cast<std::uint8_t*>(hit.data()), threads, bvh_width);
             }
-            return nb::ndarray<nb::numpy, bool, nb::ndim<1>>(hit, {n}, owner);
+            return hit.array();
           },
           "origins"_a, "directions"_a, "threads"_a = 1, "bvh_width"_a = 4, "tmax"_a = nb::none(),
           "Any-hit (occlusion) queries within (0, tmax) (default +inf): True where something is hit.")
