@@ -22,14 +22,12 @@ CacheModel::CacheModel(const CacheConfig& config) : config_(config) {
     const std::uint32_t sets = config_.size_bytes / (config_.line_bytes * config_.ways);
     set_mask_ = sets - 1;
     while ((1u << line_shift_) < config_.line_bytes) ++line_shift_;
-    ways_.assign(static_cast<std::size_t>(sets) * config_.ways, Way{~std::uint64_t{0}, 0});
+    lines_.assign(static_cast<std::size_t>(sets) * config_.ways, ~std::uint64_t{0});
   }
 }
 
 void CacheModel::reset() {
-  std::fill(ways_.begin(), ways_.end(), Way{~std::uint64_t{0}, 0});
-  clock_ = 0;
-  last_line_ = ~std::uint64_t{0};
+  std::fill(lines_.begin(), lines_.end(), ~std::uint64_t{0});
   stats_ = {};
 }
 

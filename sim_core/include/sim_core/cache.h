@@ -47,34 +47,27 @@ class CacheModel {
   void reset();
 
  private:
-  struct Way {
-    std::uint64_t tag;       // line number, ~0 = invalid
-    std::uint64_t last_use;  // LRU timestamp (0 = never used)
-  };
   CacheConfig config_;
   std::uint64_t set_mask_ = 0;  // sets - 1 (the set count is a power of two)
   std::uint32_t line_shift_ = 0;
-  std::uint64_t clock_ = 0;
-  // The line of the previous access: it is resident and already the most recently used line of its set,
-  // so touching it again changes no replacement decision (same hits and misses as the full lookup).
-  std::uint64_t last_line_ = ~std::uint64_t{0};
-  std::vector<Way> ways_;  // sets * ways, one set's ways contiguous
+  // Each set's resident lines, most recently used first (~0 = empty way, always at the end): a hit moves
+  // its line to the front, a miss drops the last one (true LRU without timestamps).
+  std::vector<std::uint64_t> lines_;  // sets * ways
   CacheStats stats_;
 
   void access_line(std::uint64_t line) {
     ++stats_.accesses;
-    ++clock_;
-    if (line == last_line_) return;
-    last_line_ = line;
-    Way* set = &ways_[static_cast<std::size_t>(line & set_mask_) * config_.ways];
-    std::uint32_t victim = 0;
-    for (std::uint32_t w = 0; w < config_.ways; ++w) {
-      if (set[w].tag == line) { set[w].last_use = clock_; return; }
-      if (set[w].last_use < set[victim].last_use) victim = w;
+    std::uint64_t* set = &lines_[static_cast<std::size_t>(line & set_mask_) * config_.ways];
+    if (set[0] == line) return;  // already the most recently used line of its set
+    std::uint32_t w = 1;
+    while (w < config_.ways && set[w] != line) ++w;
+    if (w == config_.ways) {  // miss: the least recently used (or an empty) way goes
+      ++stats_.misses;
+      stats_.dram_bytes += config_.line_bytes;
+      w = config_.ways - 1;
     }
-    ++stats_.misses;
-    stats_.dram_bytes += config_.line_bytes;
-    set[victim] = {line, clock_};
+    for (; w > 0; --w) set[w] = set[w - 1];
+    set[0] = line;
   }
 };
 
