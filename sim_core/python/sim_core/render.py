@@ -228,7 +228,7 @@ def render(
     cache: node/triangle cache of the T&I unit (CacheConfig, dict or (size_bytes, line_bytes, ways));
       None uses DEFAULT_CACHE; size 0 disables it (every fetch goes to DRAM).
     bvh_width: 4 walks the 4-wide BVH (what the energy model prices); 2 the binary BVH, the slow reference
-      (same images up to exact-t ties; its node counters count 32-byte binary nodes).
+      (the same images but where coplanar duplicates' rounded t differ; node counters in 32-byte nodes).
     log_rays: also return every traced ray (``result.rays``), e.g. to replay them through another tracer.
     """
     trace = _trace_args(bvh_width, log_rays)
