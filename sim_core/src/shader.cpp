@@ -2,19 +2,21 @@
 
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
 
 #include "sim_core/low_discrepancy.h"
 
 namespace sim_core {
 namespace {
 
-// Observes the traversal for the energy model: node and triangle fetches go through the tile's cache,
-// closest-hit comparisons into the comparator histogram.
+// Observes the traversal for the energy model: node and triangle fetches go through the tile's cache (a
+// node record i of `bytes` bytes sits at kNodeBaseAddress + i * bytes), closest-hit comparisons into the
+// comparator histogram.
 struct TileRecorder {
   TileContext& ctx;
-  void node(std::uint32_t i) {
+  void node(std::uint32_t i, std::uint32_t bytes) {
     ++ctx.counters.bvh_node_visits;
-    ctx.cache.access(kNodeBaseAddress + static_cast<std::uint64_t>(i) * sizeof(BvhNode), sizeof(BvhNode));
+    ctx.cache.access(kNodeBaseAddress + static_cast<std::uint64_t>(i) * bytes, bytes);
   }
   void tri(std::uint32_t i) {
     ++ctx.counters.triangle_tests;
@@ -269,6 +271,25 @@ class Shader {
   TileContext& ctx_;
   TileRecorder rec_;
 
+  // The tile's tree walk (the 4-wide BVH, or the binary reference walk when the context asks for it):
+  // closest hit, and any hit for shadow and ambient-occlusion rays.
+  Hit closest(const Ray& ray, RayKind kind) { return closest_traced(ray, traced_kind(kind)); }
+  Hit closest_traced(const Ray& ray, TracedKind kind) {  // also shadow and AO rays through cut-outs
+    if (ctx_.trace.log_rays) ctx_.ray_log.push_back({ray, kind});
+    return ctx_.trace.bvh_width == 2 ? ctx_.scene.closest_binary(ray, rec_) : ctx_.scene.closest(ray, rec_);
+  }
+  bool occluded(const Ray& ray, TracedKind kind) {
+    if (ctx_.trace.log_rays) ctx_.ray_log.push_back({ray, kind});
+    return ctx_.trace.bvh_width == 2 ? ctx_.scene.occluded_binary(ray, rec_) : ctx_.scene.occluded(ray, rec_);
+  }
+  static TracedKind traced_kind(RayKind kind) {
+    switch (kind) {
+      case RayKind::kReflection: return TracedKind::kReflection;
+      case RayKind::kGlossy: return TracedKind::kGlossy;
+      case RayKind::kRefraction: return TracedKind::kRefraction;
+      default: return TracedKind::kPrimary;
+    }
+  }
   void count_ray(RayKind kind);
   // Environment phase: what a ray that leaves the scene sees (cone-filtered for glossy rays when asked).
   Vec3 environment(const Ray& ray, RayKind kind, const Lobe* lobe);
@@ -279,8 +300,8 @@ class Shader {
   // Alpha phase: whether a hit of a cut-out material lets the ray through (clip: alpha below the cutoff;
   // hashed: alpha below a per-sample random threshold). Counts the test.
   bool cut_out(const Material& mat, float alpha, std::uint32_t random_key, int layer);
-  // Any hit before ray.tmax, looking through cut-outs (plain any-hit traversal when the scene has none).
-  bool occluded(Ray ray, std::uint32_t random_key, float cone_width);
+  // Any hit before ray.tmax, looking through cut-outs (the plain any-hit walk when the scene has none).
+  bool occluded_past_cutouts(Ray ray, TracedKind kind, std::uint32_t random_key, float cone_width);
   // Direct-light phase: every light's contribution, shadowed by shadow rays; sets one shadow bit per
   // occluded light.
   void add_direct_light(const SurfacePoint& s, const SurfaceBrdf& brdf, std::uint32_t random_key, Vec3* color,
@@ -334,7 +355,7 @@ Vec3 Shader::trace(const Ray& ray, RayKind kind, Branch branch, RayCone cone, co
   Hit hit;
   SurfacePoint s;
   for (int layer = 0;; ++layer) {
-    hit = ctx_.scene.closest(r, rec_);
+    hit = closest(r, kind);
     if (!hit.hit()) {
       if (info) info->object = -1;
       return environment(r, kind, lobe);
@@ -436,13 +457,13 @@ bool Shader::cut_out(const Material& mat, float alpha, std::uint32_t random_key,
   return alpha <= u32_to_unit(hash_u32(akey));  // hashed: passes through with probability 1 - alpha
 }
 
-bool Shader::occluded(Ray ray, std::uint32_t random_key, float cone_width) {
+bool Shader::occluded_past_cutouts(Ray ray, TracedKind kind, std::uint32_t random_key, float cone_width) {
   const Scene& scene = ctx_.scene;
-  if (!scene.has_cutouts()) return scene.occluded(ray, rec_);
+  if (!scene.has_cutouts()) return occluded(ray, kind);
   // Cut-outs need the hit's material and texture: closest hits, layer by layer (what an any-hit shader
   // does on a GPU).
   for (int layer = 0; layer < kMaxCutoutLayers; ++layer) {
-    const Hit hit = scene.closest(ray, rec_);
+    const Hit hit = closest_traced(ray, kind);
     if (!hit.hit()) return false;
     const TriRecord& tri = scene.tri(hit.tri);
     const Material& mat = scene.materials()[tri.material];
@@ -584,7 +605,8 @@ float Shader::light_visibility(const Light& L, std::size_t index, const SurfaceP
     ++ctx_.counters.rays_shadow;
     ++ctx_.counters.rays_total;
     total += weight;
-    if (occluded(sr, hash_combine(skey, static_cast<std::uint32_t>(i)), s.cone_width)) {
+    if (occluded_past_cutouts(sr, TracedKind::kShadow, hash_combine(skey, static_cast<std::uint32_t>(i)),
+                              s.cone_width)) {
       any_blocked = true;
     } else {
       open += weight;
@@ -637,7 +659,7 @@ float Shader::ambient_visibility(const SurfacePoint& s, std::uint32_t random_key
     ar.tmax = ctx_.ao_distance;
     ++ctx_.counters.rays_ao;
     ++ctx_.counters.rays_total;
-    if (!occluded(ar, hash_combine(akey, static_cast<std::uint32_t>(i)), s.cone_width)) {
+    if (!occluded_past_cutouts(ar, TracedKind::kAo, hash_combine(akey, static_cast<std::uint32_t>(i)), s.cone_width)) {
       ++open;
       // Cosine-distributed directions: the mean of the (smooth) radiance over the open ones estimates
       // the occluded irradiance / pi, light from the blocked directions removed, not scaled.
@@ -770,9 +792,14 @@ void Shader::add_refraction(const SurfacePoint& s, const SurfaceBrdf& brdf, cons
 
 }  // namespace
 
+void TraceOptions::validate() const {
+  if (bvh_width != 2 && bvh_width != 4) throw std::invalid_argument("bvh_width must be 2 or 4");
+}
+
 TileContext::TileContext(const Scene& s, const RenderSettings& st, const Camera& c, const CacheConfig& cc,
-                         const CacheConfig& texture_cc)
-    : scene(s), settings(st), camera(c), cache(cc), texture_cache(texture_cc) {
+                         const TraceOptions& options, const CacheConfig& texture_cc)
+    : scene(s), settings(st), camera(c), cache(cc), texture_cache(texture_cc), trace(options) {
+  trace.validate();
   cos_threshold = st.normal_threshold_deg < 0.f ? 2.f : std::cos(st.normal_threshold_deg * kPi / 180.f);
   ao_distance = st.ao_distance > 0.f ? st.ao_distance : 0.1f * s.diagonal();
   pixel_spread = 2.f * c.tan_half() / static_cast<float>(std::max(1, c.height)) / static_cast<float>(st.subgrid());

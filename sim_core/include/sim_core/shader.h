@@ -6,6 +6,7 @@
 // environment lookup is counted into the tile's context.
 #pragma once
 #include <cstdint>
+#include <vector>
 
 #include "sim_core/cache.h"
 #include "sim_core/camera.h"
@@ -37,7 +38,26 @@ struct SampleResult {
 // Texture cache of the shading cores when no hardware profile provides one (16 KiB, 64-byte lines, 4 ways).
 inline constexpr CacheConfig kDefaultTextureCache{16384, 64, 4};
 
-// Per-tile state of the T&I unit model: counters, node/triangle cache, texture cache, comparator histogram.
+// Kinds of traced rays, as a ray log records them (the order of the rays_* counters).
+enum class TracedKind : std::uint8_t { kPrimary, kShadow, kReflection, kRefraction, kAo, kGlossy };
+
+// One ray as a tile traced it: shadow and ambient-occlusion rays are any-hit queries, the others closest-hit.
+struct TracedRay {
+  Ray ray;
+  TracedKind kind;
+};
+
+// How tiles trace their rays; the defaults are what the energy model prices.
+struct TraceOptions {
+  // 4: the 4-wide BVH; 2: the binary walk, the slow reference that gives the same images (its counters
+  // count 32-byte binary nodes).
+  int bvh_width = 4;
+  bool log_rays = false;  // keep every traced ray (benchmarks replay a render's rays through other tracers)
+  void validate() const;  // throws std::invalid_argument
+};
+
+// Per-tile state of the T&I unit model: counters, node/triangle cache, texture cache, comparator histogram,
+// and how the tile's rays are traced.
 struct TileContext {
   const Scene& scene;
   const RenderSettings& settings;
@@ -46,12 +66,14 @@ struct TileContext {
   CacheModel texture_cache;  // texel reads of base-colour textures (untouched by scenes without textures)
   Counters counters;
   ComparatorHistogram histogram{};
+  TraceOptions trace;
+  std::vector<TracedRay> ray_log;  // with trace.log_rays: every ray, in tracing order
   float cos_threshold;  // cos(normal_threshold); > 1 when nothing may pass
   float ao_distance;
   float pixel_spread;   // angle between neighbouring samples (the primary ray cone's spread, radians)
 
   TileContext(const Scene& s, const RenderSettings& st, const Camera& c, const CacheConfig& cc,
-              const CacheConfig& texture_cc = kDefaultTextureCache);
+              const TraceOptions& trace = {}, const CacheConfig& texture_cc = kDefaultTextureCache);
   void finish();  // folds cache statistics into the counters
 };
 

@@ -363,8 +363,12 @@ def price(result: Any, profile: Profile | str | Path, fps: float, *, scene: Any 
     # The filter arithmetic overlaps the texel reads; the slower of the two sets the block's time.
     cycles["texture"] = max(cycles["texture"], n("texel_reads") / thr["texels_per_cycle"])
 
+    # One node visit is one step of the 4-wide tree: four ray-box tests (and the ordering of the hit
+    # children), priced per step; the unit's box testers set the step rate.
+    from . import _core
+
     energy["traversal"] = n("bvh_node_visits") * e["traversal_step"] * pj
-    cycles["traversal"] = n("bvh_node_visits") / thr["ti_box_tests_per_cycle"]
+    cycles["traversal"] = n("bvh_node_visits") * int(_core.BVH_NODE_BOXES) / thr["ti_box_tests_per_cycle"]
     energy["intersection"] = n("triangle_tests") * e["triangle_test"] * pj
     cycles["intersection"] = n("triangle_tests") / thr["ti_triangle_tests_per_cycle"]
     comp = comparator_stats(hist, prof.comparator_energy_scale)
