@@ -46,7 +46,7 @@ struct RayCone {
   float at(float t) const { return width + spread * t; }
 };
 
-// What a glossy reflection averages: a cone around the mirror direction (the SAT filter's footprint).
+// What an escaping glossy ray's environment lookup averages: a cone (the SAT filter's footprint).
 struct Lobe {
   Vec3 axis;
   float half_angle = 0.f;
