@@ -81,27 +81,11 @@ def analyze(scene: Any) -> SceneAnalysis:
     area = any(light.kind == "area" for light in lights)
     textures = "textures" in effects
     cutouts = "alpha_cutouts" in effects
-    eff = []
-    if lights:
-        eff.append("shadows")
-    if soft:
-        eff.append("soft_shadows")
-    if reflection:
-        eff.append("reflection")
-    if glossy:
-        eff.append("glossy_reflection")
-    if refraction:
-        eff.append("refraction")
-    if emission:
-        eff.append("emission")
-    if env_map:
-        eff.append("environment_map")
-    if area:
-        eff.append("area_lights")
-    if textures:
-        eff.append("textures")
-    if cutouts:
-        eff.append("alpha_cutouts")
+    flags = ((bool(lights), "shadows"), (soft, "soft_shadows"), (reflection, "reflection"),
+             (glossy, "glossy_reflection"), (refraction, "refraction"), (emission, "emission"),
+             (env_map, "environment_map"), (area, "area_lights"), (textures, "textures"),
+             (cutouts, "alpha_cutouts"))
+    eff = [name for on, name in flags if on]
     return SceneAnalysis(
         triangles=int(stats.get("triangles", 0)), lights=len(lights), shadow_bits=len(lights),
         reflection=reflection, glossy=glossy, refraction=refraction, emission=emission, soft_shadows=soft,
