@@ -68,7 +68,8 @@ class Texture:
       images are linear (negative and non-finite values are clamped with a warning). The core keeps 8-bit
       images as 8 bits (decoded per texel) and float images as float32, each with a mip pyramid.
     wrap_u / wrap_v: "repeat", "clamp" (Blender's EXTEND) or "mirror" outside [0, 1].
-    UVs sampling it follow Blender: (0, 0) is the image's bottom-left corner, v points up.
+    UVs sampling it follow Blender: (0, 0) is the image's bottom-left corner, v points up. A uint8 image is
+    kept as a read-only view (not copied); the core copies it when a Scene is built.
     """
 
     image: np.ndarray
@@ -99,6 +100,7 @@ class Texture:
         for attr in ("wrap_u", "wrap_v"):
             if getattr(self, attr) not in WRAPS:
                 raise ValueError(f"{label}: {attr} must be one of {WRAPS}, got {getattr(self, attr)!r}")
+        arr = arr.view()  # read-only view: the caller's array keeps its own flags
         arr.setflags(write=False)
         object.__setattr__(self, "image", arr)
 
