@@ -9,7 +9,7 @@ from .geometry import smooth_normals
 from .image import load_exr
 from .render import COUNTER_NAMES, RenderResult, StereoResult, render, render_stereo
 from .scene import Scene
-from .scene_data import CameraData, Light, Material, SceneData
+from .scene_data import CameraData, Light, Material, SceneData, Texture
 from .settings import RenderSettings
 
 __version__ = _core.__version__
@@ -28,6 +28,7 @@ __all__ = [
     "SceneAnalysis",
     "SceneData",
     "StereoResult",
+    "Texture",
     "__version__",
     "analyze",
     "inert_parameters",

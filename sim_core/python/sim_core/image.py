@@ -15,6 +15,8 @@ import numpy as np
 import OpenEXR
 from PIL import Image
 
+from .scene_data import finite_clamped
+
 
 def upsample_bilinear(image: np.ndarray, height: int, width: int) -> np.ndarray:
     """Bilinear resize of an (h, w[, c]) image to (height, width) with pixel centres aligned (what a
@@ -54,8 +56,9 @@ def srgb_to_linear(values: np.ndarray) -> np.ndarray:
 def load_exr(path: str | os.PathLike[str]) -> np.ndarray:
     """Read an OpenEXR image as (H, W, 3) float32 linear RGB (e.g. an equirectangular environment map).
 
-    Raises FileNotFoundError when the file is missing and ValueError when it is not a readable RGB EXR or
-    holds non-finite or negative values.
+    Raises FileNotFoundError when the file is missing and ValueError when it is not a readable RGB EXR.
+    Negative and non-finite texels (most of Blender's bundled HDRIs hold tiny negative ones) are clamped
+    with a warning, never rejected.
     """
     p = os.fspath(path)
     if not os.path.isfile(p):
@@ -77,9 +80,7 @@ def load_exr(path: str | os.PathLike[str]) -> np.ndarray:
         raise ValueError(f"{p}: not a readable EXR file ({exc})") from None
     if rgb.ndim != 3 or rgb.shape[2] != 3:
         raise ValueError(f"{p}: expected an (H, W, 3) image, got shape {rgb.shape}")
-    if not np.all(np.isfinite(rgb)) or np.any(rgb < 0):
-        raise ValueError(f"{p}: environment map must be finite and >= 0")
-    return np.ascontiguousarray(rgb)
+    return np.ascontiguousarray(finite_clamped(rgb, p))
 
 
 def write_exr(target: str | os.PathLike[str] | BinaryIO, image: np.ndarray) -> None:
