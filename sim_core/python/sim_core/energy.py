@@ -113,8 +113,6 @@ class Profile:
     @property
     def texture_cache(self) -> Any:
         """The texture cache geometry as a native ``CacheConfig`` (``render(texture_cache=...)``)."""
-        from . import _core
-
         return _core.CacheConfig(
             self.texture_cache_size_bytes, self.texture_cache_line_bytes, self.texture_cache_ways
         )
@@ -353,8 +351,6 @@ def _block_costs(prof: Profile, c: Mapping[str, int], hist: np.ndarray | None, s
 
     # One node visit is one step of the 4-wide tree: four ray-box tests (and the ordering of the hit
     # children), priced per step; the unit's box testers set the step rate.
-    from . import _core
-
     energy["traversal"] = n("bvh_node_visits") * e["traversal_step"] * pj
     cycles["traversal"] = n("bvh_node_visits") * int(_core.BVH_NODE_BOXES) / thr["ti_box_tests_per_cycle"]
     energy["intersection"] = n("triangle_tests") * e["triangle_test"] * pj

@@ -199,6 +199,8 @@ class Scene:
         self.textures: list[Texture] = []
 
     # ---- construction -------------------------------------------------------------------------
+    # Long: one validation pass over a dozen optional arrays (each checked where it is read, with its
+    # own message) before the single native build; the checks are helpers, the order is the story.
     @classmethod
     def from_arrays(
         cls,
