@@ -447,13 +447,21 @@ class _Reader:
                                      "the default mapping is used")
             return 0.0
         rot = mapping.inputs["Rotation"]
-        if rot.is_linked or any(s.is_linked for s in mapping.inputs):
+        source = _follow(mapping.inputs["Vector"])
+        if source is not None and not (source[0].bl_idname == "ShaderNodeTexCoord"
+                                       and source[1].name == "Generated"):
+            self.notes.warn("world", f"environment vector from {source[0].bl_label!r} is not simulated: "
+                                     "the default mapping is used")
+        if any(s.is_linked for s in mapping.inputs if s.name != "Vector"):
             self.notes.warn("world", "a linked Mapping input is not simulated: its unlinked values are used")
         rx, ry, rz = (float(v) for v in rot.default_value)
         scale = tuple(float(v) for v in mapping.inputs["Scale"].default_value)
-        if abs(rx) > 1e-6 or abs(ry) > 1e-6 or any(abs(abs(s) - 1.0) > 1e-6 for s in scale):
-            self.notes.warn("world", "environment Mapping rotation about X/Y or scale is not simulated: "
-                                     "only its Z rotation is used")
+        location = tuple(float(v) for v in mapping.inputs["Location"].default_value) \
+            if mapping.vector_type in ("POINT", "TEXTURE") else (0.0, 0.0, 0.0)
+        if abs(rx) > 1e-6 or abs(ry) > 1e-6 or any(abs(abs(s) - 1.0) > 1e-6 for s in scale) or \
+                any(abs(v) > 1e-6 for v in location):
+            self.notes.warn("world", "environment Mapping location, scale or rotation about X/Y is not "
+                                     "simulated: only its Z rotation is used")
         return -rz if mapping.vector_type == "TEXTURE" else rz
 
     # camera -------------------------------------------------------------------------------------------

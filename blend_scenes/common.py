@@ -393,6 +393,27 @@ def export_glb(path: Path) -> None:
                               export_animations=False)
 
 
+def export_scene_file(path: Path) -> dict:
+    """The scene as the add-on sends it to jobs (and the render engine renders it): the depsgraph translator
+    at render level, written as a render-budget scene file. Returns a summary for stats.json."""
+    from sim_core.loaders.scene_file import write_scene_file
+
+    from addon.translate import translate_for_render
+
+    translation = translate_for_render(bpy.context.scene)
+    scene_id = write_scene_file(path, translation.scene_data, translation.notes)
+    data = translation.scene_data
+    return {
+        "scene_id": scene_id,
+        "triangles": int(data.triangles.shape[0]),
+        "instances": len(data.object_names),
+        "unique_meshes": translation.stats["unique_meshes"],
+        "light_kinds": sorted({lt.kind for lt in data.lights}),
+        "environment": translation.stats["environment"],
+        "notes": [str(n) for n in translation.notes],
+    }
+
+
 def smooth_path(points: Sequence[Sequence[float]], duration_s: float) -> Callable[[float], np.ndarray]:
     """Closed Catmull-Rom curve through `points`, parameterised uniformly over the duration."""
     pts = np.asarray(points, dtype=np.float64)
