@@ -33,7 +33,6 @@ from .core.scene_translation import (
     corner_mesh,
     environment_from_inputs,
     light_from_inputs,
-    material_from_inputs,
 )
 
 __all__ = ["Translation", "translate", "translate_for_render"]
@@ -42,6 +41,7 @@ __all__ = ["Translation", "translate", "translate_for_render"]
 #: as separate mesh instances (their evaluated geometry), so they are not read twice.
 _TO_MESH_TYPES = {"SURFACE", "META"}
 _OUTPUT_TARGETS = ("ALL", "CYCLES")
+_WRAPS = {"REPEAT": "repeat", "EXTEND": "clamp", "CLIP": "clamp", "MIRROR": "mirror"}
 
 
 def translate(depsgraph: bpy.types.Depsgraph, *, camera: bool = True) -> Translation:
@@ -163,8 +163,9 @@ class _Reader:
             if key is None:
                 continue
             name = self._instance_name(inst)
+            has_uvs = self.assembler.meshes[key].uvs is not None
             self.assembler.add_instance(key, np.array(inst.matrix_world, dtype=np.float64),
-                                        self.slot_materials(obj), name)
+                                        self.slot_materials(obj, has_uvs), name)
 
     def _holdout(self, obj: bpy.types.Object) -> bool:
         try:
@@ -224,8 +225,9 @@ class _Reader:
                            tri_corners.reshape(-1, 3), tri_slots, None if uvs is None else uvs.reshape(-1, 2))
 
     # materials ----------------------------------------------------------------------------------------
-    def slot_materials(self, obj: bpy.types.Object) -> list[int]:
-        """Scene material index of each of the object's material slots (Blender's default for empty ones)."""
+    def slot_materials(self, obj: bpy.types.Object, has_uvs: bool) -> list[int]:
+        """Scene material index of each of the object's material slots (Blender's default for empty ones);
+        ``has_uvs``: whether the object's mesh has a UV map its textures can use."""
         slots = [s.material for s in obj.material_slots]
         if not slots and obj.type == "MESH":
             slots = list(obj.data.materials)
@@ -234,10 +236,8 @@ class _Reader:
             if mat is None:
                 out.append(self.assembler.default_material())
                 continue
-            original = mat.original
-            out.append(self.assembler.material_index(
-                ("material", original.name_full),
-                lambda m=mat: material_from_inputs(self.material_inputs(m), self.notes)))
+            out.append(self.assembler.principled_index(("material", mat.original.name_full),
+                                                       lambda m=mat: self.material_inputs(m), uvs=has_uvs))
         return out
 
     def material_inputs(self, mat: bpy.types.Material) -> MaterialInputs:
@@ -270,8 +270,8 @@ class _Reader:
 
         color = self.color_input(node.inputs["Color"], subject, "Color") if "Color" in node.inputs else \
             fallback.base_color
-        if kind == "ShaderNodeBsdfDiffuse":
-            return MaterialInputs(name=name, base_color=color, roughness=1.0)
+        if kind == "ShaderNodeBsdfDiffuse":  # ior 1: no specular layer
+            return MaterialInputs(name=name, base_color=color, roughness=1.0, ior=1.0)
         if kind == "ShaderNodeEmission":
             return MaterialInputs(name=name, base_color=(0.0, 0.0, 0.0), emission_color=color,
                                   emission_strength=value("Strength"))
@@ -295,6 +295,9 @@ class _Reader:
             image = self.image_texture(image_node, subject)
         if image is None:
             base = self.color_input(base_socket, subject, "Base Color")
+        alpha_source = _follow(inputs["Alpha"])
+        image_alpha = image is not None and alpha_source is not None and alpha_source[0] == image_node \
+            and alpha_source[1].name == "Alpha"
         for label in ("Coat Weight", "Sheen Weight", "Subsurface Weight"):
             sock = inputs.get(label)
             if sock is not None and (sock.is_linked or float(sock.default_value) > 0):
@@ -312,7 +315,9 @@ class _Reader:
             ior=self.float_input(inputs["IOR"], subject, "IOR"),
             emission_color=self.color_input(inputs["Emission Color"], subject, "Emission Color"),
             emission_strength=self.float_input(inputs["Emission Strength"], subject, "Emission Strength"),
-            alpha=self.float_input(inputs["Alpha"], subject, "Alpha"),
+            alpha=1.0 if image_alpha else self.float_input(inputs["Alpha"], subject, "Alpha"),
+            wrap=_WRAPS.get(image_node.extension, "repeat") if image is not None else "repeat",
+            image_alpha=image_alpha,
         )
 
     def image_texture(self, node: bpy.types.Node, subject: str) -> ImageData | None:
@@ -328,6 +333,11 @@ class _Reader:
         if node.projection != "FLAT":
             self.notes.warn(subject, f"image texture {node.name!r} uses {node.projection.lower()} "
                                      "projection: read through the mesh's UVs instead")
+        if node.extension == "CLIP":
+            self.notes.info(subject, f"image texture {node.name!r}: 'Clip' extension read as 'Extend'")
+        if node.interpolation == "Closest":
+            self.notes.info(subject, f"image texture {node.name!r}: 'Closest' interpolation is filtered "
+                                     "(bilinear, mip-mapped) by the simulator")
         return self.image(node.image, subject)
 
     def image(self, image: bpy.types.Image, subject: str) -> ImageData | None:
@@ -398,7 +408,10 @@ class _Reader:
             self.assembler.environment = (0.0, 0.0, 0.0)  # Cycles renders a scene without a world black
             return
         inputs = self.world_inputs(world)
-        self.assembler.environment = environment_from_inputs(inputs, self.notes)
+        env, strength, rotation = environment_from_inputs(inputs, self.notes)
+        self.assembler.environment = env
+        self.assembler.environment_strength = strength
+        self.assembler.environment_rotation = rotation
 
     def world_inputs(self, world: bpy.types.World) -> WorldInputs:
         plain = WorldInputs(color=tuple(world.color[:3]))

@@ -16,7 +16,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from sim_core.loaders import is_scene_file, load_scene_file, read_scene_file, write_scene_file
 from sim_core.loaders.scene_file import MANIFEST, Limits, scene_file_bytes
-from sim_core.scene_data import CameraData, Light, Material, SceneData
+from sim_core.scene_data import CameraData, Light, Material, SceneData, Texture
 
 import sim_core
 
@@ -32,15 +32,27 @@ def sample_scene(env: object = "map") -> SceneData:
         environment = env
     cam = np.eye(4)
     cam[:3, 3] = [0, -8, 4]
+    checker = np.zeros((8, 8, 4), np.uint8)
+    checker[::2, ::2] = 255
+    checker[..., 3] = 200
     return SceneData(
         positions=pos, triangles=tri, normals=nrm,
+        uvs=np.linspace(0, 1, 14, dtype=np.float32).reshape(7, 2),
+        textures=[Texture(checker, colorspace="srgb", wrap_u="mirror", name="checker"),
+                  Texture(np.full((2, 2, 3), 0.25, np.float32), colorspace="linear", wrap_v="clamp")],
         material_ids=np.array([0, 0, 1], np.uint32), object_ids=np.array([0, 0, 1], np.uint32),
-        materials=[Material(base_color=(0.5, 0.4, 0.3), roughness=0.45, metallic=1.0, name="floor"),
-                   Material(transmission=1.0, ior=1.45, emission=(0.1, 0.0, 0.0), name="glass")],
+        materials=[Material(base_color=(0.5, 0.4, 0.3), roughness=0.45, metallic=1.0, name="floor",
+                            base_color_texture=0, alpha_mode="hashed"),
+                   Material(transmission=1.0, ior=1.45, emission=(0.1, 0.0, 0.0), name="glass", alpha=0.5,
+                            alpha_mode="clip", base_color_texture=1)],
         lights=[Light(kind="point", position=(1, 2, 3), intensity=80.0, radius=0.1, name="key"),
-                Light(kind="sun", direction=(0.3, 0.2, -1.0), intensity=3.0, radius=0.01, name="sun")],
+                Light(kind="sun", direction=(0.3, 0.2, -1.0), intensity=3.0, radius=0.01, name="sun"),
+                Light(kind="area", direction=(0, 0, -1), tangent=(1, 1, 0), shape="ellipse", size=2.0,
+                      size_y=0.5, intensity=12.0, name="soft"),
+                Light(kind="spot", spot_angle=0.4, spot_blend=0.6, intensity=30.0, name="spot")],
         cameras=[CameraData(matrix_world=cam, vfov=0.6, aspect=16 / 9, name="Camera")],
-        environment=environment, object_names=["Floor", "Tri"],
+        environment=environment, environment_strength=1.5, environment_rotation=-0.7,
+        object_names=["Floor", "Tri"],
     )
 
 
@@ -57,8 +69,13 @@ def test_round_trip_same_bytes_same_id(tmp_path: Path):
     assert a.read_bytes() == b.read_bytes()
     assert content.notes == NOTES and content.version == 1
     got = content.data
-    for attr in ("positions", "triangles", "normals", "material_ids", "object_ids", "environment"):
+    for attr in ("positions", "triangles", "normals", "uvs", "material_ids", "object_ids", "environment"):
         assert np.array_equal(getattr(got, attr), getattr(data, attr)), attr
+    assert (got.environment_strength, got.environment_rotation) == (1.5, -0.7)
+    for a_tex, b_tex in zip(got.textures, data.textures, strict=True):
+        assert np.array_equal(a_tex.image, b_tex.image) and a_tex.image.dtype == b_tex.image.dtype
+        assert (a_tex.colorspace, a_tex.wrap_u, a_tex.wrap_v, a_tex.name) == \
+            (b_tex.colorspace, b_tex.wrap_u, b_tex.wrap_v, b_tex.name)
     assert got.materials == data.materials and got.lights == data.lights
     assert got.object_names == data.object_names
     assert np.array_equal(got.cameras[0].matrix_world, data.cameras[0].matrix_world)
@@ -157,6 +174,8 @@ def set_key(path, value):
 BAD_POSITIONS = np.array([[0, 0, 0], [1, 0, 0], [np.nan, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [0, 1, 1]],
                          np.float32)
 
+FIVE_CHANNELS = npy(np.zeros((8, 8, 5), np.uint8))
+
 MALFORMED = {
     "not a zip": (lambda b: b"hello" * 20, "not a readable scene file"),
     "glb": (lambda b: b"glTF" + b"\0" * 100, "not a readable scene file"),
@@ -184,6 +203,16 @@ MALFORMED = {
     "infinity": (lambda b: rewrite(b, replace={MANIFEST: zipfile.ZipFile(io.BytesIO(b)).read(MANIFEST)
                                                .replace(b'"vfov":0.6', b'"vfov":Infinity')}), "non-finite"),
     "json": (lambda b: rewrite(b, replace={MANIFEST: b"{not json"}), "not valid JSON"),
+    "texture index": (lambda b: rewrite(b, manifest=set_key(["materials", 1, "base_color_texture"], 5)),
+                      "uses texture 5"),
+    "texture channels": (lambda b: rewrite(b, manifest=set_key(["arrays", "texture_0", "shape"], [8, 8, 5]),
+                                           replace={"arrays/texture_0.npy": FIVE_CHANNELS}),
+                         "1 to 4 channels"),
+    "orphan texture": (lambda b: rewrite(b, manifest=set_key(["textures"], [])), "texture_<i>"),
+    "texture wrap": (lambda b: rewrite(b, manifest=set_key(["textures", 0, "wrap_u"], "spiral")), "wrap_u"),
+    "uvs nan": (lambda b: rewrite(b, replace={"arrays/uvs.npy": npy(np.full((7, 2), np.nan, np.float32))}),
+                "uvs must be finite"),
+    "strength": (lambda b: rewrite(b, manifest=set_key(["environment", "strength"], -1)), "strength"),
 }
 
 

@@ -160,20 +160,61 @@ def test_lights_in_cycles_units():
     assert point.position == (1, 2, 3) and point.radius == 0.25
     sun = light_from_inputs(LightInputs("s", "SUN", np.eye(4), 3.0, angle=0.02), notes)
     assert sun.intensity == 3.0 and sun.radius == pytest.approx(0.01) and sun.direction == (0, 0, -1)
-    spot = light_from_inputs(LightInputs("sp", "SPOT", np.eye(4), 100.0, spot_size=1.0), notes)
-    assert spot.spot_angle == pytest.approx(0.5)
+    spot = light_from_inputs(LightInputs("sp", "SPOT", np.eye(4), 100.0, spot_size=1.0, spot_blend=0.3),
+                             notes)
+    assert spot.spot_angle == pytest.approx(0.5) and spot.spot_blend == pytest.approx(0.3)
+    area = light_from_inputs(LightInputs("a", "AREA", np.diag([2.0, 1.0, 1.0, 1.0]), 100.0, shape="RECTANGLE",
+                                         size=1.0, size_y=0.5), notes)
+    assert area.kind == "area" and (area.size, area.size_y) == (2.0, 0.5)
+    assert area.intensity == pytest.approx(100.0 / (math.pi * 1.0))
     assert light_from_inputs(LightInputs("off", "POINT", np.eye(4), 0.0), notes) is None
-    assert any("emits nothing" in str(n) for n in notes)
+    assert light_from_inputs(LightInputs("flat", "AREA", np.eye(4), 10.0, size=0.0), notes) is None
+    text = " | ".join(str(n) for n in notes)
+    assert "emits nothing" in text and "light 'flat': left out" in text
 
 
-def test_world_map_clamps_and_scales():
+def test_world_map_clamps_and_keeps_strength_and_rotation():
     notes = Notes()
     px = np.ones((4, 8, 4), np.float32)
     px[0, 0, 0] = -0.01
     px[1, 1, 1] = np.nan
-    env = environment_from_inputs(WorldInputs(image=ImageData("hdr", px, "linear"), strength=2.0), notes)
+    env, strength, rotation = environment_from_inputs(
+        WorldInputs(image=ImageData("hdr", px, "linear"), strength=2.0, rotation_z=0.7), notes)
     assert env.shape == (4, 8, 3) and env.dtype == np.float32
-    assert env[0, 0, 0] == 0 and env[1, 1, 1] == 0 and env[2, 2, 2] == 2.0
+    assert env[0, 0, 0] == 0 and env[1, 1, 1] == 0 and env[2, 2, 2] == 1.0
+    assert (strength, rotation) == (2.0, 0.7)
     assert any("clamped 1 negative and 1 non-finite" in str(n) for n in notes)
-    assert environment_from_inputs(WorldInputs(color=(0.1, 0.2, 0.3), strength=2.0), notes) == \
-        pytest.approx((0.2, 0.4, 0.6))
+    colour, strength, rotation = environment_from_inputs(WorldInputs(color=(0.1, 0.2, 0.3), strength=2.0,
+                                                                     rotation_z=0.7), notes)
+    assert colour == pytest.approx((0.1, 0.2, 0.3)) and (strength, rotation) == (2.0, 0.0)
+
+
+def test_textured_material_shares_one_texture_and_falls_back_without_uvs():
+    asm = SceneAssembler()
+    px = np.zeros((4, 4, 4), np.uint8)
+    px[..., 3] = 255
+    px[:2, :, :3] = 255  # top half white
+    image = ImageData("checker", px, "srgb")
+    inputs = MaterialInputs("Checker", (1.0, 1.0, 1.0), base_image=image, wrap="mirror")
+    with_uvs = asm.principled_index("Checker", lambda: inputs, uvs=True)
+    again = asm.principled_index("Checker", lambda: pytest.fail("read once"), uvs=True)
+    without = asm.principled_index("Checker", lambda: inputs, uvs=False)
+    assert with_uvs == again != without
+    textured, flat = asm.materials[with_uvs], asm.materials[without]
+    assert textured.base_color_texture == 0 and textured.base_color == (1.0, 1.0, 1.0)
+    assert textured.alpha_mode == "opaque"
+    assert flat.base_color_texture is None and flat.base_color == pytest.approx((0.5,) * 3)
+    tex = asm.textures[0]
+    assert len(asm.textures) == 1 and tex.wrap_u == tex.wrap_v == "mirror" and tex.image.shape == (4, 4, 3)
+    assert any("without a UV map" in str(n) for n in asm.notes)
+    # the image's alpha travels only when the material reads it
+    cutout = asm.principled_index("Leaf", lambda: MaterialInputs("Leaf", base_image=image, image_alpha=True),
+                                  uvs=True)
+    assert asm.materials[cutout].alpha_mode == "hashed" and asm.textures[1].image.shape == (4, 4, 4)
+
+
+def test_constant_alpha_is_cycles_stochastic_alpha():
+    notes = Notes()
+    m = material_from_inputs(MaterialInputs("veil", alpha=0.3), notes)
+    assert (m.alpha, m.alpha_mode) == (0.3, "hashed")
+    assert material_from_inputs(MaterialInputs("solid"), notes).alpha_mode == "opaque"

@@ -221,3 +221,126 @@ def test_unsupported_node_setup_is_approximated_and_noted(scene):
     text = t.notes_text()
     assert "Checker Texture" in text and "Noise Texture" in text
     assert all(n.severity == "warning" for n in t.notes if "Texture" in n.message)
+
+
+def checker_material(size: int = 16):
+    """A Principled material whose Base Color is an Image Texture (a packed 2x2 checker, mirrored)."""
+    img = bpy.data.images.new("Checker", size, size, alpha=True)
+    px = np.zeros((size, size, 4), np.float32)
+    half = size // 2
+    px[:half, :half] = px[half:, half:] = (1.0, 0.0, 0.0, 1.0)  # Blender rows: bottom first
+    px[:half, half:] = px[half:, :half] = (0.0, 0.0, 1.0, 0.5)
+    img.pixels.foreach_set(px.reshape(-1))
+    img.pack()
+    mat = bpy.data.materials.new("Checker")
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    tex = nodes.new("ShaderNodeTexImage")
+    tex.image = img
+    tex.extension = "MIRROR"
+    bsdf = nodes["Principled BSDF"]
+    links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
+    links.new(tex.outputs["Alpha"], bsdf.inputs["Alpha"])
+    return mat, px
+
+
+def hdri_world(sc, strength: float, rotation_z: float):
+    import os
+
+    world = bpy.data.worlds.new("HDRI")
+    tree = world.node_tree
+    env = tree.nodes.new("ShaderNodeTexEnvironment")
+    env.image = bpy.data.images.load(os.path.join(bpy.utils.system_resource("DATAFILES"), "studiolights",
+                                                  "world", "forest.exr"))
+    mapping = tree.nodes.new("ShaderNodeMapping")
+    mapping.inputs["Rotation"].default_value = (0.0, 0.0, rotation_z)
+    coords = tree.nodes.new("ShaderNodeTexCoord")
+    tree.links.new(coords.outputs["Generated"], mapping.inputs["Vector"])
+    tree.links.new(mapping.outputs["Vector"], env.inputs["Vector"])
+    background = next(n for n in tree.nodes if n.type == "BACKGROUND")
+    tree.links.new(env.outputs["Color"], background.inputs["Color"])
+    background.inputs["Strength"].default_value = strength
+    sc.world = world
+    return env.image
+
+
+def test_textures_area_lights_and_the_hdri_are_carried(scene):
+    import bmesh
+
+    mat, px = checker_material()
+    me = bpy.data.meshes.new("Box")
+    bm = bmesh.new()
+    bm.loops.layers.uv.new("UVMap")
+    bmesh.ops.create_cube(bm, size=2.0, calc_uvs=True)
+    bm.to_mesh(me)
+    bm.free()
+    me.materials.append(mat)
+    add(scene, "Box", me, (0, 0, 0))
+    plain = add(scene, "NoUVs", cube_mesh("NoUVsMesh"), (4, 0, 0))  # bmesh's cube has no UV map
+    plain.data.materials.append(mat)
+    shapes = {"SQUARE": (1.0, 0.0), "RECTANGLE": (2.0, 0.5), "DISK": (1.5, 0.0), "ELLIPSE": (1.0, 3.0)}
+    for i, (shape, (size, size_y)) in enumerate(shapes.items()):
+        data = bpy.data.lights.new(f"Area{shape}", "AREA")
+        data.shape, data.size, data.size_y, data.energy = shape, size, size_y, 100.0 * (i + 1)
+        light = add(scene, f"Area{shape}", data, (i, 0, 5))
+        light.scale = (2.0, 1.0, 1.0)
+    image = hdri_world(scene, strength=1.5, rotation_z=0.6)
+
+    t = translate_for_render(scene)
+    sd = t.scene_data
+    # the checker travels as a texture (rows top first, sRGB bytes, alpha because the material reads it)
+    assert len(sd.textures) == 1
+    tex = sd.textures[0]
+    assert tex.image.dtype == np.uint8 and tex.image.shape == (16, 16, 4) and tex.colorspace == "srgb"
+    assert np.array_equal(tex.image, np.round(px[::-1] * 255).astype(np.uint8))
+    assert tex.wrap_u == tex.wrap_v == "mirror"
+    box_mat = sd.materials[int(sd.material_ids[sd.object_ids == sd.object_names.index("Box")][0])]
+    assert box_mat.base_color_texture == 0 and box_mat.alpha_mode == "hashed"
+    # the cube's UVs: Blender's own, per corner
+    box_uvs = sd.uvs[np.unique(sd.triangles[sd.object_ids == sd.object_names.index("Box")])]
+    assert box_uvs.min() >= 0.0 and box_uvs.max() <= 1.0 and len(np.unique(box_uvs, axis=0)) >= 8
+    # the mesh without UVs shows the image's mean colour instead (noted)
+    flat = sd.materials[int(sd.material_ids[sd.object_ids == sd.object_names.index("NoUVs")][0])]
+    assert flat.base_color_texture is None
+    assert flat.base_color == pytest.approx((0.5, 0.0, 0.5))  # linear mean of red and blue
+    assert any("without a UV map" in n.message for n in t.notes)
+    # area lights: every shape, sizes after the object's X scale, Cycles' radiance
+    areas = {lt.name: lt for lt in sd.lights}
+    for i, (shape, (size, size_y)) in enumerate(shapes.items()):
+        lt = areas[f"Area{shape}"]
+        height = size_y if shape in ("RECTANGLE", "ELLIPSE") else size
+        assert lt.kind == "area" and lt.size == pytest.approx(2 * size) and lt.size_y == pytest.approx(height)
+        assert lt.shape == ("rectangle" if shape in ("SQUARE", "RECTANGLE") else "ellipse")
+        area = 2 * size * height * (math.pi / 4 if lt.shape == "ellipse" else 1.0)
+        assert lt.intensity == pytest.approx(100.0 * (i + 1) / (math.pi * area))
+    # the HDRI: Blender's pixels, row 0 at the top, negative texels clamped (noted), strength and rotation
+    w, h = image.size
+    raw = np.empty(w * h * 4, np.float32)
+    image.pixels.foreach_get(raw)
+    raw = raw.reshape(h, w, 4)[::-1, :, :3]
+    assert sd.environment.shape == (h, w, 3)
+    assert np.array_equal(sd.environment, np.maximum(raw, 0.0))
+    assert (sd.environment_strength, sd.environment_rotation) == (pytest.approx(1.5), pytest.approx(0.6))
+    assert any("clamped" in n.message and "negative" in n.message for n in t.notes)
+
+
+def test_scene_file_of_a_translation_round_trips(scene, tmp_path):
+    from sim_core.loaders.scene_file import read_scene_file, write_scene_file
+
+    import sim_core
+
+    mat, _ = checker_material()
+    ob = add(scene, "Cube", cube_mesh("CubeMesh"), (0, 0, 0))
+    ob.data.materials.append(mat)
+    sun = add(scene, "Sun", bpy.data.lights.new("Sun", "SUN"), (0, 0, 5))
+    sun.data.angle = 0.05
+    hdri_world(scene, strength=0.8, rotation_z=0.0)
+    first = translate_for_render(scene)
+    id_a = write_scene_file(tmp_path / "a.rbscene", first.scene_data, first.notes)
+    second = translate_for_render(scene)  # a second translation of the same scene: the same bytes
+    id_b = write_scene_file(tmp_path / "b.rbscene", second.scene_data, second.notes)
+    assert id_a == id_b
+    content = read_scene_file(tmp_path / "a.rbscene")
+    assert content.notes == [n.to_dict() for n in first.notes]
+    assert write_scene_file(tmp_path / "c.rbscene", content.data, content.notes) == id_a
+    assert sim_core.Scene.from_scene_file(tmp_path / "a.rbscene").content_hash == \
+        sim_core.Scene.from_scene_data(first.scene_data).content_hash

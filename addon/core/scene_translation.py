@@ -13,14 +13,15 @@ sim_core is imported inside functions: the add-on registers without loading the 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+import warnings
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
 if TYPE_CHECKING:
-    from sim_core.scene_data import Light, Material, SceneData
+    from sim_core.scene_data import Light, Material, SceneData, Texture
 
 Severity = Literal["info", "warning"]
 
@@ -250,7 +251,9 @@ class MaterialInputs:
     """What the bpy side read from a material's node tree (Principled BSDF inputs, already reduced to
     constants where a link could not be followed: the reader adds a note when it approximates).
 
-    base_image: an Image Texture feeding Base Color through the mesh's UVs (None: constant colour).
+    base_image: an Image Texture feeding Base Color through the mesh's UVs (None: constant colour), with
+    ``wrap`` its extension ("repeat", "clamp", "mirror") and ``image_alpha`` True when the same image's
+    Alpha output drives the BSDF's Alpha (cut-outs; the image's alpha is ignored otherwise).
     """
 
     name: str
@@ -263,6 +266,8 @@ class MaterialInputs:
     emission_color: tuple[float, float, float] = (1.0, 1.0, 1.0)
     emission_strength: float = 0.0
     alpha: float = 1.0
+    wrap: str = "repeat"
+    image_alpha: bool = False
 
 
 def _unit_interval(value: float, what: str, subject: str, notes: Notes) -> float:
@@ -288,18 +293,18 @@ def _colour(value: Sequence[float], what: str, subject: str, notes: Notes) -> tu
     return (float(rgb[0]), float(rgb[1]), float(rgb[2]))
 
 
-def material_from_inputs(inputs: MaterialInputs, notes: Notes) -> Material:
+def material_from_inputs(inputs: MaterialInputs, notes: Notes, texture: int | None = None) -> Material:
     """A ``sim_core.Material`` from Principled BSDF inputs: values clamped to the core's ranges (with a
-    note), emission = colour x strength; what the core does not simulate is approximated and noted."""
+    note), emission = colour x strength, alpha below 1 (or from the texture) as Cycles' stochastic alpha
+    ("hashed"). ``texture``: the scene index of ``inputs.base_image`` (None: the image, if any, is reduced to
+    its mean colour with a note, as for a mesh without UVs)."""
     from sim_core.scene_data import Material
 
     subject = f"material {inputs.name!r}"
     base = _colour(inputs.base_color, "base colour", subject, notes)
-    if inputs.base_image is not None:
+    if inputs.base_image is not None and texture is None:
         mean = inputs.base_image.mean_linear_rgb()
         base = (base[0] * mean[0], base[1] * mean[1], base[2] * mean[2])
-        notes.warn(subject, f"image texture {inputs.base_image.name!r} approximated by its mean colour "
-                            "(this simulator build has no textures)")
     ior = float(inputs.ior)
     if not math.isfinite(ior):
         notes.warn(subject, "IOR is not finite; using 1.5")
@@ -314,8 +319,7 @@ def material_from_inputs(inputs: MaterialInputs, notes: Notes) -> Material:
         strength = 0.0
     emission_color = _colour(inputs.emission_color, "emission colour", subject, notes)
     alpha = _unit_interval(inputs.alpha, "alpha", subject, notes)
-    if alpha < 1.0:
-        notes.warn(subject, f"alpha {alpha:.3g} not simulated: the surface renders opaque")
+    textured_alpha = texture is not None and inputs.image_alpha
     return Material(
         base_color=base,
         metallic=_unit_interval(inputs.metallic, "metallic", subject, notes),
@@ -324,7 +328,24 @@ def material_from_inputs(inputs: MaterialInputs, notes: Notes) -> Material:
         ior=ior,
         emission=tuple(c * strength for c in emission_color),  # type: ignore[arg-type]
         name=inputs.name,
+        alpha=alpha,
+        alpha_mode="hashed" if alpha < 1.0 or textured_alpha else "opaque",
+        base_color_texture=texture,
     )
+
+
+def texture_from_image(image: ImageData, wrap: str, with_alpha: bool) -> Texture:
+    """A ``sim_core.Texture`` of a Blender image: its pixels (row 0 at the top), colour space and wrap; the
+    alpha channel only when the material reads it (Cycles ignores an image's alpha otherwise)."""
+    from sim_core.scene_data import Texture
+
+    px = image.pixels
+    if px.shape[-1] == 4 and not with_alpha:
+        px = px[..., :3]
+    elif px.shape[-1] == 2 and not with_alpha:
+        px = px[..., :1]
+    return Texture(image=np.ascontiguousarray(px), colorspace=image.colorspace, wrap_u=wrap,  # type: ignore[arg-type]
+                   wrap_v=wrap, name=image.name)  # type: ignore[arg-type]
 
 
 # -- lights --------------------------------------------------------------------------------------------
@@ -348,62 +369,45 @@ class LightInputs:
 
 
 def light_from_inputs(inputs: LightInputs, notes: Notes) -> Light | None:
-    """A ``sim_core.Light`` in radiometric units (Cycles' conventions: a point or spot light of P watts
-    radiates P / (4 pi) W/sr, a sun gives its strength in W/m^2); None (with a note) for a light that
-    emits nothing or cannot be read."""
+    """A ``sim_core.Light`` through ``Light.from_blender`` (the one conversion of Blender's units, checked
+    against Cycles); None (with a note) for a light that emits nothing or has no emitting surface."""
     from sim_core.scene_data import Light
 
     subject = f"light {inputs.name!r}"
-    kind = inputs.kind.upper()
-    m = np.asarray(inputs.matrix_world, dtype=np.float64).reshape(4, 4)
-    if not np.all(np.isfinite(m)):
-        notes.warn(subject, "its transform is not finite; left out")
-        return None
     power = float(inputs.energy) * 2.0 ** float(inputs.exposure)
     if not math.isfinite(power) or power <= 0.0:
         notes.info(subject, "emits nothing (power 0); left out")
         return None
-    direction = -m[:3, 2]
-    if float(np.linalg.norm(direction)) == 0.0:
-        notes.warn(subject, "zero scale; left out")
-        return None
     colour = _colour(inputs.color, "colour", subject, notes)
-    position = tuple(m[:3, 3])
-    if kind == "SUN":
-        return Light(kind="sun", position=position, direction=tuple(direction), color=colour, intensity=power,
-                     radius=0.5 * max(0.0, float(inputs.angle)), name=inputs.name)
-    if kind in ("POINT", "SPOT"):
-        return Light(kind=kind.lower(), position=position, direction=tuple(direction), color=colour,  # type: ignore[arg-type]
-                     intensity=power / (4.0 * math.pi), radius=max(0.0, float(inputs.shadow_soft_size)),
-                     spot_angle=0.5 * float(inputs.spot_size), name=inputs.name)
-    if kind == "AREA":
-        # A Lambertian one-sided emitter of P watts: intensity (P / pi) cos(theta) about its normal. This
-        # simulator build has no area lights: a hemisphere spot of the same mean intensity stands in.
-        sx, sy = float(np.linalg.norm(m[:3, 0])), float(np.linalg.norm(m[:3, 1]))
-        size = max(float(inputs.size) * sx, float(inputs.size_y if inputs.shape in ("RECTANGLE", "ELLIPSE")
-                                                     else inputs.size) * sy)
-        notes.warn(subject, "area light approximated by a spot light over its hemisphere with soft shadows "
-                            "(this simulator build has no area lights)")
-        return Light(kind="spot", position=position, direction=tuple(direction), color=colour,
-                     intensity=power / (2.0 * math.pi), radius=0.5 * size, spot_angle=0.5 * math.pi,
-                     name=inputs.name)
-    notes.warn(subject, f"light type {inputs.kind!r} is not supported; left out")
-    return None
+    try:
+        return Light.from_blender(
+            inputs.kind, inputs.matrix_world, float(inputs.energy), colour,
+            shadow_soft_size=max(0.0, float(inputs.shadow_soft_size)), spot_size=float(inputs.spot_size),
+            spot_blend=min(1.0, max(0.0, float(inputs.spot_blend))), angle=max(0.0, float(inputs.angle)),
+            shape=inputs.shape, size=float(inputs.size), size_y=float(inputs.size_y),
+            exposure=float(inputs.exposure), name=inputs.name)
+    except ValueError as exc:
+        notes.warn(subject, f"left out: {exc}")
+        return None
 
 
 # -- world ---------------------------------------------------------------------------------------------
 def environment_map(pixels: np.ndarray, name: str, notes: Notes) -> np.ndarray:
     """An equirectangular world image as the core takes it: (H, W, 3) float32 linear RGB, row 0 at the
     zenith; negative and non-finite texels are clamped (with a note), never rejected."""
+    from sim_core.scene_data import finite_clamped
+
     px = np.asarray(pixels)
     rgb = px[..., :3] if px.shape[-1] >= 3 else np.repeat(px[..., :1], 3, axis=-1)
     rgb = rgb.astype(np.float32)
-    bad = ~np.isfinite(rgb)
-    negative = np.isfinite(rgb) & (rgb < 0)
-    if bad.any() or negative.any():
-        notes.info(f"world image {name!r}", f"clamped {int(negative.sum())} negative and {int(bad.sum())} "
-                                             "non-finite texel value(s) to 0")
-        rgb = np.where(bad | negative, np.float32(0.0), rgb)
+    finite = np.isfinite(rgb)
+    negative, bad = int(np.count_nonzero(finite & (rgb < 0))), int(np.count_nonzero(~finite))
+    if negative or bad:
+        notes.info(f"world image {name!r}", f"clamped {negative} negative and {bad} non-finite texel "
+                                             "value(s)")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the note says it
+            rgb = finite_clamped(rgb, name)
     return np.ascontiguousarray(rgb)
 
 
@@ -418,23 +422,17 @@ class WorldInputs:
     rotation_z: float = 0.0
 
 
-def environment_from_inputs(world: WorldInputs, notes: Notes) -> np.ndarray | tuple[float, float, float]:
+def environment_from_inputs(world: WorldInputs, notes: Notes
+                            ) -> tuple[np.ndarray | tuple[float, float, float], float, float]:
+    """(environment, strength, rotation) for ``SceneData``: a constant colour or the clamped map."""
     strength = float(world.strength)
     if not math.isfinite(strength) or strength < 0:
         notes.warn("world", f"background strength {strength!r} is not a finite non-negative number; using 1")
         strength = 1.0
+    rotation = float(world.rotation_z) if math.isfinite(float(world.rotation_z)) else 0.0
     if world.image is None:
-        rgb = _colour(world.color, "background colour", "world", notes)
-        return (rgb[0] * strength, rgb[1] * strength, rgb[2] * strength)
-    env = environment_map(world.image.pixels, world.image.name, notes)
-    if world.rotation_z:
-        # rotating the lookup direction about +Z shifts the map's columns (nearest column here)
-        w = env.shape[1]
-        shift = round(-world.rotation_z / (2.0 * math.pi) * w) % w
-        env = np.ascontiguousarray(np.roll(env, -shift, axis=1))
-    if strength != 1.0:
-        env = env * np.float32(strength)
-    return env
+        return _colour(world.color, "background colour", "world", notes), strength, 0.0
+    return environment_map(world.image.pixels, world.image.name, notes), strength, rotation
 
 
 # -- assembly ------------------------------------------------------------------------------------------
@@ -448,7 +446,12 @@ class SceneAssembler:
         self.materials: list[Material] = []
         self._material_index: dict[Any, int] = {}
         self.lights: list[Light] = []
+        self.textures: list[Texture] = []
+        self._texture_index: dict[Any, int] = {}
+        self._inputs: dict[Any, MaterialInputs] = {}
         self.environment: np.ndarray | tuple[float, float, float] | None = None
+        self.environment_strength = 1.0
+        self.environment_rotation = 0.0
         self.cameras: list[Any] = []
 
     def material_index(self, key: Any, make: Any) -> int:
@@ -458,6 +461,41 @@ class SceneAssembler:
             idx = len(self.materials)
             self.materials.append(make())
             self._material_index[key] = idx
+        return idx
+
+    def principled_index(self, key: Any, read: Callable[[], MaterialInputs], *, uvs: bool) -> int:
+        """The scene index of a node material (inputs from ``read()``, called once per key). A base-colour
+        image becomes a shared texture on meshes with UVs; on a mesh without UVs the material's variant
+        shows the image's mean colour (noted)."""
+        inputs = self._inputs.get(key)
+        if inputs is None:
+            inputs = self._inputs[key] = read()
+        textured = inputs.base_image is not None and uvs
+
+        def make() -> Material:
+            subject = f"material {inputs.name!r}"
+            texture = None
+            if textured:
+                try:
+                    texture = self.texture_index(inputs)
+                except ValueError as exc:
+                    self.notes.warn(subject, f"image texture shows its mean colour: {exc}")
+            elif inputs.base_image is not None:
+                self.notes.warn(subject, f"image texture {inputs.base_image.name!r} on a mesh without a UV "
+                                         "map: shows its mean colour")
+            return material_from_inputs(inputs, self.notes, texture)
+
+        return self.material_index((key, textured), make)
+
+    def texture_index(self, inputs: MaterialInputs) -> int:
+        image = inputs.base_image
+        assert image is not None
+        key = (image.name, inputs.wrap, inputs.image_alpha)
+        idx = self._texture_index.get(key)
+        if idx is None:
+            texture = texture_from_image(image, inputs.wrap, inputs.image_alpha)
+            idx = self._texture_index[key] = len(self.textures)
+            self.textures.append(texture)
         return idx
 
     def default_material(self) -> int:
@@ -483,7 +521,7 @@ class SceneAssembler:
         """World-space arrays of every instance (one object id each, in instance order)."""
         from sim_core.scene_data import SceneData
 
-        positions, normals, triangles, material_ids, object_ids, names = [], [], [], [], [], []
+        positions, normals, uvs, triangles, material_ids, object_ids, names = [], [], [], [], [], [], []
         offset = 0
         for inst in self.instances:
             mesh = self.meshes[inst.mesh_key]
@@ -498,6 +536,7 @@ class SceneAssembler:
             slots = np.clip(mesh.slots, 0, len(table) - 1)
             positions.append(p)
             normals.append(n)
+            uvs.append(mesh.uvs if mesh.uvs is not None else np.zeros((p.shape[0], 2), np.float32))
             triangles.append(t.astype(np.int64) + offset)
             material_ids.append(table[slots])
             object_ids.append(np.full(t.shape[0], len(names), dtype=np.uint32))
@@ -520,8 +559,12 @@ class SceneAssembler:
             lights=list(self.lights),
             cameras=list(self.cameras),
             environment=self.environment,
+            environment_strength=self.environment_strength,
+            environment_rotation=self.environment_rotation,
             source=source,
             object_names=names,
+            uvs=np.concatenate(uvs).astype(np.float32) if self.textures else None,
+            textures=list(self.textures),
         )
 
     def _fallback_material(self) -> Material:

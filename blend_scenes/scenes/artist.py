@@ -81,7 +81,11 @@ def build(out_dir: Path) -> c.SceneSpec:
 
     c.add_object("Floor", c.box_mesh("Floor", (12.0, 12.0, 0.1), floor_mat), (0.0, 0.0, -0.05))
 
-    cube_mesh = bm_mesh("CheckerCube", lambda bm: bmesh.ops.create_cube(bm, size=1.2, calc_uvs=True))
+    def uv_cube(bm: bmesh.types.BMesh) -> None:
+        bm.loops.layers.uv.new("UVMap")  # calc_uvs fills an existing UV map
+        bmesh.ops.create_cube(bm, size=1.2, calc_uvs=True)
+
+    cube_mesh = bm_mesh("CheckerCube", uv_cube)
     cube_mesh.materials.append(checker)
     c.add_object("CheckerCube", cube_mesh, (-1.6, 0.4, 0.6), (0.0, 0.0, math.radians(20)))
 

@@ -8,11 +8,13 @@ so a job optimises exactly the scene the render engine renders. Layout (version 
 - ``manifest.json`` (first entry, UTF-8, sorted keys): ``format`` = ``"render-budget-scene"``, ``version``,
   ``arrays`` (name -> dtype and shape), ``materials`` and ``lights`` (the fields of
   ``sim_core.Material`` / ``sim_core.Light``), ``cameras``, ``environment`` (``{"kind": "default"}``,
-  ``{"kind": "color", "color": [r, g, b]}`` or ``{"kind": "map", "array": "environment"}``),
+  ``{"kind": "color", "color": [r, g, b]}`` or ``{"kind": "map", "array": "environment"}``, each with
+  ``strength`` and ``rotation``), ``textures`` (``{array, colorspace, wrap_u, wrap_v, name}``),
   ``object_names`` and ``notes`` (what the translator approximated: ``{severity, subject, message}``);
 - ``arrays/<name>.npy``: NumPy format 1.0, little-endian, C order, read with ``allow_pickle=False``:
-  ``positions`` (V, 3) <f4, ``triangles`` (T, 3) <u4, optional ``normals`` (V, 3) <f4, ``material_ids`` and
-  ``object_ids`` (T,) <u4, ``environment`` (H, W, 3) <f4 or <f2.
+  ``positions`` (V, 3) <f4, ``triangles`` (T, 3) <u4, optional ``normals`` (V, 3) <f4 and ``uvs`` (V, 2) <f4,
+  ``material_ids`` and ``object_ids`` (T,) <u4, ``environment`` (H, W, 3) <f4 or <f2, ``texture_<i>``
+  (H, W, C) |u1, <f4 or <f2 with C in 1..4 (row 0 at the top).
 
 The scene id of a file is the SHA-256 of its bytes; the same scene always writes the same bytes. Reading
 validates like any upload: entry names, sizes against the limits, dtypes and shapes against the manifest,
@@ -36,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from ..scene_data import CameraData, Light, Material, SceneData
+from ..scene_data import CameraData, Light, Material, SceneData, Texture
 
 FORMAT = "render-budget-scene"
 VERSION = 1
@@ -57,6 +59,8 @@ class Limits:
     max_objects: int = 1_000_000
     max_materials: int = 65_536
     max_environment_texels: int = 64 * 1024 * 1024
+    max_texture_texels: int = 256 * 1024 * 1024  # all textures together
+    max_textures: int = 4096
     max_manifest_bytes: int = 64 * 1024 * 1024
     max_string: int = 4096
     max_notes: int = 10_000
@@ -85,6 +89,8 @@ def scene_file_bytes(data: SceneData, notes: Any = ()) -> bytes:
     n_tri = arrays["triangles"].shape[0]
     if data.normals is not None:
         arrays["normals"] = np.ascontiguousarray(data.normals, dtype="<f4")
+    if data.uvs is not None:
+        arrays["uvs"] = np.ascontiguousarray(data.uvs, dtype="<f4")
     arrays["material_ids"] = np.ascontiguousarray(
         np.zeros(n_tri) if data.material_ids is None else data.material_ids, dtype="<u4")
     arrays["object_ids"] = np.ascontiguousarray(
@@ -93,13 +99,17 @@ def scene_file_bytes(data: SceneData, notes: Any = ()) -> bytes:
     if data.environment is None:
         environment = {"kind": "default"}
     elif isinstance(data.environment, np.ndarray) and data.environment.ndim == 3:
-        env = np.ascontiguousarray(data.environment, dtype="<f4")
-        half = env.astype("<f2")
-        # half precision when it is exact (HDRIs are usually stored as half floats)
-        arrays["environment"] = half if np.array_equal(half.astype("<f4"), env, equal_nan=True) else env
+        arrays["environment"] = _half_if_exact(np.ascontiguousarray(data.environment, dtype="<f4"))
         environment = {"kind": "map", "array": "environment"}
     else:
         environment = {"kind": "color", "color": [float(c) for c in np.asarray(data.environment).reshape(-1)]}
+    environment.update(strength=float(data.environment_strength), rotation=float(data.environment_rotation))
+    textures = []
+    for i, t in enumerate(data.textures):
+        img = t.image if t.image.dtype == np.uint8 else _half_if_exact(np.ascontiguousarray(t.image, "<f4"))
+        arrays[f"texture_{i}"] = np.ascontiguousarray(img)
+        textures.append({"array": f"texture_{i}", "colorspace": t.colorspace, "wrap_u": t.wrap_u,
+                         "wrap_v": t.wrap_v, "name": t.name})
     object_names = list(data.object_names) or [f"object {i}" for i in range(_count(arrays["object_ids"]))]
     manifest = {
         "format": FORMAT,
@@ -111,6 +121,7 @@ def scene_file_bytes(data: SceneData, notes: Any = ()) -> bytes:
                      "vfov": float(c.vfov), "aspect": float(c.aspect), "name": str(c.name)}
                     for c in data.cameras],
         "environment": environment,
+        "textures": textures,
         "object_names": [str(n) for n in object_names],
         "notes": [_note_dict(n) for n in notes],
     }
@@ -142,6 +153,12 @@ def _write_entry(zf: zipfile.ZipFile, name: str, payload: bytes) -> None:
     info.create_system = 3
     info.external_attr = 0o644 << 16
     zf.writestr(info, payload)
+
+
+def _half_if_exact(image: np.ndarray) -> np.ndarray:
+    """Half precision when that is exact (HDRIs are usually stored as half floats), else float32."""
+    half = image.astype("<f2")
+    return half if np.array_equal(half.astype("<f4"), image, equal_nan=True) else image
 
 
 def _count(object_ids: np.ndarray) -> int:
@@ -219,8 +236,10 @@ _ARRAY_SPECS: dict[str, tuple[tuple[str, ...], int | None]] = {
     "normals": (("<f4",), 3),
     "material_ids": (("<u4",), None),
     "object_ids": (("<u4",), None),
+    "uvs": (("<f4",), 2),
     "environment": (("<f4", "<f2"), 3),
 }
+_TEXTURE_SPEC = (("|u1", "<f4", "<f2"), None)
 
 
 def _read(zf: zipfile.ZipFile, size: int, limits: Limits) -> SceneFile:
@@ -253,7 +272,7 @@ def _read(zf: zipfile.ZipFile, size: int, limits: Limits) -> SceneFile:
     declared = manifest.get("arrays")
     if not isinstance(declared, dict):
         raise ValueError("scene manifest: 'arrays' must be an object")
-    unknown = set(declared) - set(_ARRAY_SPECS)
+    unknown = {n for n in declared if n not in _ARRAY_SPECS and not _is_texture_name(n)}
     if unknown:
         raise ValueError(f"scene manifest names unknown arrays: {sorted(unknown)}")
     expected_entries = {MANIFEST} | {f"arrays/{n}.npy" for n in declared}
@@ -263,6 +282,10 @@ def _read(zf: zipfile.ZipFile, size: int, limits: Limits) -> SceneFile:
                          f"missing {sorted(missing)})")
     arrays = {name: _array(zf, name, spec, limits) for name, spec in declared.items()}
     return _scene(manifest, arrays, limits)
+
+
+def _is_texture_name(name: str) -> bool:
+    return name.startswith("texture_") and name[8:].isdigit() and str(int(name[8:])) == name[8:]
 
 
 def _json(raw: bytes) -> Any:
@@ -276,7 +299,7 @@ def _json(raw: bytes) -> Any:
 
 
 def _array(zf: zipfile.ZipFile, name: str, spec: Any, limits: Limits) -> np.ndarray:
-    dtypes, cols = _ARRAY_SPECS[name]
+    dtypes, cols = _TEXTURE_SPEC if _is_texture_name(name) else _ARRAY_SPECS[name]
     if not isinstance(spec, dict):
         raise ValueError(f"scene manifest: array {name!r} must be described by an object")
     dtype, shape = spec.get("dtype"), spec.get("shape")
@@ -285,15 +308,19 @@ def _array(zf: zipfile.ZipFile, name: str, spec: Any, limits: Limits) -> np.ndar
     if not (isinstance(shape, list) and all(isinstance(s, int) and not isinstance(s, bool) and s >= 0
                                             for s in shape)):
         raise ValueError(f"array {name!r}: shape must be a list of non-negative integers, got {shape!r}")
-    want_ndim = 3 if name == "environment" else (1 if cols is None else 2)
+    texture = _is_texture_name(name)
+    want_ndim = 3 if name == "environment" or texture else (1 if cols is None else 2)
     if len(shape) != want_ndim or (cols is not None and shape[-1] != cols):
         raise ValueError(f"array {name!r} has shape {shape}, expected {want_ndim} dimensions"
                          + ("" if cols is None else f" with {cols} in the last"))
+    if texture and not 1 <= shape[-1] <= 4:
+        raise ValueError(f"array {name!r} must have 1 to 4 channels, got {shape[-1]}")
     count = math.prod(shape)
     caps = {"positions": limits.max_vertices * 3, "normals": limits.max_vertices * 3,
-            "triangles": limits.max_triangles * 3, "material_ids": limits.max_triangles,
-            "object_ids": limits.max_triangles, "environment": limits.max_environment_texels * 3}
-    if count > caps[name]:
+            "uvs": limits.max_vertices * 2, "triangles": limits.max_triangles * 3,
+            "material_ids": limits.max_triangles, "object_ids": limits.max_triangles,
+            "environment": limits.max_environment_texels * 3}
+    if count > (limits.max_texture_texels * 4 if texture else caps[name]):
         raise ValueError(f"array {name!r} of shape {shape} exceeds the limits")
     info = zf.getinfo(f"arrays/{name}.npy")
     with zf.open(info) as f:
@@ -359,9 +386,16 @@ def _scene(manifest: dict[str, Any], arrays: dict[str, np.ndarray], limits: Limi
             raise ValueError(f"normals must have one row per vertex ({n_vert}), got {normals.shape[0]}")
         if not np.all(np.isfinite(normals)):
             raise ValueError("normals must be finite (NaN or Inf found)")
+    uvs = arrays.get("uvs")
+    if uvs is not None:
+        if uvs.shape[0] != n_vert:
+            raise ValueError(f"uvs must have one row per vertex ({n_vert}), got {uvs.shape[0]}")
+        if not np.all(np.isfinite(uvs)):
+            raise ValueError("uvs must be finite (NaN or Inf found)")
     for key in ("material_ids", "object_ids"):
         if key in arrays and arrays[key].shape[0] != n_tri:
             raise ValueError(f"{key} must have one entry per triangle ({n_tri}), got {arrays[key].shape[0]}")
+    textures = _textures(manifest.get("textures", []), arrays, limits)
 
     materials_raw = manifest.get("materials", [])
     lights_raw = manifest.get("lights", [])
@@ -372,6 +406,10 @@ def _scene(manifest: dict[str, Any], arrays: dict[str, np.ndarray], limits: Limi
     materials = [Material(**_fields(Material, r, f"material {i}", limits))
                  for i, r in enumerate(materials_raw)]
     lights = [Light(**_fields(Light, r, f"light {i}", limits)) for i, r in enumerate(lights_raw)]
+    for i, m in enumerate(materials):
+        if m.base_color_texture is not None and m.base_color_texture >= len(textures):
+            raise ValueError(f"material {i} uses texture {m.base_color_texture} but the file has "
+                             f"{len(textures)} texture(s)")
     material_ids = arrays.get("material_ids")
     if material_ids is not None and material_ids.size and int(material_ids.max()) >= max(1, len(materials)):
         raise ValueError(f"material id {int(material_ids.max())} out of range ({len(materials)} materials)")
@@ -388,7 +426,14 @@ def _scene(manifest: dict[str, Any], arrays: dict[str, np.ndarray], limits: Limi
     if not isinstance(cameras_raw, list) or len(cameras_raw) > 1024:
         raise ValueError("scene manifest: 'cameras' must be a list of at most 1024")
     cameras = [_camera(c, i, limits) for i, c in enumerate(cameras_raw)]
-    environment = _environment(manifest.get("environment", {"kind": "default"}), arrays)
+    env_record = manifest.get("environment", {"kind": "default"})
+    environment = _environment(env_record, arrays)
+    strength, rotation = env_record.get("strength", 1.0), env_record.get("rotation", 0.0)
+    for label, v in (("strength", strength), ("rotation", rotation)):
+        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+            raise ValueError(f"environment {label} must be a finite number, got {v!r}")
+    if strength < 0:
+        raise ValueError(f"environment strength must be >= 0, got {strength}")
 
     notes_raw = manifest.get("notes", [])
     if not isinstance(notes_raw, list) or len(notes_raw) > limits.max_notes:
@@ -413,9 +458,36 @@ def _scene(manifest: dict[str, Any], arrays: dict[str, np.ndarray], limits: Limi
         lights=lights,
         cameras=cameras,
         environment=environment,
+        environment_strength=float(strength),
+        environment_rotation=float(rotation),
         object_names=names,
+        uvs=None if uvs is None else np.array(uvs, dtype=np.float32),
+        textures=textures,
     )
     return SceneFile(data=data, notes=notes, version=int(manifest["version"]))
+
+
+def _textures(records: Any, arrays: dict[str, np.ndarray], limits: Limits) -> list[Texture]:
+    if not isinstance(records, list) or len(records) > limits.max_textures:
+        raise ValueError(f"scene manifest: 'textures' must be a list of at most {limits.max_textures}")
+    named = {n for n in arrays if _is_texture_name(n)}
+    wanted = [r.get("array") if isinstance(r, dict) else None for r in records]
+    if sorted(named) != sorted(w for w in wanted if isinstance(w, str)) or len(set(wanted)) != len(wanted):
+        raise ValueError("scene manifest: each texture must name its own texture_<i> array, and every "
+                         "texture array must belong to one texture")
+    texels = sum(math.prod(arrays[n].shape[:2]) for n in named)
+    if texels > limits.max_texture_texels:
+        raise ValueError(f"textures hold {texels} texels, over the limit of {limits.max_texture_texels}")
+    out = []
+    for i, record in enumerate(records):
+        if set(record) - {"array", "colorspace", "wrap_u", "wrap_v", "name"}:
+            raise ValueError(f"texture {i} has unknown fields {sorted(set(record) - {'array'})}")
+        fields = {k: _string(record[k], f"texture {i} {k}", limits)
+                  for k in ("colorspace", "wrap_u", "wrap_v", "name") if k in record}
+        image = arrays[record["array"]]
+        image = np.array(image) if image.dtype == np.uint8 else np.array(image, dtype=np.float32)
+        out.append(Texture(image=image, **fields))  # validates sizes, colour space, wraps; clamps floats
+    return out
 
 
 def _camera(record: Any, i: int, limits: Limits) -> CameraData:
@@ -443,8 +515,9 @@ def _numbers(value: Any) -> bool:
 
 def _environment(record: Any, arrays: dict[str, np.ndarray]
                  ) -> np.ndarray | tuple[float, float, float] | None:
-    if not isinstance(record, dict):
-        raise ValueError("scene manifest: 'environment' must be an object")
+    if not isinstance(record, dict) or set(record) - {"kind", "color", "array", "strength", "rotation"}:
+        raise ValueError("scene manifest: 'environment' must be an object with kind, color or array, "
+                         "strength and rotation")
     kind = record.get("kind")
     if kind == "default":
         env = None
