@@ -270,8 +270,9 @@ def write_exr(path: Path, rgb: np.ndarray) -> None:
         f.write(str(path))
 
 
-def world_exr(path: Path, strength: float = 1.0) -> None:
-    """Equirectangular environment: Blender world node tree + scene extra naming the file (relative)."""
+def world_exr(path: Path, strength: float = 1.0, rotation_z: float = 0.0) -> bpy.types.Image:
+    """Equirectangular environment: Blender world node tree (Environment Texture, turned by a Mapping node's
+    Z rotation when ``rotation_z`` is not 0) + scene extra naming the file (relative); returns the image."""
     world = bpy.data.worlds.new("World")
     bpy.context.scene.world = world
     if not world.node_tree:
@@ -282,7 +283,14 @@ def world_exr(path: Path, strength: float = 1.0) -> None:
     bg = nodes["Background"]
     bg.inputs["Strength"].default_value = strength
     links.new(env.outputs["Color"], bg.inputs["Color"])
+    if rotation_z:
+        coords = nodes.new("ShaderNodeTexCoord")
+        mapping = nodes.new("ShaderNodeMapping")
+        mapping.inputs["Rotation"].default_value = (0.0, 0.0, rotation_z)
+        links.new(coords.outputs["Generated"], mapping.inputs["Vector"])
+        links.new(mapping.outputs["Vector"], env.inputs["Vector"])
     bpy.context.scene[ENVIRONMENT_KEY] = path.name
+    return env.image
 
 
 # --------------------------------------------------------------------------------------------------

@@ -243,24 +243,14 @@ def checker_material(size: int = 16):
     return mat, px
 
 
-def hdri_world(sc, strength: float, rotation_z: float):
-    import os
+def hdri_world(strength: float, rotation_z: float):
+    """Blender's bundled forest HDRI as the world (Environment Texture behind a Mapping node)."""
+    from pathlib import Path
 
-    world = bpy.data.worlds.new("HDRI")
-    tree = world.node_tree
-    env = tree.nodes.new("ShaderNodeTexEnvironment")
-    env.image = bpy.data.images.load(os.path.join(bpy.utils.system_resource("DATAFILES"), "studiolights",
-                                                  "world", "forest.exr"))
-    mapping = tree.nodes.new("ShaderNodeMapping")
-    mapping.inputs["Rotation"].default_value = (0.0, 0.0, rotation_z)
-    coords = tree.nodes.new("ShaderNodeTexCoord")
-    tree.links.new(coords.outputs["Generated"], mapping.inputs["Vector"])
-    tree.links.new(mapping.outputs["Vector"], env.inputs["Vector"])
-    background = next(n for n in tree.nodes if n.type == "BACKGROUND")
-    tree.links.new(env.outputs["Color"], background.inputs["Color"])
-    background.inputs["Strength"].default_value = strength
-    sc.world = world
-    return env.image
+    from blend_scenes import common
+    from blend_scenes.scenes.artist import bundled_hdri
+
+    return common.world_exr(Path(bundled_hdri()), strength, rotation_z)
 
 
 def test_textures_area_lights_and_the_hdri_are_carried(scene):
@@ -283,7 +273,7 @@ def test_textures_area_lights_and_the_hdri_are_carried(scene):
         data.shape, data.size, data.size_y, data.energy = shape, size, size_y, 100.0 * (i + 1)
         light = add(scene, f"Area{shape}", data, (i, 0, 5))
         light.scale = (2.0, 1.0, 1.0)
-    image = hdri_world(scene, strength=1.5, rotation_z=0.6)
+    image = hdri_world(strength=1.5, rotation_z=0.6)
 
     t = translate_for_render(scene)
     sd = t.scene_data
@@ -333,7 +323,7 @@ def test_scene_file_of_a_translation_round_trips(scene, tmp_path):
     ob.data.materials.append(mat)
     sun = add(scene, "Sun", bpy.data.lights.new("Sun", "SUN"), (0, 0, 5))
     sun.data.angle = 0.05
-    hdri_world(scene, strength=0.8, rotation_z=0.0)
+    hdri_world(strength=0.8, rotation_z=0.0)
     first = translate_for_render(scene)
     id_a = write_scene_file(tmp_path / "a.rbscene", first.scene_data, first.notes)
     second = translate_for_render(scene)  # a second translation of the same scene: the same bytes

@@ -124,17 +124,7 @@ def build(out_dir: Path) -> c.SceneSpec:
     env_path = out_dir / "environment.exr"
     shutil.copyfile(bundled_hdri(), env_path)
     os.chmod(env_path, 0o644)
-    c.world_exr(env_path)
-    world = scene.world
-    nodes, links = world.node_tree.nodes, world.node_tree.links
-    env = next(n for n in nodes if n.bl_idname == "ShaderNodeTexEnvironment")
-    env.image.pack()  # the .blend carries its world; no path into Blender's installation
-    coords = nodes.new("ShaderNodeTexCoord")
-    mapping = nodes.new("ShaderNodeMapping")
-    mapping.inputs["Rotation"].default_value = (0.0, 0.0, math.radians(40.0))
-    links.new(coords.outputs["Generated"], mapping.inputs["Vector"])
-    links.new(mapping.outputs["Vector"], env.inputs["Vector"])
-
+    c.world_exr(env_path, rotation_z=math.radians(40.0)).pack()  # the .blend carries its world
     def eye(t: float) -> np.ndarray:  # a half orbit, rising slowly
         a = -math.pi / 2 - 0.6 + math.pi * t / DURATION_S
         r = 6.4 + 0.5 * math.sin(2 * math.pi * t / DURATION_S)

@@ -380,18 +380,14 @@ def _scene(manifest: dict[str, Any], arrays: dict[str, np.ndarray], limits: Limi
         raise ValueError("positions must be finite (NaN or Inf found)")
     if int(tri.max()) >= n_vert:
         raise ValueError(f"a triangle references vertex {int(tri.max())} but there are only {n_vert}")
-    normals = arrays.get("normals")
-    if normals is not None:
-        if normals.shape[0] != n_vert:
-            raise ValueError(f"normals must have one row per vertex ({n_vert}), got {normals.shape[0]}")
-        if not np.all(np.isfinite(normals)):
-            raise ValueError("normals must be finite (NaN or Inf found)")
-    uvs = arrays.get("uvs")
-    if uvs is not None:
-        if uvs.shape[0] != n_vert:
-            raise ValueError(f"uvs must have one row per vertex ({n_vert}), got {uvs.shape[0]}")
-        if not np.all(np.isfinite(uvs)):
-            raise ValueError("uvs must be finite (NaN or Inf found)")
+    normals, uvs = arrays.get("normals"), arrays.get("uvs")
+    for key, per_vertex in (("normals", normals), ("uvs", uvs)):
+        if per_vertex is None:
+            continue
+        if per_vertex.shape[0] != n_vert:
+            raise ValueError(f"{key} must have one row per vertex ({n_vert}), got {per_vertex.shape[0]}")
+        if not np.all(np.isfinite(per_vertex)):
+            raise ValueError(f"{key} must be finite (NaN or Inf found)")
     for key in ("material_ids", "object_ids"):
         if key in arrays and arrays[key].shape[0] != n_tri:
             raise ValueError(f"{key} must have one entry per triangle ({n_tri}), got {arrays[key].shape[0]}")
