@@ -174,8 +174,16 @@ class _Reader:
             return bool(getattr(obj, "is_holdout", False))
 
     def _instance_name(self, inst: bpy.types.DepsgraphObjectInstance) -> str:
-        base = inst.object.name if not inst.is_instance or inst.parent is None else \
-            f"{inst.object.name} in {inst.parent.name}"
+        """The object's name (a curve's or text's mesh too); an instance's is "<object> in <instancer>" (a
+        geometry-nodes instance, which Blender names after its instancer, goes by its mesh's name)."""
+        obj, parent = inst.object, inst.parent
+        own_geometry = parent is not None and obj.original == parent.original and obj.data is not None
+        if not inst.is_instance or parent is None:
+            base = obj.name
+        elif own_geometry and parent.type != "MESH":  # a curve or text object's evaluated mesh
+            base = parent.name
+        else:
+            base = f"{obj.data.name if own_geometry else obj.name} in {parent.name}"
         n = self._names.get(base, 0)
         self._names[base] = n + 1
         return base if n == 0 else f"{base} #{n + 1}"

@@ -334,3 +334,59 @@ def test_scene_file_of_a_translation_round_trips(scene, tmp_path):
     assert write_scene_file(tmp_path / "c.rbscene", content.data, content.notes) == id_a
     assert sim_core.Scene.from_scene_file(tmp_path / "a.rbscene").content_hash == \
         sim_core.Scene.from_scene_data(first.scene_data).content_hash
+
+
+def instance_on_points_tree(instance_object):
+    """A geometry-nodes group: the modified mesh plus an instance of ``instance_object`` on each point."""
+    tree = bpy.data.node_groups.new("Scatter", "GeometryNodeTree")
+    tree.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    tree.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    nodes, links = tree.nodes, tree.links
+    group_in, group_out = nodes.new("NodeGroupInput"), nodes.new("NodeGroupOutput")
+    on_points = nodes.new("GeometryNodeInstanceOnPoints")
+    info = nodes.new("GeometryNodeObjectInfo")
+    info.inputs["Object"].default_value = instance_object
+    join = nodes.new("GeometryNodeJoinGeometry")
+    links.new(group_in.outputs[0], on_points.inputs["Points"])
+    links.new(info.outputs["Geometry"], on_points.inputs["Instance"])
+    links.new(on_points.outputs[0], join.inputs[0])
+    links.new(group_in.outputs[0], join.inputs[0])
+    links.new(join.outputs[0], group_out.inputs[0])
+    return tree
+
+
+def test_geometry_nodes_instances_text_holdouts_and_camera_visibility(scene):
+    grid = bpy.data.meshes.new("Grid")
+    grid.from_pydata([(x, y, 0.0) for y in (-2, 0, 2) for x in (-2, 0, 2)], [],
+                     [(0, 1, 4, 3), (1, 2, 5, 4), (3, 4, 7, 6), (4, 5, 8, 7)])
+    scatter = add(scene, "Scatter", grid, (0, 0, 0))
+    pebble = add(scene, "Pebble", sphere_mesh("PebbleMesh"), (0, 0, -50))
+    pebble.hide_render = True  # only its instances render
+    scatter.modifiers.new("Scatter", "NODES").node_group = instance_on_points_tree(pebble)
+    text = add(scene, "Label", bpy.data.curves.new("Label", "FONT"), (0, 3, 0))
+    text.data.body = "Hi"
+    held = add(scene, "Held", cube_mesh("HeldMesh"), (5, 0, 0))
+    held.is_holdout = True
+    ghost = add(scene, "Ghost", cube_mesh("GhostMesh"), (-5, 0, 0))
+    ghost.visible_camera = False
+
+    t = translate_for_render(scene)
+    sd = t.scene_data
+    names = sd.object_names
+    pebbles = [n for n in names if n.startswith("PebbleMesh in Scatter")]
+    assert len(pebbles) == 9, names  # one instance on each grid point, the source itself hidden
+    # nine instances, one mesh read for them all
+    pebble_triangles = [int(np.count_nonzero(sd.object_ids == names.index(n))) for n in pebbles]
+    assert len(set(pebble_triangles)) == 1
+    assert t.stats["mesh_reads"] == t.stats["unique_meshes"] == 4  # grid, pebble, text, held cube
+    # the text renders once (as the mesh Blender evaluates it to), not twice
+    text_objects = [n for n in names if "Label" in n]
+    assert text_objects == ["Label"]
+    text_eval = text.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    expected = len(text_eval.to_mesh().loop_triangles)
+    text_eval.to_mesh_clear()
+    assert int(np.count_nonzero(sd.object_ids == names.index(text_objects[0]))) == expected
+    # a holdout renders as a plain surface, an object invisible to camera rays is left out: both noted
+    assert "Held" in names and "Ghost" not in names
+    notes = t.notes_text(limit=50)
+    assert "'Held': holdout" in notes and "'Ghost': invisible to camera" in notes
