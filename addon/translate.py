@@ -72,7 +72,8 @@ def translate(depsgraph: bpy.types.Depsgraph, *, camera: bool = True) -> Transla
                         else "constant" if data.environment is not None else "default"),
         "seconds": round(time.perf_counter() - start, 4),
     }
-    return Translation(scene_data=data, notes=reader.assembler.notes.as_list(), stats=stats)
+    return Translation(scene_data=data, notes=reader.assembler.notes.as_list(), stats=stats,
+                       pass_indices=list(reader.assembler.pass_indices))
 
 
 def translate_for_render(scene: bpy.types.Scene | None = None,
@@ -165,7 +166,7 @@ class _Reader:
             name = self._instance_name(inst)
             has_uvs = self.assembler.meshes[key].uvs is not None
             self.assembler.add_instance(key, np.array(inst.matrix_world, dtype=np.float64),
-                                        self.slot_materials(obj, has_uvs), name)
+                                        self.slot_materials(obj, has_uvs), name, obj.pass_index)
 
     def _holdout(self, obj: bpy.types.Object) -> bool:
         try:

@@ -111,10 +111,10 @@ def test_assembler_shares_mesh_arrays_between_instances():
     red, blue = make("red", (1, 0, 0)), make("blue", (0, 0, 1))
     m2 = np.eye(4)
     m2[:3, 3] = [5, 0, 0]
-    asm.add_instance("quad", np.eye(4), [red, blue], "a")
+    asm.add_instance("quad", np.eye(4), [red, blue], "a", pass_index=3)
     asm.add_instance("quad", m2, [blue], "b")  # one slot: both triangles blue
     data = asm.build()
-    assert data.object_names == ["a", "b"]
+    assert data.object_names == ["a", "b"] and asm.pass_indices == [3, 0]
     assert data.triangles.shape == (4, 3) and data.positions.shape == (8, 3)
     assert data.material_ids.tolist() == [red, blue, blue, blue]
     assert data.object_ids.tolist() == [0, 0, 1, 1]

@@ -367,6 +367,7 @@ def test_geometry_nodes_instances_text_holdouts_and_camera_visibility(scene):
     text.data.body = "Hi"
     held = add(scene, "Held", cube_mesh("HeldMesh"), (5, 0, 0))
     held.is_holdout = True
+    held.pass_index = 7
     ghost = add(scene, "Ghost", cube_mesh("GhostMesh"), (-5, 0, 0))
     ghost.visible_camera = False
 
@@ -386,6 +387,9 @@ def test_geometry_nodes_instances_text_holdouts_and_camera_visibility(scene):
     expected = len(text_eval.to_mesh().loop_triangles)
     text_eval.to_mesh_clear()
     assert int(np.count_nonzero(sd.object_ids == names.index(text_objects[0]))) == expected
+    # the Object Index pass value of each object (an instance takes its instanced object's)
+    assert len(t.pass_indices) == len(names)
+    assert t.pass_indices[names.index("Held")] == 7 and t.pass_indices[names.index(pebbles[0])] == 0
     # a holdout renders as a plain surface, an object invisible to camera rays is left out: both noted
     assert "Held" in names and "Ghost" not in names
     notes = t.notes_text(limit=50)

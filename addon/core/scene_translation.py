@@ -91,12 +91,14 @@ class Translation:
     """The translator's result: scene data ready for ``sim_core.Scene.from_scene_data`` plus notes.
 
     ``stats``: counts of what was read (objects, instances, unique meshes, triangles, lights, ...) and
-    ``seconds`` spent; ``frame`` the scene frame the depsgraph was evaluated at.
+    ``seconds`` spent; ``frame`` the scene frame the depsgraph was evaluated at. ``pass_indices``: each
+    object's (instance's) Object Index pass value, indexed like ``scene_data.object_names``.
     """
 
     scene_data: SceneData
     notes: list[Note] = field(default_factory=list)
     stats: dict[str, Any] = field(default_factory=dict)
+    pass_indices: list[int] = field(default_factory=list)  # Blender's Object Index, by object id
 
     @property
     def warnings(self) -> list[Note]:
@@ -213,6 +215,7 @@ class Instance:
     matrix: np.ndarray
     slot_materials: tuple[int, ...]
     name: str
+    pass_index: int = 0
 
 
 # -- materials -----------------------------------------------------------------------------------------
@@ -453,6 +456,7 @@ class SceneAssembler:
         self.environment_strength = 1.0
         self.environment_rotation = 0.0
         self.cameras: list[Any] = []
+        self.pass_indices: list[int] = []  # of the built scene's objects (after build)
 
     def material_index(self, key: Any, make: Any) -> int:
         """The scene index of the material known by ``key`` (``make()`` builds it the first time)."""
@@ -507,11 +511,12 @@ class SceneAssembler:
     def add_mesh(self, key: Any, mesh: MeshArrays) -> None:
         self.meshes[key] = mesh
 
-    def add_instance(self, mesh_key: Any, matrix: Any, slot_materials: Sequence[int], name: str) -> None:
+    def add_instance(self, mesh_key: Any, matrix: Any, slot_materials: Sequence[int], name: str,
+                     pass_index: int = 0) -> None:
         if mesh_key not in self.meshes:
             raise KeyError(f"mesh {mesh_key!r} was not added")
         self.instances.append(Instance(mesh_key, np.asarray(matrix, dtype=np.float64).reshape(4, 4),
-                                       tuple(int(i) for i in slot_materials), name))
+                                       tuple(int(i) for i in slot_materials), name, int(pass_index)))
 
     def add_light(self, light: Light | None) -> None:
         if light is not None:
@@ -522,6 +527,7 @@ class SceneAssembler:
         from sim_core.scene_data import SceneData
 
         positions, normals, uvs, triangles, material_ids, object_ids, names = [], [], [], [], [], [], []
+        pass_indices: list[int] = []
         offset = 0
         for inst in self.instances:
             mesh = self.meshes[inst.mesh_key]
@@ -541,9 +547,11 @@ class SceneAssembler:
             material_ids.append(table[slots])
             object_ids.append(np.full(t.shape[0], len(names), dtype=np.uint32))
             names.append(inst.name)
+            pass_indices.append(inst.pass_index)
             offset += p.shape[0]
         if not names:
             raise ValueError("nothing to render: the scene has no visible geometry for rendering")
+        self.pass_indices = pass_indices
         if len(self.lights) > 32:
             kept = sorted(self.lights, key=lambda lt: -lt.intensity)[:32]
             self.notes.warn("lights", f"{len(self.lights)} lights, the simulator takes 32: kept the 32 "
