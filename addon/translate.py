@@ -111,12 +111,15 @@ def translate_for_render(scene: bpy.types.Scene | None = None,
         scene.render.use_compositing = False
         scene.render.use_sequencer = False
         with bpy.context.temp_override(scene=scene, view_layer=layer):
-            bpy.ops.render.render(layer=layer.name, scene=scene.name)
+            result = bpy.ops.render.render(layer=layer.name, scene=scene.name)
     finally:
         scene.render.engine, scene.render.use_compositing, scene.render.use_sequencer = saved
         bpy.utils.unregister_class(RENDER_BUDGET_translate_engine)
     if "error" in outcome:
         raise outcome["error"]
+    if "FINISHED" not in result:
+        raise RuntimeError("Blender did not start a render to translate the scene (is a render already "
+                           "running?); try again when it has finished")
     if "translation" not in outcome:
         raise RuntimeError(f"Blender rendered no view layer named {layer.name!r}: is it enabled for "
                            "rendering?")
