@@ -406,8 +406,8 @@ def environment_map(pixels: np.ndarray, name: str, notes: Notes) -> np.ndarray:
     finite = np.isfinite(rgb)
     negative, bad = int(np.count_nonzero(finite & (rgb < 0))), int(np.count_nonzero(~finite))
     if negative or bad:
-        notes.info(f"world image {name!r}", f"clamped {negative} negative and {bad} non-finite texel "
-                                             "value(s)")
+        notes.warn(f"world image {name!r}", f"clamped {negative} negative and {bad} non-finite texel "
+                                             "value(s) to 0 (or the largest finite value for +inf)")
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # the note says it
             rgb = finite_clamped(rgb, name)
