@@ -402,8 +402,6 @@ class _Reader:
             self.notes.info(subject, "light node tree ignored: its colour and power are used")
         if not light.use_shadow:
             self.notes.info(subject, "'cast shadow' off is not simulated: it casts shadows")
-        if light.type == "AREA" and not getattr(light, "normalize", True):
-            self.notes.warn(subject, "'normalize' off is not simulated: power read as if normalised")
         self.assembler.add_light(light_from_inputs(LightInputs(
             name=obj.name, kind=light.type, matrix_world=matrix, energy=float(light.energy),
             color=tuple(color), shadow_soft_size=float(getattr(light, "shadow_soft_size", 0.0)),
@@ -411,6 +409,7 @@ class _Reader:
             spot_blend=float(getattr(light, "spot_blend", 0.15)), angle=float(getattr(light, "angle", 0.0)),
             shape=str(getattr(light, "shape", "SQUARE")), size=float(getattr(light, "size", 0.0)),
             size_y=float(getattr(light, "size_y", 0.0)), exposure=float(getattr(light, "exposure", 0.0)),
+            normalize=bool(getattr(light, "normalize", True)),
         ), self.notes))
 
     # world --------------------------------------------------------------------------------------------

@@ -167,6 +167,10 @@ def test_lights_in_cycles_units():
                                          size=1.0, size_y=0.5), notes)
     assert area.kind == "area" and (area.size, area.size_y) == (2.0, 0.5)
     assert area.intensity == pytest.approx(100.0 / (math.pi * 1.0))
+    # "Normalize" off (checked against Cycles: a 3 x 0.6 m rectangle renders 1.80x brighter): power per m^2
+    raw = light_from_inputs(LightInputs("a", "AREA", np.diag([2.0, 1.0, 1.0, 1.0]), 100.0, shape="RECTANGLE",
+                                        size=1.0, size_y=0.5, normalize=False), notes)
+    assert raw.intensity == pytest.approx(area.intensity * 2.0 * 0.5)
     assert light_from_inputs(LightInputs("off", "POINT", np.eye(4), 0.0), notes) is None
     assert light_from_inputs(LightInputs("flat", "AREA", np.eye(4), 10.0, size=0.0), notes) is None
     text = " | ".join(str(n) for n in notes)

@@ -12,6 +12,7 @@ sim_core is imported inside functions: the add-on registers without loading the 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 from collections.abc import Callable, Sequence
@@ -369,6 +370,7 @@ class LightInputs:
     size: float = 0.0
     size_y: float = 0.0
     exposure: float = 0.0
+    normalize: bool = True  # area lights: False makes ``energy`` the power per m^2 of the emitter
 
 
 def light_from_inputs(inputs: LightInputs, notes: Notes) -> Light | None:
@@ -383,7 +385,7 @@ def light_from_inputs(inputs: LightInputs, notes: Notes) -> Light | None:
         return None
     colour = _colour(inputs.color, "colour", subject, notes)
     try:
-        return Light.from_blender(
+        light = Light.from_blender(
             inputs.kind, inputs.matrix_world, float(inputs.energy), colour,
             shadow_soft_size=max(0.0, float(inputs.shadow_soft_size)), spot_size=float(inputs.spot_size),
             spot_blend=min(1.0, max(0.0, float(inputs.spot_blend))), angle=max(0.0, float(inputs.angle)),
@@ -392,6 +394,10 @@ def light_from_inputs(inputs: LightInputs, notes: Notes) -> Light | None:
     except ValueError as exc:
         notes.warn(subject, f"left out: {exc}")
         return None
+    if light.kind == "area" and not inputs.normalize:
+        # Cycles without "Normalize": the power scales with the emitter's area (after the object's scale)
+        light = dataclasses.replace(light, intensity=light.intensity * light.area)
+    return light
 
 
 # -- world ---------------------------------------------------------------------------------------------
