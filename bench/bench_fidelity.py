@@ -29,18 +29,8 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp(prefix="bench-fidelity-"))
 
-LUMA = np.array([0.2126, 0.7152, 0.0722])
-
-
-def display(image: np.ndarray) -> np.ndarray:
-    from service.evaluation import tone_map
-
-    return tone_map(image)
-
-
-def luminance(image: np.ndarray) -> float:
-    """Mean Rec. 709 luma of the display image (what the artist sees)."""
-    return float((display(image) @ LUMA).mean())
+sys.path.insert(0, str(ROOT / "tests"))
+import cycles_reference  # noqa: E402  (the Cycles reference set-up and the fidelity metrics, shared with tests)
 
 
 def open_scene(blend: Path):
@@ -68,51 +58,20 @@ def simulate(scene, width: int, height: int) -> tuple[np.ndarray, float, list, d
 
 
 def cycles(scene, width: int, height: int, samples: int, depth: int) -> tuple[np.ndarray, float]:
-    """Cycles' linear render of the scene's own camera (EXR, read back; row 0 at the top)."""
-    import bpy
-    import OpenEXR
-
-    r = scene.render
-    r.engine = "CYCLES"
-    r.resolution_x, r.resolution_y, r.resolution_percentage = width, height, 100
-    r.use_compositing = False
-    r.use_sequencer = False
-    cy = scene.cycles
-    cy.device = "CPU"
-    cy.samples = samples
-    cy.use_adaptive_sampling = False
-    cy.use_denoising = True
-    cy.denoiser = "OPENIMAGEDENOISE"
-    cy.seed = 1
-    cy.diffuse_bounces = 0
-    cy.glossy_bounces = depth
-    cy.transmission_bounces = depth
-    cy.volume_bounces = 0
-    cy.max_bounces = depth
-    scene.view_settings.view_transform = "Standard"
-    scene.view_settings.look = "None"
-    scene.view_settings.exposure = 0.0
-    scene.view_settings.gamma = 1.0
-    path = Path(tempfile.mkdtemp(prefix="bench-fidelity-")) / "cycles.exr"
-    r.image_settings.file_format = "OPEN_EXR"
-    r.image_settings.color_depth = "32"
-    r.filepath = str(path)
+    """Cycles' linear render of the scene's own camera (denoised; row 0 at the top) and its time."""
+    cycles_reference.cycles_settings(scene, width, height, samples, depth=depth, denoise=True)
     t0 = time.perf_counter()
-    bpy.ops.render.render(write_still=True)
-    elapsed = time.perf_counter() - t0
-    with OpenEXR.File(str(path)) as f:
-        channels = f.channels()
-        key = "RGBA" if "RGBA" in channels else "RGB"
-        image = np.asarray(channels[key].pixels, dtype=np.float64)[..., :3]
-    path.unlink()
-    return image, elapsed
+    image = cycles_reference.cycles_render(scene)
+    return image, time.perf_counter() - t0
 
 
 def save_pair(out: Path, name: str, simulated: np.ndarray, reference: np.ndarray) -> None:
     """simulator | Cycles, display-transformed, as one PNG."""
     from PIL import Image
 
-    pair = np.concatenate([display(simulated), display(reference)], axis=1)
+    from service.evaluation import tone_map
+
+    pair = np.concatenate([tone_map(simulated), tone_map(reference)], axis=1)
     out.mkdir(parents=True, exist_ok=True)
     Image.fromarray(np.round(pair * 255).astype(np.uint8)).save(out / f"{name}.png")
 
@@ -132,7 +91,6 @@ def main() -> None:
 
     import sim_core
     from blend_scenes.build import build
-    from service.metrics import ssim
 
     build(names, args.scenes)
     depth = sim_core.RenderSettings.max_quality().max_depth
@@ -147,9 +105,9 @@ def main() -> None:
         scene = open_scene(args.scenes / name / "scene.blend")
         simulated, sim_s, notes, stats = simulate(scene, args.width, args.height)
         reference, cycles_s = cycles(scene, args.width, args.height, args.samples, depth)
-        lum_c, lum_s = luminance(reference), luminance(simulated)
-        error = 1.0 - ssim(display(reference), display(simulated), data_range=1.0)
-        print(f"| {name} | {stats['triangles']:,} | {lum_c:.3f} | {lum_s:.3f} | {lum_s / lum_c:.3f} | "
+        lum_c, lum_s = (cycles_reference.display_luminance(x) for x in (reference, simulated))
+        ratio, error = cycles_reference.fidelity(reference, simulated)
+        print(f"| {name} | {stats['triangles']:,} | {lum_c:.3f} | {lum_s:.3f} | {ratio:.3f} | "
               f"{error:.3f} | {cycles_s:.1f} | {sim_s:.1f} |", flush=True)
         remarks[name] = [n for n in notes if n.severity == "warning"]
         if args.out is not None:
