@@ -247,3 +247,21 @@ def test_is_scene_file_tells_formats_apart(tmp_path: Path):
     assert not is_scene_file(plain_zip.getvalue())
     assert not is_scene_file(b"glTF" + b"\0" * 60)
     assert not is_scene_file(tmp_path / "missing")
+
+
+def test_jobs_load_scene_files_by_content(tmp_path: Path):
+    """What the CLI, local jobs and evaluation workers do with a scene path: a scene file is recognised by
+    its bytes whatever its name, and a worker that gets the pickled handle reloads the same scene."""
+    import pickle
+
+    from service import evaluation
+
+    path = tmp_path / "upload.glb"  # a misleading name: the content decides
+    write_scene_file(path, sample_scene())
+    handle = evaluation.load_scene(path, ship_bytes=True)
+    expected = sim_core.Scene.from_scene_data(sample_scene()).content_hash
+    assert handle.content_hash == expected
+    clone = pickle.loads(pickle.dumps(handle))
+    evaluation._SCENES.clear()  # as in a fresh worker process
+    path.unlink()  # a worker without the file gets the shipped bytes
+    assert clone.get().content_hash == expected
