@@ -1,5 +1,6 @@
-"""The scene as the service reads it: one glTF export for the add-on's jobs and previews and for the
-scene generators (``blend_scenes``), so what the simulator sees is made the same way everywhere."""
+"""The scene as glTF: the one export with the extras sim_core's loader reads, used by the scene generators
+(``blend_scenes``: the scene.glb that ``make demo``, the CLI and glTF uploads read). The add-on's own jobs
+and previews send the depsgraph translation instead (``ops_optimize.export_scene``)."""
 
 from __future__ import annotations
 

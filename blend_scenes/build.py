@@ -1,10 +1,13 @@
 """Build the test scenes: ``python -m blend_scenes.build [--scene NAME ...] [--out DIR] [--force]``.
 
-For each scene it writes ``<out>/<name>/{scene.blend, scene.glb, path.json, stats.json}`` (plus any extra
-file such as the valley's environment EXR). Builds are cached: a scene is rebuilt only when the hash of its
-generator, the shared helpers, this driver and the bundled models it names changes (stored in stats.json,
-which is written last, so an interrupted build is redone). Statistics are measured on the exported .glb
-through sim_core's own loader, so they describe exactly what the simulator will see.
+For each scene it writes ``<out>/<name>/{scene.blend, scene.glb, scene.rbscene, path.json, stats.json}``
+(plus any extra file such as the valley's environment EXR). ``scene.rbscene`` is the add-on's depsgraph
+translation at render level (what the add-on's jobs optimise and the render engine renders; summarised as
+``translated`` in stats.json); ``scene.glb`` is what a REST user would upload. Builds are cached: a scene
+is rebuilt only when the hash of its generator, the shared helpers, this driver, the translator, the scene
+file format and the bundled models it names changes (stored in stats.json, which is written last, so an
+interrupted build is redone). The other statistics are measured on the exported .glb through sim_core's own
+loader.
 """
 
 from __future__ import annotations
@@ -33,8 +36,12 @@ from .scenes import SCENES
 PACKAGE_DIR = Path(__file__).resolve().parent
 REPO_ROOT = PACKAGE_DIR.parent
 DEFAULT_OUT = PACKAGE_DIR / "build"
-SCENE_FILES = ("scene.blend", "scene.glb", "path.json", "stats.json")
-#: The add-on's helpers the build uses (path sampling, fov, export): part of every scene's hash.
+#: What scene.rbscene depends on besides the generator: the depsgraph translator and the file format.
+TRANSLATOR_SOURCES = (REPO_ROOT / "addon" / "translate.py",
+                      REPO_ROOT / "addon" / "core" / "scene_translation.py",
+                      REPO_ROOT / "sim_core" / "python" / "sim_core" / "loaders" / "scene_file.py")
+SCENE_FILES = ("scene.blend", "scene.glb", "scene.rbscene", "path.json", "stats.json")
+#: The add-on's helpers the build uses (path sampling, fov, glTF export): part of every scene's hash.
 ADDON_SOURCES = tuple(REPO_ROOT / f for f in ("addon/camera_path.py", "addon/scene_export.py",
                                               "addon/core/path_sampling.py", "service/store/camera.py"))
 
@@ -43,7 +50,7 @@ def generator_hash(name: str) -> str:
     """Hash of everything that determines a scene's content (sources and the models it loads)."""
     h = hashlib.sha256()
     gen = PACKAGE_DIR / "scenes" / f"{name}.py"
-    sources = [gen, PACKAGE_DIR / "common.py", PACKAGE_DIR / "build.py", *ADDON_SOURCES]
+    sources = [gen, PACKAGE_DIR / "common.py", PACKAGE_DIR / "build.py", *TRANSLATOR_SOURCES, *ADDON_SOURCES]
     text = gen.read_text()
     models = sorted(set(re.findall(r"[\"']([\w-]+\.obj)[\"']", text)))  # quoted model file names
     sources += [REPO_ROOT / "assets" / "models" / m for m in models]
@@ -161,6 +168,7 @@ def build_scene(name: str, out_dir: Path) -> dict[str, Any]:
     path = compact(sample_animation(bpy.context.scene, spec.camera))
     path.save(scene_dir / "path.json")
     export_glb(bpy.context.scene, scene_dir / "scene.glb")
+    translated = common.export_scene_file(scene_dir / "scene.rbscene")
     bpy.ops.wm.save_as_mainfile(filepath=str(scene_dir / "scene.blend"), compress=True, check_existing=False)
     stats = {"name": name, "description": spec.description, **scene_statistics(scene_dir / "scene.glb")}
     stats.update({
@@ -169,6 +177,7 @@ def build_scene(name: str, out_dir: Path) -> dict[str, Any]:
         "duration_s": path.frames[-1].time,
         "resolution": list(path.frames[0].resolution),
         "extra_files": [p.name for p in spec.extra_files],
+        "translated": translated,
         "camera_min_clearance_m": round(clearance, 3),
         "blender_version": bpy.app.version_string,
         "build_seconds": round(time.perf_counter() - start, 2),

@@ -413,7 +413,7 @@ def test_panel_and_preferences_refer_to_existing_properties(ext) -> None:
 
 
 def test_the_one_export_carries_the_extras_the_simulator_reads(scene, tmp_path) -> None:
-    """The add-on's export (also the scene generators') keeps custom properties as glTF extras: the
+    """The one glTF export (the scene generators' scene.glb) keeps custom properties as glTF extras: the
     environment colour and a light's radius reach sim_core's loader; the add-on's own settings group,
     store included, stays out of the file."""
     from sim_core.loaders import load_gltf
