@@ -16,6 +16,9 @@ from pathlib import Path
 import bpy
 import numpy as np
 from mathutils import Euler, Matrix, Vector
+from sim_core.loaders.scene_file import write_scene_file
+
+from addon.translate import translate_for_render
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 MODELS_DIR = REPO_ROOT / "assets" / "models"
@@ -355,10 +358,6 @@ def camera_clearance(cam: bpy.types.Object, every: int = 10) -> tuple[float, lis
 def export_scene_file(path: Path) -> dict:
     """The scene as the add-on sends it to jobs (and the render engine renders it): the depsgraph translator
     at render level, written as a render-budget scene file. Returns a summary for stats.json."""
-    from sim_core.loaders.scene_file import write_scene_file
-
-    from addon.translate import translate_for_render
-
     translation = translate_for_render(bpy.context.scene)
     scene_id = write_scene_file(path, translation.scene_data, translation.notes)
     data = translation.scene_data

@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 from sim_core.image import linear_to_srgb, upsample_bilinear
+from sim_core.loaders.scene_file import SUFFIX, is_scene_file
 
 import sim_core
 from service.eval_cache import CacheKey, EvalCache, Evaluation
@@ -160,10 +161,6 @@ def _load_scene(path: str, data: bytes | None) -> Any:
 def read_scene(path: str | Path) -> Any:
     """A ``sim_core.Scene`` from a file: a render-budget scene file (known by its content, whatever its
     name: what the add-on sends), ``.glb``/``.gltf`` or ``.obj``."""
-    from sim_core.loaders.scene_file import SUFFIX, is_scene_file
-
-    import sim_core
-
     p = Path(path)
     if is_scene_file(p):
         return sim_core.Scene.from_scene_file(p)

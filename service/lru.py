@@ -36,6 +36,10 @@ class LRUCache(Generic[K, V]):
             while len(self._items) > self.capacity:
                 self._items.popitem(last=False)
 
+    def clear(self) -> None:
+        with self._lock:
+            self._items.clear()
+
     def __iter__(self) -> Iterator[K]:
         """The keys, oldest first (a snapshot)."""
         with self._lock:

@@ -131,7 +131,10 @@ class ServiceClient:
         if data[:4] == b"glTF":
             content_type = "model/gltf-binary"
         else:
-            from sim_core.loaders.scene_file import MEDIA_TYPE, is_scene_file
+            from sim_core.loaders.scene_file import (  # lazy: optional, not in a stock Blender
+                MEDIA_TYPE,
+                is_scene_file,
+            )
 
             if not is_scene_file(data[:64]):
                 raise ValueError(f"{scene_path} is neither a render-budget scene file nor a binary glTF "

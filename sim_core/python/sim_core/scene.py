@@ -16,6 +16,7 @@ import numpy as np
 
 from . import _core
 from .loaders import load_gltf, load_obj
+from .loaders.scene_file import Limits, load_scene_file
 from .scene_data import ALPHA_MODES, WRAPS, CameraData, Light, Material, SceneData, Texture, finite_clamped
 
 # Blender's default world colour: what a scene without an environment sees.
@@ -343,8 +344,6 @@ class Scene:
     def from_scene_file(cls, path: str | os.PathLike[str], **limits: Any) -> Scene:
         """A render-budget scene file (what the add-on's depsgraph translator writes; ``limits``: fields of
         ``sim_core.loaders.scene_file.Limits``)."""
-        from .loaders.scene_file import Limits, load_scene_file
-
         return cls.from_scene_data(load_scene_file(path, limits=Limits(**limits)))
 
     @classmethod
