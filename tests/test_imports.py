@@ -182,7 +182,8 @@ def test_imports_inside_functions_are_only_the_lazy_kind_and_say_why() -> None:
                 continue
             external = [n.split(".")[0] for n in _names(node)]
             internal = _resolve(m, path, node)
-            core_in_addon = m.startswith("addon.") and all(t.startswith("sim_core") for t in internal or ["-"])
+            in_addon = m.startswith("addon.")
+            core_in_addon = in_addon and all(t.startswith("sim_core.") for t in internal or ["-"])
             heavy = all(n in LAZY_ALLOWED for n in external) and all(t in bound for t in internal)
             allowed = guarded or core_in_addon or (heavy and bool(external or internal))
             above = lines[max(0, node.lineno - 4):node.lineno]
