@@ -7,7 +7,6 @@ import base64
 import io
 import json
 import math
-import os
 import struct
 from pathlib import Path
 
@@ -321,21 +320,15 @@ def _external_buffer(b: _Builder, path: Path, uri: str) -> Path:
     return path
 
 
-@pytest.fixture
-def opened_files() -> list[str]:
-    """Every file this process opens while the test runs (Python's ``open`` audit event)."""
-    import sys
-
-    seen: list[str] = []
-    active = [True]
-
-    def hook(event: str, args: tuple) -> None:
-        if active[0] and event == "open" and isinstance(args[0], str | bytes | Path):
-            seen.append(str(Path(os.fsdecode(args[0])).resolve()))
-
-    sys.addaudithook(hook)  # audit hooks cannot be removed: switch it off instead
-    yield seen
-    active[0] = False
+def _scene_folder_beside_a_secret(tmp_path: Path) -> tuple[_Builder, Path, Path]:
+    """A one-triangle document, a file outside the scene's folder holding its geometry, and the folder."""
+    b = _Builder()
+    _one_triangle(b)
+    secret = tmp_path / "secret.bin"
+    secret.write_bytes(bytes(b.blob))
+    scene_dir = tmp_path / "scene"
+    scene_dir.mkdir()
+    return b, secret, scene_dir
 
 
 def test_external_buffer_in_the_scene_folder(tmp_path: Path) -> None:
@@ -355,12 +348,7 @@ def test_external_files_stay_inside_the_scene_folder(tmp_path: Path, uri: str,
                                                      opened_files: list[str]) -> None:
     """Relative references are resolved (``..``, percent-encoding, symbolic links) and must stay in the
     scene's folder; the message names the reference, not where it leads, and nothing outside is read."""
-    b = _Builder()
-    _one_triangle(b)
-    secret = tmp_path / "secret.bin"
-    secret.write_bytes(bytes(b.blob))
-    scene_dir = tmp_path / "scene"
-    scene_dir.mkdir()
+    b, secret, scene_dir = _scene_folder_beside_a_secret(tmp_path)
     (scene_dir / "link.bin").symlink_to(secret)
     uri = uri.replace("SECRET_ABSOLUTE", str(secret))
     path = _external_buffer(b, scene_dir / "t.gltf", uri)
@@ -388,17 +376,12 @@ def test_missing_external_buffer_names_the_reference_only(tmp_path: Path) -> Non
 
 
 @pytest.mark.parametrize("what", ["buffer", "image", "environment"])
-@pytest.mark.parametrize("reference", ["geometry.bin", "ABSOLUTE", "../outside.bin", "%2e%2e/outside.bin"])
+@pytest.mark.parametrize("reference", ["geometry.bin", "ABSOLUTE", "../secret.bin", "%2e%2e/secret.bin"])
 def test_self_contained_refuses_every_external_reference_before_reading(
         tmp_path: Path, what: str, reference: str, opened_files: list[str]) -> None:
     """Uploads (``self_contained=True``): only the binary chunk and data: URIs. Any other reference, be
     it next to the file or not, is refused before any file but the scene itself is opened."""
-    b = _Builder()
-    _one_triangle(b)
-    outside = tmp_path / "outside.bin"
-    outside.write_bytes(bytes(b.blob))
-    scene_dir = tmp_path / "upload"
-    scene_dir.mkdir()
+    b, outside, scene_dir = _scene_folder_beside_a_secret(tmp_path)
     (scene_dir / "geometry.bin").write_bytes(bytes(b.blob))
     reference = reference.replace("ABSOLUTE", str(outside))
     if what == "buffer":
