@@ -31,13 +31,13 @@ from typing import Any
 
 import numpy as np
 
-from service.camera_path import check_vfov
 from service.eval_cache import CacheKey, EvalCache, Evaluation
 from service.executors import Executor, InProcessExecutor
 from service.images import linear_to_srgb
 from service.metrics import flip, ssim
 from service.options import METRICS
 from service.params import Indices, ParameterSpace
+from service.store.camera import check_fov
 
 #: Bumped whenever the pipeline that turns renders into errors changes (part of every cache key).
 PIPELINE_VERSION = "v1"
@@ -96,7 +96,7 @@ class CameraSpec:
             raise ValueError("camera forward must be non-zero")
         if np.linalg.norm(np.cross(self.forward, self.up)) < 1e-9:
             raise ValueError("camera up must not be parallel to forward")
-        check_vfov(self.vfov)  # the limits every layer shares
+        check_fov(self.vfov, "vfov")  # the limits every layer shares
         if int(self.width) < 8 or int(self.height) < 8:
             raise ValueError("evaluation images need at least 8x8 pixels")
         object.__setattr__(self, "width", int(self.width))

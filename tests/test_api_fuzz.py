@@ -27,7 +27,7 @@ from hypothesis import HealthCheck, given, seed, settings
 from hypothesis import strategies as st
 
 from service.api import Settings
-from service.camera_path import MAX_COORDINATE, MIN_AXES_VOLUME, VFOV_MAX, VFOV_MIN
+from service.store.camera import MAX_COORDINATE, MIN_AXES_VOLUME, VFOV_MAX, VFOV_MIN
 
 pytestmark = [pytest.mark.service, pytest.mark.fuzz, pytest.mark.slow]
 

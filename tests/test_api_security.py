@@ -30,7 +30,7 @@ from api_support import (
 )
 
 from service.api import Settings
-from service.camera_path import VFOV_MAX, VFOV_MIN
+from service.store.camera import VFOV_MAX, VFOV_MIN
 
 pytestmark = pytest.mark.service
 

@@ -237,6 +237,9 @@ def _refine_openapi(app: FastAPI, *, bearer: bool) -> None:
                             "description": "invalid request: the details name the fields",
                             "content": {"application/json": {"schema": error_ref}}}
                     for status, answer in operation["responses"].items():
+                        stream = answer.get("content", {}).get("text/event-stream", {})
+                        if "itemSchema" in stream:  # events are described one by one, not as a string
+                            stream.pop("schema", None)
                         if status.startswith(("4", "5")) and "ErrorResponse" in str(answer.get("content")):
                             answer["content"] = {"application/json": {"schema": error_ref}}  # errors are JSON
                             # (FastAPI files them under the route's own media type, e.g. text/event-stream)

@@ -10,8 +10,8 @@ from typing import Annotated, Any
 from fastapi import Depends, Request
 
 from service.jobs import JobManager, SceneCache
-from service.store import ParetoStore
 from service.storage import Storage, StoreRecord
+from service.store import ParetoStore
 
 from .config import Settings
 from .errors import ApiError

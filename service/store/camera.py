@@ -74,7 +74,7 @@ def vec3(v: Any, name: str) -> tuple[float, float, float]:
 def _scale_free(v: tuple[float, float, float], name: str) -> tuple[float, float, float]:
     """Divide by the largest component (so squaring cannot overflow); zero vectors are refused."""
     m = max(abs(v[0]), abs(v[1]), abs(v[2]))
-    if m == 0.0 or m < 1e-300:
+    if m == 0.0:  # any other finite vector scales to unit size (even subnormal ones)
         raise ValueError(f"{name} must be non-zero")
     return v[0] / m, v[1] / m, v[2] / m
 
