@@ -92,7 +92,7 @@ def remove_staged_extension(bpy: ModuleType) -> None:
     (a batch run leaves nothing in the temp dir)."""
     if not _staged:
         return
-    import addon_utils
+    import addon_utils  # lazy: a Blender module, like bpy
 
     addon_utils.disable(f"bl_ext.{STAGED_REPO}.{EXT_ID}", default_set=True)
     repos = bpy.context.preferences.extensions.repos

@@ -36,6 +36,11 @@ class LRUCache(Generic[K, V]):
             while len(self._items) > self.capacity:
                 self._items.popitem(last=False)
 
+    def pop(self, key: K) -> V | None:
+        """Forget ``key`` (its value, or None when it was not cached)."""
+        with self._lock:
+            return self._items.pop(key, None)
+
     def clear(self) -> None:
         with self._lock:
             self._items.clear()

@@ -16,12 +16,6 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = {REPO_ROOT / "addon": "addon", REPO_ROOT / "service": "service", REPO_ROOT / "tools": "tools",
             REPO_ROOT / "blend_scenes": "blend_scenes",
             REPO_ROOT / "sim_core" / "python" / "sim_core": "sim_core"}
-#: Files another change (the service hardening) is rewriting right now; their function-level imports and
-#: the serve options' cycle are cleared when it lands. Every other file is held to the rule below.
-PENDING_FILES = {"service/api/deps.py", "service/api/routes/render.py", "service/api/routes/jobs.py",
-                 "service/api/routes/scenes.py", "service/api/routes/health.py", "service/jobs.py",
-                 "service/cli.py", "sim_core/python/sim_core/loaders/gltf.py"}
-PENDING_CYCLES = [["service.api.server", "service.cli"]]
 #: What may be imported inside a function (besides sim_core inside the add-on, which a stock Blender's
 #: Python may lack): Blender's modules (only inside Blender or the bpy module, some
 #: only with a GPU context), and heavy or optional packages only one code path needs.
@@ -148,13 +142,14 @@ def test_no_import_cycles() -> None:
     """Function-level imports count too: a cycle hidden in a function body is still a cycle."""
     graph = _graph()
     assert "sim_core.loaders.gltf" in graph and "sim_core.image" in graph["sim_core.loaders.gltf"]
-    assert [c for c in _cycles(graph) if c not in PENDING_CYCLES] == []
+    assert _cycles(graph) == []
 
 
 def _bpy_bound(graph_top: dict[str, set[str]]) -> set[str]:
-    """Modules that import a Blender module at their top level, directly or through ours."""
+    """Modules that import a Blender module or a heavy package (LAZY_ALLOWED) at their top level,
+    directly or through ours: importing them lazily is importing that lazily."""
     bound = {m for m in MODULES for node, inside in _imports(m) if not inside
-             and any(n.split(".")[0] in {"bpy", "bmesh", "mathutils"} for n in _names(node))}
+             and any(n.split(".")[0] in LAZY_ALLOWED for n in _names(node))}
     changed = True
     while changed:
         grown = {m for m, targets in graph_top.items() if targets & bound} - bound
@@ -188,9 +183,8 @@ def test_imports_inside_functions_are_only_the_lazy_kind_and_say_why() -> None:
             allowed = guarded or core_in_addon or (heavy and bool(external or internal))
             above = lines[max(0, node.lineno - 4):node.lineno]
             commented = any("#" in line and "lazy" in line.lower() for line in above)
-            where = path.relative_to(REPO_ROOT)
-            if not (allowed and commented) and where.as_posix() not in PENDING_FILES:
-                offenders.append(f"{where}:{node.lineno}")
+            if not (allowed and commented):
+                offenders.append(f"{path.relative_to(REPO_ROOT)}:{node.lineno}")
     assert offenders == []
 
 

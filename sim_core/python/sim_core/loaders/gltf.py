@@ -35,17 +35,20 @@ wrote it, never a resolved path or the bytes of another file.
 from __future__ import annotations
 
 import base64
+import io
 import json
 import math
 import os
 import re
 import struct
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 from urllib.parse import unquote, unquote_to_bytes
 
 import numpy as np
+from PIL import Image
 
 from ..geometry import smooth_normals
 from ..image import load_exr
@@ -497,11 +500,6 @@ class _TextureTable:
         """(H, W, 3|4) uint8, sRGB-encoded (what glTF base-colour images are), row 0 at the top."""
         if source in self._images:
             return self._images[source]
-        import io
-        import warnings
-
-        from PIL import Image
-
         doc = self.doc
         try:
             with warnings.catch_warnings():
