@@ -13,6 +13,7 @@ from service import nsga
 from service.eval_cache import EvalCache
 from service.evaluation import CameraSpec, Evaluator, SceneHandle, evaluate
 from service.executors import DaskExecutor, InProcessExecutor, ProcessPoolExecutor
+from service.lru import LRUCache
 from service.params import default_space
 
 
@@ -161,7 +162,7 @@ def test_a_worker_without_the_scene_file_loads_the_shipped_bytes_and_keeps_no_co
     handle = SceneHandle(path=glb, ship_bytes=True)
     travelled = pickle.loads(pickle.dumps(handle))
     glb.unlink()  # the worker's machine has no such file
-    monkeypatch.setattr(evaluation, "_SCENES", {})
+    monkeypatch.setattr(evaluation, "_SCENES", LRUCache(8))
     travelled._scene = None
     assert str(travelled.get().content_hash) == handle.content_hash
     assert list(system_tmp.iterdir()) == []
