@@ -58,6 +58,24 @@ def test_image_and_aovs_shapes(teapot):
     np.testing.assert_allclose(np.linalg.norm(r.aovs["normal"][hit], axis=-1), 1.0, atol=1e-4)
 
 
+@pytest.mark.parametrize("mode", ["fsaa", "undersample"])
+def test_tile_counters_add_up_to_the_frame(effects, mode):
+    """Every tile's own counters and comparator histogram (cold caches per tile) sum to the frame's, and
+    each row is the tile's: a sample of tiles prices a sample of the frame."""
+    cam = effects_camera(72, 40)
+    r = render(effects, cam, RenderSettings(mode=mode, block=2, shadow_samples=4, max_depth=2), threads=2)
+    tc, th = r.tile_counters, r.tile_histograms
+    assert tc.shape == (len(r.tile_stats), len(COUNTER_NAMES)) and tc.dtype == np.uint64
+    assert th.shape == (len(r.tile_stats), 25)
+    for i, name in enumerate(COUNTER_NAMES):
+        assert int(tc[:, i].sum()) == r.counters[name], name
+    np.testing.assert_array_equal(th.sum(axis=0), r.comparator_histogram)
+    col = {n: i for i, n in enumerate(COUNTER_NAMES)}
+    for row, t in zip(tc, r.tile_stats, strict=True):
+        assert row[col["pixels"]] == t["width"] * t["height"]
+        assert row[col["rays_total"]] == t["rays_total"] and row[col["cache_misses"]] == t["cache_misses"]
+
+
 @pytest.mark.parametrize("mode", ["1spp", "fsaa", "undersample", "supersample"])
 def test_same_image_for_one_and_two_threads(effects, mode):
     cam = effects_camera(80, 48)

@@ -45,8 +45,10 @@ void render_tiles(const Scene& scene, const Camera& camera, const RenderSettings
   trace.validate();
   const std::size_t ntiles = static_cast<std::size_t>(grid.count());
   out->tiles.resize(ntiles);
-  std::vector<Counters> tile_counters(ntiles);
-  std::vector<ComparatorHistogram> tile_hist(ntiles);
+  std::vector<Counters>& tile_counters = out->tile_counters;
+  std::vector<ComparatorHistogram>& tile_hist = out->tile_histograms;
+  tile_counters.assign(ntiles, Counters{});
+  tile_hist.assign(ntiles, ComparatorHistogram{});
   std::vector<std::vector<TracedRay>> tile_rays(trace.log_rays ? ntiles : 0);
   parallel_chunks(ntiles, threads, 1, [&](std::size_t begin, std::size_t end) {
     for (std::size_t t = begin; t < end; ++t) {

@@ -69,6 +69,10 @@ struct RenderOutput {
   Counters counters;
   std::vector<TileStat> tiles;
   ComparatorHistogram histogram{};
+  // Every tile's own counters and comparator histogram, in tile order (each tile's caches start cold, so
+  // these add up exactly to `counters` and `histogram`: a sample of tiles prices a sample of the frame).
+  std::vector<Counters> tile_counters;
+  std::vector<ComparatorHistogram> tile_histograms;
   MultirateState multirate;
   std::vector<TracedRay> rays;  // with TraceOptions::log_rays: every traced ray, tile by tile in tile order
 };

@@ -93,6 +93,9 @@ class RenderResult:
       (-1 on miss), sample_kind (0 traced, 1 interpolated, 2 reused), all at the render resolution.
     counters: activity counts (COUNTER_NAMES). tile_stats: one dict per tile. comparator_histogram:
       closest-hit comparisons by compute-chain length (0..24). multirate_state: pass as `previous=`.
+    tile_counters: (tiles, len(COUNTER_NAMES)) uint64, every tile's own counters in tile order (columns in
+      COUNTER_NAMES order; each tile's caches start cold, so the rows sum to `counters` exactly);
+      tile_histograms: (tiles, 25) uint64, every tile's comparator histogram (rows sum to the frame's).
     """
 
     image: np.ndarray
@@ -106,6 +109,8 @@ class RenderResult:
     render_resolution: tuple[int, int]  # (width, height) actually traced
     extra: dict[str, Any] = field(default_factory=dict)
     rays: TracedRays | None = None  # with render(..., log_rays=True)
+    tile_counters: np.ndarray | None = None
+    tile_histograms: np.ndarray | None = None
 
 
 @dataclass
@@ -197,6 +202,8 @@ def _result(
         camera=camera,
         render_resolution=size,
         rays=rays,
+        tile_counters=np.asarray(d["tile_counters"], dtype=np.uint64),
+        tile_histograms=np.asarray(d["tile_histograms"], dtype=np.uint64),
     )
 
 
