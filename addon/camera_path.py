@@ -6,8 +6,9 @@ from __future__ import annotations
 import bpy
 from mathutils import Matrix
 
+from service import camera_path as path_format
+
 from .core.path_sampling import build_path, camera_lens_from_viewport, frame_times, vertical_fov
-from .core.vendored import camera_path as path_format
 
 PATH_TEXT_PREFIX = "render_budget_path"
 

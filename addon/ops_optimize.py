@@ -18,13 +18,14 @@ from pathlib import Path
 
 import bpy
 
+from service import camera_path as path_format
+from service import pareto_store
+
 from . import playback, service_process
 from .camera_path import load_path, sample_animation, store_path
 from .core.client import ServiceClient
 from .core.job_runner import JobOptions, JobOutcome, JobUpdate, run_job
 from .core.playback_logic import predicted_path_summary, summary_text, validate_budget
-from .core.vendored import camera_path as path_format
-from .core.vendored import pareto_store
 
 log = logging.getLogger(__name__)
 STORE_TEXT_PREFIX = "render_budget_store"

@@ -9,10 +9,11 @@ from typing import Any
 
 import bpy
 
+from service import pareto_store
+
 from . import service_process
 from .camera_path import camera_vfov, render_resolution
 from .core.client import ServiceClient
-from .core.vendored import pareto_store
 from .ops_optimize import check_scene, export_glb
 
 IMAGE_NAME = "Power Budget Preview"

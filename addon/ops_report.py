@@ -12,13 +12,14 @@ from pathlib import Path
 
 import bpy
 
+from service import pareto_store
+
 from . import preferences, service_process
 from .camera_path import load_path
 from .core import report as report_data
 from .core.client import ServiceClient
 from .core.evaluate_path import EvalSpec, camera_payload, evaluate_path, preset_settings
 from .core.playback_logic import PlaybackDriver, validate_budget
-from .core.vendored import pareto_store
 from .ops_preview import upload_scene
 
 log = logging.getLogger(__name__)

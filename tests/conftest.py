@@ -18,3 +18,12 @@ MODELS_DIR = REPO_ROOT / "assets" / "models"
 @pytest.fixture(scope="session")
 def models_dir() -> Path:
     return MODELS_DIR
+
+
+@pytest.fixture(scope="session")
+def extension_zip(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The extension zip for this platform, built once per test session (tools/build_extension.py)."""
+    from tests.addon_support import build_extension
+
+    [path] = build_extension.build(tmp_path_factory.mktemp("dist"))
+    return path

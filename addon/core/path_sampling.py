@@ -7,7 +7,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .vendored import camera_path
+from service import camera_path
 
 #: Blender's 3D viewport treats its lens as if the sensor were 72 mm wide (twice a 36 mm camera sensor).
 VIEWPORT_SENSOR_MM = 72.0

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from .vendored import pareto_store
+from service import pareto_store
 
 BUDGET_MODES = ("POWER", "ERROR")
 

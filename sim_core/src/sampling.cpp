@@ -54,7 +54,9 @@ void render_tile(TileContext& ctx, FrameBuffers& fb, int x0, int y0, int w, int 
 
   auto at = [&](int i, int j) -> std::size_t { return static_cast<std::size_t>(j) * nx + i; };
   auto trace_at = [&](int i, int j) {
-    const std::uint32_t sx = static_cast<std::uint32_t>(x0 * k + i), sy = static_cast<std::uint32_t>(y0 * k + j);
+    // Seeds by position in the full frame: a window of it (Camera::crop_x/y) samples like the whole.
+    const std::uint32_t sx = static_cast<std::uint32_t>((ctx.camera.crop_x + x0) * k + i),
+                        sy = static_cast<std::uint32_t>((ctx.camera.crop_y + y0) * k + j);
     const std::uint32_t key = hash_combine(hash_combine(hash_u32(sx), sy), static_cast<std::uint32_t>(k));
     const float px = static_cast<float>(x0) + (static_cast<float>(i) + 0.5f) * inv_k;
     const float py = static_cast<float>(y0) + (static_cast<float>(j) + 0.5f) * inv_k;

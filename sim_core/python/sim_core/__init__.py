@@ -5,7 +5,7 @@ from ._core import CacheConfig
 from .analysis import SceneAnalysis, analyze, inert_parameters
 from .camera import Camera
 from .energy import EnergyReport, Profile, list_profiles, load_profile, price
-from .render import COUNTER_NAMES, RenderResult, StereoResult, render, render_stereo
+from .render import COUNTER_NAMES, RenderResult, StereoResult, render, render_stereo, render_tiled
 from .scene import Scene, load_exr, smooth_normals
 from .scene_data import CameraData, Light, Material, SceneData
 from .settings import RenderSettings
@@ -35,5 +35,6 @@ __all__ = [
     "price",
     "render",
     "render_stereo",
+    "render_tiled",
     "smooth_normals",
 ]

@@ -115,8 +115,14 @@ void register_render(nb::module_& m) {
       "render_frame",
       [](const Scene& scene, nb::ndarray<const float, nb::shape<4, 3>, nb::c_contig, nb::device::cpu> frame,
          float vfov, int width, int height, const RenderSettings& settings, int threads,
-         const MultirateState* previous, std::uint32_t cache_size, std::uint32_t cache_line, std::uint32_t cache_ways) {
-        const Camera cam = make_camera(frame, vfov, width, height);
+         const MultirateState* previous, std::uint32_t cache_size, std::uint32_t cache_line, std::uint32_t cache_ways,
+         int crop_x, int crop_y, int full_width, int full_height) {
+        Camera cam = make_camera(frame, vfov, width, height);
+        cam.crop_x = crop_x;
+        cam.crop_y = crop_y;
+        cam.full_width = full_width;
+        cam.full_height = full_height;
+        cam.validate();
         const CacheConfig cc{cache_size, cache_line, cache_ways};
         RenderOutput out;
         {
@@ -126,8 +132,10 @@ void register_render(nb::module_& m) {
         return output_to_dict(out);
       },
       "scene"_a, "frame"_a, "vfov"_a, "width"_a, "height"_a, "settings"_a, "threads"_a, "previous"_a.none(),
-      "cache_size"_a, "cache_line"_a, "cache_ways"_a,
-      "Renders one frame. frame rows: position, right, up, forward (unit) of the camera.");
+      "cache_size"_a, "cache_line"_a, "cache_ways"_a, "crop_x"_a = 0, "crop_y"_a = 0, "full_width"_a = 0,
+      "full_height"_a = 0,
+      "Renders one frame, or the width x height window at (crop_x, crop_y) of a full_width x full_height\n"
+      "frame. frame rows: position, right, up, forward (unit) of the camera.");
 
   m.def(
       "render_stereo",

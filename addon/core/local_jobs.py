@@ -1,0 +1,310 @@
+"""Local work with the bundled core, no server: scenes are analysed in this process, and each optimisation
+job runs in a child process (`python -m service.local_job`) started with this interpreter (Blender's own
+Python inside Blender, the bpy module's interpreter in tests).
+
+`LocalClient` answers the subset of `ServiceClient` that `job_runner.run_job` and the operators use
+(`health`, `upload_scene`, `scene`, `submit_job`, `job`, `cancel_job`, `store_text`), with the same
+dictionaries the REST service returns, so a local and a remote job follow one code path.
+
+A job process never outlives its job or this process: it watches a pipe from us (end of file: it kills
+itself and its workers), asks Linux for SIGKILL when its parent dies, leads its own process group (stopping
+it stops its workers), and `close()` (add-on disabled, Blender exiting) stops whatever still runs.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+import uuid
+from collections import OrderedDict
+from pathlib import Path
+from typing import IO, Any
+
+from .client import ServiceError
+
+TERMINAL = ("done", "failed", "cancelled")
+SCENES_KEPT = 8
+JOB_MODULE = "service.local_job"
+
+
+def module_paths() -> list[str]:
+    """Folders that hold the bundled packages (the extension's site-packages inside Blender): the job
+    process gets them first on its path, since it does not run Blender's start-up code."""
+    import service
+    import sim_core
+
+    out: list[str] = []
+    for mod in (service, sim_core):
+        folder = str(Path(mod.__file__).resolve().parent.parent)
+        if folder not in out:
+            out.append(folder)
+    return out
+
+
+def job_command(python: str | Path, args: list[str]) -> list[str]:
+    """`python -I` (no user site, no PYTHON* variables: the user's other Pythons cannot leak in) running
+    the job module with the bundled packages first on the path."""
+    boot = (f"import sys, runpy; sys.path[:0] = {module_paths()!r}; "
+            f"runpy.run_module({JOB_MODULE!r}, run_name='__main__', alter_sys=True)")
+    return [str(python), "-I", "-c", boot, *args]
+
+
+class LocalJobProcess:
+    """One running job: the child process, a reader thread turning its JSON lines into REST-shaped state."""
+
+    def __init__(self, job_id: str, command: list[str], work_dir: Path) -> None:
+        self.id = job_id
+        self.work_dir = work_dir
+        self.store_path = work_dir / "store.json"
+        self.log_path = work_dir / "job.log"
+        self._lock = threading.Lock()
+        self._state: dict[str, Any] = {"id": job_id, "state": "queued", "progress": None, "error": None,
+                                       "store_id": None}
+        log = self.log_path.open("ab")
+        try:
+            posix = os.name == "posix"
+            self.process = subprocess.Popen(
+                command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=log, cwd=str(work_dir),
+                start_new_session=posix,
+                creationflags=0 if posix else subprocess.CREATE_NEW_PROCESS_GROUP)  # type: ignore[attr-defined]
+        finally:
+            log.close()
+        self._reader = threading.Thread(target=self._read, args=(self.process.stdout,),
+                                        name=f"render-budget-job-{job_id[:8]}", daemon=True)
+        self._reader.start()
+
+    @property
+    def pid(self) -> int:
+        return self.process.pid
+
+    def _set(self, **fields: Any) -> None:
+        with self._lock:
+            self._state.update(fields)
+
+    def _read(self, stream: IO[bytes]) -> None:
+        for raw in stream:
+            try:
+                msg = json.loads(raw.decode("utf-8"))
+            except (UnicodeDecodeError, json.JSONDecodeError):
+                continue  # not ours (a library printing to stdout); the log has stderr
+            event = msg.get("event")
+            if event == "started":
+                self._set(state="running")
+            elif event == "progress":
+                self._set(state="running", progress=msg.get("progress"))
+            elif event == "done":
+                self._set(state="done", store_id=str(msg["store_id"]))
+            elif event == "cancelled":
+                self._set(state="cancelled")
+            elif event == "failed":
+                self._set(state="failed", error=str(msg.get("error") or "no message"))
+        code = self.process.wait()
+        with self._lock:
+            if self._state["state"] not in TERMINAL:
+                self._state.update(state="failed", error=f"the local job process exited with status {code}"
+                                   f" before finishing; log: {self.log_path}\n{self.log_tail()}")
+        self._close_stdin()
+
+    def snapshot(self) -> dict[str, Any]:
+        with self._lock:
+            return dict(self._state)
+
+    def running(self) -> bool:
+        return self.process.poll() is None
+
+    def cancel(self) -> None:
+        """Ask the job to stop at its next evaluation batch (what it evaluated stays in the cache)."""
+        try:
+            if self.process.stdin is not None and not self.process.stdin.closed:
+                self.process.stdin.write(b"cancel\n")
+                self.process.stdin.flush()
+        except (OSError, ValueError):
+            pass
+
+    def _close_stdin(self) -> None:
+        try:
+            if self.process.stdin is not None:
+                self.process.stdin.close()
+        except OSError:
+            pass
+
+    def stop(self, timeout_s: float = 5.0) -> None:
+        """End the job now: closing its lifeline makes it kill itself and its workers; if it does not,
+        its whole process group is killed (only while it runs: a reaped group id could be reused)."""
+        if self.running():
+            self._close_stdin()
+            try:
+                self.process.wait(timeout=timeout_s)
+            except subprocess.TimeoutExpired:
+                if os.name == "posix":
+                    os.killpg(self.process.pid, signal.SIGKILL)
+                else:
+                    self.process.kill()
+                self.process.wait(timeout=timeout_s)
+        self._reader.join(timeout=timeout_s)
+        with self._lock:
+            if self._state["state"] not in TERMINAL:
+                self._state["state"] = "cancelled"
+
+    def log_tail(self, lines: int = 12) -> str:
+        try:
+            return "\n".join(self.log_path.read_text(errors="replace").splitlines()[-lines:])
+        except OSError:
+            return ""
+
+
+class LocalClient:
+    """Jobs and scene analysis on this machine with the bundled core; files under `data_dir`."""
+
+    def __init__(self, data_dir: str | Path, *, workers: int = 1, python: str | Path | None = None) -> None:
+        if int(workers) < 1:
+            raise ValueError(f"workers must be >= 1, got {workers}")
+        self.data_dir = Path(data_dir)
+        self.workers = int(workers)
+        self.python = str(python or sys.executable)
+        self.base_url = "local"
+        self.timeout_s = 3600.0
+        self._jobs: dict[str, LocalJobProcess] = {}
+        self._scenes: OrderedDict[str, dict[str, Any]] = OrderedDict()
+        self._lock = threading.Lock()
+
+    # -- what ServiceClient offers ---------------------------------------------------------------------
+    def health(self, timeout_s: float | None = None) -> dict[str, Any]:
+        import sim_core
+
+        return {"status": "ok", "mode": "local", "version": getattr(sim_core, "__version__", "?"),
+                "profiles": list(sim_core.list_profiles()), "workers": self.workers, "python": self.python}
+
+    def upload_scene(self, glb_path: str | Path) -> dict[str, Any]:
+        """Analyse a .glb the way POST /scenes does (load with the real loader, statistics, parameters
+        the simulator reports inert) and keep a copy for jobs; answers the same fields."""
+        data = Path(glb_path).read_bytes()
+        if data[:4] != b"glTF":
+            raise ValueError(f"{glb_path} is not a binary glTF (.glb) file")
+        scene_id = hashlib.sha256(data).hexdigest()
+        with self._lock:
+            known = self._scenes.get(scene_id)
+            if known is not None:
+                self._scenes.move_to_end(scene_id)
+                return dict(known)
+        folder = self.data_dir / "scenes"
+        folder.mkdir(parents=True, exist_ok=True)
+        kept = folder / f"{scene_id}.glb"
+        if not kept.is_file():
+            tmp = kept.with_suffix(".tmp")
+            tmp.write_bytes(data)
+            tmp.replace(kept)
+        info = analyse_scene(kept)
+        info.update(id=scene_id, size=len(data))
+        with self._lock:
+            self._scenes[scene_id] = info
+            while len(self._scenes) > SCENES_KEPT:
+                old, _ = self._scenes.popitem(last=False)
+                (folder / f"{old}.glb").unlink(missing_ok=True)
+        return dict(info)
+
+    def scene(self, scene_id: str) -> dict[str, Any]:
+        with self._lock:
+            info = self._scenes.get(scene_id)
+        if info is None:
+            raise ServiceError(404, f"scene {scene_id!r} not found")
+        return dict(info)
+
+    def submit_job(self, payload: dict[str, Any]) -> dict[str, Any]:
+        scene_id = str(payload.get("scene_id", ""))
+        scene_file = self.data_dir / "scenes" / f"{scene_id}.glb"
+        if scene_id not in self._scenes or not scene_file.is_file():
+            raise ServiceError(404, f"scene {scene_id!r} not found: upload it first")
+        job_id = uuid.uuid4().hex
+        work = self.data_dir / "jobs" / job_id
+        work.mkdir(parents=True)
+        (work / "request.json").write_text(json.dumps(payload, allow_nan=False), encoding="utf-8")
+        (self.data_dir / "cache").mkdir(parents=True, exist_ok=True)
+        args = ["--request", str(work / "request.json"), "--scene", str(scene_file),
+                "--store", str(work / "store.json"),
+                "--cache", str(self.data_dir / "cache" / "eval_cache.sqlite3"),
+                "--workers", str(self.workers), "--parent-pid", str(os.getpid())]
+        job = LocalJobProcess(job_id, job_command(self.python, args), work)
+        with self._lock:
+            self._jobs[job_id] = job
+        return job.snapshot()
+
+    def job(self, job_id: str) -> dict[str, Any]:
+        return self._job(job_id).snapshot()
+
+    def cancel_job(self, job_id: str) -> dict[str, Any]:
+        job = self._job(job_id)
+        state = job.snapshot()
+        if state["state"] in TERMINAL:
+            raise ServiceError(409, f"job {job_id} already {state['state']}")
+        job.cancel()
+        return job.snapshot()
+
+    def store_text(self, store_id: str) -> str:
+        with self._lock:
+            jobs = list(self._jobs.values())
+        for job in jobs:
+            snap = job.snapshot()
+            if snap["state"] == "done" and snap["store_id"] == store_id:
+                text = job.store_path.read_text(encoding="utf-8")
+                json.loads(text)
+                self._forget(job)
+                return text
+        raise ServiceError(404, f"store {store_id!r} not found")
+
+    # -- local only ------------------------------------------------------------------------------------
+    def _job(self, job_id: str) -> LocalJobProcess:
+        with self._lock:
+            job = self._jobs.get(job_id)
+        if job is None:
+            raise ServiceError(404, f"job {job_id!r} not found")
+        return job
+
+    def _forget(self, job: LocalJobProcess) -> None:
+        """The store has been handed over: the job's folder is no longer needed."""
+        job.stop()
+        with self._lock:
+            self._jobs.pop(job.id, None)
+        shutil.rmtree(job.work_dir, ignore_errors=True)
+
+    def job_pids(self) -> list[int]:
+        """Process ids of jobs still running (for status displays and tests)."""
+        with self._lock:
+            return [j.pid for j in self._jobs.values() if j.running()]
+
+    def close(self, timeout_s: float = 5.0) -> None:
+        """Stop every job still running (the add-on is disabled or Blender exits)."""
+        with self._lock:
+            jobs = list(self._jobs.values())
+        for job in jobs:
+            job.stop(timeout_s)
+
+    def wait_idle(self, timeout_s: float = 30.0) -> bool:
+        deadline = time.monotonic() + timeout_s
+        while self.job_pids() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        return not self.job_pids()
+
+
+def analyse_scene(path: str | Path) -> dict[str, Any]:
+    """Load a scene file with the real loader; statistics and the parameters it cannot exercise."""
+    import sim_core
+    from service.params import default_space
+
+    try:
+        scene = sim_core.Scene.from_gltf(str(path))
+    except (ValueError, FileNotFoundError) as exc:
+        raise ValueError(f"the simulator cannot load this scene: {exc}") from exc
+    stats = {k: (v if isinstance(v, int | float | str | bool | list | dict) else str(v))
+             for k, v in dict(scene.stats).items()}
+    inert = {str(k): str(v) for k, v in sim_core.inert_parameters(scene, default_space().as_render_space())
+             .items()}
+    return {"content_hash": str(scene.content_hash), "stats": stats, "inert_parameters": inert,
+            "cameras": len(scene.cameras)}

@@ -1,0 +1,211 @@
+"""The add-on's local path without Blender: LocalClient analyses scenes in-process and runs each job in a
+`python -m service.local_job` child. The store equals the in-process optimiser's for the same request;
+cancel stops the job and keeps its evaluations; the job and its workers die with their parent."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from addon.core.client import ServiceError
+from addon.core.job_runner import JobCancelled, JobFailed, JobOptions, run_job
+from addon.core.local_jobs import LocalClient, job_command
+from tests.api_support import box_scene_glb, camera_path, teapot_scene_glb, tiny_job
+
+RUN_STATISTICS = ("evaluations", "cache_hits", "elapsed_s", "executor")
+
+
+def comparable(store_json: str) -> dict[str, Any]:
+    doc = json.loads(store_json)
+    for key in RUN_STATISTICS:
+        doc["meta"].pop(key)
+    return doc
+
+
+def alive(pid: int) -> bool:
+    """A live process (zombies, whose parent has not reaped them yet, count as gone)."""
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def descendants(pid: int) -> list[int]:
+    """Live processes below `pid` (Linux /proc)."""
+    children: dict[int, list[int]] = {}
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat") as fh:
+                    ppid = int(fh.read().rsplit(")", 1)[1].split()[1])
+            except (OSError, ValueError, IndexError):
+                continue
+            children.setdefault(ppid, []).append(int(entry))
+    out, todo = [], [pid]
+    while todo:
+        for c in children.get(todo.pop(), []):
+            if alive(c):
+                out.append(c)
+                todo.append(c)
+    return out
+
+
+def wait_gone(pids: list[int], timeout_s: float = 15.0) -> list[int]:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline and any(alive(p) for p in pids):
+        time.sleep(0.1)
+    return [p for p in pids if alive(p)]
+
+
+@pytest.fixture
+def glb(tmp_path: Path) -> Path:
+    path = tmp_path / "box.glb"
+    path.write_bytes(box_scene_glb())
+    return path
+
+
+def test_upload_answers_what_the_service_answers(glb: Path, tmp_path: Path) -> None:
+    client = LocalClient(tmp_path / "data")
+    info = client.upload_scene(glb)
+    assert info["stats"]["triangles"] == 14 and info["size"] == glb.stat().st_size
+    assert "multirate" in info["inert_parameters"]  # nothing adaptive can differ in this scene
+    assert client.scene(info["id"]) == info
+    assert client.upload_scene(glb) == info  # same content: same id, no second analysis
+    assert client.health()["mode"] == "local" and "mobile" in client.health()["profiles"]
+    bad = tmp_path / "bad.glb"
+    bad.write_bytes(b"not a glb")
+    with pytest.raises(ValueError, match="not a binary glTF"):
+        client.upload_scene(bad)
+    with pytest.raises(ServiceError, match="not found"):
+        client.submit_job(tiny_job("0" * 64))
+
+
+def test_local_job_gives_the_in_process_store(glb: Path, tmp_path: Path) -> None:
+    from service.eval_cache import EvalCache
+    from service.evaluation import load_scene
+    from service.executors import InProcessExecutor
+    from service.jobs import run_optimisation
+
+    client = LocalClient(tmp_path / "data")
+    scene_id = client.upload_scene(glb)["id"]
+    spec = tiny_job(scene_id)
+    job = client.submit_job(spec)
+    deadline = time.monotonic() + 120
+    states = set()
+    while (state := client.job(job["id"]))["state"] not in ("done", "failed", "cancelled"):
+        states.add(state["state"])
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+    assert state["state"] == "done", state
+    text = client.store_text(state["store_id"])
+    assert not (tmp_path / "data" / "jobs" / job["id"]).exists()  # handed over, folder cleaned
+    with EvalCache(tmp_path / "reference.sqlite3") as cache:
+        reference = run_optimisation(spec, scene=load_scene(glb), cache=cache, executor=InProcessExecutor(),
+                                     progress=lambda p: None, should_cancel=lambda: False)
+    assert comparable(text) == comparable(reference.to_json())
+    assert client.job_pids() == []
+
+
+def test_run_job_reports_progress_and_a_second_run_is_served_from_the_cache(glb: Path, tmp_path: Path
+                                                                           ) -> None:
+    client = LocalClient(tmp_path / "data", workers=2)
+    options = JobOptions(parameters=("sampling", "max_depth"), max_depth=0, population=4, generations=2,
+                         exhaustive_limit=64, resolution=(16, 12))
+    updates = []
+    first = run_job(client, glb, camera_path(3), options, progress=updates.append, poll_s=0.05)
+    assert updates[0].state == "uploading" and updates[-1].state == "done" and updates[-1].fraction == 1.0
+    assert first.scene_info["stats"]["triangles"] == 14
+    again = run_job(client, glb, camera_path(3), options, poll_s=0.05)
+    assert comparable(again.store_text) == comparable(first.store_text)
+    meta = json.loads(again.store_text)["meta"]
+    assert meta["evaluations"] == 0 and meta["cache_hits"] > 0
+
+
+def test_cancel_stops_the_job_and_keeps_its_evaluations(tmp_path: Path) -> None:
+    glb = tmp_path / "teapot.glb"
+    glb.write_bytes(teapot_scene_glb())
+    client = LocalClient(tmp_path / "data")
+    options = JobOptions(view_sampling="aimed", max_depth=2, population=16, generations=20,
+                         resolution=(48, 36))
+    seen: list[Any] = []
+
+    def cancel_when_running() -> bool:
+        return any(u.state == "running" and "evaluations" in u.text and not u.text.endswith(" 0 evaluations")
+                   for u in seen)
+
+    with pytest.raises(JobCancelled):
+        run_job(client, glb, camera_path(3), options, progress=seen.append, should_cancel=cancel_when_running,
+                poll_s=0.05)
+    assert client.wait_idle(30)
+    cache = tmp_path / "data" / "cache" / "eval_cache.sqlite3"
+    assert cache.is_file() and cache.stat().st_size > 0
+
+
+def test_a_failing_job_says_why(glb: Path, tmp_path: Path) -> None:
+    client = LocalClient(tmp_path / "data")
+    scene_id = client.upload_scene(glb)["id"]
+    spec = tiny_job(scene_id)
+    spec["parameters"] = ["no_such_parameter"]
+    job = client.submit_job(spec)
+    deadline = time.monotonic() + 60
+    while client.job(job["id"])["state"] not in ("done", "failed", "cancelled"):
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+    state = client.job(job["id"])
+    assert state["state"] == "failed" and "no_such_parameter" in state["error"]
+    with pytest.raises(JobFailed, match="no_such_parameter"):
+        run_job(client, glb, camera_path(3), JobOptions(parameters=("no_such_parameter",)), poll_s=0.05)
+
+
+PARENT = textwrap.dedent("""
+    import json, sys, time
+    from pathlib import Path
+    from addon.core.local_jobs import LocalClient
+    from tests.api_support import teapot_scene_glb, tiny_job
+    data = Path(sys.argv[1])
+    glb = data / "teapot.glb"
+    glb.write_bytes(teapot_scene_glb())
+    client = LocalClient(data / "data", workers=2)
+    spec = tiny_job(client.upload_scene(glb)["id"], resolution=(48, 36), depth_values=(0, 1, 2, 3))
+    spec["options"].update(max_depth=2, population=16, generations=20, view_sampling="aimed")
+    job = client.submit_job(spec)
+    while not (client.job(job["id"]).get("progress") or {}).get("evaluations"):
+        assert client.job(job["id"])["state"] in ("queued", "running"), client.job(job["id"])
+        time.sleep(0.05)
+    print("RUNNING", flush=True)
+    time.sleep(600)
+""")
+
+
+def test_the_job_and_its_workers_die_with_their_parent(tmp_path: Path) -> None:
+    """Blender killed mid-job (SIGKILL: no clean-up code runs) leaves no process behind."""
+    if not sys.platform.startswith("linux"):
+        pytest.skip("reads /proc")
+    parent = subprocess.Popen([sys.executable, "-c", PARENT, str(tmp_path)], stdout=subprocess.PIPE,
+                              text=True, cwd=Path(__file__).resolve().parent.parent)
+    try:
+        assert parent.stdout.readline().strip() == "RUNNING"
+        below = descendants(parent.pid)
+        assert len(below) >= 3  # the job process and its two evaluation workers (+ resource tracker)
+        parent.send_signal(signal.SIGKILL)
+        parent.wait(timeout=10)
+        assert wait_gone(below) == []
+    finally:
+        if parent.poll() is None:
+            parent.kill()
+
+
+def test_job_command_isolates_the_child_from_the_users_python_environment() -> None:
+    cmd = job_command("/opt/blender/python/bin/python3.11", ["--request", "r.json"])
+    assert cmd[:3] == ["/opt/blender/python/bin/python3.11", "-I", "-c"]
+    assert "service.local_job" in cmd[3] and cmd[4:] == ["--request", "r.json"]
