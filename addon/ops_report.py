@@ -14,7 +14,7 @@ import bpy
 
 from service import pareto_store
 
-from . import preferences, service_process
+from . import service_process
 from .camera_path import load_path
 from .core import report as report_data
 from .core.client import ServiceClient
@@ -26,15 +26,8 @@ log = logging.getLogger(__name__)
 
 
 def _plot_elsewhere(csv_path: Path, out_dir: Path) -> str | None:
-    """Stock Blender lacks matplotlib: draw the plots with the service's Python if one is configured."""
-    candidates = []
-    try:
-        prefs = preferences.get()
-        if prefs.python_path:
-            candidates.append(bpy.path.abspath(prefs.python_path))
-    except RuntimeError:
-        pass
-    candidates.append(shutil.which("python3") or "")
+    """Stock Blender lacks matplotlib: draw the plots with a system Python that has it, if any."""
+    candidates = [shutil.which("python3") or ""]
     script = Path(report_data.__file__)
     for python in filter(None, candidates):
         proc = subprocess.run([python, str(script), "plot", str(csv_path), str(out_dir)], capture_output=True,
@@ -123,7 +116,7 @@ class RENDER_BUDGET_OT_evaluate_path(bpy.types.Operator):
             written = evaluate_scene(context.scene, client, out,
                                      progress=lambda d, t: wm.progress_update(int(100 * d / max(t, 1))))
         except Exception as err:  # report, the .blend is untouched
-            self.report({"ERROR"}, f"Evaluate path failed: {err}")
+            self.report({"ERROR"}, f"Evaluate path failed: {service_process.explain(err)}")
             return {"CANCELLED"}
         finally:
             wm.progress_end()

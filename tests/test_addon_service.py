@@ -21,15 +21,14 @@ import pytest
 
 from addon.core.client import ServiceClient
 from addon.core.local_service import LocalService, free_port
-from tests.addon_support import EXT_MODULE, REPO_ROOT, disable_dev, enable_dev, stage_extension
+from tests import orbit_scene
+from tests.addon_support import EXT_MODULE, REPO_ROOT, disable_dev, enable_dev, small_job, stage_extension
 
 pytestmark = [pytest.mark.blender, pytest.mark.service, pytest.mark.slow]
 bpy = pytest.importorskip("bpy")
 
 FRAMES = 16
 RES = (96, 54)  # scene render size: the path's aspect, so the add-on and the CLI see the same frustum
-EVAL = (32, 18)
-PARAMETERS = ("sampling", "shadow_samples", "resolution_scale")
 
 
 @pytest.fixture(scope="module")
@@ -44,7 +43,7 @@ def service(tmp_path_factory: pytest.TempPathFactory):
 def ext(tmp_path_factory: pytest.TempPathFactory, service):
     mod = enable_dev(bpy, stage_extension(tmp_path_factory.mktemp("ext")))
     prefs = importlib.import_module(f"{EXT_MODULE}.preferences").get()
-    prefs.service_mode, prefs.url, prefs.timeout_s = "URL", service.url, 120
+    prefs.service_mode, prefs.url, prefs.timeout_s = "REMOTE", service.url, 120
     yield mod
     disable_dev()
 
@@ -54,44 +53,9 @@ def m(name: str):
 
 
 def build_scene() -> bpy.types.Scene:
-    """A lit box on a floor with a camera orbiting it once (keyframed, 24 fps); search space of 3 params."""
-    import bmesh
-
-    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
-    sc = bpy.context.scene
-    sc.render.resolution_x, sc.render.resolution_y, sc.render.resolution_percentage = *RES, 100
-    sc.render.fps, sc.render.fps_base = 24, 1.0
-    for name, size, loc in (("Box", 1.0, (0, 0, 0.5)), ("Floor", 6.0, (0, 0, -3.0))):
-        me = bpy.data.meshes.new(name)
-        bm = bmesh.new()
-        bmesh.ops.create_cube(bm, size=size)
-        bm.to_mesh(me)
-        bm.free()
-        ob = bpy.data.objects.new(name, me)
-        ob.location = loc
-        sc.collection.objects.link(ob)
-    light = bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "POINT"))
-    light.data.energy = 800
-    light.location = (2, -2, 3)
-    sc.collection.objects.link(light)
-    cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
-    cam.data.lens = 30
-    sc.collection.objects.link(cam)
-    sc.camera = cam
-    sc.frame_start, sc.frame_end = 1, FRAMES
-    for i in range(FRAMES):
-        a = 2 * math.pi * i / FRAMES
-        cam.location = (4 * math.cos(a), 4 * math.sin(a), 1.2)
-        cam.rotation_euler = (math.radians(80), 0.0, a + math.pi / 2)
-        cam.keyframe_insert("location", frame=i + 1)
-        cam.keyframe_insert("rotation_euler", frame=i + 1)
-    props = sc.render_budget
-    for name in PARAMETERS:
-        item = props.parameters.add()
-        item.name = name
-    props.eval_width, props.eval_height = EVAL
-    props.max_depth, props.population, props.generations, props.exhaustive_limit = 0, 8, 2, 128
-    props.filter_period = 0.25
+    """The orbiting box scene with a search space of 3 parameters and small optimiser options."""
+    sc = orbit_scene.build(bpy, FRAMES, RES)
+    small_job(sc.render_budget)
     return sc
 
 
