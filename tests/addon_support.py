@@ -49,19 +49,6 @@ def synthetic_store(root_min: tuple[float, float, float] = (-10.0, -10.0, -10.0)
                        vfov=0.69, aspect=16 / 9, profile="mobile", fps=24.0)
 
 
-JOB_PARAMETERS = ("sampling", "shadow_samples", "resolution_scale")
-
-
-def small_job(props: Any) -> None:
-    """Options of a job that takes seconds: 3 searched parameters, octree depth 0, a small population,
-    tiny evaluation images."""
-    for name in JOB_PARAMETERS:
-        props.parameters.add().name = name
-    props.eval_width, props.eval_height = 32, 18
-    props.max_depth, props.population, props.generations, props.exhaustive_limit = 0, 8, 2, 128
-    props.filter_period = 0.25
-
-
 def stage_extension(tmp: Path) -> Path:
     """Stage the extension under `tmp` (the add-on folder only: this environment has the project's
     packages); returns the repo folder."""

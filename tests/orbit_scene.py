@@ -1,4 +1,5 @@
-"""A lit box on a floor with a camera orbiting it (keyframed, 24 fps), built with bpy alone.
+"""A lit box on a floor with a camera orbiting it (keyframed, 24 fps), built with bpy alone, and the
+options of a job on it that takes seconds.
 
 Imports nothing of this project: the extension's end-to-end test copies this file next to its script in
 a virtual environment that holds only bpy, and the add-on tests in this project's environment use it too.
@@ -43,3 +44,16 @@ def build(bpy: Any, frames: int = 16, resolution: tuple[int, int] = (96, 54)) ->
         cam.keyframe_insert("location", frame=i + 1)
         cam.keyframe_insert("rotation_euler", frame=i + 1)
     return sc
+
+
+JOB_PARAMETERS = ("sampling", "shadow_samples", "resolution_scale")
+
+
+def small_job(props: Any) -> None:
+    """Options of a job that takes seconds (on the add-on's scene settings): 3 searched parameters,
+    octree depth 0, a small population, tiny evaluation images."""
+    for name in JOB_PARAMETERS:
+        props.parameters.add().name = name
+    props.eval_width, props.eval_height = 32, 18
+    props.max_depth, props.population, props.generations, props.exhaustive_limit = 0, 8, 2, 128
+    props.filter_period = 0.25

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from tests import orbit_scene
-from tests.addon_support import EXT_MODULE, disable_dev, enable_dev, small_job, stage_extension
+from tests.addon_support import EXT_MODULE, disable_dev, enable_dev, stage_extension
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow]
 bpy = pytest.importorskip("bpy")
@@ -56,7 +56,7 @@ def job_processes() -> list[int]:
 
 def scene() -> bpy.types.Scene:
     sc = orbit_scene.build(bpy, 16, (96, 54))
-    small_job(sc.render_budget)
+    orbit_scene.small_job(sc.render_budget)
     return sc
 
 

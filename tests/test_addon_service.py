@@ -22,7 +22,7 @@ import pytest
 from addon.core.client import ServiceClient
 from addon.core.local_service import LocalService, free_port
 from tests import orbit_scene
-from tests.addon_support import EXT_MODULE, REPO_ROOT, disable_dev, enable_dev, small_job, stage_extension
+from tests.addon_support import EXT_MODULE, REPO_ROOT, disable_dev, enable_dev, stage_extension
 
 pytestmark = [pytest.mark.blender, pytest.mark.service, pytest.mark.slow]
 bpy = pytest.importorskip("bpy")
@@ -55,7 +55,7 @@ def m(name: str):
 def build_scene() -> bpy.types.Scene:
     """The orbiting box scene with a search space of 3 parameters and small optimiser options."""
     sc = orbit_scene.build(bpy, FRAMES, RES)
-    small_job(sc.render_budget)
+    orbit_scene.small_job(sc.render_budget)
     return sc
 
 
