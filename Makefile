@@ -35,7 +35,8 @@ demo: venv
 scenes: venv
 	$(PY) -m blend_scenes.build
 
-# The installable Blender extension zip, built with Blender's own extension build.
+# The installable Blender extension zip for this platform (dist/render_budget-<version>-<platform>.zip):
+# this project's wheel (native core) and its runtime wheels in the manifest, then Blender's own build.
 addon: venv
 	$(PY) tools/build_extension.py --out dist/
 

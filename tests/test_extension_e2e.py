@@ -56,14 +56,15 @@ def descendants():
 
 
 class Watch:
-    """Processes seen below this one while a step runs."""
+    """Command lines seen below this one while a step runs (a process is first seen with its parent's
+    command line, between fork and exec: every one seen is kept)."""
 
     def __enter__(self):
-        self.seen, self.stop = {}, threading.Event()
+        self.seen, self.stop = set(), threading.Event()
         def run():
             while not self.stop.is_set():
-                for pid, argv in descendants():
-                    self.seen.setdefault(pid, argv)
+                for _, argv in descendants():
+                    self.seen.add(tuple(argv))
                 time.sleep(0.02)
         self.thread = threading.Thread(target=run, daemon=True)
         self.thread.start()
@@ -102,8 +103,8 @@ def optimize():
         res = bpy.ops.render_budget.optimize()
     props = bpy.context.scene.render_budget
     store = json.loads(props.store_text.as_string()) if props.store_text else {}
-    jobs = [argv for argv in watch.seen.values() if any("service.local_job" in a for a in argv)]
-    workers = [argv for argv in watch.seen.values() if any("multiprocessing" in a for a in argv)]
+    jobs = sorted(argv for argv in watch.seen if any("service.local_job" in a for a in argv))
+    workers = {argv for argv in watch.seen if any("multiprocessing.spawn" in a for a in argv)}
     return {"result": sorted(res), "status": bpy.context.window_manager.render_budget_runtime.job_status,
             "views": store.get("meta", {}).get("views_optimised", 0), "job_argv": jobs[:1],
             "workers": len(workers), "python": sys.executable, "left": descendants()}
