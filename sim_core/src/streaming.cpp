@@ -42,6 +42,134 @@ void check_rays(const Ray* rays, std::size_t n, const Hit* hits) {
   if (n > 0xFFFFFFFFull) throw std::invalid_argument("too many rays for one stream");
 }
 
+// Node and triangle bytes of the fetches counted so far.
+void count_fetch_bytes(TraversalTraffic* t) {
+  t->node_bytes = t->node_fetches * sizeof(BvhNode);
+  t->triangle_bytes = t->triangle_fetches * sizeof(TriRecord);
+}
+
+// One stream of rays pushed through the BVH node by node (streaming.h): a depth-first stack of
+// (node, ray stream) work items, compacted at every pop.
+class StreamTraversal {
+ public:
+  StreamTraversal(const Scene& scene, const Ray* rays, std::size_t n, Hit* hits, TraversalTraffic* t)
+      : scene_(scene), nodes_(scene.bvh().nodes), rays_(rays), hits_(hits), t_(*t) {
+    prepared_.reserve(n);
+    best_.resize(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      prepared_.emplace_back(rays[i]);
+      best_[i] = rays[i].tmax;
+      hits[i] = Hit{};
+    }
+  }
+
+  void run() {
+    push_root();
+    while (!stack_.empty()) {
+      Work w = std::move(stack_.back());
+      stack_.pop_back();
+      if (!compact(&w)) continue;
+      const BvhNode& node = nodes_[w.node];
+      if (node.count == 0) {
+        split_interior(node, w);
+      } else {
+        intersect_leaf(node, w);
+      }
+    }
+  }
+
+ private:
+  const Scene& scene_;
+  const std::vector<BvhNode>& nodes_;
+  const Ray* rays_;
+  Hit* hits_;
+  TraversalTraffic& t_;
+  std::vector<PreparedRay> prepared_;
+  std::vector<float> best_;  // closest hit so far per ray (its tmax at the start)
+  std::vector<Work> stack_;
+  std::vector<Elem> out0_, out1_;
+
+  // Entry distance of ray `ray` into node `node` within its current interval (inf: missed).
+  float entry(std::uint32_t node, std::uint32_t ray) const {
+    return box_entry(nodes_[node], prepared_[ray], rays_[ray].tmin, best_[ray]);
+  }
+
+  // Root: fetched once, every ray tested against its box.
+  void push_root() {
+    Work root{0, {}};
+    ++t_.node_fetches;
+    for (std::uint32_t i = 0; i < prepared_.size(); ++i) {
+      ++t_.box_tests;
+      const float e = entry(0, i);
+      if (e != kInf) root.stream.push_back({i, e});
+    }
+    t_.stream_elements_written += root.stream.size();
+    if (!root.stream.empty()) stack_.push_back(std::move(root));
+  }
+
+  // Compaction at pop: drops rays whose closest hit moved in front of this node. False when none is left.
+  bool compact(Work* w) {
+    std::size_t kept = 0;
+    for (const Elem& e : w->stream) {
+      if (e.entry < best_[e.ray]) w->stream[kept++] = e;
+    }
+    t_.culled_at_pop += w->stream.size() - kept;
+    t_.stream_elements_read += w->stream.size();  // the compaction pass reads every element once
+    w->stream.resize(kept);
+    return !w->stream.empty();
+  }
+
+  // Interior: one fetch of the sibling pair for the whole stream; two conditional output streams, pushed
+  // depth first with the nearer child (by mean entry distance) on top so its hits cull the farther stream.
+  void split_interior(const BvhNode& node, const Work& w) {
+    const std::uint32_t c = node.first;
+    t_.node_fetches += 2;
+    ++t_.interior_streams;
+    t_.interior_stream_rays += w.stream.size();
+    out0_.clear();
+    out1_.clear();
+    double sum0 = 0.0, sum1 = 0.0;
+    for (const Elem& e : w.stream) {
+      t_.box_tests += 2;
+      const float t0 = entry(c, e.ray);
+      const float t1 = entry(c + 1, e.ray);
+      if (t0 != kInf) { out0_.push_back({e.ray, t0}); sum0 += t0; }
+      if (t1 != kInf) { out1_.push_back({e.ray, t1}); sum1 += t1; }
+    }
+    t_.stream_elements_written += out0_.size() + out1_.size();
+    const bool first0 = !out0_.empty() && (out1_.empty() || sum0 / out0_.size() <= sum1 / out1_.size());
+    if (first0) {
+      if (!out1_.empty()) stack_.push_back({c + 1, out1_});
+      stack_.push_back({c, out0_});
+    } else {
+      if (!out0_.empty()) stack_.push_back({c, out0_});
+      if (!out1_.empty()) stack_.push_back({c + 1, out1_});
+    }
+  }
+
+  // Leaf: its triangles fetched once, each tested against every ray of the stream.
+  void intersect_leaf(const BvhNode& node, const Work& w) {
+    ++t_.leaf_streams;
+    t_.leaf_stream_rays += w.stream.size();
+    const std::uint32_t end = node.first + node.count;
+    t_.triangle_fetches += node.count;
+    for (std::uint32_t k = node.first; k < end; ++k) {
+      const TriRecord& tri = scene_.tri(k);
+      for (const Elem& e : w.stream) {
+        ++t_.triangle_tests;
+        float tt, b0, b1, b2;
+        bool compared = false;
+        if (intersect_triangle(tri, prepared_[e.ray], rays_[e.ray].tmin, best_[e.ray], &tt, &b0, &b1, &b2,
+                               &compared)) {
+          best_[e.ray] = tt;
+          Hit& h = hits_[e.ray];
+          h.t = tt; h.tri = k; h.b0 = b0; h.b1 = b1; h.b2 = b2;
+        }
+      }
+    }
+  }
+};
+
 }  // namespace
 
 TraversalTraffic per_ray_traversal(const Scene& scene, const Ray* rays, std::size_t n, Hit* hits,
@@ -62,8 +190,7 @@ TraversalTraffic per_ray_traversal(const Scene& scene, const Ray* rays, std::siz
     CountingRecorder rec{&t, nullptr};
     for (std::size_t i = 0; i < n; ++i) hits[i] = scene.closest(rays[i], rec);
   }
-  t.node_bytes = t.node_fetches * sizeof(BvhNode);
-  t.triangle_bytes = t.triangle_fetches * sizeof(TriRecord);
+  count_fetch_bytes(&t);
   if (!cache.enabled()) t.scene_dram_bytes = t.node_bytes + t.triangle_bytes;
   return t;
 }
@@ -72,94 +199,10 @@ TraversalTraffic streaming_traversal(const Scene& scene, const Ray* rays, std::s
   check_rays(rays, n, hits);
   TraversalTraffic t;
   t.rays = n;
-  const std::vector<BvhNode>& nodes = scene.bvh().nodes;
-  std::vector<PreparedRay> prepared;
-  prepared.reserve(n);
-  std::vector<float> best(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    prepared.emplace_back(rays[i]);
-    best[i] = rays[i].tmax;
-    hits[i] = Hit{};
-  }
-  if (n == 0 || nodes.empty()) return t;
-
-  // Root: fetched once, every ray tested against its box.
-  std::vector<Work> stack;
-  Work root{0, {}};
-  ++t.node_fetches;
-  for (std::uint32_t i = 0; i < n; ++i) {
-    ++t.box_tests;
-    const float e = box_entry(nodes[0], prepared[i], rays[i].tmin, best[i]);
-    if (e != kInf) root.stream.push_back({i, e});
-  }
-  t.stream_elements_written += root.stream.size();
-  if (!root.stream.empty()) stack.push_back(std::move(root));
-
-  std::vector<Elem> out0, out1;
-  while (!stack.empty()) {
-    Work w = std::move(stack.back());
-    stack.pop_back();
-    // Compaction at pop: drop rays whose closest hit moved in front of this node.
-    std::size_t kept = 0;
-    for (const Elem& e : w.stream) {
-      if (e.entry < best[e.ray]) w.stream[kept++] = e;
-    }
-    t.culled_at_pop += w.stream.size() - kept;
-    t.stream_elements_read += w.stream.size();  // the compaction pass reads every element once
-    w.stream.resize(kept);
-    if (w.stream.empty()) continue;
-    const BvhNode& node = nodes[w.node];
-    if (node.count == 0) {
-      // Interior: one fetch of the sibling pair for the whole stream; two conditional output streams.
-      const std::uint32_t c = node.first;
-      t.node_fetches += 2;
-      ++t.interior_streams;
-      t.interior_stream_rays += w.stream.size();
-      out0.clear();
-      out1.clear();
-      double sum0 = 0.0, sum1 = 0.0;
-      for (const Elem& e : w.stream) {
-        const Ray& r = rays[e.ray];
-        t.box_tests += 2;
-        const float t0 = box_entry(nodes[c], prepared[e.ray], r.tmin, best[e.ray]);
-        const float t1 = box_entry(nodes[c + 1], prepared[e.ray], r.tmin, best[e.ray]);
-        if (t0 != kInf) { out0.push_back({e.ray, t0}); sum0 += t0; }
-        if (t1 != kInf) { out1.push_back({e.ray, t1}); sum1 += t1; }
-      }
-      t.stream_elements_written += out0.size() + out1.size();
-      // Depth first, nearer child (by mean entry distance) on top so its hits cull the farther stream.
-      const bool first0 = !out0.empty() && (out1.empty() || sum0 / out0.size() <= sum1 / out1.size());
-      if (first0) {
-        if (!out1.empty()) stack.push_back({c + 1, out1});
-        stack.push_back({c, out0});
-      } else {
-        if (!out0.empty()) stack.push_back({c, out0});
-        if (!out1.empty()) stack.push_back({c + 1, out1});
-      }
-    } else {
-      // Leaf: its triangles fetched once, tested against every ray of the stream.
-      ++t.leaf_streams;
-      t.leaf_stream_rays += w.stream.size();
-      const std::uint32_t end = node.first + node.count;
-      t.triangle_fetches += node.count;
-      for (std::uint32_t k = node.first; k < end; ++k) {
-        const TriRecord& tri = scene.tri(k);
-        for (const Elem& e : w.stream) {
-          ++t.triangle_tests;
-          float tt, b0, b1, b2;
-          bool compared = false;
-          if (intersect_triangle(tri, prepared[e.ray], rays[e.ray].tmin, best[e.ray], &tt, &b0, &b1, &b2,
-                                 &compared)) {
-            best[e.ray] = tt;
-            Hit& h = hits[e.ray];
-            h.t = tt; h.tri = k; h.b0 = b0; h.b1 = b1; h.b2 = b2;
-          }
-        }
-      }
-    }
-  }
-  t.node_bytes = t.node_fetches * sizeof(BvhNode);
-  t.triangle_bytes = t.triangle_fetches * sizeof(TriRecord);
+  StreamTraversal traversal(scene, rays, n, hits, &t);
+  if (n == 0 || scene.bvh().nodes.empty()) return t;
+  traversal.run();
+  count_fetch_bytes(&t);
   t.scene_dram_bytes = t.node_bytes + t.triangle_bytes;
   t.stream_bytes = (t.stream_elements_read + t.stream_elements_written) * kStreamElementBytes +
                    t.stream_elements_read * kRayRecordBytes;

@@ -1,11 +1,10 @@
 // Summed-area tables: box and Bartlett sums against direct summation (float64 tables, with and without
-// offset), and the environment filter on a constant map.
+// offset).
 #include <cmath>
 #include <cstdio>
 #include <random>
 #include <vector>
 
-#include "sim_core/env_filter.h"
 #include "sim_core/sat.h"
 
 #include "check.h"
@@ -44,16 +43,6 @@ int main() {
           for (int x = 0; x < w; ++x)
             ref += std::max(0, rx - std::abs(x - cx)) * std::max(0, ry - std::abs(y - cy)) * at(x, y, k);
         CHECK(std::fabs(got[k] - ref) <= 1e-9 * (1.0 + std::fabs(ref)));
-      }
-    }
-  }
-  {  // A constant map filters to the constant for any cone and either order.
-    std::vector<float> env(16 * 32 * 3, 0.25f);
-    for (int order = 1; order <= 2; ++order) {
-      sim_core::EnvironmentFilter f(env.data(), 32, 16, order);
-      for (float cone : {0.f, 0.05f, 0.4f, 1.5f}) {
-        const sim_core::Vec3 v = f.lookup(sim_core::Vec3(0.3f, -0.5f, 0.8f), cone);
-        CHECK(std::fabs(v.x - 0.25f) < 1e-5f && std::fabs(v.z - 0.25f) < 1e-5f);
       }
     }
   }

@@ -10,14 +10,7 @@
 
 #include "sim_core/ssim.h"
 
-static int failures = 0;
-#define CHECK(cond)                                                                 \
-  do {                                                                              \
-    if (!(cond)) {                                                                  \
-      std::fprintf(stderr, "%s:%d: CHECK failed: %s\n", __FILE__, __LINE__, #cond); \
-      ++failures;                                                                   \
-    }                                                                               \
-  } while (0)
+#include "check.h"
 
 // Direct per-window SSIM mean over full windows (the same crop scikit-image applies).
 static double brute_ssim(const std::vector<double>& x, const std::vector<double>& y, int h, int w, int c,
@@ -51,8 +44,9 @@ static double brute_ssim(const std::vector<double>& x, const std::vector<double>
   return total / (static_cast<double>(c) * (h - win + 1) * (w - win + 1));
 }
 
-int main() {
-  std::mt19937 rng(11);
+// Small, odd and colour sizes, box and Gaussian, identical and noisy pairs: brute force, thread counts,
+// float32 input.
+void check_against_brute_force(std::mt19937& rng) {
   std::uniform_real_distribution<double> val(0.0, 1.0);
   std::normal_distribution<double> noise(0.0, 1.0);
   const int sizes[][3] = {{7, 7, 1}, {11, 11, 3}, {12, 9, 2}, {23, 41, 3}, {40, 13, 1}, {70, 37, 4}};
@@ -86,7 +80,11 @@ int main() {
       }
     }
   }
-  // A larger image over many bands (running column sums drift): brute force and thread counts.
+}
+
+// A larger image over many bands (running column sums drift): brute force and thread counts; NaN/Inf.
+void check_large_image(std::mt19937& rng) {
+  std::uniform_real_distribution<double> val(0.0, 1.0);
   {
     const int h = 300, w = 200, c = 3;
     std::vector<double> x(static_cast<std::size_t>(h) * w * c), y(x.size());
@@ -111,7 +109,10 @@ int main() {
       }
     }
   }
-  // Bad sizes and data range throw.
+}
+
+// Bad sizes and data range throw.
+void check_bad_input() {
   {
     std::vector<double> x(10 * 10, 0.5);
     sim_core::SsimOptions opt;
@@ -128,7 +129,12 @@ int main() {
     try { sim_core::ssim_mean(x.data(), x.data(), 10, 10, 1, opt); } catch (const std::invalid_argument&) { threw = true; }
     CHECK(threw);
   }
-  if (failures) std::fprintf(stderr, "%d failure(s)\n", failures);
-  else std::printf("ssim_test: ok\n");
-  return failures ? 1 : 0;
+}
+
+int main() {
+  std::mt19937 rng(11);
+  check_against_brute_force(rng);
+  check_large_image(rng);
+  check_bad_input();
+  return check_exit_code();
 }

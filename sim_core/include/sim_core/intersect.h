@@ -1,7 +1,12 @@
 // Ray traversal of the BVH and the watertight ray-triangle test (Woop, Benthin, Wald 2013, "Watertight
-// Ray/Triangle Intersection"). Header-only so the traversal loop inlines; a Recorder policy observes every
-// node fetch, triangle fetch and closest-hit comparison (NullRecorder for the plain intersect() path,
+// Ray/Triangle Intersection"). Header-only so the traversal loops inline. One traversal core per tree
+// (traverse_bvh: binary, traverse_bvh4: 4-wide) serves every query; a query (ClosestHitQuery, AnyHitQuery)
+// decides what a leaf's triangles do and when the walk may stop. A Recorder policy observes every node
+// fetch, triangle fetch and closest-hit comparison of the binary walk (NullRecorder for plain queries,
 // the tile recorder with cache model and counters inside the renderer).
+//
+// The scalar triangle test (intersect_triangle) and its 4-lane SIMD twin (intersect_block4) are kept as a
+// slow-reference / fast-path pair: the same operations in the same order, bit-identical per lane.
 #pragma once
 #include <cmath>
 #include <cstdint>
@@ -19,6 +24,8 @@
 namespace sim_core {
 
 inline constexpr float kInf = std::numeric_limits<float>::infinity();
+// Far-distance scale of the robust slab test: 1 + 2 * gamma(3) (Ize 2013).
+inline constexpr float kSlabRobust = 1.0000004f;
 
 struct Ray {
   Vec3 origin;
@@ -77,17 +84,13 @@ struct PreparedRay {
 };
 
 // Robust slab test (Ize 2013 / pbrt: far distance scaled by 1 + 2*gamma(3) so rounding never culls a box
-// the exact ray hits). Returns the entry distance or +inf when the box is missed within [tmin, tmax].
-inline float box_entry(const BvhNode& n, const PreparedRay& r, float tmin, float tmax) {
-  constexpr float kRobust = 1.0000004f;  // 1 + 2 * gamma(3)
-  const float* lo = n.lo;
-  const float* hi = n.hi;
-  const float x0 = ((r.sign[0] ? hi : lo)[0] - r.org[0]) * r.inv[0];
-  const float x1 = ((r.sign[0] ? lo : hi)[0] - r.org[0]) * r.inv[0];
-  const float y0 = ((r.sign[1] ? hi : lo)[1] - r.org[1]) * r.inv[1];
-  const float y1 = ((r.sign[1] ? lo : hi)[1] - r.org[1]) * r.inv[1];
-  const float z0 = ((r.sign[2] ? hi : lo)[2] - r.org[2]) * r.inv[2];
-  const float z1 = ((r.sign[2] ? lo : hi)[2] - r.org[2]) * r.inv[2];
+// the exact ray hits) of the box whose planes nearer / farther along the ray are `near` / `far` (per axis).
+// Writes the entry distance; true when the box is entered within [tmin, tmax].
+inline bool slab_entry(const float near[3], const float far[3], const PreparedRay& r, float tmin, float tmax,
+                       float* entry) {
+  const float x0 = (near[0] - r.org[0]) * r.inv[0], x1 = (far[0] - r.org[0]) * r.inv[0];
+  const float y0 = (near[1] - r.org[1]) * r.inv[1], y1 = (far[1] - r.org[1]) * r.inv[1];
+  const float z0 = (near[2] - r.org[2]) * r.inv[2], z1 = (far[2] - r.org[2]) * r.inv[2];
   // Written so a NaN (0 * inf on a slab plane) never tightens the interval.
   float tn = x0 > tmin ? x0 : tmin;
   tn = y0 > tn ? y0 : tn;
@@ -95,14 +98,22 @@ inline float box_entry(const BvhNode& n, const PreparedRay& r, float tmin, float
   float tf = x1 < tmax ? x1 : tmax;
   tf = y1 < tf ? y1 : tf;
   tf = z1 < tf ? z1 : tf;
-  return tn <= tf * kRobust ? tn : kInf;
+  *entry = tn;
+  return tn <= tf * kSlabRobust;
+}
+
+// Entry distance of a BVH node's box, or +inf when it is missed within [tmin, tmax].
+inline float box_entry(const BvhNode& n, const PreparedRay& r, float tmin, float tmax) {
+  const float near[3] = {(r.sign[0] ? n.hi : n.lo)[0], (r.sign[1] ? n.hi : n.lo)[1], (r.sign[2] ? n.hi : n.lo)[2]};
+  const float far[3] = {(r.sign[0] ? n.lo : n.hi)[0], (r.sign[1] ? n.lo : n.hi)[1], (r.sign[2] ? n.lo : n.hi)[2]};
+  float tn;
+  return slab_entry(near, far, r, tmin, tmax, &tn) ? tn : kInf;
 }
 
 // Entry distances of both children of an interior node (nodes c and c + 1, one 64-byte pair).
 inline void box_entry_pair(const BvhNode* pair, const PreparedRay& r, float tmin, float tmax, float* t0,
                            float* t1) {
 #if SIM_CORE_SSE
-  constexpr float kRobust = 1.0000004f;
   // Lane 3 of each load is the node's first/count word; it is never read out of the horizontal reductions.
   const __m128 lo0 = _mm_loadu_ps(pair[0].lo), hi0 = _mm_loadu_ps(pair[0].hi);
   const __m128 lo1 = _mm_loadu_ps(pair[1].lo), hi1 = _mm_loadu_ps(pair[1].hi);
@@ -120,7 +131,7 @@ inline void box_entry_pair(const BvhNode* pair, const PreparedRay& r, float tmin
   tn = _mm_max_ps(_mm_max_ps(tn, nz), vmin);
   __m128 tf = _mm_min_ps(ff, _mm_shuffle_ps(ff, ff, _MM_SHUFFLE(2, 3, 0, 1)));
   tf = _mm_min_ps(_mm_min_ps(tf, fz), vmax);
-  const __m128 ok = _mm_cmple_ps(tn, _mm_mul_ps(tf, _mm_set1_ps(kRobust)));
+  const __m128 ok = _mm_cmple_ps(tn, _mm_mul_ps(tf, _mm_set1_ps(kSlabRobust)));
   const int mask = _mm_movemask_ps(ok);
   *t0 = (mask & 1) ? _mm_cvtss_f32(tn) : kInf;
   *t1 = (mask & 4) ? _mm_cvtss_f32(_mm_movehl_ps(tn, tn)) : kInf;
@@ -182,98 +193,6 @@ inline bool intersect_triangle(const TriRecord& tri, const PreparedRay& r, float
   *b1 = w_v * rcp;
   *b2 = w * rcp;
   return true;
-}
-
-// Closest hit along r within (r.tmin, r.tmax).
-template <class Recorder>
-inline Hit intersect_closest(const BvhNode* nodes, const TriRecord* tris, const Ray& ray, Recorder& rec) {
-  const PreparedRay r(ray);
-  Hit hit;
-  float best = ray.tmax;
-  struct Entry { std::uint32_t node; float t; };
-  Entry stack[64];
-  int sp = 0;
-  rec.node(0);
-  if (box_entry(nodes[0], r, ray.tmin, best) == kInf) return hit;
-  std::uint32_t cur = 0;
-  for (;;) {
-    const BvhNode& n = nodes[cur];
-    if (n.count == 0) {
-      const std::uint32_t c = n.first;
-      rec.node(c);
-      rec.node(c + 1);
-      float t0, t1;
-      prefetch_node(nodes[c], nodes, tris);
-      prefetch_node(nodes[c + 1], nodes, tris);
-      box_entry_pair(nodes + c, r, ray.tmin, best, &t0, &t1);
-      if (t0 != kInf && t1 != kInf) {
-        if (t0 <= t1) { stack[sp++] = {c + 1, t1}; cur = c; }
-        else { stack[sp++] = {c, t0}; cur = c + 1; }
-        continue;
-      }
-      if (t0 != kInf) { cur = c; continue; }
-      if (t1 != kInf) { cur = c + 1; continue; }
-    } else {
-      const std::uint32_t end = n.first + n.count;
-      for (std::uint32_t i = n.first; i < end; ++i) {
-        rec.tri(i);
-        float t = 0.f, b0 = 0.f, b1 = 0.f, b2 = 0.f;
-        bool compared = false;
-        const bool h = intersect_triangle(tris[i], r, ray.tmin, best, &t, &b0, &b1, &b2, &compared);
-        if (compared) rec.compare(t, best);
-        if (h) {
-          best = t;
-          hit.t = t; hit.tri = i; hit.b0 = b0; hit.b1 = b1; hit.b2 = b2;
-        }
-      }
-    }
-    // Pop the next node still in front of the closest hit.
-    for (;;) {
-      if (sp == 0) return hit;
-      const Entry e = stack[--sp];
-      if (e.t < best) { cur = e.node; break; }
-    }
-  }
-}
-
-// Any hit within (r.tmin, r.tmax): shadow and ambient-occlusion rays.
-template <class Recorder>
-inline bool intersect_any(const BvhNode* nodes, const TriRecord* tris, const Ray& ray, Recorder& rec) {
-  const PreparedRay r(ray);
-  std::uint32_t stack[64];
-  int sp = 0;
-  rec.node(0);
-  if (box_entry(nodes[0], r, ray.tmin, ray.tmax) == kInf) return false;
-  std::uint32_t cur = 0;
-  for (;;) {
-    const BvhNode& n = nodes[cur];
-    if (n.count == 0) {
-      const std::uint32_t c = n.first;
-      rec.node(c);
-      rec.node(c + 1);
-      float t0, t1;
-      prefetch_node(nodes[c], nodes, tris);
-      prefetch_node(nodes[c + 1], nodes, tris);
-      box_entry_pair(nodes + c, r, ray.tmin, ray.tmax, &t0, &t1);
-      if (t0 != kInf && t1 != kInf) {
-        if (t0 <= t1) { stack[sp++] = c + 1; cur = c; }
-        else { stack[sp++] = c; cur = c + 1; }
-        continue;
-      }
-      if (t0 != kInf) { cur = c; continue; }
-      if (t1 != kInf) { cur = c + 1; continue; }
-    } else {
-      const std::uint32_t end = n.first + n.count;
-      for (std::uint32_t i = n.first; i < end; ++i) {
-        rec.tri(i);
-        float t = 0.f, b0 = 0.f, b1 = 0.f, b2 = 0.f;
-        bool compared = false;
-        if (intersect_triangle(tris[i], r, ray.tmin, ray.tmax, &t, &b0, &b1, &b2, &compared)) return true;
-      }
-    }
-    if (sp == 0) return false;
-    cur = stack[--sp];
-  }
 }
 
 // Up to four triangles of a block at once: the same operations, in the same order, as
@@ -343,59 +262,199 @@ inline void intersect_block4(const TriBlock4& b, const TriRecord* tris, const Pr
 #endif
 }
 
-// Closest hit along r within (r.tmin, r.tmax) over the 4-wide BVH (no recorder: the host-side query path).
-// Same boxes, leaves and triangle test as intersect_closest, so hit/miss and t agree with it exactly; only
-// which of two triangles at exactly the same t wins may differ (ties are broken by visiting order).
-inline Hit intersect_closest4(const Bvh4Node* nodes, const TriBlock4* blocks, const TriRecord* tris,
-                              const Ray& ray) {
-  const PreparedRay r(ray);
+// Traversal queries: what the triangles of a leaf do to a query, how far along the ray boxes still
+// matter, and which popped subtrees may be skipped. The traversal loops below (traverse_bvh over the binary
+// tree, traverse_bvh4 over the 4-wide tree) are the same for every query.
+//
+// ClosestHitQuery keeps the nearest accepted triangle, shrinks the search interval to it, reports every
+// distance comparison to the recorder (the comparator model) and skips popped subtrees that start behind
+// the closest hit. AnyHitQuery (shadow and ambient-occlusion rays) keeps the ray's interval, never skips
+// a popped subtree and stops at the first accepted triangle; it makes no closest-hit comparisons.
+struct ClosestHitQuery {
   Hit hit;
-  float best = ray.tmax;
+  float best;  // far end of the search interval: ray.tmax, then the closest accepted t
+
+  explicit ClosestHitQuery(const Ray& ray) : best(ray.tmax) {}
+  float far() const { return best; }
+  bool skip(float entry) const { return !(entry < best); }
+  // Tests triangle i; true would stop the traversal (a closest-hit query never stops early).
+  template <class Recorder>
+  bool triangle(const TriRecord& tri, std::uint32_t i, const PreparedRay& r, float tmin, Recorder& rec) {
+    float t = 0.f, b0 = 0.f, b1 = 0.f, b2 = 0.f;
+    bool compared = false;
+    const bool h = intersect_triangle(tri, r, tmin, best, &t, &b0, &b1, &b2, &compared);
+    if (compared) rec.compare(t, best);
+    if (h) {
+      best = t;
+      hit.t = t; hit.tri = i; hit.b0 = b0; hit.b1 = b1; hit.b2 = b2;
+    }
+    return false;
+  }
+  // Up to four triangles of a BVH4 leaf at once (the 4-wide tree has no recorder).
+  bool block4(const TriBlock4& b, const TriRecord* tris, const PreparedRay& r, float tmin) {
+    intersect_block4(b, tris, r, tmin, &best, &hit);
+    return false;
+  }
+};
+
+// Shadow and ambient-occlusion rays. It has a binary-tree leaf test only: without a 4-wide one (block4),
+// traverse_bvh4 does not compile with this query until one is written.
+struct AnyHitQuery {
+  bool occluded = false;
+  float tmax;
+
+  explicit AnyHitQuery(const Ray& ray) : tmax(ray.tmax) {}
+  float far() const { return tmax; }
+  bool skip(float) const { return false; }
+  template <class Recorder>
+  bool triangle(const TriRecord& tri, std::uint32_t, const PreparedRay& r, float tmin, Recorder&) {
+    float t = 0.f, b0 = 0.f, b1 = 0.f, b2 = 0.f;
+    bool compared = false;
+    if (intersect_triangle(tri, r, tmin, tmax, &t, &b0, &b1, &b2, &compared)) occluded = true;
+    return occluded;
+  }
+};
+
+// Depth-first walk of the binary BVH, nearer child first, for any query. The recorder sees every node
+// fetch (both children of each interior node entered) and every triangle fetch.
+template <class Query, class Recorder>
+inline void traverse_bvh(const BvhNode* nodes, const TriRecord* tris, const Ray& ray, Query& query,
+                         Recorder& rec) {
+  const PreparedRay r(ray);
+  struct Entry { std::uint32_t node; float t; };
+  Entry stack[64];
+  int sp = 0;
+  rec.node(0);
+  if (box_entry(nodes[0], r, ray.tmin, query.far()) == kInf) return;
+  std::uint32_t cur = 0;
+  for (;;) {
+    const BvhNode& n = nodes[cur];
+    if (n.count == 0) {
+      const std::uint32_t c = n.first;
+      rec.node(c);
+      rec.node(c + 1);
+      float t0, t1;
+      prefetch_node(nodes[c], nodes, tris);
+      prefetch_node(nodes[c + 1], nodes, tris);
+      box_entry_pair(nodes + c, r, ray.tmin, query.far(), &t0, &t1);
+      if (t0 != kInf && t1 != kInf) {
+        if (t0 <= t1) { stack[sp++] = {c + 1, t1}; cur = c; }
+        else { stack[sp++] = {c, t0}; cur = c + 1; }
+        continue;
+      }
+      if (t0 != kInf) { cur = c; continue; }
+      if (t1 != kInf) { cur = c + 1; continue; }
+    } else {
+      const std::uint32_t end = n.first + n.count;
+      for (std::uint32_t i = n.first; i < end; ++i) {
+        rec.tri(i);
+        if (query.triangle(tris[i], i, r, ray.tmin, rec)) return;
+      }
+    }
+    // Pop the next node the query still needs.
+    for (;;) {
+      if (sp == 0) return;
+      const Entry e = stack[--sp];
+      if (!query.skip(e.t)) { cur = e.node; break; }
+    }
+  }
+}
+
+// Closest hit along r within (r.tmin, r.tmax).
+template <class Recorder>
+inline Hit intersect_closest(const BvhNode* nodes, const TriRecord* tris, const Ray& ray, Recorder& rec) {
+  ClosestHitQuery query(ray);
+  traverse_bvh(nodes, tris, ray, query, rec);
+  return query.hit;
+}
+
+// Any hit within (r.tmin, r.tmax): shadow and ambient-occlusion rays.
+template <class Recorder>
+inline bool intersect_any(const BvhNode* nodes, const TriRecord* tris, const Ray& ray, Recorder& rec) {
+  AnyHitQuery query(ray);
+  traverse_bvh(nodes, tris, ray, query, rec);
+  return query.occluded;
+}
+
+// Per-ray constants of the 4-wide slab test: which SoA box rows are the near and far planes per axis
+// (rows 2a (lo) and 2a + 1 (hi), swapped for negative directions), and the broadcast ray.
+struct PreparedRay4 {
+  int nx, ny, nz, fx, fy, fz;
+#if SIM_CORE_SSE
+  __m128 ox, oy, oz, ix, iy, iz, vtmin, robust;
+#endif
+  PreparedRay4(const PreparedRay& r, float tmin)
+      : nx(r.sign[0]), ny(2 + r.sign[1]), nz(4 + r.sign[2]),
+        fx(1 - r.sign[0]), fy(3 - r.sign[1]), fz(5 - r.sign[2]) {
+#if SIM_CORE_SSE
+    ox = _mm_set1_ps(r.org[0]); oy = _mm_set1_ps(r.org[1]); oz = _mm_set1_ps(r.org[2]);
+    ix = _mm_set1_ps(r.inv[0]); iy = _mm_set1_ps(r.inv[1]); iz = _mm_set1_ps(r.inv[2]);
+    vtmin = _mm_set1_ps(tmin);
+    robust = _mm_set1_ps(kSlabRobust);
+#else
+    (void)tmin;
+#endif
+  }
+};
+
+// Entry distances of the four children of `n` into tn; returns the mask of the children the ray enters
+// within [tmin, tmax] (the same robust test as box_entry, four lanes at once).
+inline int box_entry4(const Bvh4Node& n, const PreparedRay& r, const PreparedRay4& q, float tmin, float tmax,
+                      float tn[4]) {
+#if SIM_CORE_SSE
+  (void)r; (void)tmin;
+  const __m128 tnx = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(n.box[q.nx]), q.ox), q.ix);
+  const __m128 tny = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(n.box[q.ny]), q.oy), q.iy);
+  const __m128 tnz = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(n.box[q.nz]), q.oz), q.iz);
+  const __m128 tfx = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(n.box[q.fx]), q.ox), q.ix);
+  const __m128 tfy = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(n.box[q.fy]), q.oy), q.iy);
+  const __m128 tfz = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(n.box[q.fz]), q.oz), q.iz);
+  // Operand order as in box_entry: a NaN slab distance never tightens the interval.
+  const __m128 vn = _mm_max_ps(tnz, _mm_max_ps(tny, _mm_max_ps(tnx, q.vtmin)));
+  const __m128 vf = _mm_min_ps(tfz, _mm_min_ps(tfy, _mm_min_ps(tfx, _mm_set1_ps(tmax))));
+  _mm_store_ps(tn, vn);
+  return _mm_movemask_ps(_mm_cmple_ps(vn, _mm_mul_ps(vf, q.robust)));
+#else
+  int mask = 0;
+  for (int i = 0; i < 4; ++i) {
+    const float near[3] = {n.box[q.nx][i], n.box[q.ny][i], n.box[q.nz][i]};
+    const float far[3] = {n.box[q.fx][i], n.box[q.fy][i], n.box[q.fz][i]};
+    if (slab_entry(near, far, r, tmin, tmax, &tn[i])) mask |= 1 << i;
+  }
+  return mask;
+#endif
+}
+
+// Starts fetching a BVH4 child: a 128-byte node, or the first 160-byte triangle block of a leaf.
+inline void prefetch_bvh4_child(const Bvh4Node* nodes, const TriBlock4* blocks, std::uint32_t child,
+                                std::uint32_t count) {
+#if SIM_CORE_SSE
+  const char* p = count == 0 ? reinterpret_cast<const char*>(nodes + child)
+                             : reinterpret_cast<const char*>(blocks + child);
+  _mm_prefetch(p, _MM_HINT_T0);
+  _mm_prefetch(p + 64, _MM_HINT_T0);
+  if (count != 0) _mm_prefetch(p + 128, _MM_HINT_T0);
+#else
+  (void)nodes; (void)blocks; (void)child; (void)count;
+#endif
+}
+
+// Depth-first walk of the 4-wide BVH, hit children nearest first, for any query with a block4 leaf test
+// (no recorder: the host-side query path).
+template <class Query>
+inline void traverse_bvh4(const Bvh4Node* nodes, const TriBlock4* blocks, const TriRecord* tris,
+                          const Ray& ray, Query& query) {
+  const PreparedRay r(ray);
+  const PreparedRay4 r4(r, ray.tmin);
   struct Entry { std::uint32_t child, count; float t; };
   Entry stack[256];
   int sp = 0;
-  // Near/far planes per axis: rows 2a (lo) and 2a + 1 (hi) of the SoA box, swapped for negative directions.
-  const int nx = r.sign[0], ny = 2 + r.sign[1], nz = 4 + r.sign[2];
-  const int fx = 1 - r.sign[0], fy = 3 - r.sign[1], fz = 5 - r.sign[2];
   std::uint32_t cur = 0, cur_count = 0;
-#if SIM_CORE_SSE
-  const __m128 ox = _mm_set1_ps(r.org[0]), oy = _mm_set1_ps(r.org[1]), oz = _mm_set1_ps(r.org[2]);
-  const __m128 ix = _mm_set1_ps(r.inv[0]), iy = _mm_set1_ps(r.inv[1]), iz = _mm_set1_ps(r.inv[2]);
-  const __m128 vtmin = _mm_set1_ps(ray.tmin), robust = _mm_set1_ps(1.0000004f);
-#endif
   for (;;) {
     if (cur_count == 0) {
       const Bvh4Node& n = nodes[cur];
       alignas(16) float tn[4];
-      int mask;
-#if SIM_CORE_SSE
-      const __m128 tnx = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(n.box[nx]), ox), ix);
-      const __m128 tny = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(n.box[ny]), oy), iy);
-      const __m128 tnz = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(n.box[nz]), oz), iz);
-      const __m128 tfx = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(n.box[fx]), ox), ix);
-      const __m128 tfy = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(n.box[fy]), oy), iy);
-      const __m128 tfz = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(n.box[fz]), oz), iz);
-      // Operand order as in box_entry: a NaN slab distance never tightens the interval.
-      const __m128 vn = _mm_max_ps(tnz, _mm_max_ps(tny, _mm_max_ps(tnx, vtmin)));
-      const __m128 vf = _mm_min_ps(tfz, _mm_min_ps(tfy, _mm_min_ps(tfx, _mm_set1_ps(best))));
-      mask = _mm_movemask_ps(_mm_cmple_ps(vn, _mm_mul_ps(vf, robust)));
-      _mm_store_ps(tn, vn);
-#else
-      mask = 0;
-      for (int i = 0; i < 4; ++i) {
-        const float x0 = (n.box[nx][i] - r.org[0]) * r.inv[0], x1 = (n.box[fx][i] - r.org[0]) * r.inv[0];
-        const float y0 = (n.box[ny][i] - r.org[1]) * r.inv[1], y1 = (n.box[fy][i] - r.org[1]) * r.inv[1];
-        const float z0 = (n.box[nz][i] - r.org[2]) * r.inv[2], z1 = (n.box[fz][i] - r.org[2]) * r.inv[2];
-        float a = x0 > ray.tmin ? x0 : ray.tmin;
-        a = y0 > a ? y0 : a;
-        a = z0 > a ? z0 : a;
-        float b = x1 < best ? x1 : best;
-        b = y1 < b ? y1 : b;
-        b = z1 < b ? z1 : b;
-        tn[i] = a;
-        if (a <= b * 1.0000004f) mask |= 1 << i;
-      }
-#endif
+      const int mask = box_entry4(n, r, r4, ray.tmin, query.far(), tn);
       if (mask != 0) {
         // Visit the hit children nearest first: push the others far to near.
         Entry hits[4];
@@ -410,25 +469,30 @@ inline Hit intersect_closest4(const Bvh4Node* nodes, const TriBlock4* blocks, co
         for (int i = 0; i < nh - 1; ++i) stack[sp++] = hits[i];
         cur = hits[nh - 1].child;
         cur_count = hits[nh - 1].count;
-#if SIM_CORE_SSE
-        const char* p = cur_count == 0 ? reinterpret_cast<const char*>(nodes + cur)
-                                       : reinterpret_cast<const char*>(blocks + cur);
-        _mm_prefetch(p, _MM_HINT_T0);
-        _mm_prefetch(p + 64, _MM_HINT_T0);
-        if (cur_count != 0) _mm_prefetch(p + 128, _MM_HINT_T0);
-#endif
+        prefetch_bvh4_child(nodes, blocks, cur, cur_count);
         continue;
       }
     } else {
       const std::uint32_t nb = (cur_count + 3) / 4;
-      for (std::uint32_t k = 0; k < nb; ++k) intersect_block4(blocks[cur + k], tris, r, ray.tmin, &best, &hit);
+      for (std::uint32_t k = 0; k < nb; ++k)
+        if (query.block4(blocks[cur + k], tris, r, ray.tmin)) return;
     }
     for (;;) {
-      if (sp == 0) return hit;
+      if (sp == 0) return;
       const Entry e = stack[--sp];
-      if (e.t < best) { cur = e.child; cur_count = e.count; break; }
+      if (!query.skip(e.t)) { cur = e.child; cur_count = e.count; break; }
     }
   }
+}
+
+// Closest hit along r within (r.tmin, r.tmax) over the 4-wide BVH. Same boxes, leaves and triangle test
+// as intersect_closest, so hit/miss and t agree with it exactly; only which of two triangles at exactly
+// the same t wins may differ (ties are broken by visiting order).
+inline Hit intersect_closest4(const Bvh4Node* nodes, const TriBlock4* blocks, const TriRecord* tris,
+                              const Ray& ray) {
+  ClosestHitQuery query(ray);
+  traverse_bvh4(nodes, blocks, tris, ray, query);
+  return query.hit;
 }
 
 }  // namespace sim_core

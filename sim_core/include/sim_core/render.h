@@ -1,9 +1,10 @@
-// The tile-based Whitted ray tracer: shading of one sample (primary ray, shadow rays, mirror/glossy
-// reflection, Fresnel refraction, ambient occlusion) with every event counted, and the frame driver that
-// hands tiles to threads. The sampling schedule inside a tile (1 spp, FSAA, adaptive under/supersampling,
-// multi-rate) lives in sampling.h; stereo reprojection in stereo.h.
+// The tile-based ray tracer's frame driver: it hands tiles to threads, each tile with its own context
+// (counters, cache model, comparator histogram), and sums them in tile order. Shading of one sample lives
+// in shader.h, the sampling schedule inside a tile (1 spp, FSAA, adaptive under/supersampling, multi-rate)
+// in adaptive_sampling.h, stereo reprojection in stereo.h.
 #pragma once
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include "sim_core/cache.h"
@@ -12,45 +13,9 @@
 #include "sim_core/counters.h"
 #include "sim_core/scene.h"
 #include "sim_core/settings.h"
+#include "sim_core/shader.h"
 
 namespace sim_core {
-
-// What the similarity test needs to know about a sample besides its colour (seed sec. 3: object id,
-// normal, position, shadow bits), for the primary hit and for the first reflection/refraction hits.
-struct SampleGeometry {
-  std::int32_t object = -1;  // primary hit object, -1 on a miss
-  Vec3 normal;               // shading normal at the primary hit
-  Vec3 position;             // primary hit point (world)
-  float depth = kInf;        // camera-space depth of the primary hit
-  std::uint32_t shadow_bits = 0;  // bit l: light l is occluded at the primary hit
-  std::int32_t sec_object[2] = {-2, -2};  // reflection / refraction hit object (-1 environment, -2 no ray)
-  Vec3 sec_normal[2];
-  std::uint32_t sec_shadow_bits = 0;
-};
-
-struct SampleResult {
-  Vec3 color;
-  SampleGeometry geom;
-};
-
-// Per-tile state of the T&I unit model: counters, node/triangle cache, comparator histogram.
-struct TileContext {
-  const Scene& scene;
-  const RenderSettings& settings;
-  const Camera& camera;
-  CacheModel cache;
-  Counters counters;
-  ComparatorHistogram histogram{};
-  float cos_threshold;  // cos(normal_threshold); > 1 when nothing may pass
-  float ao_distance;
-
-  TileContext(const Scene& s, const RenderSettings& st, const Camera& c, const CacheConfig& cc);
-  void finish();  // folds cache statistics into the counters
-};
-
-// Traces and shades the primary sample through continuous pixel coordinates (px, py) of the camera.
-// `key` identifies the sample (its global sample-grid coordinates) and seeds all its random numbers.
-SampleResult trace_sample(TileContext& ctx, float px, float py, std::uint32_t key);
 
 // Statistics of one tile.
 struct TileStat {
@@ -74,6 +39,9 @@ struct MultirateState {
   }
 };
 
+// How a pixel's value came about (the sample_kind AOV).
+enum SampleKind : std::uint8_t { kSampleTraced = 0, kSampleInterpolated = 1, kSampleReused = 2 };
+
 struct FrameBuffers {
   int width = 0, height = 0;
   std::vector<float> color;         // H*W*3 linear RGB
@@ -81,8 +49,19 @@ struct FrameBuffers {
   std::vector<float> normal;        // H*W*3 shading normal, 0 on miss
   std::vector<float> position;      // H*W*3 primary hit point (world), 0 on miss
   std::vector<std::int32_t> object; // H*W, -1 on miss
-  std::vector<std::uint8_t> kind;   // H*W: 0 traced, 1 interpolated, 2 reused
+  std::vector<std::uint8_t> kind;   // H*W SampleKind
   void allocate(int w, int h);
+  // Writes pixel p: its colour and the geometry of its (centre) sample; the normal stays 0 on a miss.
+  void store(std::size_t p, Vec3 color, const SampleGeometry& g, SampleKind sample_kind);
+};
+
+// The tiles of a frame, row-major: tile t covers [x0, x0 + width) x [y0, y0 + height), clipped to the frame.
+struct TileGrid {
+  int width, height, tile_size, tiles_x, tiles_y;
+  TileGrid(int w, int h, int ts)
+      : width(w), height(h), tile_size(ts), tiles_x((w + ts - 1) / ts), tiles_y((h + ts - 1) / ts) {}
+  int count() const { return tiles_x * tiles_y; }
+  TileStat tile(std::size_t t) const;  // rect set, statistics zero
 };
 
 struct RenderOutput {
@@ -92,6 +71,14 @@ struct RenderOutput {
   ComparatorHistogram histogram{};
   MultirateState multirate;
 };
+
+// Renders every tile of `grid` on `threads` threads. Each tile gets its own TileContext (cold cache) and its
+// TileStat with the rect set; render(ctx, stat, t) traces the tile and writes its pixels. The driver then
+// folds the tile's pixels, frame-buffer flush and cache statistics into its counters and adds every tile's
+// counters and comparator histogram to `out` in tile order (the same totals for any thread count).
+using TileRenderer = std::function<void(TileContext& ctx, TileStat& stat, std::size_t tile)>;
+void render_tiles(const Scene& scene, const Camera& camera, const RenderSettings& settings, const CacheConfig& cache,
+                  const TileGrid& grid, int threads, RenderOutput* out, const TileRenderer& render);
 
 // Renders `camera` (already at render resolution) with `settings`. `previous` may be null.
 RenderOutput render_frame(const Scene& scene, const Camera& camera, const RenderSettings& settings, int threads,

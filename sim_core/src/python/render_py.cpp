@@ -1,4 +1,5 @@
-// Bindings of the renderer: settings struct, multi-rate state, render_frame and render_stereo.
+// Bindings of the frame renderer: render_frame, its multi-rate state, and the conversions the stereo
+// bindings share (render_py.h).
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
 #include <nanobind/stl/string.h>
@@ -7,8 +8,8 @@
 #include <stdexcept>
 #include <vector>
 
+#include "render_py.h"
 #include "sim_core/render.h"
-#include "sim_core/stereo.h"
 
 namespace nb = nanobind;
 using namespace nb::literals;
@@ -24,8 +25,9 @@ nb::object to_numpy(const std::vector<T>& v, std::initializer_list<std::size_t> 
   return nb::cast(nb::ndarray<nb::numpy, T>(data, shape.size(), shape.begin(), owner));
 }
 
-Camera make_camera(nb::ndarray<const float, nb::shape<4, 3>, nb::c_contig, nb::device::cpu> frame, float vfov,
-                   int width, int height) {
+}  // namespace
+
+Camera camera_from_frame(CameraFrame frame, float vfov, int width, int height) {
   Camera c;
   c.position = Vec3(frame(0, 0), frame(0, 1), frame(0, 2));
   c.right = Vec3(frame(1, 0), frame(1, 1), frame(1, 2));
@@ -38,7 +40,7 @@ Camera make_camera(nb::ndarray<const float, nb::shape<4, 3>, nb::c_contig, nb::d
   return c;
 }
 
-nb::dict output_to_dict(const RenderOutput& o) {
+nb::dict render_output_dict(const RenderOutput& o) {
   nb::dict d;
   const std::size_t h = static_cast<std::size_t>(o.fb.height), w = static_cast<std::size_t>(o.fb.width);
   d["image"] = to_numpy(o.fb.color, {h, w, 3});
@@ -74,29 +76,7 @@ nb::dict output_to_dict(const RenderOutput& o) {
   return d;
 }
 
-}  // namespace
-
-void register_render(nb::module_& m) {
-  nb::class_<RenderSettings>(m, "NativeRenderSettings",
-                             "Native render settings; build them through sim_core.RenderSettings.")
-      .def(nb::init<>())
-      .def_prop_rw("mode", [](const RenderSettings& s) { return static_cast<int>(s.mode); },
-                   [](RenderSettings& s, int v) { s.mode = static_cast<SamplingMode>(v); })
-      .def_rw("block", &RenderSettings::block)
-      .def_rw("normal_threshold_deg", &RenderSettings::normal_threshold_deg)
-      .def_rw("max_depth", &RenderSettings::max_depth)
-      .def_rw("shadow_samples", &RenderSettings::shadow_samples)
-      .def_rw("resolution_scale", &RenderSettings::resolution_scale)
-      .def_prop_rw("env_filter", [](const RenderSettings& s) { return static_cast<int>(s.env_filter); },
-                   [](RenderSettings& s, int v) { s.env_filter = static_cast<EnvFilter>(v); })
-      .def_rw("ao_samples", &RenderSettings::ao_samples)
-      .def_rw("ao_distance", &RenderSettings::ao_distance)
-      .def_rw("multirate", &RenderSettings::multirate)
-      .def_rw("multirate_low", &RenderSettings::multirate_low)
-      .def_rw("multirate_high", &RenderSettings::multirate_high)
-      .def_rw("tile_size", &RenderSettings::tile_size)
-      .def("validate", &RenderSettings::validate);
-
+void bind_render(nb::module_& m) {
   nb::class_<MultirateState>(m, "MultirateState",
                              "Per-tile block sizes and similarity ratios of a frame; pass to the next frame.")
       .def_ro("tiles_x", &MultirateState::tiles_x)
@@ -113,11 +93,10 @@ void register_render(nb::module_& m) {
 
   m.def(
       "render_frame",
-      [](const Scene& scene, nb::ndarray<const float, nb::shape<4, 3>, nb::c_contig, nb::device::cpu> frame,
-         float vfov, int width, int height, const RenderSettings& settings, int threads,
-         const MultirateState* previous, std::uint32_t cache_size, std::uint32_t cache_line, std::uint32_t cache_ways,
-         int crop_x, int crop_y, int full_width, int full_height) {
-        Camera cam = make_camera(frame, vfov, width, height);
+      [](const Scene& scene, CameraFrame frame, float vfov, int width, int height, const RenderSettings& settings,
+         int threads, const MultirateState* previous, std::uint32_t cache_size, std::uint32_t cache_line,
+         std::uint32_t cache_ways, int crop_x, int crop_y, int full_width, int full_height) {
+        Camera cam = camera_from_frame(frame, vfov, width, height);
         cam.crop_x = crop_x;
         cam.crop_y = crop_y;
         cam.full_width = full_width;
@@ -129,40 +108,13 @@ void register_render(nb::module_& m) {
           nb::gil_scoped_release release;
           out = render_frame(scene, cam, settings, threads, previous, cc);
         }
-        return output_to_dict(out);
+        return render_output_dict(out);
       },
       "scene"_a, "frame"_a, "vfov"_a, "width"_a, "height"_a, "settings"_a, "threads"_a, "previous"_a.none(),
       "cache_size"_a, "cache_line"_a, "cache_ways"_a, "crop_x"_a = 0, "crop_y"_a = 0, "full_width"_a = 0,
       "full_height"_a = 0,
       "Renders one frame, or the width x height window at (crop_x, crop_y) of a full_width x full_height\n"
       "frame. frame rows: position, right, up, forward (unit) of the camera.");
-
-  m.def(
-      "render_stereo",
-      [](const Scene& scene, nb::ndarray<const float, nb::shape<4, 3>, nb::c_contig, nb::device::cpu> left,
-         nb::ndarray<const float, nb::shape<4, 3>, nb::c_contig, nb::device::cpu> right, float vfov, int width,
-         int height, const RenderSettings& settings, int threads, const MultirateState* previous,
-         std::uint32_t cache_size, std::uint32_t cache_line, std::uint32_t cache_ways) {
-        const Camera cl = make_camera(left, vfov, width, height);
-        const Camera cr = make_camera(right, vfov, width, height);
-        const CacheConfig cc{cache_size, cache_line, cache_ways};
-        StereoOutput out;
-        {
-          nb::gil_scoped_release release;
-          out = render_stereo(scene, cl, cr, settings, threads, previous, cc);
-        }
-        nb::dict d;
-        d["left"] = output_to_dict(out.left);
-        d["right"] = output_to_dict(out.right);
-        d["reuse_ratio"] = out.reuse_ratio;
-        d["holes"] = out.holes;
-        d["silhouettes"] = out.silhouettes;
-        d["depth_mismatches"] = out.depth_mismatches;
-        return d;
-      },
-      "scene"_a, "left"_a, "right"_a, "vfov"_a, "width"_a, "height"_a, "settings"_a, "threads"_a,
-      "previous"_a.none(), "cache_size"_a, "cache_line"_a, "cache_ways"_a,
-      "Renders the left eye, reprojects it into the right eye and traces only the bad pixels.");
 }
 
 }  // namespace sim_core

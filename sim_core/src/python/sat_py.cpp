@@ -1,17 +1,16 @@
-// Bindings: summed-area tables (float32 and float64 reference) and the glossy environment filter.
+// Bindings of the summed-area tables: float32 (the hardware's) and float64 (the reference).
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
 
-#include <cmath>
 #include <stdexcept>
 #include <string>
 
-#include "sim_core/env_filter.h"
 #include "sim_core/sat.h"
 
 namespace nb = nanobind;
 using namespace nb::literals;
 
+namespace sim_core {
 namespace {
 
 using Image = nb::ndarray<const float, nb::c_contig, nb::device::cpu>;
@@ -27,8 +26,8 @@ void image_shape(const Image& img, int* w, int* h, int* c) {
 }
 
 template <typename T>
-void bind_table(nb::module_& m, const char* name) {
-  using Table = sim_core::SummedAreaTable<T>;
+void def_table_class(nb::module_& m, const char* name) {
+  using Table = SummedAreaTable<T>;
   nb::class_<Table>(m, name)
       .def("__init__",
            [](Table* self, Image img, int order, bool offset) {
@@ -78,37 +77,8 @@ void bind_table(nb::module_& m, const char* name) {
 }  // namespace
 
 void bind_sat(nb::module_& m) {
-  bind_table<float>(m, "SummedAreaTableF32");
-  bind_table<double>(m, "SummedAreaTableF64");
-
-  nb::class_<sim_core::EnvironmentFilter>(m, "EnvironmentFilter")
-      .def("__init__",
-           [](sim_core::EnvironmentFilter* self, nb::ndarray<const float, nb::ndim<3>, nb::c_contig, nb::device::cpu> rgb,
-              int order, int table_bits) {
-             if (rgb.shape(2) != 3) throw std::invalid_argument("environment map must be (H, W, 3) float32");
-             new (self) sim_core::EnvironmentFilter(rgb.data(), static_cast<int>(rgb.shape(1)),
-                                                    static_cast<int>(rgb.shape(0)), order, table_bits);
-           },
-           "rgb"_a, "order"_a = 1, "table_bits"_a = 0)
-      .def_prop_ro("table_bits", &sim_core::EnvironmentFilter::table_bits)
-      .def_prop_ro("width", &sim_core::EnvironmentFilter::width)
-      .def_prop_ro("height", &sim_core::EnvironmentFilter::height)
-      .def_prop_ro("order", &sim_core::EnvironmentFilter::order)
-      .def("lookup",
-           [](const sim_core::EnvironmentFilter& f, nb::ndarray<const float, nb::ndim<2>, nb::c_contig, nb::device::cpu> dirs,
-              float cone_half_angle) {
-             if (dirs.shape(1) != 3) throw std::invalid_argument("directions must be (N, 3) float32");
-             const std::size_t n = dirs.shape(0);
-             auto* out = new float[n * 3];
-             nb::capsule owner(out, [](void* p) noexcept { delete[] static_cast<float*>(p); });
-             const float* d = dirs.data();
-             for (std::size_t i = 0; i < n; ++i) {
-               const sim_core::Vec3 v = f.lookup(sim_core::Vec3(d[3 * i], d[3 * i + 1], d[3 * i + 2]), cone_half_angle);
-               out[3 * i] = v.x; out[3 * i + 1] = v.y; out[3 * i + 2] = v.z;
-             }
-             return nb::ndarray<nb::numpy, float, nb::ndim<2>>(out, {n, 3}, owner);
-           },
-           "directions"_a, "cone_half_angle"_a,
-           "Mean radiance over each direction's cone footprint (box or Bartlett, by the filter's order).");
-  m.attr("ENV_FILTER_MAX_CONE_HALF_ANGLE") = sim_core::EnvironmentFilter::kMaxConeHalfAngle;
+  def_table_class<float>(m, "SummedAreaTableF32");
+  def_table_class<double>(m, "SummedAreaTableF64");
 }
+
+}  // namespace sim_core

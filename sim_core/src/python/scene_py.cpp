@@ -48,7 +48,7 @@ std::unique_ptr<Scene> make_scene(Arr2<float, 3> positions, Arr2<std::uint32_t, 
 
 }  // namespace
 
-void register_scene(nb::module_& m) {
+void bind_scene(nb::module_& m) {
   nb::class_<Scene>(m, "NativeScene",
                     "Native scene (BVH + shading data). Build it through sim_core.Scene, which validates.")
       .def_static("build", &make_scene, "positions"_a, "triangles"_a, "prim_ids"_a, "normals"_a.none(),

@@ -10,6 +10,7 @@
 namespace nb = nanobind;
 using namespace nb::literals;
 
+namespace sim_core {
 namespace {
 
 template <typename T>
@@ -27,14 +28,14 @@ double ssim_binding(Image<T> x, Image<T> y, double data_range, bool gaussian, in
   const int h = static_cast<int>(x.shape(0));
   const int w = static_cast<int>(x.shape(1));
   const int c = x.ndim() == 3 ? static_cast<int>(x.shape(2)) : 1;
-  sim_core::SsimOptions opt;
+  SsimOptions opt;
   opt.data_range = data_range;
   opt.gaussian = gaussian;
   opt.threads = threads;
   const T* xp = x.data();
   const T* yp = y.data();
   nb::gil_scoped_release release;
-  return sim_core::ssim_mean(xp, yp, h, w, c, opt);
+  return ssim_mean(xp, yp, h, w, c, opt);
 }
 
 }  // namespace
@@ -49,3 +50,5 @@ void bind_ssim(nb::module_& m) {
   m.def("ssim_mean", &ssim_binding<float>, "x"_a, "y"_a, "data_range"_a = 1.0, "gaussian"_a = false,
         "threads"_a = 0, doc);
 }
+
+}  // namespace sim_core

@@ -14,11 +14,12 @@
 namespace nb = nanobind;
 using namespace nb::literals;
 
+namespace sim_core {
 namespace {
 
 using Rays = nb::ndarray<const float, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu>;
 
-nb::dict traffic_dict(const sim_core::TraversalTraffic& t) {
+nb::dict traffic_dict(const TraversalTraffic& t) {
   nb::dict d;
   d["rays"] = t.rays;
   d["node_fetches"] = t.node_fetches;
@@ -51,30 +52,30 @@ nb::dict traffic_dict(const sim_core::TraversalTraffic& t) {
 void bind_streaming(nb::module_& m) {
   m.def(
       "traverse_rays",
-      [](const sim_core::Scene& scene, Rays origins, Rays directions, const std::string& mode,
+      [](const Scene& scene, Rays origins, Rays directions, const std::string& mode,
          std::uint32_t cache_size, std::uint32_t cache_line, std::uint32_t cache_ways, std::size_t group_size) {
         const std::size_t n = origins.shape(0);
         if (directions.shape(0) != n) throw std::invalid_argument("origins and directions differ in length");
-        std::vector<sim_core::Ray> rays(n);
+        std::vector<Ray> rays(n);
         const float* o = origins.data();
         const float* d = directions.data();
         for (std::size_t i = 0; i < n; ++i) {
-          rays[i].origin = sim_core::Vec3(o[3 * i], o[3 * i + 1], o[3 * i + 2]);
-          rays[i].dir = sim_core::Vec3(d[3 * i], d[3 * i + 1], d[3 * i + 2]);
-          if (!sim_core::is_finite(rays[i].origin) || !sim_core::is_finite(rays[i].dir) ||
-              sim_core::dot(rays[i].dir, rays[i].dir) == 0.f)
+          rays[i].origin = Vec3(o[3 * i], o[3 * i + 1], o[3 * i + 2]);
+          rays[i].dir = Vec3(d[3 * i], d[3 * i + 1], d[3 * i + 2]);
+          if (!is_finite(rays[i].origin) || !is_finite(rays[i].dir) ||
+              dot(rays[i].dir, rays[i].dir) == 0.f)
             throw std::invalid_argument("ray " + std::to_string(i) + " has a non-finite origin or a bad direction");
         }
-        std::vector<sim_core::Hit> hits(n);
-        sim_core::TraversalTraffic t;
+        std::vector<Hit> hits(n);
+        TraversalTraffic t;
         {
           nb::gil_scoped_release release;
           if (mode == "streaming") {
-            t = sim_core::streaming_traversal(scene, rays.data(), n, hits.data());
+            t = streaming_traversal(scene, rays.data(), n, hits.data());
           } else if (mode == "per_ray") {
-            const sim_core::CacheConfig cfg{cache_size, cache_line, cache_ways};
+            const CacheConfig cfg{cache_size, cache_line, cache_ways};
             cfg.validate();
-            t = sim_core::per_ray_traversal(scene, rays.data(), n, hits.data(), cfg, group_size);
+            t = per_ray_traversal(scene, rays.data(), n, hits.data(), cfg, group_size);
           } else {
             throw std::invalid_argument("mode must be 'streaming' or 'per_ray'");
           }
@@ -94,3 +95,5 @@ void bind_streaming(nb::module_& m) {
       "cache_ways"_a = 4, "group_size"_a = 0,
       "Closest hits of a ray batch by streaming or per-ray traversal, with fetch and byte counters.");
 }
+
+}  // namespace sim_core

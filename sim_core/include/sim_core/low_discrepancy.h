@@ -20,6 +20,11 @@ inline std::uint32_t hash_u32(std::uint32_t x) {  // lowbias32 (Chris Wellons)
 inline std::uint32_t hash_combine(std::uint32_t seed, std::uint32_t v) {
   return hash_u32(seed ^ (v + 0x9e3779b9u + (seed << 6) + (seed >> 2)));
 }
+// Key of the sample at global sample-grid coordinates (sx, sy) of a grid tagged `grid` (its sub-pixel
+// count, plus a flag for a differently scheduled grid): seeds every random number of that sample.
+inline std::uint32_t sample_key(std::uint32_t sx, std::uint32_t sy, std::uint32_t grid) {
+  return hash_combine(hash_combine(hash_u32(sx), sy), grid);
+}
 inline float u32_to_unit(std::uint32_t x) { return static_cast<float>(x >> 8) * (1.f / 16777216.f); }
 
 struct Sample2 { float u, v; };

@@ -1,11 +1,13 @@
-// Sampling schedules inside one tile (tracer seed sec. 3). Samples are pixels (1 spp, undersampling) or
-// sub-pixels of a k x k grid (FSAA, supersampling). Reference samples R sit every `spacing` samples along
-// X and Y (plus the tile's last row and column); they are traced first. Then, first along X on the R rows
-// and then along Y on every column, each run of intermediate samples between two adjacent known samples
-// is interpolated when the two pass the similarity test (same object, normals within the threshold, same
-// shadow bits, and the same for their first reflection/refraction hits) and traced otherwise.
+// Adaptive sampling: the sampling schedule inside one tile (tracer seed sec. 3). Samples are pixels
+// (1 spp, undersampling) or sub-pixels of a k x k grid (FSAA, supersampling). Reference samples R sit every
+// `spacing` samples along X and Y (plus the tile's last row and column); they are traced first. Then,
+// first along X on the R rows and then along Y on every column, each run of intermediate samples between
+// two adjacent known samples is interpolated when the two pass the similarity test (same object, normals
+// within the threshold, same shadow bits, and the same for their first reflection/refraction hits) and
+// traced otherwise. Multi-rate control picks each tile's spacing from the previous frame.
 #pragma once
 #include "sim_core/render.h"
+#include "sim_core/shader.h"
 
 namespace sim_core {
 

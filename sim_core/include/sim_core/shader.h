@@ -1,0 +1,55 @@
+// Shading of one sample: the Whitted ray tree of a primary ray, traced and shaded in named phases
+// (shader.cpp): primary hit -> surface point and material terms -> emission -> direct light with shadow
+// rays -> ambient light with ambient-occlusion rays -> mirror/glossy reflection and Fresnel refraction
+// (recursively) -> environment for rays that leave the scene. Every ray, node and triangle fetch,
+// closest-hit comparison and environment lookup is counted into the tile's context.
+#pragma once
+#include <cstdint>
+
+#include "sim_core/cache.h"
+#include "sim_core/camera.h"
+#include "sim_core/comparator.h"
+#include "sim_core/counters.h"
+#include "sim_core/scene.h"
+#include "sim_core/settings.h"
+
+namespace sim_core {
+
+// What the similarity test needs to know about a sample besides its colour (seed sec. 3: object id,
+// normal, position, shadow bits), for the primary hit and for the first reflection/refraction hits.
+struct SampleGeometry {
+  std::int32_t object = -1;  // primary hit object, -1 on a miss
+  Vec3 normal;               // shading normal at the primary hit
+  Vec3 position;             // primary hit point (world)
+  float depth = kInf;        // camera-space depth of the primary hit
+  std::uint32_t shadow_bits = 0;  // bit l: light l is occluded at the primary hit
+  std::int32_t sec_object[2] = {-2, -2};  // reflection / refraction hit object (-1 environment, -2 no ray)
+  Vec3 sec_normal[2];
+  std::uint32_t sec_shadow_bits = 0;
+};
+
+struct SampleResult {
+  Vec3 color;
+  SampleGeometry geom;
+};
+
+// Per-tile state of the T&I unit model: counters, node/triangle cache, comparator histogram.
+struct TileContext {
+  const Scene& scene;
+  const RenderSettings& settings;
+  const Camera& camera;
+  CacheModel cache;
+  Counters counters;
+  ComparatorHistogram histogram{};
+  float cos_threshold;  // cos(normal_threshold); > 1 when nothing may pass
+  float ao_distance;
+
+  TileContext(const Scene& s, const RenderSettings& st, const Camera& c, const CacheConfig& cc);
+  void finish();  // folds cache statistics into the counters
+};
+
+// Traces and shades the primary sample through continuous pixel coordinates (px, py) of the camera.
+// `key` identifies the sample (its global sample-grid coordinates) and seeds all its random numbers.
+SampleResult trace_sample(TileContext& ctx, float px, float py, std::uint32_t key);
+
+}  // namespace sim_core

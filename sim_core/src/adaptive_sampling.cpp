@@ -1,0 +1,190 @@
+#include "sim_core/adaptive_sampling.h"
+
+#include <algorithm>
+#include <vector>
+
+#include "sim_core/low_discrepancy.h"
+
+namespace sim_core {
+
+bool similar(const SampleGeometry& a, const SampleGeometry& b, float cos_threshold) {
+  if (cos_threshold > 1.f) return false;  // a negative angle threshold: nothing is similar
+  if (a.object != b.object) return false;
+  if (a.object >= 0) {
+    if (dot(a.normal, b.normal) < cos_threshold) return false;
+    if (a.shadow_bits != b.shadow_bits) return false;
+  }
+  // Secondary rays follow the same scheme: their first hits must agree too.
+  for (int s = 0; s < 2; ++s) {
+    if (a.sec_object[s] != b.sec_object[s]) return false;
+    if (a.sec_object[s] >= 0 && dot(a.sec_normal[s], b.sec_normal[s]) < cos_threshold) return false;
+  }
+  return a.sec_shadow_bits == b.sec_shadow_bits;
+}
+
+int multirate_block(int previous_block, float previous_ratio, std::uint64_t previous_checks,
+                    const RenderSettings& settings) {
+  int b = std::min(4, std::max(2, previous_block));
+  if (previous_checks == 0) return b;
+  if (previous_ratio >= settings.multirate_high) return std::min(4, b + 1);
+  if (previous_ratio < settings.multirate_low) return std::max(2, b - 1);
+  return b;
+}
+
+namespace {
+
+SampleGeometry interpolate_geometry(const SampleGeometry& a, const SampleGeometry& b, float f) {
+  SampleGeometry g = a;  // object, shadow bits and secondary hits agree (similarity passed)
+  g.normal = normalize(lerp(a.normal, b.normal, f));
+  g.position = lerp(a.position, b.position, f);
+  g.depth = a.object >= 0 ? a.depth + (b.depth - a.depth) * f : kInf;
+  return g;
+}
+
+// The samples of one tile (its tile buffer) and the schedule that fills them.
+class TileSampler {
+ public:
+  TileSampler(TileContext& ctx, int x0, int y0, int w, int h, int k)
+      : ctx_(ctx), x0_(x0), y0_(y0), w_(w), h_(h), k_(k), nx_(w * k), ny_(h * k),
+        inv_k_(1.f / static_cast<float>(k)),
+        samples_(static_cast<std::size_t>(nx_) * ny_), state_(samples_.size(), 0) {}
+
+  // Full rate: every sample traced, row by row.
+  void trace_all() {
+    for (int j = 0; j < ny_; ++j)
+      for (int i = 0; i < nx_; ++i) trace_at(i, j);
+  }
+  // Reference samples every `spacing` (and the last row/column), then the runs between them along X on
+  // the reference rows, then along Y on every column.
+  void trace_adaptive(int spacing);
+  // Resolves the samples to pixels and flushes the tile into the frame buffer.
+  void flush(FrameBuffers& fb);
+  // Folds the schedule's statistics into the tile's counters and `stat`.
+  void finish(int spacing, TileStat* stat) const;
+
+ private:
+  enum : std::uint8_t { kPending = 0, kTraced = 1, kInterpolated = 2 };
+  TileContext& ctx_;
+  const int x0_, y0_, w_, h_, k_, nx_, ny_;
+  const float inv_k_;
+  std::vector<SampleResult> samples_;
+  std::vector<std::uint8_t> state_;
+  std::uint64_t checks_ = 0, passed_ = 0, traced_ = 0, interpolated_ = 0;
+
+  std::size_t at(int i, int j) const { return static_cast<std::size_t>(j) * nx_ + i; }
+  void trace_at(int i, int j);
+  // The run of `count` samples strictly between known samples ia and ib along a line: interpolated when
+  // the two are similar, traced otherwise. index_of(m) / trace_of(m) address its m-th sample (1-based).
+  template <class IndexOf, class TraceOf>
+  void resolve_run(std::size_t ia, std::size_t ib, int count, IndexOf index_of, TraceOf trace_of);
+};
+
+void TileSampler::trace_at(int i, int j) {
+  // Seeds by position in the full frame: a window of it (Camera::crop_x/y) samples like the whole.
+  const std::uint32_t sx = static_cast<std::uint32_t>((ctx_.camera.crop_x + x0_) * k_ + i),
+                      sy = static_cast<std::uint32_t>((ctx_.camera.crop_y + y0_) * k_ + j);
+  const std::uint32_t key = sample_key(sx, sy, static_cast<std::uint32_t>(k_));
+  const float px = static_cast<float>(x0_) + (static_cast<float>(i) + 0.5f) * inv_k_;
+  const float py = static_cast<float>(y0_) + (static_cast<float>(j) + 0.5f) * inv_k_;
+  samples_[at(i, j)] = trace_sample(ctx_, px, py, key);
+  state_[at(i, j)] = kTraced;
+  ++traced_;
+  ++ctx_.counters.tile_buffer_writes;
+}
+
+template <class IndexOf, class TraceOf>
+void TileSampler::resolve_run(std::size_t ia, std::size_t ib, int count, IndexOf index_of, TraceOf trace_of) {
+  if (count <= 0) return;
+  Counters& c = ctx_.counters;
+  ++checks_;
+  c.tile_buffer_reads += 2;
+  if (!similar(samples_[ia].geom, samples_[ib].geom, ctx_.cos_threshold)) {
+    for (int m = 1; m <= count; ++m) trace_of(m);
+    return;
+  }
+  ++passed_;
+  for (int m = 1; m <= count; ++m) {
+    const float f = static_cast<float>(m) / static_cast<float>(count + 1);
+    SampleResult& s = samples_[index_of(m)];
+    s.color = lerp(samples_[ia].color, samples_[ib].color, f);
+    s.geom = interpolate_geometry(samples_[ia].geom, samples_[ib].geom, f);
+    state_[index_of(m)] = kInterpolated;
+    ++interpolated_;
+    c.tile_buffer_reads += 2;
+    ++c.tile_buffer_writes;
+  }
+}
+
+void TileSampler::trace_adaptive(int spacing) {
+  std::vector<int> rx, ry;  // reference columns / rows: every `spacing`, plus the last one
+  for (int i = 0; i < nx_; ++i) if (i % spacing == 0 || i == nx_ - 1) rx.push_back(i);
+  for (int j = 0; j < ny_; ++j) if (j % spacing == 0 || j == ny_ - 1) ry.push_back(j);
+  for (int j : ry)
+    for (int i : rx) trace_at(i, j);
+  // X: along reference rows, between adjacent reference samples.
+  for (int j : ry) {
+    for (std::size_t r = 0; r + 1 < rx.size(); ++r) {
+      const int i0 = rx[r], i1 = rx[r + 1];
+      resolve_run(at(i0, j), at(i1, j), i1 - i0 - 1, [&](int m) { return at(i0 + m, j); },
+                  [&](int m) { trace_at(i0 + m, j); });
+    }
+  }
+  // Y: along every column, between the (now known) samples of adjacent reference rows.
+  for (int i = 0; i < nx_; ++i) {
+    for (std::size_t r = 0; r + 1 < ry.size(); ++r) {
+      const int j0 = ry[r], j1 = ry[r + 1];
+      resolve_run(at(i, j0), at(i, j1), j1 - j0 - 1, [&](int m) { return at(i, j0 + m); },
+                  [&](int m) { trace_at(i, j0 + m); });
+    }
+  }
+}
+
+void TileSampler::flush(FrameBuffers& fb) {
+  const float inv_n = 1.f / static_cast<float>(k_ * k_);
+  for (int jj = 0; jj < h_; ++jj) {
+    for (int ii = 0; ii < w_; ++ii) {
+      Vec3 sum;
+      bool any_interp = false;
+      for (int b = 0; b < k_; ++b)
+        for (int a = 0; a < k_; ++a) {
+          const std::size_t idx = at(ii * k_ + a, jj * k_ + b);
+          sum += samples_[idx].color;
+          any_interp |= state_[idx] == kInterpolated;
+        }
+      if (k_ > 1) ctx_.counters.tile_buffer_reads += static_cast<std::uint64_t>(k_) * k_;
+      const SampleGeometry& g = samples_[at(ii * k_ + k_ / 2, jj * k_ + k_ / 2)].geom;
+      const std::size_t p = static_cast<std::size_t>(y0_ + jj) * fb.width + (x0_ + ii);
+      fb.store(p, k_ > 1 ? sum * inv_n : sum, g, any_interp ? kSampleInterpolated : kSampleTraced);
+    }
+  }
+}
+
+void TileSampler::finish(int spacing, TileStat* stat) const {
+  Counters& c = ctx_.counters;
+  c.samples_traced += traced_;
+  c.samples_interpolated += interpolated_;
+  c.interpolations += interpolated_;
+  c.similarity_checks += checks_;
+  stat->block = spacing;
+  stat->samples_traced = traced_;
+  stat->samples_interpolated = interpolated_;
+  stat->similarity_checks = checks_;
+  stat->similarity_passed = passed_;
+  stat->similarity_ratio = checks_ ? static_cast<float>(passed_) / static_cast<float>(checks_) : 0.f;
+}
+
+}  // namespace
+
+void render_tile(TileContext& ctx, FrameBuffers& fb, int x0, int y0, int w, int h, int k, int spacing,
+                 TileStat* stat) {
+  TileSampler sampler(ctx, x0, y0, w, h, k);
+  if (spacing <= 1) {
+    sampler.trace_all();
+  } else {
+    sampler.trace_adaptive(spacing);
+  }
+  sampler.flush(fb);
+  sampler.finish(spacing, stat);
+}
+
+}  // namespace sim_core
