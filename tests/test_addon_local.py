@@ -60,7 +60,7 @@ def scene() -> bpy.types.Scene:
     return sc
 
 
-def test_optimize_runs_here_by_default_and_leaves_no_process(ext) -> None:
+def test_optimize_and_evaluate_run_here_by_default_and_leave_no_process(ext, tmp_path) -> None:
     sc = scene()
     assert bpy.ops.render_budget.optimize() == {"FINISHED"}
     props = sc.render_budget
@@ -71,6 +71,12 @@ def test_optimize_runs_here_by_default_and_leaves_no_process(ext) -> None:
     assert m("service_process").local_job_pids() == [] and job_processes() == []
     sc.frame_set(5)  # the store drives playback
     assert props.playback_status in ("on target", "blending") and props.active_indices
+    props.report_frame_step = 4
+    out = tmp_path / "report"
+    assert bpy.ops.render_budget.evaluate_path(directory=str(out)) == {"FINISHED"}
+    rows = (out / "per_frame.csv").read_text().splitlines()
+    assert len(rows) == 1 + 4 * 5  # 4 frames x (ours + 4 presets), measured here
+    assert (out / "report.md").is_file() and len(list((out / "frames").glob("*.png"))) >= 4
 
 
 def _start_gui_job(sc: bpy.types.Scene):

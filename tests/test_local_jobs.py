@@ -16,10 +16,10 @@ from typing import Any
 
 import pytest
 
-from addon.core.client import ServiceError
+from addon.core.client import ServiceClient, ServiceError
 from addon.core.job_runner import JobCancelled, JobFailed, JobOptions, run_job
 from addon.core.local_jobs import LocalClient, job_command
-from tests.api_support import box_scene_glb, camera_path, teapot_scene_glb, tiny_job
+from tests.api_support import box_scene_glb, camera_path, server_thread, teapot_scene_glb, tiny_job
 
 RUN_STATISTICS = ("evaluations", "cache_hits", "elapsed_s", "executor")
 
@@ -88,6 +88,37 @@ def test_upload_answers_what_the_service_answers(glb: Path, tmp_path: Path) -> N
         client.upload_scene(bad)
     with pytest.raises(ServiceError, match="not found"):
         client.submit_job(tiny_job("0" * 64))
+
+
+@pytest.mark.service
+def test_local_answers_equal_the_services(glb: Path, tmp_path: Path) -> None:
+    """Scene analysis, /evaluate and /render: the local client and a real service answer the same."""
+    from service.api import Settings
+
+    local = LocalClient(tmp_path / "local")
+    frame = camera_path(3)["frames"][1]
+    with server_thread(Settings(data_dir=tmp_path / "service")) as url:
+        remote = ServiceClient(url, timeout_s=120)
+        a, b = local.upload_scene(glb), remote.upload_scene(glb)
+        for key in ("id", "stats", "inert_parameters", "cameras"):
+            assert a[key] == b[key], key
+        camera = {"matrix_world": frame["matrix_world"], "vfov": frame["vfov"], "width": 32, "height": 24}
+        for settings in ({}, {"sampling": "1spp", "shadow_samples": 1}):
+            body = {"scene_id": a["id"], "camera": camera, "settings": settings, "profile": "mobile",
+                    "fps": 30}
+            ours, theirs = local.evaluate(body), remote.evaluate(body)
+            assert ours["error"] == pytest.approx(theirs["error"], abs=1e-12)
+            assert ours["power_w"] == pytest.approx(theirs["power_w"], rel=1e-12)
+            for fmt in ("png", "exr"):
+                img_ours = local.render({**body, "format": fmt})
+                img_theirs = remote.render({**body, "format": fmt})
+                assert img_ours.content_type == img_theirs.content_type
+                if fmt == "png":  # same pixels, same encoder
+                    assert img_ours.data == img_theirs.data
+                assert img_ours.metadata["energy"]["power_w"] == pytest.approx(
+                    img_theirs.metadata["energy"]["power_w"], rel=1e-9)
+    with pytest.raises(ValueError, match="not a value of 'sampling'"):
+        local.evaluate({**body, "settings": {"sampling": "nonsense"}})
 
 
 def test_local_job_gives_the_in_process_store(glb: Path, tmp_path: Path) -> None:

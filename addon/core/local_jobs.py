@@ -2,9 +2,11 @@
 job runs in a child process (`python -m service.local_job`) started with this interpreter (Blender's own
 Python inside Blender, the bpy module's interpreter in tests).
 
-`LocalClient` answers the subset of `ServiceClient` that `job_runner.run_job` and the operators use
-(`health`, `upload_scene`, `scene`, `submit_job`, `job`, `cancel_job`, `store_text`), with the same
-dictionaries the REST service returns, so a local and a remote job follow one code path.
+`LocalClient` answers what `job_runner.run_job`, the operators and path evaluation ask a `ServiceClient`
+(`health`, `upload_scene`, `scene`, `submit_job`, `job`, `cancel_job`, `store_text`, `evaluate`,
+`render`), with the same dictionaries the REST service returns, so local and remote work follow one code
+path. Evaluations and renders run in this process (the native core releases the GIL: a thread pool of
+evaluations uses every core).
 
 A job process never outlives its job or this process: it watches a pipe from us (end of file: it kills
 itself and its workers), asks Linux for SIGKILL when its parent dies, leads its own process group (stopping
@@ -27,7 +29,13 @@ from collections import OrderedDict
 from pathlib import Path
 from typing import IO, Any
 
-from .client import ServiceError
+import numpy as np
+
+from . import preview
+from .client import RenderedImage, ServiceError
+
+# The native core (sim_core, and service modules that import it) loads on first use, not when the add-on
+# registers: playback and the panel work even where it cannot load, and the error then says why.
 
 TERMINAL = ("done", "failed", "cancelled")
 SCENES_KEPT = 8
@@ -173,6 +181,7 @@ class LocalClient:
         self.timeout_s = 3600.0
         self._jobs: dict[str, LocalJobProcess] = {}
         self._scenes: OrderedDict[str, dict[str, Any]] = OrderedDict()
+        self._loaded: OrderedDict[str, Any] = OrderedDict()  # scene id -> sim_core.Scene (evaluate, render)
         self._lock = threading.Lock()
 
     # -- what ServiceClient offers ---------------------------------------------------------------------
@@ -201,14 +210,66 @@ class LocalClient:
             tmp = kept.with_suffix(".tmp")
             tmp.write_bytes(data)
             tmp.replace(kept)
-        info = analyse_scene(kept)
+        loaded, info = analyse_scene(kept)
         info.update(id=scene_id, size=len(data))
         with self._lock:
             self._scenes[scene_id] = info
+            self._remember(scene_id, loaded)
             while len(self._scenes) > SCENES_KEPT:
                 old, _ = self._scenes.popitem(last=False)
+                self._loaded.pop(old, None)
                 (folder / f"{old}.glb").unlink(missing_ok=True)
         return dict(info)
+
+    def _remember(self, scene_id: str, scene: Any) -> None:
+        """Keep the two most recent loaded scenes (a BVH is the expensive part; memory is the limit)."""
+        self._loaded[scene_id] = scene
+        self._loaded.move_to_end(scene_id)
+        while len(self._loaded) > 2:
+            self._loaded.popitem(last=False)
+
+    def _scene(self, scene_id: str) -> Any:
+        import sim_core
+
+        with self._lock:
+            scene = self._loaded.get(scene_id)
+            known = scene_id in self._scenes
+        if scene is None:
+            path = self.data_dir / "scenes" / f"{scene_id}.glb"
+            if not known or not path.is_file():
+                raise ServiceError(404, f"scene {scene_id!r} not found: upload it first")
+            scene = sim_core.Scene.from_gltf(str(path))
+            with self._lock:
+                self._remember(scene_id, scene)
+        return scene
+
+    def evaluate(self, payload: dict[str, Any], timeout_s: float | None = None) -> dict[str, Any]:
+        """What POST /evaluate answers: error against the maximum-quality render of the same camera
+        and power of `settings` (`{parameter: value}`), here."""
+        from service.evaluation import CameraSpec, evaluate
+
+        cam = payload["camera"]
+        m = _camera_matrix(cam["matrix_world"])
+        spec = CameraSpec(eye=tuple(m[:3, 3]), forward=tuple(-m[:3, 2]), up=tuple(m[:3, 1]), vfov=cam["vfov"],
+                          width=cam["width"], height=cam["height"])
+        space, indices = preview.settings_indices(payload.get("settings"))
+        ev = evaluate(self._scene(str(payload["scene_id"])), spec, indices, space,
+                      profile=str(payload.get("profile", "mobile")), fps=float(payload.get("fps", 30.0)))
+        return {"error": float(ev.error), "power_w": float(ev.power_w),
+                "frame_time_s": float(ev.frame_time_s), "breakdown": dict(ev.breakdown)}
+
+    def render(self, payload: dict[str, Any], timeout_s: float | None = None) -> RenderedImage:
+        """What POST /render answers: the frame as PNG or EXR with its counters and energy report, here."""
+        cam = payload["camera"]
+        profile, fps = str(payload.get("profile", "mobile")), float(payload.get("fps", 30.0))
+        result = preview.render(self._scene(str(payload["scene_id"])), _camera_matrix(cam["matrix_world"]),
+                                cam["vfov"], int(cam["width"]), int(cam["height"]),
+                                settings=payload.get("settings"), profile=profile, fps=fps)
+        fmt = str(payload.get("format", "png")).lower()
+        data = preview.encode(np.asarray(result.image), fmt)
+        return RenderedImage(data, "image/x-exr" if fmt == "exr" else "image/png",
+                             {"energy": result.energy, "counters": result.counters,
+                              "render_time_s": result.render_s})
 
     def scene(self, scene_id: str) -> dict[str, Any]:
         with self._lock:
@@ -293,8 +354,17 @@ class LocalClient:
         return not self.job_pids()
 
 
-def analyse_scene(path: str | Path) -> dict[str, Any]:
-    """Load a scene file with the real loader; statistics and the parameters it cannot exercise."""
+def _camera_matrix(matrix: Any) -> np.ndarray:
+    m = np.array(matrix, dtype=np.float64)
+    if m.shape != (4, 4) or not np.all(np.isfinite(m)):
+        raise ValueError("camera matrix_world must be a finite 4x4 matrix")
+    m[3] = (0.0, 0.0, 0.0, 1.0)
+    return m
+
+
+def analyse_scene(path: str | Path) -> tuple[Any, dict[str, Any]]:
+    """Load a scene file with the real loader; the scene, its statistics and the parameters it cannot
+    exercise."""
     import sim_core
     from service.params import default_space
 
@@ -306,5 +376,5 @@ def analyse_scene(path: str | Path) -> dict[str, Any]:
              for k, v in dict(scene.stats).items()}
     inert = {str(k): str(v) for k, v in sim_core.inert_parameters(scene, default_space().as_render_space())
              .items()}
-    return {"content_hash": str(scene.content_hash), "stats": stats, "inert_parameters": inert,
-            "cameras": len(scene.cameras)}
+    return scene, {"content_hash": str(scene.content_hash), "stats": stats, "inert_parameters": inert,
+                   "cameras": len(scene.cameras)}

@@ -81,8 +81,8 @@ def check_size(width: int, height: int, available: int | None = None) -> None:
                          f"{have / 2**30:.1f} GiB are available: lower the preview scale")
 
 
-def settings_from_values(values: Mapping[str, Any] | None) -> Any:
-    """RenderSettings for `{parameter: value}` of the default space (what a store lookup returns);
+def settings_indices(values: Mapping[str, Any] | None) -> tuple[Any, tuple[int, ...]]:
+    """The default parameter space and the indices of `{parameter: value}` (what a store lookup returns);
     parameters left out stay at maximum quality."""
     from service.jobs import same_value
     from service.params import default_space
@@ -98,7 +98,30 @@ def settings_from_values(values: Mapping[str, Any] | None) -> Any:
             raise ValueError(f"{value!r} is not a value of {name!r}; "
                              f"values: {list(space.parameters[k].values)}")
         indices[k] = hits[0]
-    return space.to_settings(indices)
+    return space, tuple(indices)
+
+
+def encode(image: np.ndarray, fmt: str) -> bytes:
+    """Linear float RGB as PNG (8-bit sRGB) or EXR (32-bit float) bytes."""
+    import io
+
+    if fmt == "exr":
+        import OpenEXR
+
+        header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+        buf = io.BytesIO()
+        with OpenEXR.File(header, {"RGB": np.ascontiguousarray(image, dtype=np.float32)}) as f:
+            f.write(buf)
+        return buf.getvalue()
+    if fmt != "png":
+        raise ValueError(f"format must be png or exr, got {fmt!r}")
+    from PIL import Image
+
+    x = np.clip(np.nan_to_num(np.asarray(image, dtype=np.float64)), 0.0, 1.0)
+    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+    buf = io.BytesIO()
+    Image.fromarray((srgb * 255.0 + 0.5).astype(np.uint8), "RGB").save(buf, format="PNG")
+    return buf.getvalue()
 
 
 def render(scene: Any, matrix_world: Sequence[Sequence[float]], vfov: float, width: int, height: int, *,
@@ -115,7 +138,8 @@ def render(scene: Any, matrix_world: Sequence[Sequence[float]], vfov: float, wid
     m = np.array(matrix_world, dtype=np.float64)
     m[3] = (0.0, 0.0, 0.0, 1.0)
     camera = sim_core.Camera.from_blender(m, float(vfov), int(width), int(height))
-    rs = settings_from_values(settings)
+    space, indices = settings_indices(settings)
+    rs = space.to_settings(indices)
     prof = sim_core.load_profile(profile)
 
     def on_band(done: int, total: int) -> None:
