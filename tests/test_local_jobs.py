@@ -240,3 +240,11 @@ def test_job_command_isolates_the_child_from_the_users_python_environment() -> N
     cmd = job_command("/opt/blender/python/bin/python3.11", ["--request", "r.json"])
     assert cmd[:3] == ["/opt/blender/python/bin/python3.11", "-I", "-c"]
     assert "service.local_job" in cmd[3] and cmd[4:] == ["--request", "r.json"]
+
+
+def test_a_job_that_cannot_start_says_what_to_do(glb: Path, tmp_path: Path) -> None:
+    client = LocalClient(tmp_path / "data", python=tmp_path / "no-such-python")
+    scene_id = client.upload_scene(glb)["id"]
+    with pytest.raises(RuntimeError, match="could not start a local job .* remote service"):
+        client.submit_job(tiny_job(scene_id))
+    assert client.job_pids() == []

@@ -82,6 +82,9 @@ class LocalJobProcess:
                 command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=log, cwd=str(work_dir),
                 start_new_session=posix,
                 creationflags=0 if posix else subprocess.CREATE_NEW_PROCESS_GROUP)  # type: ignore[attr-defined]
+        except OSError as err:
+            raise RuntimeError(f"could not start a local job with the Python at {command[0]} ({err}); run "
+                               "jobs on a remote service instead (add-on preferences)") from err
         finally:
             log.close()
         self._reader = threading.Thread(target=self._read, args=(self.process.stdout,),
