@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import csv
 import importlib
+import importlib.util
 import sys
 import tempfile
 import time
@@ -64,6 +65,10 @@ def ensure_extension(bpy: ModuleType) -> str:
     if not (tools / "build_extension.py").is_file():
         raise RuntimeError("the render_budget extension is not installed and no source tree is next to this "
                            "script: install the zip first")
+    if importlib.util.find_spec("service") is None or importlib.util.find_spec("sim_core") is None:
+        raise RuntimeError("the render_budget extension is not installed in this Blender: install the zip "
+                           "(make addon, then Install from Disk), or run this script with the bpy module "
+                           "of the checkout's .venv")
     sys.path.insert(0, str(tools))
     try:
         build_extension = importlib.import_module("build_extension")
