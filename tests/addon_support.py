@@ -56,6 +56,22 @@ def stage_extension(tmp: Path) -> Path:
     return tmp
 
 
+def start_gui_job(bpy: Any) -> tuple[Any, Any]:
+    """What the Optimize button's invoke() does, without a window: prepare on the main thread, a worker
+    thread follows the job; returns (ops_optimize module, the active job). `ops._poll_queue()` is the
+    timer's step."""
+    import importlib
+    import threading
+
+    ops = importlib.import_module(f"{EXT_MODULE}.ops_optimize")
+    client = importlib.import_module(f"{EXT_MODULE}.service_process").client_for(bpy.context)
+    job = ops._ActiveJob(ops.prepare(bpy.context.scene), threading.Thread())
+    job.thread = threading.Thread(target=ops._worker, args=(job, client), daemon=True)
+    ops._active = job
+    job.thread.start()
+    return ops, job
+
+
 def enable_dev(bpy: Any, repo_dir: Path) -> Any:
     """Register `repo_dir` as a dev extension repo and enable the add-on from it."""
     import addon_utils

@@ -7,7 +7,6 @@ from __future__ import annotations
 import importlib
 import json
 import os
-import threading
 import time
 from pathlib import Path
 
@@ -15,7 +14,7 @@ import numpy as np
 import pytest
 
 from tests import orbit_scene
-from tests.addon_support import EXT_MODULE, disable_dev, enable_dev, stage_extension
+from tests.addon_support import EXT_MODULE, disable_dev, enable_dev, stage_extension, start_gui_job
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow]
 bpy = pytest.importorskip("bpy")
@@ -79,21 +78,10 @@ def test_optimize_and_evaluate_run_here_by_default_and_leave_no_process(ext, tmp
     assert (out / "report.md").is_file() and len(list((out / "frames").glob("*.png"))) >= 4
 
 
-def _start_gui_job(sc: bpy.types.Scene):
-    ops = m("ops_optimize")
-    client = m("service_process").client_for(bpy.context)
-    prep = ops.prepare(sc)
-    job = ops._ActiveJob(prep, threading.Thread())
-    job.thread = threading.Thread(target=ops._worker, args=(job, client), daemon=True)
-    ops._active = job
-    job.thread.start()
-    return ops, job
-
-
 def test_gui_path_follows_the_local_job_to_the_store(ext) -> None:
     sc = scene()
     sc.render_budget.seed = 7
-    ops, job = _start_gui_job(sc)
+    ops, job = start_gui_job(bpy)
     job.thread.join(600)
     assert not job.thread.is_alive()
     assert ops._poll_queue() is None
@@ -107,7 +95,7 @@ def test_cancel_from_the_gui_path_stops_the_job_process(ext) -> None:
     sc = scene()
     props = sc.render_budget
     props.seed, props.max_depth, props.population, props.generations = 12345, 2, 16, 20
-    ops, job = _start_gui_job(sc)
+    ops, job = start_gui_job(bpy)
     deadline = time.monotonic() + 120
     while not job_processes() and time.monotonic() < deadline:
         time.sleep(0.02)

@@ -12,7 +12,6 @@ import os
 import re
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
@@ -22,7 +21,7 @@ import pytest
 from addon.core.client import ServiceClient
 from addon.core.local_service import LocalService, free_port
 from tests import orbit_scene
-from tests.addon_support import EXT_MODULE, REPO_ROOT, disable_dev, enable_dev, stage_extension
+from tests.addon_support import EXT_MODULE, REPO_ROOT, disable_dev, enable_dev, stage_extension, start_gui_job
 
 pytestmark = [pytest.mark.blender, pytest.mark.service, pytest.mark.slow]
 bpy = pytest.importorskip("bpy")
@@ -144,14 +143,8 @@ def test_optimize_end_to_end_store_in_blend_and_playback_matches_query(optimized
 
 def test_gui_path_worker_thread_and_queue(ext) -> None:
     """invoke()'s machinery without a window: the worker thread does HTTP, the timer callback applies."""
-    ops = m("ops_optimize")
     sc = build_scene()
-    client = m("service_process").client_for(bpy.context)
-    prep = ops.prepare(sc)
-    job = ops._ActiveJob(prep, threading.Thread())
-    job.thread = threading.Thread(target=ops._worker, args=(job, client), daemon=True)
-    ops._active = job
-    job.thread.start()
+    ops, job = start_gui_job(bpy)
     job.thread.join(600)
     assert not job.thread.is_alive()
     assert ops._poll_queue() is None  # drained: job finished, timer would stop
@@ -161,16 +154,10 @@ def test_gui_path_worker_thread_and_queue(ext) -> None:
 
 
 def test_cancel_from_the_gui_path(ext, service) -> None:
-    ops = m("ops_optimize")
     sc = build_scene()
     sc.render_budget.seed = 12345  # a job the cache has not seen
     sc.render_budget.max_depth = 2
-    client = m("service_process").client_for(bpy.context)
-    prep = ops.prepare(sc)
-    job = ops._ActiveJob(prep, threading.Thread())
-    job.thread = threading.Thread(target=ops._worker, args=(job, client), daemon=True)
-    ops._active = job
-    job.thread.start()
+    ops, job = start_gui_job(bpy)
     deadline = time.monotonic() + 60
     while job.messages.qsize() < 2 and time.monotonic() < deadline:  # uploaded, submitted, first poll
         time.sleep(0.02)

@@ -19,16 +19,14 @@ import pytest
 from addon.core.client import ServiceClient, ServiceError
 from addon.core.job_runner import JobCancelled, JobFailed, JobOptions, run_job
 from addon.core.local_jobs import LocalClient, job_command
-from tests.api_support import box_scene_glb, camera_path, server_thread, teapot_scene_glb, tiny_job
-
-RUN_STATISTICS = ("evaluations", "cache_hits", "elapsed_s", "executor")
-
-
-def comparable(store_json: str) -> dict[str, Any]:
-    doc = json.loads(store_json)
-    for key in RUN_STATISTICS:
-        doc["meta"].pop(key)
-    return doc
+from tests.api_support import (
+    box_scene_glb,
+    camera_path,
+    comparable,
+    server_thread,
+    teapot_scene_glb,
+    tiny_job,
+)
 
 
 def alive(pid: int) -> bool:
@@ -245,6 +243,6 @@ def test_job_command_isolates_the_child_from_the_users_python_environment() -> N
 def test_a_job_that_cannot_start_says_what_to_do(glb: Path, tmp_path: Path) -> None:
     client = LocalClient(tmp_path / "data", python=tmp_path / "no-such-python")
     scene_id = client.upload_scene(glb)["id"]
-    with pytest.raises(RuntimeError, match="could not start a local job .* remote service"):
+    with pytest.raises(RuntimeError, match=r"could not start a local job .* remote service"):
         client.submit_job(tiny_job(scene_id))
     assert client.job_pids() == []
