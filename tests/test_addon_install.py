@@ -106,6 +106,23 @@ def test_release_build_needs_a_project_wheel_per_platform(tmp_path: Path) -> Non
     assert build_extension.wheel_platforms("x-1-cp311-cp311-linux_x86_64.whl") == {"linux-x64"}
 
 
+def test_release_build_writes_one_zip_per_platform(zip_path: Path, tmp_path: Path) -> None:
+    """A release: a project wheel per platform (here the Linux one, renamed for Windows: the packaging
+    does not look inside), one run, one zip per platform holding only that platform's wheels."""
+    own = next(n for n in zipfile.ZipFile(zip_path).namelist() if n.startswith("wheels/render_budget-"))
+    linux = tmp_path / Path(own).name
+    linux.write_bytes(zipfile.ZipFile(zip_path).read(own))
+    windows = tmp_path / linux.name.replace(linux.name.split("-")[-1], "win_amd64.whl")
+    shutil.copy(linux, windows)
+    zips = build_extension.build(tmp_path / "dist", own_wheels=[linux, windows])
+    assert [z.name for z in zips] == ["render_budget-0.1.0-linux_x64.zip",
+                                      "render_budget-0.1.0-windows_x64.zip"]
+    for z, tag in zip(zips, ("x86_64", "win_amd64"), strict=True):
+        wheels = [n for n in zipfile.ZipFile(z).namelist() if n.startswith("wheels/")]
+        assert len(wheels) == 3 and all(tag in n for n in wheels), wheels
+        assert {Path(n).name.split("-")[0].lower() for n in wheels} == {"render_budget", "pillow", "openexr"}
+
+
 def _check_install(out: dict, user: Path) -> None:
     assert out["install"] == ["FINISHED"]
     on = out["after_install"]
