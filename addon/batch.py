@@ -89,6 +89,26 @@ def _raise(exc: BaseException) -> None:
 
 
 # -- arguments -----------------------------------------------------------------------------------------
+def _option_schema() -> ModuleType:
+    """The optimiser's option schema (service/options.py, stdlib only): from the source tree or an
+    installed project, else the copy inside a staged extension next to this file."""
+    try:
+        from service import options
+    except ImportError:
+        here = Path(__file__).resolve().parent
+        for path in (here.parent / "service" / "options.py",):
+            if path.is_file():
+                spec = importlib.util.spec_from_file_location("render_budget_options", path)
+                assert spec is not None and spec.loader is not None
+                options = importlib.util.module_from_spec(spec)
+                sys.modules[spec.name] = options  # dataclasses look their module up
+                spec.loader.exec_module(options)
+                break
+        else:
+            raise ImportError("service/options.py not found next to the batch script") from None
+    return options
+
+
 def parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="batch", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -110,16 +130,9 @@ def parser() -> argparse.ArgumentParser:
     opt = sub.add_parser("optimize", help="record the path if needed, optimise, keep the store, save")
     budget(opt)
     opt.add_argument("--profile")
-    opt.add_argument("--max-depth", type=int)
-    opt.add_argument("--camera-sampling", choices=("path", "aimed", "axis"))
-    opt.add_argument("--path-resolution", type=float)
-    opt.add_argument("--guard-frames", type=int)
-    opt.add_argument("--population", type=int)
-    opt.add_argument("--generations", type=int)
-    opt.add_argument("--seed", type=int)
-    opt.add_argument("--threshold-power", type=float)
-    opt.add_argument("--threshold-error", type=float)
-    opt.add_argument("--resolution", help="evaluation resolution WxH, e.g. 64x36")
+    _option_schema().add_arguments(opt, with_defaults=False)
+    opt.add_argument("--resolution", help="evaluation resolution WxH, e.g. 64x36 (sets --eval-width, "
+                     "--eval-height)")
     opt.add_argument("--frame-step", type=int)
     opt.add_argument("--record", action="store_true", help="re-record the path from the camera animation")
     opt.add_argument("--save-as", help="save the .blend here (default: overwrite the opened file)")
@@ -149,22 +162,20 @@ def _apply_scene_options(ext: str, props, args: argparse.Namespace) -> None:
             props.power_budget = args.budget
         else:
             props.error_budget = args.budget
-    for arg, prop in (("filter_period", "filter_period"), ("profile", "profile"), ("max_depth", "max_depth"),
-                      ("population", "population"), ("generations", "generations"), ("seed", "seed"),
-                      ("threshold_power", "threshold_power"), ("threshold_error", "threshold_error"),
-                      ("frame_step", "frame_step"), ("path_resolution", "path_resolution"),
-                      ("guard_frames", "guard_frames")):
-        value = getattr(args, arg, None)
+    for name in ("filter_period", "profile", "frame_step"):
+        value = getattr(args, name, None)
         if value is not None:
-            setattr(props, prop, value)
-    if getattr(args, "camera_sampling", None):
-        props.camera_sampling = args.camera_sampling.upper()
+            setattr(props, name, value)
+    set_option = importlib.import_module(f"{ext}.properties").set_option
     if getattr(args, "resolution", None):
         try:
-            w, h = (int(v) for v in args.resolution.lower().split("x"))
+            args.eval_width, args.eval_height = (int(v) for v in args.resolution.lower().split("x"))
         except ValueError:
             raise ValueError(f"--resolution must look like 64x36, got {args.resolution!r}") from None
-        props.eval_width, props.eval_height = w, h
+    for opt in _option_schema().PUBLIC:  # each checked here; together when the job is built
+        value = getattr(args, opt.name, None)
+        if value is not None:
+            set_option(props, opt.name, value)
 
 
 def _configure_service(bpy: ModuleType, ext: str, args: argparse.Namespace) -> None:

@@ -7,8 +7,9 @@ import bpy
 from mathutils import Matrix
 
 from service import camera_path as path_format
+from service.store import camera
 
-from .core.path_sampling import build_path, camera_lens_from_viewport, frame_times, vertical_fov
+from .core.path_sampling import build_path, frame_times
 
 PATH_TEXT_PREFIX = "render_budget_path"
 
@@ -29,7 +30,7 @@ def camera_vfov(cam_obj: bpy.types.Object, scene: bpy.types.Scene) -> float:
                          "only perspective cameras are supported")
     w, h = render_resolution(scene)
     r = scene.render
-    return vertical_fov(cam.lens, cam.sensor_width, cam.sensor_height, cam.sensor_fit, w, h,
+    return camera.vertical_fov(cam.lens, cam.sensor_width, cam.sensor_height, cam.sensor_fit, w, h,
                         r.pixel_aspect_x, r.pixel_aspect_y)
 
 
@@ -145,7 +146,7 @@ class RENDER_BUDGET_OT_record_path_viewport(bpy.types.Operator):
             lens = scene.camera.data.lens
         else:
             matrix = r3d.view_matrix.inverted()
-            lens = camera_lens_from_viewport(self.space.lens, self.cam.data.sensor_width)
+            lens = camera.camera_lens_from_viewport(self.space.lens, self.cam.data.sensor_width)
         keyframe_pose(self.cam, self.frame, matrix, lens)
         self.frame += 1
 

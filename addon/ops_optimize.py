@@ -20,14 +20,15 @@ from pathlib import Path
 import bpy
 
 from service import camera_path as path_format
-from service import pareto_store
+from service import store as pareto_store
 
 from . import playback, service_process
 from .camera_path import load_path, sample_animation, store_path
 from .core.client import ServiceClient
-from .core.job_runner import JobOptions, JobOutcome, JobUpdate, run_job
+from .core.job_runner import JobOutcome, JobRequest, JobUpdate, run_job
 from .core.local_jobs import LocalClient
 from .core.playback_logic import budget_shortfall, predicted_path_summary, summary_text, validate_budget
+from .properties import option_values
 
 log = logging.getLogger(__name__)
 STORE_TEXT_PREFIX = "render_budget_store"
@@ -43,25 +44,15 @@ def check_scene(scene: bpy.types.Scene) -> None:
         raise ValueError("the scene has no renderable geometry (empty scene)")
 
 
-def job_options(scene: bpy.types.Scene) -> JobOptions:
+def job_request(scene: bpy.types.Scene) -> JobRequest:
     props = scene.render_budget
     searchable = [p for p in props.parameters if not p.inert]
     enabled = tuple(p.name for p in searchable if p.enabled)
-    return JobOptions(
+    return JobRequest(
         profile=props.profile or _default_profile(),
         # None lets the service search its whole default space (minus what is inert for this scene)
         parameters=enabled if searchable else None,
-        threshold_power_w=props.threshold_power,
-        threshold_error=props.threshold_error,
-        max_depth=props.max_depth,
-        view_sampling=props.camera_sampling.lower(),
-        path_resolution=props.path_resolution,
-        guard_frames=props.guard_frames,
-        population=props.population,
-        generations=props.generations,
-        seed=props.seed,
-        exhaustive_limit=props.exhaustive_limit,
-        resolution=(props.eval_width, props.eval_height),
+        options=option_values(props),
     )
 
 
@@ -103,7 +94,7 @@ class Prepared:
     scene_name: str
     glb: Path
     path: path_format.CameraPath
-    options: JobOptions
+    request: JobRequest
     tmpdir: tempfile.TemporaryDirectory = field(repr=False)
 
 
@@ -112,7 +103,7 @@ def prepare(scene: bpy.types.Scene) -> Prepared:
     props = scene.render_budget
     validate_budget(props.budget_mode,
                     props.power_budget if props.budget_mode == "POWER" else props.error_budget)
-    options = job_options(scene)
+    request = job_request(scene)
     path = ensure_path(scene)
     tmp = tempfile.TemporaryDirectory(prefix="render-budget-export-")
     try:
@@ -120,7 +111,7 @@ def prepare(scene: bpy.types.Scene) -> Prepared:
     except Exception:
         tmp.cleanup()
         raise
-    return Prepared(scene.name, glb, path, options, tmp)
+    return Prepared(scene.name, glb, path, request, tmp)
 
 
 @dataclass(frozen=True)
@@ -177,7 +168,7 @@ def run_sync(scene: bpy.types.Scene, client: ServiceClient | LocalClient,
     """The whole optimisation on the calling (main) thread: for background mode, batch and tests."""
     prep = prepare(scene)
     try:
-        outcome = run_job(client, prep.glb, prep.path.to_dict(), prep.options, progress=progress,
+        outcome = run_job(client, prep.glb, prep.path.to_dict(), prep.request, progress=progress,
                           timeout_s=timeout_s)
     finally:
         prep.tmpdir.cleanup()
@@ -204,7 +195,7 @@ def _worker(job: _ActiveJob, client: ServiceClient | LocalClient) -> None:
     """Follows the job (HTTP or the local job process); never touches bpy. Posts ('progress'|'done'|'error',
     payload) messages."""
     try:
-        outcome = run_job(client, job.prep.glb, job.prep.path.to_dict(), job.prep.options,
+        outcome = run_job(client, job.prep.glb, job.prep.path.to_dict(), job.prep.request,
                           progress=lambda u: job.messages.put(("progress", u)),
                           should_cancel=job.cancel.is_set)
         job.messages.put(("done", outcome))

@@ -16,7 +16,7 @@ from typing import Any
 import bpy
 import numpy as np
 
-from service import pareto_store
+from service import store as pareto_store
 
 from . import service_process
 from .camera_path import camera_vfov, render_resolution, scene_fps

@@ -12,7 +12,8 @@ from pathlib import Path
 
 import bpy
 
-from service import pareto_store
+from service import options as option_schema
+from service import store as pareto_store
 
 from . import service_process
 from .camera_path import load_path
@@ -73,7 +74,9 @@ def evaluate_scene(scene: bpy.types.Scene, client: ServiceClient, out_dir: str |
     scene_id = upload_scene(scene, client)
     step = frame_step or props.report_frame_step
     spec = EvalSpec(scene_id=scene_id, profile=props.profile or store.profile,
-                    resolution=(props.eval_width, props.eval_height), budget_mode=mode, budget_value=value,
+                    resolution=option_schema.eval_resolution(props.eval_width or None, props.eval_height,
+                                                             path.frames[0].aspect),
+                    budget_mode=mode, budget_value=value,
                     filter_period_s=props.filter_period, frame_step=step,
                     power_resolution=path.frames[0].resolution)
     frames = [scene.frame_start + round(path.frames[i].time * path.fps) for i in range(0, len(path), step)]

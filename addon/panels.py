@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import bpy
 
+from service import options as option_schema
+
 from . import ops_optimize, preferences
 
 
@@ -59,29 +61,7 @@ class VIEW3D_PT_render_budget(bpy.types.Panel):
         layout.template_list("RENDER_BUDGET_UL_parameters", "", props, "parameters", props,
                              "parameters_index", rows=4)
 
-        col = layout.column(align=True)
-        col.label(text="Camera samples")
-        col.prop(props, "camera_sampling", text="")
-        col.prop(props, "max_depth")
-        path_mode = props.camera_sampling == "PATH"
-        sub = col.column(align=True)
-        sub.active = path_mode
-        sub.prop(props, "path_resolution")
-        sub.prop(props, "guard_frames")
-        sub = col.column(align=True)
-        sub.active = not path_mode  # frontier-difference thresholds split the paper's view cubes only
-        sub.prop(props, "threshold_power")
-        sub.prop(props, "threshold_error")
-        col = layout.column(align=True)
-        col.label(text="Optimiser")
-        col.prop(props, "population")
-        col.prop(props, "generations")
-        col.prop(props, "seed")
-        col.prop(props, "exhaustive_limit")
-        row = layout.row(align=True)
-        row.label(text="Evaluation")
-        row.prop(props, "eval_width", text="W")
-        row.prop(props, "eval_height", text="H")
+        draw_options(layout, props)
 
         col = layout.column(align=True)
         col.prop(props, "budget_mode", expand=True)
@@ -125,6 +105,19 @@ class VIEW3D_PT_render_budget(bpy.types.Panel):
         row.operator("render_budget.evaluate_path", icon="GRAPH")
         layout.prop(props, "report_frame_step")
         layout.operator("render_budget.load_store", icon="FILE")
+
+
+def draw_options(layout: bpy.types.UILayout, props: bpy.types.PropertyGroup) -> None:
+    """The optimiser's options, box by box as their schema groups them; an option that does not apply
+    to the chosen camera samples is greyed out."""
+    for group in option_schema.GROUPS:
+        col = layout.column(align=True)
+        col.label(text=group)
+        for opt in option_schema.PUBLIC:
+            if opt.group == group:
+                row = col.row(align=True)
+                row.active = not opt.modes or props.view_sampling in opt.modes
+                row.prop(props, opt.name)
 
 
 def _remote(context: bpy.types.Context) -> bool:

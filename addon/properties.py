@@ -1,6 +1,12 @@
-"""Typed settings saved in the .blend (Scene) and runtime job state (WindowManager, not saved)."""
+"""Typed settings saved in the .blend (Scene) and runtime job state (WindowManager, not saved).
+
+The optimiser's options are scene properties built from their one schema (``service.options``): same
+names, defaults, bounds and help as the service's; an optional option (None: "derive it") shows 0.
+"""
 
 from __future__ import annotations
+
+from typing import Any
 
 import bpy
 from bpy.props import (
@@ -12,6 +18,8 @@ from bpy.props import (
     PointerProperty,
     StringProperty,
 )
+
+from service import options as option_schema
 
 
 class RENDER_BUDGET_PG_parameter(bpy.types.PropertyGroup):
@@ -37,31 +45,7 @@ class RENDER_BUDGET_PG_scene(bpy.types.PropertyGroup):
     parameters: CollectionProperty(type=RENDER_BUDGET_PG_parameter)  # type: ignore
     parameters_index: IntProperty()  # type: ignore
 
-    threshold_power: FloatProperty(name="Power threshold (W)", default=0.05, min=0.0, soft_max=5.0,  # type: ignore
-                                   description="Subdivide where neighbouring frontiers differ by more power")
-    threshold_error: FloatProperty(name="Error threshold", default=0.01, min=0.0, max=1.0,  # type: ignore
-                                   precision=4, description="Subdivide where frontiers differ by more error")
-    camera_sampling: EnumProperty(  # type: ignore
-        name="Camera samples",
-        items=(("PATH", "Path cameras", "Measure each octree face the path looks up at the path camera most "
-                "like the frames looking it up, on a lattice refined by viewing distance (recommended)"),
-               ("AIMED", "Aimed view cubes", "The paper's six views per corner, aimed at what the path sees, "
-                "split where neighbouring frontiers differ"),
-               ("AXIS", "Axis view cubes", "The paper's six world-axis views per corner")),
-        default="PATH",
-    )
-    path_resolution: FloatProperty(name="Path resolution", default=0.25, min=0.01, max=10.0,  # type: ignore
-                                   description="Path cameras: octree leaves at most this times the viewing "
-                                   "distance wide")
-    guard_frames: IntProperty(name="Guard frames", default=2, min=0, max=8,  # type: ignore
-                              description="Path cameras: also price each frontier at this many more path "
-                              "cameras, keeping the worst error and power")
-    max_depth: IntProperty(name="Max depth", default=6, min=0, max=8)  # type: ignore
-    population: IntProperty(name="Population", default=24, min=4, max=1000)  # type: ignore
-    generations: IntProperty(name="Generations", default=25, min=1, max=1000)  # type: ignore
-    seed: IntProperty(name="Seed", default=0, min=0)  # type: ignore
-    exhaustive_limit: IntProperty(name="Exhaustive up to", default=512, min=0,  # type: ignore
-                                  description="Enumerate every setting when the space is this small")
+    # the optimiser's options are added from their schema below (option_properties)
 
     budget_mode: EnumProperty(  # type: ignore
         name="Budget",
@@ -73,8 +57,6 @@ class RENDER_BUDGET_PG_scene(bpy.types.PropertyGroup):
     error_budget: FloatProperty(name="Error budget", default=0.02, min=0.0, max=1.0, precision=4)  # type: ignore
     filter_period: FloatProperty(name="Filter time T (s)", default=2.0, min=0.0, soft_max=10.0,  # type: ignore
                                  description="Temporal filter: settings move to a new target over T seconds")
-    eval_width: IntProperty(name="Width", default=128, min=8, max=8192)  # type: ignore
-    eval_height: IntProperty(name="Height", default=72, min=8, max=8192)  # type: ignore
     frame_step: IntProperty(name="Record step", default=1, min=1, max=1000,  # type: ignore
                             description="Record every N-th frame of the camera animation")
     report_frame_step: IntProperty(name="Report step", default=5, min=1, max=1000,  # type: ignore
@@ -100,6 +82,55 @@ class RENDER_BUDGET_PG_scene(bpy.types.PropertyGroup):
     clamped: BoolProperty(name="Outside the store's space")  # type: ignore
     infeasible: BoolProperty(name="Budget infeasible")  # type: ignore
     playback_status: StringProperty(name="Playback status")  # type: ignore
+
+
+def _option_property(opt: option_schema.Option) -> Any:
+    """The Blender property of one optimiser option."""
+    text = {"name": opt.label, "description": opt.help[:1].upper() + opt.help[1:]
+            + (". 0 leaves it to that default" if opt.optional else "")}
+    if opt.choices:
+        labels = opt.choice_labels or opt.choices
+        return EnumProperty(items=tuple((c, label, "") for c, label in zip(opt.choices, labels, strict=True)),
+                            default=opt.default, **text)
+    if opt.kind is bool:
+        return BoolProperty(default=opt.default, **text)
+    limits: dict[str, Any] = {"max": opt.maximum}
+    limits["min"] = 0 if opt.optional else opt.minimum  # 0 stands for None
+    limits = {k: v for k, v in limits.items() if v is not None}
+    default = 0 if opt.default is None else opt.default
+    if opt.kind is int:
+        return IntProperty(default=default, **limits, **text)
+    extra = {k: v for k, v in (("soft_max", opt.soft_max), ("precision", opt.precision)) if v is not None}
+    return FloatProperty(default=default, **limits, **extra, **text)
+
+
+def option_properties() -> dict[str, Any]:
+    """Annotations for the public optimiser options (added to the scene settings group)."""
+    return {o.name: _option_property(o) for o in option_schema.PUBLIC}
+
+
+RENDER_BUDGET_PG_scene.__annotations__.update(option_properties())
+
+
+def option_values(props: Any) -> dict[str, Any]:
+    """The optimiser options as set on a scene: 0 back to None for the optional ones, and floats to the
+    7 significant digits a Blender (single-precision) float property holds, so 0.05 stays 0.05."""
+    out = {}
+    for o in option_schema.PUBLIC:
+        value = getattr(props, o.name)
+        if o.optional and value == 0:
+            value = None
+        elif o.kind is float:
+            value = float(f"{value:.7g}")
+        out[o.name] = value
+    return out
+
+
+def set_option(props: Any, name: str, value: Any) -> None:
+    """Set one optimiser option on a scene (validated first: Blender would clamp silently)."""
+    opt = option_schema.BY_NAME[name]
+    value = opt.check(value)
+    setattr(props, name, 0 if value is None else value)
 
 
 class RENDER_BUDGET_PG_runtime(bpy.types.PropertyGroup):

@@ -174,8 +174,8 @@ def asgi_costs(data_dir: Path, store_id: str, bodies: list[dict[str, Any]],
     from service.api import Settings, create_app
     from service.api.routes.stores import answer_query
     from service.api.schemas import StoreQuery
-    from service.pareto_store import ParetoStore
     from service.storage import Storage
+    from service.store import ParetoStore
 
     raw = [json.dumps(b).encode() for b in bodies]
     out: dict[str, float] = {}

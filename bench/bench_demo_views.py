@@ -27,7 +27,7 @@ from service.eval_cache import EvalCache
 from service.evaluation import CameraSpec, Evaluator, load_scene
 from service.nsga import NSGAConfig, optimise
 from service.params import default_space
-from service.pareto_store import ParetoStore
+from service.store import ParetoStore
 
 REPO = Path(__file__).resolve().parent.parent
 

@@ -23,7 +23,7 @@ import numpy as np
 from service.camera_path import CameraPath
 from service.evaluation import CameraSpec, evaluate, load_scene
 from service.params import default_space
-from service.pareto_store import LookupResult, ParetoStore, TemporalFilter, unpack_indices
+from service.store import LookupResult, ParetoStore, TemporalFilter, unpack_indices
 
 REPO = Path(__file__).resolve().parent.parent
 

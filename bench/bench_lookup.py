@@ -4,18 +4,25 @@ Uses a store file when given (e.g. one written by `render-budget optimize`), oth
 store of the same shape as the paper's (depth 4, a few hundred corners, 16-point frontiers); the lookup
 cost depends on the octree and frontier sizes, not on where the frontiers came from.
 
-Run: .venv/bin/python bench/bench_lookup.py [STORE.json] [--queries N]
+Run: .venv/bin/python bench/bench_lookup.py [STORE.json] [--queries N] [--reference]
+
+``--reference`` times the lookup this one replaced (kept in tests/store_reference.py as the slow
+reference the property tests compare with) on the same queries, in the same process.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
+import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from service.pareto_store import Frontier, ParetoStore, StoredParameter, TemporalFilter, pack_array
+from service.store import Frontier, ParetoStore, StoredParameter, TemporalFilter, pack_array
+from service.store.camera import look_matrix
 
 
 def generated_store(depth: int = 4, seed: int = 0) -> ParetoStore:
@@ -63,38 +70,70 @@ def generated_store(depth: int = 4, seed: int = 0) -> ParetoStore:
     return ParetoStore(params, np.zeros(3), 10.0, depth, np.asarray(children), coords, views, frontiers)
 
 
+def _queries(store: ParetoStore, n: int) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], np.ndarray]:
+    """A smooth camera path through the root (positions), random view directions, the same poses as
+    camera matrices, and budgets that vary."""
+    rng = np.random.default_rng(1)
+    lo, size = store.root_min, store.root_size
+    t = np.linspace(0, 1, n)
+    pos = lo + size * np.stack([t, 0.5 + 0.3 * np.sin(6 * t), 0.5 + 0.3 * np.cos(4 * t)], axis=1)
+    dirs = rng.normal(size=(n, 3))
+    mats = [look_matrix(p, d) for p, d in zip(pos, dirs, strict=True)]
+    return pos, dirs, mats, rng.uniform(0.5, 3.0, n)
+
+
+def _time(lookup: Any, cases: tuple, queries: tuple, repeat: int) -> list[tuple[str, float, float]]:
+    """(label, CPU us, wall us) per case: the best of ``repeat`` runs by CPU time (other processes on
+    a shared machine only ever add time)."""
+    pos, dirs, mats, budgets = queries
+    out = []
+    for label, with_filter, kind in cases:
+        runs = []
+        for _ in range(repeat):
+            filt = TemporalFilter(2.0)
+            w0, c0 = time.perf_counter(), time.process_time()
+            for i in range(len(pos)):
+                kw = {"power_budget": budgets[i]} if kind != "e" else {"error_budget": budgets[i] / 20}
+                pose = {"matrix": mats[i]} if kind == "m" else {"direction": dirs[i]}
+                r = lookup(pos[i], **pose, **kw)
+                if with_filter:
+                    filt.update(r[0] if isinstance(r, tuple) else r.indices, i / 60.0)
+            runs.append(((time.process_time() - c0) / len(pos), (time.perf_counter() - w0) / len(pos)))
+        cpu, wall = min(runs)
+        out.append((label, cpu * 1e6, wall * 1e6))
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("store", nargs="?", type=Path)
     ap.add_argument("--queries", type=int, default=20000)
+    ap.add_argument("--repeat", type=int, default=3, help="runs per row; the best CPU time is reported")
+    ap.add_argument("--reference", action="store_true",
+                    help="also time the lookup this one replaced (tests/store_reference.py), same queries")
     args = ap.parse_args()
     store = ParetoStore.from_json(args.store.read_bytes()) if args.store else generated_store()
     st = store.stats()
     print(f"store: {st['size_bytes'] / 1024:.1f} KB, depth {st['depth']}, {st['leaves']} leaves, "
           f"{st['corners']} corners, {st['unique_frontiers']} frontiers, {st['frontier_points']} points")
-    rng = np.random.default_rng(1)
-    lo, size = store.root_min, store.root_size
-    # a smooth camera path through the root, budgets that vary
-    t = np.linspace(0, 1, args.queries)
-    pos = lo + size * np.stack([t, 0.5 + 0.3 * np.sin(6 * t), 0.5 + 0.3 * np.cos(4 * t)], axis=1)
-    dirs = rng.normal(size=(args.queries, 3))
-    budgets = rng.uniform(0.5, 3.0, args.queries)
-    filt = TemporalFilter(2.0)
-    rows = []
+    queries = _queries(store, args.queries)
     cases = (("lookup (power budget)", False, "p"), ("lookup (error budget)", False, "e"),
-             ("lookup + temporal filter", True, "p"))
-    for label, with_filter, kind in cases:
-        t0 = time.perf_counter()
-        for i in range(args.queries):
-            kw = {"power_budget": budgets[i]} if kind == "p" else {"error_budget": budgets[i] / 20}
-            r = store.lookup(pos[i], direction=dirs[i], **kw)
-            if with_filter:
-                filt.update(r.indices, i / 60.0)
-        dt = (time.perf_counter() - t0) / args.queries
-        rows.append((label, dt))
-    print(f"{'query':>28} {'us/query':>9}")
-    for label, dt in rows:
-        print(f"{label:>28} {dt * 1e6:9.1f}")
+             ("lookup + temporal filter", True, "p"), ("lookup by matrix + filter", True, "m"))
+    rows = _time(store.lookup, cases, queries, args.repeat)
+    ref = None
+    if args.reference:
+        sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+        from tests.store_reference import ReferenceLookup
+
+        ref = _time(ReferenceLookup(store).lookup, cases, queries, args.repeat)
+    head = f"{'query':>28} {'CPU us':>8} {'wall us':>8}"
+    print(head + (f" {'ref CPU us':>11} {'ref wall':>9} {'speed-up':>9}" if ref else ""))
+    for k, (label, cpu, wall) in enumerate(rows):
+        line = f"{label:>28} {cpu:8.1f} {wall:8.1f}"
+        if ref:
+            line += f" {ref[k][1]:11.1f} {ref[k][2]:9.1f} {ref[k][1] / cpu:8.1f}x"
+        print(line)
+    print(f"load average at the end: {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs")
 
 
 if __name__ == "__main__":

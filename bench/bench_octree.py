@@ -27,9 +27,9 @@ from service.eval_cache import EvalCache
 from service.evaluation import CameraSpec, Evaluator, SceneHandle, evaluate
 from service.executors import InProcessExecutor
 from service.octree import frontier_distance
-from service.optimize import OptimizeOptions, optimize_path
+from service.optimize import OptimizeConfig, optimize_path
 from service.params import default_space
-from service.pareto_store import TemporalFilter
+from service.store import TemporalFilter
 
 
 def orbit_path(n: int = 24, res: tuple[int, int] = (160, 120)) -> CameraPath:
@@ -59,7 +59,7 @@ def part_a(quick: bool) -> None:
           f"{'in budget':>9} {'P saved':>8}")
     last_store = None
     for tau_p, tau_e, min_depth in pairs:
-        opts = OptimizeOptions(threshold_power_w=tau_p, threshold_error=tau_e, max_depth=2,
+        opts = OptimizeConfig(threshold_power_w=tau_p, threshold_error=tau_e, max_depth=2,
                                min_depth=min_depth, population=24,
                                generations=8 if quick else 12, exhaustive_limit=0, eval_width=32,
                                eval_height=24, seed=0)

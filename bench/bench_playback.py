@@ -26,7 +26,8 @@ import numpy as np
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from service.pareto_store import Frontier, ParetoStore, StoredParameter, pack_indices  # noqa: E402
+from service.store import Frontier, ParetoStore, StoredParameter, pack_indices  # noqa: E402
+from service.store.camera import look_matrix  # noqa: E402
 
 PARAMS = (
     StoredParameter("sampling_mode", ("fsaa2", "adaptive_ss", "1spp", "under2", "under4"), 0),
@@ -77,13 +78,7 @@ def flight(frames: int, fps: float = 30.0) -> list[np.ndarray]:
         t = i / fps
         p = np.array([8 * math.sin(0.21 * t), 7 * math.sin(0.13 * t + 1), 3 + 2 * math.sin(0.3 * t)])
         d = np.array([math.cos(0.21 * t), math.cos(0.13 * t + 1) * 0.8, 0.2 * math.cos(0.3 * t)])
-        f = d / np.linalg.norm(d)
-        r = np.cross(f, [0, 0, 1.0])
-        r /= np.linalg.norm(r)
-        u = np.cross(r, f)
-        m = np.eye(4)
-        m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = r, u, -f, p
-        out.append(m)
+        out.append(look_matrix(p, d))
     return out
 
 

@@ -25,7 +25,7 @@ from service.camera_path import CameraPath
 from service.eval_cache import EvalCache
 from service.evaluation import CameraSpec, Evaluator, load_scene
 from service.executors import ProcessPoolExecutor
-from service.optimize import OptimizeOptions, optimize_path, resolve_space
+from service.optimize import OptimizeConfig, optimize_path, resolve_space
 from service.params import default_space
 
 REPO = Path(__file__).resolve().parent.parent
@@ -72,7 +72,7 @@ def main() -> None:
         print("|---|---|---|---|---|---|---|---|---|---|---|---|")
         for vs in args.sampling:
             depth = 6 if vs == "path" else args.max_depth_paper
-            opt = OptimizeOptions(max_depth=depth, population=args.population, generations=args.generations,
+            opt = OptimizeConfig(max_depth=depth, population=args.population, generations=args.generations,
                                   eval_height=36, threads=1, view_sampling=vs, skip_inert=False,
                                   path_resolution=args.path_resolution, guard_frames=args.guard_frames)
             t0 = time.perf_counter()

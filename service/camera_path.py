@@ -11,7 +11,8 @@ Format (version 1; written by the add-on and the scene generators)::
 +Y up), ``vfov`` the vertical field of view in radians, ``time`` in seconds (non-decreasing). Instead of
 ``matrix_world`` a frame may give ``position`` plus either ``rotation_quaternion`` ([w, x, y, z], Blender's
 order) or ``direction`` (and optional ``up``, default world +Z); the reader turns those into a matrix and
-the writer always writes ``matrix_world``. Pure stdlib + numpy: the add-on bundles this module.
+the writer always writes ``matrix_world``. Camera maths comes from :mod:`service.store.camera`. Pure
+stdlib + numpy: the add-on bundles this module (with the store package).
 """
 
 from __future__ import annotations
@@ -26,6 +27,8 @@ from typing import Any
 
 import numpy as np
 
+from .store import camera
+
 PATH_VERSION = 1
 
 
@@ -33,42 +36,6 @@ def _finite(a: np.ndarray, what: str) -> np.ndarray:
     if not np.all(np.isfinite(a)):
         raise ValueError(f"{what} must be finite")
     return a
-
-
-def _matrix_from_direction(position: np.ndarray, direction: np.ndarray, up: np.ndarray) -> np.ndarray:
-    big = float(np.abs(direction).max())
-    if big == 0.0:
-        raise ValueError("direction must be non-zero")
-    f = direction / big  # scale-free first, so huge components cannot overflow the norm
-    f = f / np.linalg.norm(f)
-    ubig = float(np.abs(up).max())
-    if ubig == 0.0:
-        raise ValueError("up must be non-zero")
-    up = up / ubig
-    right = np.cross(f, up)
-    if float(np.linalg.norm(right)) < 1e-9:
-        raise ValueError("up must not be parallel to direction")
-    right /= np.linalg.norm(right)
-    true_up = np.cross(right, f)
-    m = np.eye(4)
-    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = right, true_up, -f, position
-    return m
-
-
-def _matrix_from_quaternion(position: np.ndarray, q: np.ndarray) -> np.ndarray:
-    big = float(np.abs(q).max())
-    if big == 0.0:
-        raise ValueError("rotation_quaternion must be non-zero")
-    q = q / big
-    w, x, y, z = q / np.linalg.norm(q)
-    r = np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
-    m = np.eye(4)
-    m[:3, :3], m[:3, 3] = r, position
-    return m
 
 
 @dataclass(frozen=True)
@@ -90,8 +57,7 @@ class CameraFrame:
         object.__setattr__(self, "matrix_world", m)
         if not math.isfinite(self.time):
             raise ValueError("time must be finite")
-        if not (math.isfinite(self.vfov) and 0 < self.vfov < math.pi):
-            raise ValueError(f"vfov must be in (0, pi) radians, got {self.vfov}")
+        camera.check_fov(self.vfov, "vfov")
         w, h = (int(v) for v in self.resolution)
         if (w, h) != tuple(self.resolution) or w <= 0 or h <= 0:
             raise ValueError(f"resolution must be two positive integers, got {self.resolution!r}")
@@ -104,8 +70,7 @@ class CameraFrame:
     @property
     def direction(self) -> np.ndarray:
         """Unit view direction (the camera's local -Z in world space)."""
-        f = -self.matrix_world[:3, 2]
-        return f / np.linalg.norm(f)
+        return camera.forward_of(self.matrix_world)
 
     @property
     def aspect(self) -> float:
@@ -127,11 +92,11 @@ class CameraFrame:
                 pos = _finite(pos, f"frame {index} position")
                 if "rotation_quaternion" in d:
                     q = np.asarray(d["rotation_quaternion"], dtype=np.float64).reshape(4)
-                    m = _matrix_from_quaternion(pos, _finite(q, f"frame {index} rotation_quaternion"))
+                    m = camera.quaternion_matrix(pos, _finite(q, f"frame {index} rotation_quaternion"))
                 elif "direction" in d:
                     f = np.asarray(d["direction"], dtype=np.float64).reshape(3)
                     up = np.asarray(d.get("up", [0.0, 0.0, 1.0]), dtype=np.float64).reshape(3)
-                    m = _matrix_from_direction(pos, _finite(f, "direction"), _finite(up, "up"))
+                    m = camera.look_matrix(pos, _finite(f, "direction"), _finite(up, "up"))
                 else:
                     raise ValueError(f"frame {index}: position needs rotation_quaternion or direction")
             else:
@@ -215,15 +180,13 @@ class CameraPath:
     def from_positions(positions: Sequence[Sequence[float]], directions: Sequence[Sequence[float]],
                        vfov: float = 0.6911, resolution: tuple[int, int] = (1920, 1080),
                        fps: float = 30.0) -> CameraPath:
-        """Build a path from positions and view directions (up = world +Z), one frame per 1/fps."""
+        """Build a path from positions and view directions (up = world +Z, or +Y looking straight up or
+        down), one frame per 1/fps."""
         if len(positions) != len(directions):
             raise ValueError("positions and directions differ in length")
         frames = []
         for i, (p, f) in enumerate(zip(positions, directions, strict=True)):
             pos = _finite(np.asarray(p, dtype=np.float64).reshape(3), "position")
             fd = _finite(np.asarray(f, dtype=np.float64).reshape(3), "direction")
-            up = np.array([0.0, 0.0, 1.0])
-            if float(np.linalg.norm(np.cross(fd, up))) < 1e-9 * max(float(np.linalg.norm(fd)), 1e-300):
-                up = np.array([0.0, 1.0, 0.0])
-            frames.append(CameraFrame(i / fps, _matrix_from_direction(pos, fd, up), vfov, resolution))
+            frames.append(CameraFrame(i / fps, camera.look_matrix(pos, fd), vfov, resolution))
         return CameraPath(tuple(frames), fps)

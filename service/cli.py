@@ -17,6 +17,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from service import options
+
 
 def _default_cache() -> Path:
     base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
@@ -48,30 +50,8 @@ def build_parser() -> argparse.ArgumentParser:
     o.add_argument("--out", type=Path, required=True, help="where to write the store (JSON)")
     o.add_argument("--profile", default="mobile", help="hardware profile name or file (default: mobile)")
     o.add_argument("--fps", type=_positive, default=30.0, help="frame rate the power is measured at")
-    o.add_argument("--threshold-power", type=_positive, default=0.05, metavar="W",
-                   help="subdivide where neighbouring frontiers differ by more than W watts")
-    o.add_argument("--threshold-error", type=_positive, default=0.01, metavar="E",
-                   help="subdivide where neighbouring frontiers differ by more than E (1 - SSIM)")
-    o.add_argument("--max-depth", type=int, default=6, metavar="N", help="deepest octree level (default 6)")
-    o.add_argument("--min-depth", type=int, default=0, metavar="N",
-                   help="split nodes on the path at least N deep (default 0: only where needed)")
-    o.add_argument("--view-sampling", choices=("path", "aimed", "axis"), default="path",
-                   help="camera samples: the path's own cameras on a lattice refined by viewing distance "
-                        "(path, default), or the paper's six views per corner with frontier-difference "
-                        "refinement (aimed at what the path sees, or along the axes)")
-    o.add_argument("--path-resolution", type=_positive, default=0.25, metavar="R",
-                   help="path sampling: octree leaves at most R x the viewing distance wide (default 0.25)")
-    o.add_argument("--guard-frames", type=int, default=2, metavar="N",
-                   help="path sampling: also price each frontier at N more path cameras (default 2)")
-    o.add_argument("--population", type=int, default=24)
-    o.add_argument("--generations", type=int, default=25)
-    o.add_argument("--exhaustive-limit", type=int, default=512, metavar="N",
-                   help="enumerate every setting when the space has at most N")
-    o.add_argument("--eval-height", type=int, default=36, help="evaluation image height (pixels)")
-    o.add_argument("--eval-width", type=int, default=None, help="evaluation width (default: path aspect)")
-    o.add_argument("--metric", default="ssim", choices=("ssim", "ssim_gaussian", "flip"))
+    options.add_arguments(o)
     o.add_argument("--parameters", default=None, help="comma-separated parameters to search (default: all)")
-    o.add_argument("--seed", type=int, default=0)
     o.add_argument("--cache", type=Path, default=None, help=f"evaluation cache (default {_default_cache()})")
     o.add_argument("--dask-scheduler", default=None, metavar="ADDR", help="evaluate on a Dask cluster")
     o.add_argument("--workers", type=int, default=1, help="local worker processes (default 1: in-process)")
@@ -139,27 +119,21 @@ def _optimize(args: argparse.Namespace) -> int:
     from service.eval_cache import EvalCache
     from service.evaluation import load_scene
     from service.executors import make_executor
-    from service.optimize import OptimizeOptions, optimize_path
+    from service.optimize import OptimizeConfig, optimize_path
     from service.params import default_space
 
     path = CameraPath.load(args.path)
     space = default_space()
     if args.parameters:
         space = space.subset([n.strip() for n in args.parameters.split(",") if n.strip()])
-    options = OptimizeOptions(
-        threshold_power_w=args.threshold_power, threshold_error=args.threshold_error,
-        max_depth=args.max_depth, min_depth=args.min_depth, view_sampling=args.view_sampling,
-        path_resolution=args.path_resolution, guard_frames=args.guard_frames, population=args.population,
-        generations=args.generations,
-        exhaustive_limit=args.exhaustive_limit, eval_width=args.eval_width, eval_height=args.eval_height,
-        profile=args.profile, fps=args.fps, seed=args.seed, metric=args.metric, threads=args.threads,
-    )
+    config = OptimizeConfig(**options.from_arguments(args), profile=args.profile, fps=args.fps,
+                            threads=args.threads)
     handle = load_scene(args.scene, ship_bytes=bool(args.dask_scheduler))
     bar = _Bar(not args.no_progress)
     with EvalCache(args.cache or _default_cache()) as cache:
         executor = make_executor(args.dask_scheduler, args.workers)
         try:
-            store = optimize_path(handle, path, space, options, cache=cache, executor=executor, progress=bar)
+            store = optimize_path(handle, path, space, config, cache=cache, executor=executor, progress=bar)
         finally:
             bar.close()
             executor.close()
@@ -178,7 +152,7 @@ def _optimize(args: argparse.Namespace) -> int:
 
 
 def _query(args: argparse.Namespace) -> int:
-    from service.pareto_store import ParetoStore
+    from service.store import ParetoStore
 
     store = ParetoStore.from_json(args.store.read_bytes())
     matrix = None

@@ -33,11 +33,11 @@ import numpy as np
 from service.eval_cache import CacheKey, EvalCache, Evaluation
 from service.executors import Executor, InProcessExecutor
 from service.metrics import flip, ssim
+from service.options import METRICS
 from service.params import Indices, ParameterSpace
 
 #: Bumped whenever the pipeline that turns renders into errors changes (part of every cache key).
 PIPELINE_VERSION = "v1"
-METRICS = ("ssim", "ssim_gaussian", "flip")
 
 __all__ = ["METRICS", "CameraSpec", "Evaluation", "Evaluator", "SceneHandle", "evaluate", "tone_map",
            "upsample_bilinear"]

@@ -314,13 +314,6 @@ def is_terminal(state: str) -> bool:
 
 
 # -- the bridge to the optimiser (service.optimize and friends) ------------------------------------------
-def same_value(a: Any, b: Any) -> bool:
-    """Equality that keeps True apart from 1 (JSON clients send both)."""
-    if isinstance(a, bool) or isinstance(b, bool):
-        return isinstance(a, bool) and isinstance(b, bool) and a == b
-    return bool(a == b)
-
-
 def build_space(spec: dict[str, Any]) -> Any:
     """The job's ParameterSpace: the default space, each parameter named in ``space`` cut down to the
     given values (kept in the default order), and only ``parameters`` searched (others fixed at their
@@ -337,13 +330,10 @@ def build_space(spec: dict[str, Any]) -> Any:
         if p.name not in wanted:
             params.append(p)
             continue
-        idx: list[int] = []
-        for v in wanted[p.name]:
-            hits = [i for i, pv in enumerate(p.values) if same_value(pv, v)]
-            if not hits:
-                raise ValueError(f"space: {v!r} is not a value of {p.name!r}; values: {list(p.values)}")
-            idx.append(hits[0])
-        idx = sorted(set(idx))
+        try:
+            idx = sorted({base.index_of(p.name, v) for v in wanted[p.name]})
+        except ValueError as exc:
+            raise ValueError(f"space: {exc}") from None
         best = min(range(len(idx)), key=lambda k: abs(idx[k] - p.max_quality))
         params.append(Parameter(p.name, tuple(p.values[i] for i in idx), best,
                                 tuple(p.fields[i] for i in idx)))
@@ -353,11 +343,32 @@ def build_space(spec: dict[str, Any]) -> Any:
     return space
 
 
+#: How jobs stored by earlier versions ran the options their request did not carry.
+LEGACY_SPEC_DEFAULTS = {"min_depth": 0, "view_sampling": "aimed", "path_resolution": 0.25, "guard_frames": 0}
+
+
+def spec_options(spec: dict[str, Any]) -> dict[str, Any]:
+    """The optimiser option values of a stored job request (``service.options`` names): requests keep
+    every public option in ``options``; those stored by earlier versions kept the thresholds and the
+    evaluation resolution apart and ran the options they lack as :data:`LEGACY_SPEC_DEFAULTS` says."""
+    from service import options
+
+    values = dict(spec.get("options") or {})
+    if "thresholds" in spec or "resolution" in spec:
+        thresholds = spec.get("thresholds") or {}
+        legacy = {"threshold_power_w": thresholds.get("power_w"), "threshold_error": thresholds.get("error")}
+        if spec.get("resolution") is not None:
+            legacy["eval_width"], legacy["eval_height"] = spec["resolution"]
+        values = {**LEGACY_SPEC_DEFAULTS, **{k: v for k, v in legacy.items() if v is not None}, **values}
+    return options.check(values, public_only=True)
+
+
 def validate_job_spec(spec: dict[str, Any]) -> None:
     """Checks that need the optimiser's definitions; raises ValueError naming the problem."""
     from service.camera_path import CameraPath
 
     CameraPath.from_dict(spec["camera_path"])
+    spec_options(spec)
     build_space(spec)
 
 
@@ -368,19 +379,9 @@ def run_optimisation(
     """Turn a stored job request into the optimiser's inputs and run it; returns a ParetoStore.
     Raises ``service.optimize.Cancelled`` when ``should_cancel`` turns true."""
     from service.camera_path import CameraPath
-    from service.optimize import OptimizeOptions, optimize_path
+    from service.optimize import OptimizeConfig, optimize_path
 
     path = CameraPath.from_dict(spec["camera_path"])
-    opts, thresholds = spec["options"], spec["thresholds"]
-    width, height = spec["resolution"]
-    options = OptimizeOptions(
-        threshold_power_w=thresholds["power_w"], threshold_error=thresholds["error"],
-        max_depth=opts["max_depth"], population=opts["population"], generations=opts["generations"],
-        exhaustive_limit=opts["exhaustive_limit"], eval_width=width, eval_height=height,
-        profile=spec["profile"], fps=path.fps, seed=opts["seed"], threads=threads,
-        # jobs stored before these options existed ran the paper's sampling
-        min_depth=opts.get("min_depth", 0), view_sampling=opts.get("view_sampling", "aimed"),
-        path_resolution=opts.get("path_resolution", 0.25), guard_frames=opts.get("guard_frames", 0),
-    )
-    return optimize_path(scene, path, build_space(spec), options, cache=cache, executor=executor,
+    config = OptimizeConfig(**spec_options(spec), profile=spec["profile"], fps=path.fps, threads=threads)
+    return optimize_path(scene, path, build_space(spec), config, cache=cache, executor=executor,
                          progress=progress, should_cancel=should_cancel)

@@ -10,90 +10,47 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, field, make_dataclass
 from typing import Any
 
 import numpy as np
 
+from service import options
 from service.camera_path import CameraPath
 from service.eval_cache import EvalCache
-from service.evaluation import METRICS, Evaluator, SceneHandle
+from service.evaluation import Evaluator, SceneHandle
 from service.executors import Executor
 from service.nsga import NSGAConfig
-from service.octree import VIEW_SAMPLING, Cancelled, OctreeBuilder, OctreeConfig, Progress
+from service.octree import Cancelled, OctreeBuilder, OctreeConfig, PathFrames, Progress
 from service.params import ParameterSpace
-from service.pareto_store import ParetoStore
+from service.store import ParetoStore
 
-__all__ = ["Cancelled", "OptimizeOptions", "Progress", "optimize_path"]
+__all__ = ["Cancelled", "OptimizeConfig", "Progress", "optimize_path"]
 
 
-@dataclass
-class OptimizeOptions:
-    """Options of one run (defaults follow the paper: population 24, 25 generations).
+def _check_config(self: Any) -> None:
+    for name, value in options.check({o.name: getattr(self, o.name) for o in options.OPTIONS}).items():
+        object.__setattr__(self, name, value)  # as the option's type (an int given for a float ...)
+    if not (isinstance(self.fps, (int, float)) and math.isfinite(self.fps) and self.fps > 0):
+        raise ValueError(f"fps must be a positive finite number, got {self.fps!r}")
+    if self.threads is not None and int(self.threads) < 1:
+        raise ValueError(f"threads must be >= 1, got {self.threads!r}")
 
-    ``eval_width``/``eval_height`` set the evaluation resolution; a missing width follows the path's
-    aspect. ``min_depth`` splits the nodes the path passes through at least that deep (the paper's
-    behaviour is 0: split only where neighbouring frontiers differ). ``margin`` widens nodes (as a
-    fraction of their side) when testing whether the path passes through them. ``skip_inert`` asks the
-    simulator which parameters cannot matter for the scene. ``power_at_path_resolution`` predicts power
-    for the path's resolution (dynamic energy scaled by the pixel ratio) rather than for the small
-    evaluation images.
 
-    ``view_sampling="path"`` (default) splits the nodes holding path frames until they are at most
-    ``path_resolution`` times the frames' viewing distance wide (``max_depth`` caps it) and optimises
-    one sample per (corner, face) the path looks up, at the path camera most like the frames looking it
-    up, priced also at ``guard_frames`` more of them. ``"aimed"``/``"axis"`` are the paper's view cubes
-    with frontier-difference refinement: there ``max_depth`` is the split depth (keep it at 1-3)."""
-
-    threshold_power_w: float = 0.05
-    threshold_error: float = 0.01
-    max_depth: int = 6
-    min_depth: int = 0
-    population: int = 24
-    generations: int = 25
-    exhaustive_limit: int = 512
-    eval_width: int | None = None
-    eval_height: int = 36
-    profile: str = "mobile"
-    fps: float = 30.0
-    seed: int = 0
-    margin: float = 0.1
-    pad_fraction: float = 0.1
-    min_size: float = 1.0
-    metric: str = "ssim"
-    threads: int | None = None
-    skip_inert: bool = True
-    power_at_path_resolution: bool = True
-    view_sampling: str = "path"
-    path_resolution: float = 0.25
-    guard_frames: int = 2
-
-    def __post_init__(self) -> None:
-        for name in ("threshold_power_w", "threshold_error", "fps"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ValueError(f"{name} must be a positive finite number, got {v!r}")
-        if not 0 <= self.max_depth <= 12:
-            raise ValueError("max_depth must be in 0..12")
-        if not 0 <= self.min_depth <= self.max_depth:
-            raise ValueError("min_depth must be in 0..max_depth")
-        if self.population < 2 or self.generations < 1:
-            raise ValueError("population must be >= 2 and generations >= 1")
-        if self.exhaustive_limit < 0:
-            raise ValueError("exhaustive_limit must be >= 0")
-        if self.eval_height < 8 or (self.eval_width is not None and self.eval_width < 8):
-            raise ValueError("evaluation resolution must be at least 8x8")
-        if self.view_sampling not in VIEW_SAMPLING:
-            raise ValueError(f"view_sampling must be one of {VIEW_SAMPLING}")
-        if self.metric not in METRICS:
-            raise ValueError(f"metric must be one of {METRICS}")
-        if not (isinstance(self.path_resolution, (int, float)) and math.isfinite(self.path_resolution)
-                and self.path_resolution > 0):
-            raise ValueError(f"path_resolution must be positive and finite, got {self.path_resolution!r}")
-        if not 0 <= self.guard_frames <= 8:
-            raise ValueError("guard_frames must be in 0..8")
-        if not (self.margin >= 0 and self.pad_fraction >= 0 and self.min_size > 0):
-            raise ValueError("margin and pad_fraction must be >= 0, min_size > 0")
+#: Everything one run needs besides the scene, path and space: every option of
+#: :data:`service.options.OPTIONS` (same names and defaults; validated) plus the hardware ``profile``,
+#: the frame rate ``fps`` power is measured at and the tracer's ``threads`` per render. Keyword-only.
+OptimizeConfig = make_dataclass(
+    "OptimizeConfig",
+    [(o.name, (o.kind | None) if o.optional else o.kind, field(default=o.default)) for o in options.OPTIONS]
+    + [("profile", str, field(default="mobile")), ("fps", float, field(default=30.0)),
+       ("threads", int | None, field(default=None))],
+    namespace={"__post_init__": _check_config,
+               "__doc__": "Options of one optimiser run: service.options.OPTIONS plus profile, fps and "
+                          "threads (see service.optimize)."},
+    kw_only=True,
+)
+OptimizeConfig.__module__ = __name__  # (make_dataclass takes module= only from Python 3.12)
 
 
 def resolve_space(scene: Any, space: ParameterSpace, path: CameraPath, threads: int | None = None
@@ -137,7 +94,7 @@ def path_targets(scene: Any, path: CameraPath) -> tuple[np.ndarray, np.ndarray]:
     return fwd, eye + fwd * t[:, None]
 
 
-def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, options: OptimizeOptions, *,
+def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, config: OptimizeConfig, *,
                   cache: EvalCache, executor: Executor,
                   progress: Callable[[Progress], None] | None = None,
                   should_cancel: Callable[[], bool] | None = None) -> ParetoStore:
@@ -147,49 +104,46 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, options: 
     ``cache``, so calling again with the same arguments resumes without re-rendering."""
     t0 = time.perf_counter()
     handle = scene if isinstance(scene, SceneHandle) else SceneHandle(scene)
-    if options.skip_inert:
-        space = resolve_space(handle.get(), space, path, options.threads)
+    if config.skip_inert:
+        space = resolve_space(handle.get(), space, path, config.threads)
     frames = path.frames
     vfov = float(np.median([f.vfov for f in frames]))
     aspect = float(np.median([f.aspect for f in frames]))
-    height = int(options.eval_height)
-    width = int(options.eval_width) if options.eval_width is not None else max(8, round(height * aspect))
+    width, height = options.eval_resolution(config.eval_width, config.eval_height, aspect)
     target_pixels = int(np.median([f.resolution[0] * f.resolution[1] for f in frames]))
-    evaluator = Evaluator(handle, space, cache=cache, executor=executor, profile=options.profile,
-                          fps=options.fps, metric=options.metric, threads=options.threads,
-                          target_pixels=target_pixels if options.power_at_path_resolution else None)
+    evaluator = Evaluator(handle, space, cache=cache, executor=executor, profile=config.profile,
+                          fps=config.fps, metric=config.metric, threads=config.threads,
+                          target_pixels=target_pixels if config.power_at_path_resolution else None)
     cfg = OctreeConfig(
-        threshold_power_w=options.threshold_power_w, threshold_error=options.threshold_error,
-        max_depth=options.max_depth, min_depth=options.min_depth, margin=options.margin,
-        pad_fraction=options.pad_fraction,
-        min_size=options.min_size,
-        nsga=NSGAConfig(population=options.population, generations=options.generations, seed=options.seed),
-        exhaustive_limit=options.exhaustive_limit, vfov=vfov, width=width, height=height,
-        view_sampling=options.view_sampling, path_resolution=options.path_resolution,
-        guard_frames=options.guard_frames,
+        threshold_power_w=config.threshold_power_w, threshold_error=config.threshold_error,
+        max_depth=config.max_depth, min_depth=config.min_depth, margin=config.margin,
+        pad_fraction=config.pad_fraction,
+        min_size=config.min_size,
+        nsga=NSGAConfig(population=config.population, generations=config.generations, seed=config.seed),
+        exhaustive_limit=config.exhaustive_limit, vfov=vfov, width=width, height=height,
+        view_sampling=config.view_sampling, path_resolution=config.path_resolution,
+        guard_frames=config.guard_frames,
     )
     forwards = targets = None
-    if options.view_sampling in ("aimed", "path"):
+    if config.view_sampling in ("aimed", "path"):
         forwards, targets = path_targets(handle.get(), path)
-    builder = OctreeBuilder(evaluator, space, path.positions(), cfg, progress, should_cancel,
-                            path_forwards=forwards, path_targets=targets,
-                            path_matrices=np.stack([np.asarray(f.matrix_world, dtype=np.float64)
-                                                    for f in frames]),
-                            path_vfovs=np.asarray([f.vfov for f in frames]),
-                            path_aspects=np.asarray([f.aspect for f in frames]))
+    frames_in = PathFrames(path.positions(), forwards, targets,
+                           np.stack([np.asarray(f.matrix_world, dtype=np.float64) for f in frames]),
+                           np.asarray([f.vfov for f in frames]), np.asarray([f.aspect for f in frames]))
+    builder = OctreeBuilder(evaluator, space, frames_in, cfg, progress, should_cancel)
     builder.run()
     meta = {
-        "thresholds": {"power_w": options.threshold_power_w, "error": options.threshold_error},
-        "max_depth": options.max_depth,
+        "thresholds": {"power_w": config.threshold_power_w, "error": config.threshold_error},
+        "max_depth": config.max_depth,
         "eval_resolution": [width, height],
-        "power_pixels": target_pixels if options.power_at_path_resolution else width * height,
-        "metric": options.metric,
-        "view_sampling": options.view_sampling,
-        "path_resolution": options.path_resolution,
-        "guard_frames": options.guard_frames,
-        "seed": options.seed,
-        "population": options.population,
-        "generations": options.generations,
+        "power_pixels": target_pixels if config.power_at_path_resolution else width * height,
+        "metric": config.metric,
+        "view_sampling": config.view_sampling,
+        "path_resolution": config.path_resolution,
+        "guard_frames": config.guard_frames,
+        "seed": config.seed,
+        "population": config.population,
+        "generations": config.generations,
         "fixed_parameters": dict(space.fixed_reasons),
         "evaluations": evaluator.evaluations,
         "cache_hits": evaluator.cache_hits,
@@ -198,8 +152,8 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, options: 
         "scene": handle.content_hash,
         "executor": getattr(executor, "name", type(executor).__name__),
     }
-    return builder.to_store(profile=options.profile, fps=options.fps, aspect=aspect, meta=meta)
+    return builder.to_store(profile=config.profile, fps=config.fps, aspect=aspect, meta=meta)
 
 
-def options_dict(options: OptimizeOptions) -> dict[str, Any]:
-    return asdict(options)
+def options_dict(config: OptimizeConfig) -> dict[str, Any]:
+    return asdict(config)

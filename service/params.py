@@ -3,7 +3,7 @@
 A parameter has a name, values ordered from cheapest to best (or the other way: ``max_quality`` says
 which index is the best), and for every value the ``sim_core.RenderSettings`` fields it sets. A
 settings vector is one value index per parameter, packed 4 bits per parameter into a 32-bit integer
-by :mod:`service.pareto_store` (the one packing implementation). Parameters found inert for a scene
+by :mod:`service.store` (the one packing implementation). Parameters found inert for a scene
 (``sim_core.inert_parameters``) are *fixed* at their maximum-quality value: they stay in the packed
 vector, so stores from different scenes read alike, but the search skips them.
 
@@ -18,7 +18,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from service.pareto_store import (
+from service.store import (
     MAX_PARAMS,
     MAX_VALUES_PER_PARAM,
     StoredParameter,
@@ -151,6 +151,30 @@ class ParameterSpace:
         return idx
 
     # -- meaning ------------------------------------------------------------------------------------
+
+    def index_of(self, name: str, value: Any) -> int:
+        """Index of ``value`` among parameter ``name``'s values (the names and values a store query
+        returns and clients send back); ``True`` and ``1`` are different values, as JSON clients send
+        both. ValueError names an unknown parameter or value."""
+        if name not in self.names:
+            raise ValueError(f"unknown parameter {name!r}; known: {list(self.names)}")
+        p = self.parameters[self.names.index(name)]
+        for i, v in enumerate(p.values):
+            if (isinstance(v, bool) or isinstance(value, bool)) and not (
+                    isinstance(v, bool) and isinstance(value, bool)):
+                continue
+            if v == value:
+                return i
+        raise ValueError(f"{value!r} is not a value of {name!r}; values: {list(p.values)}")
+
+    def indices_of(self, values: Mapping[str, Any] | None) -> Indices:
+        """Indices of ``{parameter: value}`` (a store query's settings); parameters left out stay at
+        maximum quality. ValueError names an unknown parameter or value."""
+        indices = list(self.max_quality_indices())
+        for name, value in (values or {}).items():
+            index = self.index_of(name, value)  # checks the name first
+            indices[self.names.index(name)] = index
+        return tuple(indices)
 
     def values_of(self, indices: Sequence[int]) -> dict[str, Any]:
         self.validate(indices)

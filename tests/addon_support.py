@@ -17,7 +17,7 @@ EXT_MODULE = f"bl_ext.{REPO_MODULE}.{EXT_ID}"
 sys.path.insert(0, str(REPO_ROOT / "tools"))
 import build_extension  # noqa: E402
 
-from service.pareto_store import Frontier, ParetoStore, StoredParameter, pack_indices  # noqa: E402
+from service.store import Frontier, ParetoStore, StoredParameter, pack_indices  # noqa: E402
 
 PARAMETERS = (
     StoredParameter("max_depth", (3, 2, 1, 0), 0),

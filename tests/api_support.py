@@ -20,6 +20,8 @@ import httpx
 import numpy as np
 import pygltflib
 
+from service.store.camera import look_matrix
+
 REPO_ROOT = Path(__file__).resolve().parent.parent
 MODELS_DIR = REPO_ROOT / "assets" / "models"
 
@@ -128,13 +130,7 @@ def box_scene_glb() -> bytes:
 def look_at_matrix(eye: tuple[float, float, float], target: tuple[float, float, float]) -> list[list[float]]:
     """Blender camera world matrix (looks down local -Z, +Y up) at ``eye`` towards ``target``."""
     e, t = np.asarray(eye, dtype=np.float64), np.asarray(target, dtype=np.float64)
-    f = (t - e) / np.linalg.norm(t - e)
-    right = np.cross(f, [0.0, 0.0, 1.0])
-    right /= np.linalg.norm(right)
-    up = np.cross(right, f)
-    m = np.eye(4)
-    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = right, up, -f, e
-    return m.tolist()
+    return look_matrix(e, t - e).tolist()
 
 
 def camera_path(n: int = 3, radius: float = 3.0, height: float = 1.5) -> dict[str, Any]:
@@ -159,10 +155,9 @@ def tiny_job(scene_id: str, *, resolution: tuple[int, int] = (16, 12), seed: int
                   "shadow_samples": [1], "ao_samples": [0], "env_filter": ["off"],
                   "resolution_scale": [1.0], "normal_threshold_deg": [20.0], "multirate": [False]},
         "parameters": ["sampling", "max_depth"],
-        "options": {"max_depth": 0, "population": 4, "generations": 2, "seed": seed, "exhaustive_limit": 64},
-        "thresholds": {"power_w": 0.05, "error": 0.01},
+        "options": {"max_depth": 0, "population": 4, "generations": 2, "seed": seed, "exhaustive_limit": 64,
+                    "eval_width": resolution[0], "eval_height": resolution[1]},
         "profile": "mobile",
-        "resolution": list(resolution),
     }
 
 

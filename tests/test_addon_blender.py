@@ -1,6 +1,6 @@
 """The add-on inside real Blender (the bpy 5.0.1 module): registration, path recording, playback from a
-store saved in the .blend, and bad input. The extension is staged (with its vendored modules) into a temp
-folder and loaded from there as a dev extension repository."""
+store saved in the .blend, and bad input. The add-on folder is staged into a temp folder (this environment
+has the project's packages) and loaded from there as a dev extension repository."""
 
 from __future__ import annotations
 
@@ -138,6 +138,20 @@ def test_a_file_saved_with_the_old_settings_group_is_migrated_once(scene, tmp_pa
     bpy.ops.wm.save_as_mainfile(filepath=str(blend))
     bpy.ops.wm.open_mainfile(filepath=str(blend))
     assert bpy.context.scene.render_budget.power_budget == 5.0
+
+
+def test_settings_saved_under_older_property_names_are_moved(scene, tmp_path) -> None:
+    """``camera_sampling`` (enum PATH/AIMED/AXIS) became ``view_sampling``; ``threshold_power`` became
+    ``threshold_power_w``: Blender keeps the old values as raw ID properties of the group."""
+    props = scene.render_budget
+    props["camera_sampling"] = 1  # AIMED, stored as its item index
+    props["threshold_power"] = 0.25
+    blend = tmp_path / "renamed.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    bpy.ops.wm.open_mainfile(filepath=str(blend))
+    props = bpy.context.scene.render_budget
+    assert props.view_sampling == "aimed" and math.isclose(props.threshold_power_w, 0.25, rel_tol=1e-6)
+    assert "camera_sampling" not in props.keys() and "threshold_power" not in props.keys()
 
 
 # -- camera paths ---------------------------------------------------------------------------------------
@@ -370,7 +384,8 @@ def test_the_default_runs_jobs_here_and_needs_no_set_up(ext) -> None:
 
 @pytest.mark.parametrize(("mode", "field", "value", "message"),
                          [("POWER", "power_budget", 0.0, "power budget must be > 0"),
-                          ("ERROR", "threshold_error", 0.0, "threshold_error must be a positive number")])
+                          # 0 means "from the path's aspect"; 1..7 passes Blender's limits, not the schema's
+                          ("ERROR", "eval_width", 4, r"eval_width must be in \[8, 1024\]")])
 def test_optimize_rejects_invalid_settings(scene, mode, field, value, message) -> None:
     turning_camera(scene, 6)
     add_cube(scene)
@@ -452,13 +467,16 @@ def test_panel_and_preferences_refer_to_existing_properties(ext) -> None:
     scene_props = set(bpy.types.Scene.bl_rna.properties["render_budget"].fixed_type.properties.keys())
     wm_rna = bpy.types.WindowManager.bl_rna
     runtime = set(wm_rna.properties["render_budget_runtime"].fixed_type.properties.keys())
+    from service.options import PUBLIC
+
+    assert {o.name for o in PUBLIC} <= scene_props  # the panel draws every optimiser option by name
     src = Path(ext.__file__).parent / "panels.py"
     for node in ast.walk(ast.parse(src.read_text())):
         if isinstance(node, ast.Call) and getattr(node.func, "attr", "") in {"prop", "prop_search"}:
             owner = getattr(node.args[0], "id", "")
             name = node.args[1]
             choices = [name.body, name.orelse] if isinstance(name, ast.IfExp) else [name]
-            names = [c.value for c in choices]
+            names = [c.value for c in choices if isinstance(c, ast.Constant)]  # options: drawn by name
             for n in names:
                 assert n in (scene_props if owner == "props" else runtime | scene_props | {"enabled"}), n
         if isinstance(node, ast.Call) and getattr(node.func, "attr", "") == "operator":

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from addon.core import client as client_mod
-from addon.core.job_runner import JobOptions, describe
+from addon.core.job_runner import JobRequest, describe
 from addon.core.local_service import free_port, serve_command
-from addon.core.path_sampling import build_path, camera_lens_from_viewport, frame_times, vertical_fov
+from addon.core.path_sampling import build_path, frame_times
 from addon.core.playback_logic import PlaybackDriver, StoreCache, predicted_path_summary, validate_budget
 from addon.core.report import (
     FrameRow,
@@ -24,6 +24,7 @@ from addon.core.report import (
     write_csv,
     write_report,
 )
+from service.store.camera import camera_lens_from_viewport, vertical_fov
 from tests.addon_support import synthetic_store
 
 
@@ -135,21 +136,25 @@ def test_upload_refuses_non_glb(tmp_path) -> None:
         client_mod.ServiceClient("http://127.0.0.1:9").upload_scene(f)
 
 
-def test_job_options_validate_and_build_the_payload() -> None:
-    o = JobOptions(profile="mobile", parameters=("max_depth",), max_depth=1, resolution=(32, 24))
+def test_job_request_validates_and_sends_only_overrides() -> None:
+    o = JobRequest(profile="mobile", parameters=("max_depth",),
+                   options={"max_depth": 1, "eval_width": 32, "eval_height": 24, "guard_frames": 2})
     body = o.payload("a" * 64, {"version": 1, "fps": 24.0, "frames": []})
-    assert body["parameters"] == ["max_depth"] and body["resolution"] == [32, 24]
-    assert body["thresholds"] == {"power_w": 0.05, "error": 0.01}
-    assert body["options"]["view_sampling"] == "path" and body["options"]["guard_frames"] == 2
+    assert body["parameters"] == ["max_depth"]
+    # guard_frames is at its default: not sent
+    assert body["options"] == {"max_depth": 1, "eval_width": 32, "eval_height": 24}
+    assert o.option("population") == 24 and o.option("max_depth") == 1
     # the payload is what the service's schema accepts, field for field
-    from service.api.schemas import OptimizerOptions
+    from service.api.schemas import JobOptionsIn
 
-    assert OptimizerOptions(**body["options"]).model_dump(exclude={"min_depth"}) == body["options"]
-    for bad in (dict(threshold_power_w=0), dict(threshold_error=2), dict(max_depth=9),
-                dict(resolution=(2, 2)), dict(parameters=()), dict(view_sampling="random"),
-                dict(path_resolution=0.0), dict(guard_frames=9)):
+    assert JobOptionsIn(**body["options"]).model_dump(exclude_unset=True) == body["options"]
+    for bad in ({"threshold_power_w": 0}, {"threshold_error": 2}, {"max_depth": 9}, {"eval_height": 2},
+                {"view_sampling": "random"}, {"path_resolution": 0.0}, {"guard_frames": 9},
+                {"min_depth": 3, "max_depth": 2}, {"no_such_option": 1}):
         with pytest.raises(ValueError):
-            JobOptions(**bad)
+            JobRequest(options=bad)
+    with pytest.raises(ValueError):
+        JobRequest(parameters=())
 
 
 def test_describe_job_progress() -> None:

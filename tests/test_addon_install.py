@@ -36,8 +36,8 @@ def state():
             "wm_prop": hasattr(bpy.types.WindowManager, "render_budget_runtime")}
 out["after_install"] = state()
 import importlib
-import service.pareto_store, service.local_job, sim_core, PIL.Image, OpenEXR, numpy
-out["modules"] = {m.__name__: m.__file__ for m in (service.pareto_store, sim_core, PIL.Image, OpenEXR, numpy)}
+import service.store, service.local_job, sim_core, PIL.Image, OpenEXR, numpy
+out["modules"] = {m.__name__: m.__file__ for m in (service.store, sim_core, PIL.Image, OpenEXR, numpy)}
 out["hud"] = importlib.import_module(mod + ".hud").is_registered()
 out["health"] = importlib.import_module(mod + ".core.local_jobs").LocalClient("unused").health()
 addon_utils.disable(mod, default_set=True)
@@ -78,7 +78,7 @@ def test_zip_carries_the_project_wheel_and_its_runtime_wheels(zip_path: Path) ->
     own = zipfile.ZipFile(io.BytesIO(z.read(f"wheels/{by_name['render_budget']}")))
     own_names = own.namelist()
     assert any(n.startswith("sim_core/_core") for n in own_names)
-    for module in ("service/pareto_store.py", "service/local_job.py", "service/optimize.py"):
+    for module in ("service/store/pareto.py", "service/local_job.py", "service/optimize.py"):
         assert module in own_names
 
 
@@ -130,7 +130,7 @@ def _check_install(out: dict, user: Path) -> None:
     assert on["enabled"] and on["types"] >= 10 and on["scene_prop"] and on["wm_prop"]
     assert len(on["handlers"]) == 3  # playback: frame change + load; migration: load
     site = str(user / "extensions" / ".local")
-    for name in ("service.pareto_store", "sim_core", "PIL.Image", "OpenEXR"):  # the zip's wheels
+    for name in ("service.store", "sim_core", "PIL.Image", "OpenEXR"):  # the zip's wheels
         assert out["modules"][name].startswith(site), out["modules"]
     assert not out["modules"]["numpy"].startswith(site)  # Blender's (here: bpy's) numpy
     assert out["hud"] is False and out["health"]["status"] == "ok"

@@ -83,7 +83,7 @@ def _varied_budget(store, path) -> float:
 
 
 def test_optimize_end_to_end_store_in_blend_and_playback_matches_query(optimized, service, tmp_path) -> None:
-    from service.pareto_store import ParetoStore
+    from service.store import ParetoStore
 
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     bpy.ops.wm.open_mainfile(filepath=str(optimized))  # the store survived save and reload

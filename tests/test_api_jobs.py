@@ -17,7 +17,7 @@ import pytest
 from api_support import camera_path, look_at_matrix, server_thread, sse_events, teapot_scene_glb, tiny_job
 
 from service.api import Settings
-from service.pareto_store import ParetoStore
+from service.store import ParetoStore
 
 pytestmark = pytest.mark.service
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from service import cli
-from service.pareto_store import Frontier, ParetoStore, StoredParameter, pack_indices
+from service.store import Frontier, ParetoStore, StoredParameter, pack_indices
 
 
 def _store_file(tmp_path):

@@ -119,7 +119,7 @@ def test_demo_end_to_end_tiny(tmp_path: Path) -> None:
     assert by_mode["max"]["saving_vs_max"] == pytest.approx(0.0, abs=1e-12)
 
     # the automatic power budget lies within the store's frontiers (between their cheapest and best)
-    from service.pareto_store import ParetoStore
+    from service.store import ParetoStore
 
     store = ParetoStore.from_json((out / "store.json").read_text())
     assert store.stats()["views"] == summary["store"]["views"] and summary["store"]["depth"] == 0

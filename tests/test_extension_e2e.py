@@ -113,7 +113,7 @@ def optimize():
 def playback():
     sc = bpy.context.scene
     props = sc.render_budget
-    from service.pareto_store import ParetoStore
+    from service.store import ParetoStore
     store = ParetoStore.from_json(props.store_text.as_string())
     powers = sorted({float(p) for f in store.frontiers for p in f.power_w})
     budget = powers[len(powers) // 2]  # the middle of what the store offers

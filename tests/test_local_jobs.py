@@ -17,7 +17,7 @@ from typing import Any
 import pytest
 
 from addon.core.client import ServiceClient, ServiceError
-from addon.core.job_runner import JobCancelled, JobFailed, JobOptions, run_job
+from addon.core.job_runner import JobCancelled, JobFailed, JobRequest, run_job
 from addon.core.local_jobs import LocalClient, job_command
 from tests.api_support import (
     box_scene_glb,
@@ -148,8 +148,9 @@ def test_local_job_gives_the_in_process_store(glb: Path, tmp_path: Path) -> None
 def test_run_job_reports_progress_and_a_second_run_is_served_from_the_cache(glb: Path, tmp_path: Path
                                                                            ) -> None:
     client = LocalClient(tmp_path / "data", workers=2)
-    options = JobOptions(parameters=("sampling", "max_depth"), max_depth=0, population=4, generations=2,
-                         exhaustive_limit=64, resolution=(16, 12))
+    options = JobRequest(parameters=("sampling", "max_depth"),
+                         options={"max_depth": 0, "population": 4, "generations": 2, "exhaustive_limit": 64,
+                                  "eval_width": 16, "eval_height": 12})
     updates = []
     first = run_job(client, glb, camera_path(3), options, progress=updates.append, poll_s=0.05)
     assert updates[0].state == "uploading" and updates[-1].state == "done" and updates[-1].fraction == 1.0
@@ -164,8 +165,8 @@ def test_cancel_stops_the_job_and_keeps_its_evaluations(tmp_path: Path) -> None:
     glb = tmp_path / "teapot.glb"
     glb.write_bytes(teapot_scene_glb())
     client = LocalClient(tmp_path / "data")
-    options = JobOptions(view_sampling="aimed", max_depth=2, population=16, generations=20,
-                         resolution=(48, 36))
+    options = JobRequest(options={"view_sampling": "aimed", "max_depth": 2, "population": 16,
+                                  "generations": 20, "eval_width": 48, "eval_height": 36})
     seen: list[Any] = []
 
     def cancel_when_running() -> bool:
@@ -193,7 +194,7 @@ def test_a_failing_job_says_why(glb: Path, tmp_path: Path) -> None:
     state = client.job(job["id"])
     assert state["state"] == "failed" and "no_such_parameter" in state["error"]
     with pytest.raises(JobFailed, match="no_such_parameter"):
-        run_job(client, glb, camera_path(3), JobOptions(parameters=("no_such_parameter",)), poll_s=0.05)
+        run_job(client, glb, camera_path(3), JobRequest(parameters=("no_such_parameter",)), poll_s=0.05)
 
 
 PARENT = textwrap.dedent("""

@@ -14,9 +14,9 @@ from service.camera_path import CameraPath
 from service.eval_cache import EvalCache
 from service.executors import InProcessExecutor
 from service.octree import CUBE_EDGES, Cancelled, densify, frontier_distance
-from service.optimize import OptimizeOptions, optimize_path
+from service.optimize import OptimizeConfig, optimize_path
 from service.params import default_space
-from service.pareto_store import ParetoStore
+from service.store import ParetoStore
 
 MODELS = Path(__file__).resolve().parent.parent / "assets" / "models"
 
@@ -52,11 +52,11 @@ def _path() -> CameraPath:
     return CameraPath.from_positions(pos, dirs, vfov=0.7, resolution=(320, 240))
 
 
-def _options(**kw) -> OptimizeOptions:
+def _options(**kw) -> OptimizeConfig:
     base = dict(threshold_power_w=0.01, threshold_error=0.005, max_depth=1, population=6, generations=3,
                 exhaustive_limit=0, eval_width=16, eval_height=12, seed=3, view_sampling="aimed")
     base.update(kw)
-    return OptimizeOptions(**base)
+    return OptimizeConfig(**base)
 
 
 SPACE = default_space().subset(["sampling", "max_depth", "resolution_scale"])
@@ -174,30 +174,30 @@ def test_cli_optimize_then_query(tmp_path, capsys) -> None:
 
 def test_options_validation() -> None:
     with pytest.raises(ValueError):
-        OptimizeOptions(min_depth=3, max_depth=2)
+        OptimizeConfig(min_depth=3, max_depth=2)
     with pytest.raises(ValueError):
-        OptimizeOptions(threshold_power_w=0.0)
+        OptimizeConfig(threshold_power_w=0.0)
     with pytest.raises(ValueError):
-        OptimizeOptions(metric="mse")
+        OptimizeConfig(metric="mse")
     with pytest.raises(ValueError):
-        OptimizeOptions(eval_height=4)
+        OptimizeConfig(eval_height=4)
 
 
 @pytest.mark.slow
 def test_min_depth_splits_and_similar_frontiers_are_inherited(scene) -> None:
     """Thresholds nothing exceeds: only min_depth splits the root, and every new corner inherits."""
     cache = EvalCache()
-    store, _ = _run(scene, cache=cache, threshold_power_w=1e6, threshold_error=1.0, min_depth=1)
+    store, _ = _run(scene, cache=cache, threshold_power_w=1e4, threshold_error=1.0, min_depth=1)
     st = store.stats()
     assert st["depth"] == 1 and st["corners"] == 27
     assert store.meta["views_optimised"] == 48 == st["unique_frontiers"]
-    root_only, _ = _run(scene, cache=cache, threshold_power_w=1e6, threshold_error=1.0)
+    root_only, _ = _run(scene, cache=cache, threshold_power_w=1e4, threshold_error=1.0)
     assert root_only.stats()["corners"] == 8 and root_only.meta["evaluations"] == 0
 
 
 def test_aimed_directions_look_at_what_the_path_sees() -> None:
     from service.octree import aimed_directions
-    from service.pareto_store import VIEW_FORWARD, face_of
+    from service.store import VIEW_FORWARD, face_of
 
     # an orbit of radius 4 at height 1.5 around a subject at the origin, cameras looking at it
     ang = np.linspace(0, 2 * np.pi, 64, endpoint=False)
@@ -233,7 +233,7 @@ def test_axis_and_aimed_view_sampling(scene) -> None:
     assert all(float(aimed.sample_direction(c, 2) @ [0, 1, 0]) > 0 for c in range(8))
     assert any(not np.allclose(aimed.sample_direction(c, 2), [0, 1, 0]) for c in range(8))
     with pytest.raises(ValueError):
-        OptimizeOptions(view_sampling="random")
+        OptimizeConfig(view_sampling="random")
 
 
 def _orbit_path(n: int = 12) -> CameraPath:
@@ -301,7 +301,7 @@ def test_path_sampling_without_guards_and_determinism(scene) -> None:
     assert fine.stats()["depth"] > coarse.stats()["depth"]
     assert fine.meta["views_optimised"] >= coarse.meta["views_optimised"]
     from service.evaluation import CameraSpec, Evaluator
-    from service.pareto_store import unpack_indices, view_up
+    from service.store import unpack_indices, view_up
 
     ev = Evaluator(scene, SPACE, cache=cache, profile="mobile", fps=30.0, target_pixels=320 * 240)
     step = coarse.stats()["power_step_w"]
@@ -317,6 +317,35 @@ def test_path_sampling_without_guards_and_determinism(scene) -> None:
         for fr in store.frontiers:
             assert np.all(np.diff(fr.power_w) >= 0) and np.all(np.diff(fr.error) <= 0)
     with pytest.raises(ValueError):
-        OptimizeOptions(path_resolution=0.0)
+        OptimizeConfig(path_resolution=0.0)
     with pytest.raises(ValueError):
-        OptimizeOptions(guard_frames=-1)
+        OptimizeConfig(guard_frames=-1)
+
+
+def _digest(store: ParetoStore) -> str:
+    """SHA-256 of the store document with keys sorted, without the run time in ``meta``."""
+    import hashlib
+
+    d = store.to_dict()
+    d["meta"] = {k: v for k, v in d["meta"].items() if k != "elapsed_s"}
+    return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()
+
+
+# Stores the optimiser wrote before the octree was split into lattice, search scheduler and sampling
+# strategies (and before the store became a package): the same seed must still give the same bytes.
+RECORDED = {
+    "axis_d1_min1": "edb20ba2aab6fd350978a8ecf4f642c0f0ceb6cabddc981a6809a43dfa1ec06e",
+    "path_d4_guard0": "013ba3ee90a0e7dc199f962599bd9f074b5f808fd46645a542cb458575862032",
+}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(RECORDED))
+def test_same_seed_gives_the_recorded_store(scene, name) -> None:
+    if name == "axis_d1_min1":
+        path, opts = _path(), _options(view_sampling="axis", min_depth=1)
+    else:
+        path, opts = _orbit_path(8), _options(view_sampling="path", max_depth=4, path_resolution=0.5,
+                                              guard_frames=0)
+    store = optimize_path(scene, path, SPACE, opts, cache=EvalCache(), executor=InProcessExecutor())
+    assert _digest(store) == RECORDED[name]

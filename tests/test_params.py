@@ -7,7 +7,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from service.params import Parameter, ParameterSpace, default_space
-from service.pareto_store import pack_indices
+from service.store import pack_indices
 
 
 def test_default_space_shape() -> None:

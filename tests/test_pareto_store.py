@@ -10,7 +10,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from service.pareto_store import (
+from service.octree import root_cube
+from service.store import (
     FORMAT_VERSION,
     MAX_PARAMS,
     VIEW_FORWARD,
@@ -22,7 +23,6 @@ from service.pareto_store import (
     camera_rotation,
     pack_array,
     pack_indices,
-    root_cube,
     unpack_array,
     unpack_indices,
 )
@@ -160,7 +160,7 @@ def test_lookup_outside_faces_and_corners(pos, clamped: bool) -> None:
         assert r.clamped is clamped
         q = np.clip(pos, 0, 2)
         dists = np.linalg.norm(s.corner_positions() - q, axis=1)
-        leaf_corners = s._leaf_corners[r.leaf]
+        leaf_corners = s.leaf_corners(r.leaf)
         assert dists[r.corner] == pytest.approx(dists[leaf_corners].min())
 
 
@@ -343,7 +343,7 @@ _unit_dirs = st.tuples(*[st.floats(-1.0, 1.0, allow_nan=False)] * 3).filter(
 
 @given(_unit_dirs)
 def test_face_of_is_a_valid_face_and_matches_a_narrow_frustum(v) -> None:
-    from service.pareto_store import face_of
+    from service.store import face_of
 
     k = face_of(v)
     assert 0 <= k < 6
@@ -359,7 +359,7 @@ def test_face_of_is_a_valid_face_and_matches_a_narrow_frustum(v) -> None:
 
 @given(st.lists(_unit_dirs, min_size=1, max_size=12))
 def test_quantised_directions_are_unit_and_close(vs) -> None:
-    from service.pareto_store import quantise_directions
+    from service.store import quantise_directions
 
     d = np.asarray(vs, dtype=np.float64)
     q = quantise_directions(d)
@@ -379,7 +379,7 @@ def _aimed_store() -> ParetoStore:
 
 
 def test_view_dirs_roundtrip_and_old_version_loads_as_axis_views() -> None:
-    from service.pareto_store import quantise_directions
+    from service.store import quantise_directions
 
     s = _aimed_store()
     text = s.to_json()
@@ -417,7 +417,7 @@ def test_view_dirs_roundtrip_and_old_version_loads_as_axis_views() -> None:
 def test_frontier_cameras_roundtrip_and_locate_matches_lookup() -> None:
     """Version 3: one sample camera per frontier (path-sampled stores); every face sharing a frontier
     reports its camera; `locate` is the lookup's (corner, view) without a budget."""
-    from service.pareto_store import quantise_directions, quantise_eyes
+    from service.store import quantise_directions, quantise_eyes
 
     s = _store(subdivide=True)
     rng = np.random.default_rng(5)
@@ -458,7 +458,7 @@ def test_frontier_cameras_roundtrip_and_locate_matches_lookup() -> None:
 
 @given(st.lists(_unit_dirs, min_size=1, max_size=12))
 def test_fine_directions_are_within_a_hundredth_of_a_degree(vs) -> None:
-    from service.pareto_store import quantise_directions
+    from service.store import quantise_directions
 
     d = np.asarray(vs, dtype=np.float64)
     q = quantise_directions(d, fine=True)

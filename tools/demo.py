@@ -43,7 +43,7 @@ from addon.core.evaluate_path import EvalSpec, camera_payload, evaluate_path, pr
 from addon.core.local_service import LocalService, free_port
 from addon.core.playback_logic import PlaybackDriver
 from service.camera_path import CameraPath
-from service.pareto_store import ParetoStore
+from service.store import ParetoStore
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 SCENES_DIR = REPO_ROOT / "blend_scenes" / "build"

@@ -10,7 +10,8 @@ from typing import Any
 
 import numpy as np
 
-from service import camera_path, pareto_store
+from service import camera_path
+from service import store as pareto_store
 
 from .client import ServiceClient
 from .playback_logic import PlaybackDriver, validate_budget

@@ -5,12 +5,13 @@ Used by the operator's worker thread (GUI), by its synchronous execute() (backgr
 
 from __future__ import annotations
 
-import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+from service import options as option_schema
 
 from .client import ServiceClient, ServiceError
 
@@ -26,56 +27,27 @@ class JobCancelled(RuntimeError):
 
 
 @dataclass(frozen=True)
-class JobOptions:
-    """Everything a job needs besides the scene and the path (mirrors the service's JobCreate)."""
+class JobRequest:
+    """A POST /jobs request besides the scene and the path: the hardware profile, the parameters to
+    search, and the optimiser options this job changes (``service.options`` names; the service
+    fills in the rest). Validated here with the service's own option schema."""
 
     profile: str = "mobile"
     parameters: tuple[str, ...] | None = None  # None: all, minus inert (service default)
-    threshold_power_w: float = 0.05
-    threshold_error: float = 0.01
-    max_depth: int = 6
-    view_sampling: str = "path"  # "path" | "aimed" | "axis" (service.optimize.OptimizeOptions)
-    path_resolution: float = 0.25
-    guard_frames: int = 2
-    population: int = 24
-    generations: int = 25
-    seed: int = 0
-    exhaustive_limit: int = 512
-    resolution: tuple[int, int] = (64, 48)
+    options: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        for name in ("threshold_power_w", "threshold_error"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v > 0):
-                raise ValueError(f"{name} must be a positive number, got {v}")
-        if self.threshold_error > 1:
-            raise ValueError(f"threshold_error must be <= 1, got {self.threshold_error}")
-        if not 0 <= self.max_depth <= 8:
-            raise ValueError(f"max_depth must be in 0..8, got {self.max_depth}")
-        if self.view_sampling not in ("path", "aimed", "axis"):
-            raise ValueError(f"view_sampling must be path, aimed or axis, got {self.view_sampling!r}")
-        if not (math.isfinite(self.path_resolution) and 0 < self.path_resolution <= 10):
-            raise ValueError(f"path_resolution must be in (0, 10], got {self.path_resolution}")
-        if not 0 <= self.guard_frames <= 8:
-            raise ValueError(f"guard_frames must be in 0..8, got {self.guard_frames}")
-        w, h = self.resolution
-        if not (4 <= w <= 1024 and 4 <= h <= 1024):
-            raise ValueError(f"evaluation resolution must be within 4..1024 pixels, got {w}x{h}")
+        object.__setattr__(self, "options", option_schema.check(self.options, public_only=True))
         if self.parameters is not None and not self.parameters:
             raise ValueError("select at least one parameter to search")
 
+    def option(self, name: str) -> Any:
+        """The value the job will run with (the override, else the default)."""
+        return self.options.get(name, option_schema.BY_NAME[name].default)
+
     def payload(self, scene_id: str, path_doc: dict[str, Any]) -> dict[str, Any]:
-        body: dict[str, Any] = {
-            "scene_id": scene_id,
-            "camera_path": path_doc,
-            "thresholds": {"power_w": self.threshold_power_w, "error": self.threshold_error},
-            "options": {"max_depth": self.max_depth, "view_sampling": self.view_sampling,
-                        "path_resolution": self.path_resolution, "guard_frames": self.guard_frames,
-                        "population": self.population, "generations": self.generations, "seed": self.seed,
-                        "exhaustive_limit": self.exhaustive_limit},
-            "profile": self.profile,
-            "resolution": [int(self.resolution[0]), int(self.resolution[1])],
-        }
+        body: dict[str, Any] = {"scene_id": scene_id, "camera_path": path_doc, "profile": self.profile,
+                                "options": option_schema.only_overrides(self.options)}
         if self.parameters is not None:
             body["parameters"] = list(self.parameters)
         return body
@@ -126,7 +98,7 @@ def describe(job: dict[str, Any], evals_per_view: int | None = None) -> JobUpdat
     return JobUpdate(state, frac, text)
 
 
-def run_job(client: ServiceClient, glb_path: str | Path, path_doc: dict[str, Any], options: JobOptions, *,
+def run_job(client: ServiceClient, glb_path: str | Path, path_doc: dict[str, Any], request: JobRequest, *,
             progress: Callable[[JobUpdate], None] | None = None,
             should_cancel: Callable[[], bool] | None = None,
             on_submitted: Callable[[str, str], None] | None = None,
@@ -139,12 +111,12 @@ def run_job(client: ServiceClient, glb_path: str | Path, path_doc: dict[str, Any
     scene_id = str(scene["id"])
     if cancelled():
         raise JobCancelled("cancelled before submission")
-    job = client.submit_job(options.payload(scene_id, path_doc))
+    job = client.submit_job(request.payload(scene_id, path_doc))
     job_id = str(job["id"])
     if on_submitted:
         on_submitted(scene_id, job_id)
     deadline = None if timeout_s is None else time.monotonic() + timeout_s
-    per_view = options.population * options.generations
+    per_view = request.option("population") * request.option("generations")
     while True:
         update = describe(job, per_view)
         report(update)

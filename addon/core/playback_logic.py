@@ -10,9 +10,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
-
-from service import pareto_store
+from service import store as pareto_store
 
 BUDGET_MODES = ("POWER", "ERROR")
 
@@ -84,8 +82,9 @@ class PlaybackDriver:
         hit = self._memo.get(key)
         if hit is None:
             kwargs = {"power_budget": budget} if budget_mode == "POWER" else {"error_budget": budget}
-            m = np.array((*rows, (0.0, 0.0, 0.0, 1.0)))
-            hit = self.store.lookup(m[:3, 3], matrix=m, fov=vfov, aspect=aspect, **kwargs)
+            m = (*rows, (0.0, 0.0, 0.0, 1.0))
+            hit = self.store.lookup((rows[0][3], rows[1][3], rows[2][3]), matrix=m, fov=vfov, aspect=aspect,
+                                    **kwargs)
             if len(self._memo) >= self.MEMO_LIMIT:
                 self._memo.clear()
             self._memo[key] = hit

@@ -84,21 +84,10 @@ def check_size(width: int, height: int, available: int | None = None) -> None:
 def settings_indices(values: Mapping[str, Any] | None) -> tuple[Any, tuple[int, ...]]:
     """The default parameter space and the indices of `{parameter: value}` (what a store lookup returns);
     parameters left out stay at maximum quality."""
-    from service.jobs import same_value
     from service.params import default_space
 
     space = default_space()
-    indices = list(space.max_quality_indices())
-    for name, value in (values or {}).items():
-        if name not in space.names:
-            raise ValueError(f"unknown parameter {name!r}; known: {list(space.names)}")
-        k = space.names.index(name)
-        hits = [i for i, v in enumerate(space.parameters[k].values) if same_value(v, value)]
-        if not hits:
-            raise ValueError(f"{value!r} is not a value of {name!r}; "
-                             f"values: {list(space.parameters[k].values)}")
-        indices[k] = hits[0]
-    return space, tuple(indices)
+    return space, space.indices_of(values)
 
 
 def encode(image: np.ndarray, fmt: str) -> bytes:

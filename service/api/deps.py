@@ -34,7 +34,7 @@ class StoreCache:
         record = self._storage.get_store(store_id=store_id)
         if record is None:
             raise ApiError(404, f"store {store_id!r} not found")
-        from service.pareto_store import ParetoStore
+        from service.store import ParetoStore
 
         store = ParetoStore.from_json(record.body)
         with self._lock:

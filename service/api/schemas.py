@@ -10,7 +10,10 @@ import itertools
 import math
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, StringConstraints, model_validator
+from pydantic import BaseModel, ConfigDict, Field, StringConstraints, create_model, model_validator
+
+from service import options
+from service.store.camera import check_affine
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Vec3 = tuple[Finite, Finite, Finite]
@@ -28,22 +31,6 @@ Pixels = Annotated[int, Field(ge=1, le=8192)]
 
 class StrictModel(BaseModel):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
-
-
-def _check_affine(m: Matrix4, name: str) -> None:
-    if tuple(m[3]) != (0.0, 0.0, 0.0, 1.0):
-        raise ValueError(f"{name} must be an affine 4x4 matrix with last row [0, 0, 0, 1]")
-    # Scale each column to unit max-magnitude first: only the axes' directions matter, and huge but finite
-    # entries must not overflow the determinant.
-    scale = [max(abs(m[i][j]) for i in range(3)) or 1.0 for j in range(3)]
-    m = tuple(tuple(m[i][j] / scale[j] for j in range(3)) for i in range(3))  # type: ignore[assignment]
-    det = (
-        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
-        - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
-    )
-    if not math.isfinite(det) or abs(det) < 1e-12:
-        raise ValueError(f"{name} must have an invertible 3x3 part")
 
 
 # -- scenes --------------------------------------------------------------------------------------------
@@ -76,7 +63,7 @@ class CameraFrame(StrictModel):
         if self.matrix_world is not None:
             if any(v is not None for v in (self.position, self.rotation_quaternion, self.direction)):
                 raise ValueError("give matrix_world or position + orientation, not both")
-            _check_affine(self.matrix_world, "matrix_world")
+            check_affine(self.matrix_world, "matrix_world")
         elif self.position is None:
             raise ValueError("a frame needs matrix_world or position")
         elif (self.rotation_quaternion is None) == (self.direction is None):
@@ -103,37 +90,40 @@ class CameraPathIn(StrictModel):
         return self
 
 
-class Thresholds(StrictModel):
-    """Octree subdivision thresholds tau_p (watts) and tau_e (1 - SSIM)."""
+def _option_field(opt: options.Option) -> tuple[Any, Any]:
+    """The pydantic type and field of one optimiser option (service.options)."""
+    if opt.choices:
+        kind: Any = Literal[opt.choices]  # type: ignore[valid-type]
+    elif opt.kind in (int, float):
+        kind = Annotated[opt.kind, Field(ge=opt.minimum, le=opt.maximum, allow_inf_nan=False)]
+    else:
+        kind = opt.kind
+    return (kind | None) if opt.optional else kind, Field(default=opt.default, description=opt.help)
 
-    power_w: Annotated[float, Field(gt=0.0, le=1e4)] = 0.05
-    error: Annotated[float, Field(gt=0.0, le=1.0)] = 0.01
 
-
-class OptimizerOptions(StrictModel):
-    """How the store's camera samples are placed and searched (``service.optimize.OptimizeOptions``).
-
-    ``view_sampling``: ``path`` (default) measures each octree face at the path camera that best
-    represents the frames looking it up, on a lattice refined to ``path_resolution`` times the viewing
-    distance (capped by ``max_depth``), and prices each frontier at ``guard_frames`` more path cameras;
-    ``aimed`` and ``axis`` are the paper's six views per corner (aimed at what the path sees, or along
-    the world axes) with frontier-difference refinement down to ``max_depth``."""
-
-    max_depth: Annotated[int, Field(ge=0, le=8)] = 6
-    min_depth: Annotated[int, Field(ge=0, le=8)] = 0
-    view_sampling: Literal["path", "aimed", "axis"] = "path"
-    path_resolution: Annotated[float, Field(gt=0.0, le=10.0)] = 0.25
-    guard_frames: Annotated[int, Field(ge=0, le=8)] = 2
-    population: Annotated[int, Field(ge=4, le=512)] = 24
-    generations: Annotated[int, Field(ge=1, le=500)] = 25
-    seed: Annotated[int, Field(ge=0, le=2**31 - 1)] = 0
-    exhaustive_limit: Annotated[int, Field(ge=0, le=65536)] = 512
-
+class _JobOptionsBase(StrictModel):
     @model_validator(mode="after")
-    def _depths(self) -> OptimizerOptions:
-        if self.min_depth > self.max_depth:
-            raise ValueError("min_depth must not exceed max_depth")
+    def _together(self) -> _JobOptionsBase:
+        options.check(self.model_dump(), public_only=True)  # what relates two options (min/max depth)
         return self
+
+
+#: The optimiser options of a job request, one field per public option of ``service.options`` (same
+#: names, defaults, bounds and help); send only those you change.
+JobOptionsIn = create_model("JobOptionsIn", __base__=_JobOptionsBase,
+                            __doc__="Optimiser options (service.options); omitted ones take their default.",
+                            **{o.name: _option_field(o) for o in options.PUBLIC})
+
+
+class Thresholds(StrictModel):
+    """Older spelling of ``options.threshold_power_w`` / ``options.threshold_error`` (still accepted)."""
+
+    power_w: _option_field(options.BY_NAME["threshold_power_w"])[0] | None = None  # type: ignore[valid-type]
+    error: _option_field(options.BY_NAME["threshold_error"])[0] | None = None  # type: ignore[valid-type]
+
+
+_EVAL_PIXELS = Annotated[int, Field(ge=options.BY_NAME["eval_height"].minimum,
+                                    le=options.BY_NAME["eval_height"].maximum)]
 
 
 class JobCreate(StrictModel):
@@ -145,17 +135,35 @@ class JobCreate(StrictModel):
     space: dict[Name, Annotated[list[Scalar], Field(min_length=1, max_length=16)]] | None = Field(
         default=None, description="explicit candidate values per parameter, maximum quality first"
     )
-    thresholds: Thresholds = Thresholds()
-    options: OptimizerOptions = OptimizerOptions()
+    options: JobOptionsIn = Field(default_factory=JobOptionsIn)  # type: ignore[valid-type]
     profile: Name = "mobile"
-    resolution: tuple[Annotated[int, Field(ge=8, le=1024)], Annotated[int, Field(ge=8, le=1024)]] = Field(
-        default=(64, 48), description="evaluation resolution (width, height)"
-    )
+    thresholds: Thresholds | None = Field(
+        default=None, description="older spelling of options.threshold_power_w and options.threshold_error")
+    resolution: tuple[_EVAL_PIXELS, _EVAL_PIXELS] | None = Field(
+        default=None, description="older spelling of [options.eval_width, options.eval_height]")
 
     @model_validator(mode="after")
     def _space(self) -> JobCreate:
         if self.space is not None and len(self.space) > 8:
             raise ValueError("space has more than 8 parameters (settings pack into 32 bits)")
+        return self
+
+    @model_validator(mode="after")
+    def _older_spellings(self) -> JobCreate:
+        """Move ``thresholds`` and ``resolution`` into ``options`` (refusing a disagreement)."""
+        moved: dict[str, Any] = {}
+        if self.thresholds is not None:
+            moved.update({k: v for k, v in (("threshold_power_w", self.thresholds.power_w),
+                                            ("threshold_error", self.thresholds.error)) if v is not None})
+        if self.resolution is not None:
+            moved["eval_width"], moved["eval_height"] = self.resolution
+        given = self.options.model_dump(include=self.options.model_fields_set)
+        clash = sorted(k for k, v in moved.items() if k in given and given[k] != v)
+        if clash:
+            raise ValueError(f"options.{clash[0]} disagrees with its older spelling (thresholds/resolution)")
+        if moved:
+            self.options = JobOptionsIn(**{**given, **moved})
+        self.thresholds = self.resolution = None
         return self
 
 
@@ -221,7 +229,7 @@ class StoreQuery(StrictModel):
         if self.direction is not None and math.hypot(*self.direction) < 1e-12:
             raise ValueError("direction must be non-zero")
         if self.matrix is not None:
-            _check_affine(self.matrix, "matrix")
+            check_affine(self.matrix, "matrix")
         return self
 
 
@@ -245,7 +253,7 @@ class CameraIn(StrictModel):
 
     @model_validator(mode="after")
     def _affine(self) -> CameraIn:
-        _check_affine(self.matrix_world, "matrix_world")
+        check_affine(self.matrix_world, "matrix_world")
         return self
 
 

@@ -13,6 +13,7 @@ import numpy as np
 from fastapi import APIRouter
 
 from service.storage import Storage
+from service.store.camera import unit_axes
 
 from ..deps import ScenesDep, SettingsDep, StorageDep
 from ..errors import ApiError, ErrorResponse
@@ -30,12 +31,8 @@ def scene_or_404(storage: Storage, scenes: Any, scene_id: str) -> Any:
 
 
 def camera_matrix(cam: CameraIn) -> np.ndarray:
-    """The camera's world matrix with unit-length axes (a camera's scale means nothing; huge but finite
-    entries must not overflow later arithmetic)."""
-    m = np.asarray(cam.matrix_world, dtype=np.float64)
-    axes = m[:3, :3] / np.abs(m[:3, :3]).max(axis=0)
-    m[:3, :3] = axes / np.linalg.norm(axes, axis=0)
-    return m
+    """The camera's world matrix with unit-length axes (:func:`service.store.camera.unit_axes`)."""
+    return unit_axes(cam.matrix_world)
 
 
 def make_camera(cam: CameraIn, max_pixels: int) -> Any:
@@ -53,21 +50,13 @@ def make_camera(cam: CameraIn, max_pixels: int) -> Any:
 def settings_indices(values: dict[str, Any] | None) -> tuple[Any, tuple[int, ...]]:
     """The default parameter space and the index vector of ``{parameter: value}`` (the names and values a
     store query returns); parameters left out stay at maximum quality."""
-    from service.jobs import same_value
     from service.params import default_space
 
     space = default_space()
-    indices = list(space.max_quality_indices())
-    for name, value in (values or {}).items():
-        if name not in space.names:
-            raise ApiError(422, f"settings: unknown parameter {name!r}; known: {list(space.names)}")
-        k = space.names.index(name)
-        p = space.parameters[k]
-        hits = [i for i, v in enumerate(p.values) if same_value(v, value)]
-        if not hits:
-            raise ApiError(422, f"settings: {value!r} is not a value of {name!r}; values: {list(p.values)}")
-        indices[k] = hits[0]
-    return space, tuple(indices)
+    try:
+        return space, space.indices_of(values)
+    except ValueError as exc:
+        raise ApiError(422, f"settings: {exc}") from None
 
 
 def _jsonable(value: Any) -> Any:

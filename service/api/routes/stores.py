@@ -6,7 +6,7 @@ from typing import Any
 
 from fastapi import APIRouter, Response
 
-from service.pareto_store import TemporalFilter, pack_indices
+from service.store import TemporalFilter, pack_indices
 
 from ..deps import StoreRecordDep, StoresDep
 from ..errors import ApiError, ErrorResponse
@@ -16,38 +16,17 @@ router = APIRouter(prefix="/stores", tags=["stores"])
 
 
 @router.get("/{store_id}", responses={200: {"content": {"application/json": {}},
-                                            "description": "the store JSON (service.pareto_store format)"},
+                                            "description": "the store JSON (service.store format)"},
                                        404: {"model": ErrorResponse}})
 def get_store(record: StoreRecordDep) -> Response:
     """The store exactly as the optimiser wrote it (load it with ``ParetoStore.from_json``)."""
     return Response(record.body, media_type="application/json", headers={"ETag": f'"{record.id}"'})
 
 
-def _unit_scale(v: tuple[float, ...] | list[float]) -> list[float]:
-    """Divide by the largest magnitude when squaring could overflow or underflow (only the direction
-    counts); ordinary values pass unchanged, so answers match a direct ``ParetoStore.lookup`` bit for bit."""
-    m = max(abs(c) for c in v)
-    return [c / m for c in v] if m > 0 and not 1e-100 < m < 1e100 else list(v)
-
-
-def _orientation(body: StoreQuery) -> tuple[Any, Any]:
-    """Direction, or a matrix with its rotation columns rescaled, safe for any finite input."""
-    if body.direction is not None:
-        return _unit_scale(body.direction), None
-    assert body.matrix is not None
-    rows = [list(r) for r in body.matrix]
-    for j in range(3):
-        col = _unit_scale([rows[i][j] for i in range(3)])
-        for i in range(3):
-            rows[i][j] = col[i]
-    return None, rows
-
-
 def answer_query(store: Any, body: StoreQuery) -> QueryResult:
     """Lookup plus the optional temporal filter; shared by the route and the app's fast path."""
-    direction, matrix = _orientation(body)
-    try:
-        hit = store.lookup(body.position, direction=direction, matrix=matrix, fov=body.fov,
+    try:  # the lookup's camera maths is scale-free: huge or tiny but finite orientations are fine
+        hit = store.lookup(body.position, direction=body.direction, matrix=body.matrix, fov=body.fov,
                            power_budget=body.power_budget_w, error_budget=body.error_budget,
                            aspect=body.aspect)
     except ValueError as exc:

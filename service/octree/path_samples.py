@@ -1,0 +1,213 @@
+"""Camera samples at the path's own cameras (``view_sampling="path"``, the default).
+
+The corners the paper samples sit up to half a cell from the path and their six views see what a path
+camera would only see from elsewhere, so their frontiers predict the path's power and error poorly.
+Here the nodes holding path frames are split until their side is at most ``path_resolution`` times the
+frames' median viewing distance (the distance their central ray travels; ``max_depth`` caps it), and
+the runtime lookup itself (:meth:`ParetoStore.locate`) says which (corner, face) each path frame will
+read. Each such sample is measured at the path camera most like the frames reading it (their medoid
+by eye distance over viewing distance plus direction difference); a full search runs at every
+``path_stride``-th sample along the path and short warm-started ones in between; then every frontier
+setting is also priced at ``guard_frames`` more of those frames (the ones least like the chosen ones)
+and the frontier keeps each setting's worst error and power, so it bounds the frames it serves. Faces
+no path frame reads inherit the frontier of the nearest sample. No frontier-difference comparisons
+are made in this mode.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from service.evaluation import CameraSpec
+from service.params import Indices
+from service.store import VIEW_FORWARD, quantise_directions, quantise_eyes, view_up
+
+from .lattice import N_VIEWS, Lattice
+from .search import Search
+
+
+class PathSampling:
+    """One sample per (corner, face) the path looks up, at the path's own cameras."""
+
+    def __init__(self, lattice: Lattice, search: Search, config: Any, path: Any) -> None:
+        self.lattice, self.search, self.cfg, self.path = lattice, search, config, path
+        n = len(path.positions)
+        if path.forwards is None or path.targets is None:
+            raise ValueError("path view sampling needs the path's forwards and targets")
+        if (path.matrices is None or path.matrices.shape[0] != n or path.vfovs.shape[0] != n
+                or path.aspects.shape[0] != n):
+            raise ValueError("path view sampling needs one world matrix, fov and aspect per path frame")
+        self.sample_cams: dict[tuple[int, int], CameraSpec] = {}  # the camera behind each sample
+        self.sample_scale: dict[tuple[int, int], float] = {}  # median viewing distance of its frames
+
+    def store_cameras(self, used: list[int]) -> dict[str, Any]:
+        """Every stored frontier's sample camera (format version 3)."""
+        recs = [self.lattice.frontiers[f] for f in used]
+        cams = [self.sample_cams[(r.corner, r.view)] for r in recs]
+        if not cams:
+            return {}
+        return {"frontier_dirs": np.asarray([c.forward for c in cams]),
+                "frontier_eyes": np.asarray([c.eye for c in cams])}
+
+    def build(self) -> None:
+        dist = self._view_distances()
+        self._refine(dist)
+        self.search.report("place samples")
+        groups = self._group_frames()
+        self.search.state.views_planned = len(groups)
+        guards: dict[tuple[int, int], list[CameraSpec]] = {}
+        order = sorted(groups, key=lambda cv: groups[cv][0])  # in path order (first frame)
+        for (c, v) in order:
+            frames = groups[(c, v)]
+            cams = self._sample_cameras(frames, dist)
+            self.sample_cams[(c, v)] = cams[0]
+            self.sample_scale[(c, v)] = float(np.median(dist[frames]))
+            guards[(c, v)] = cams[1:]
+        self._search_along(order, guards)
+        self._guard(guards)
+        self.search.steps_done += sum(len(g) for g in guards.values())
+        self._inherit_unsampled()
+        self.search.report("done")
+
+    def _refine(self, dist: np.ndarray) -> None:
+        """Split the nodes the path's frames are in until their side is at most ``path_resolution``
+        times the median distance those frames look (so the lattice is fine where the camera looks at
+        something near and coarse where it looks far)."""
+        lat = self.lattice
+        positions = self.path.positions
+        lat.add_root()
+        level = [0]
+        while level:
+            depth = lat.depth(level[0])
+            if depth >= self.cfg.max_depth:
+                break
+            split = []
+            for n in level:
+                lo, hi = lat.node_box(n)
+                inside = np.all((positions >= lo) & (positions <= hi), axis=1)
+                if not np.any(inside):
+                    continue
+                side = float(hi[0] - lo[0])
+                if depth < self.cfg.min_depth or side > self.cfg.path_resolution * float(
+                        np.median(dist[inside])):
+                    split.append(n)
+            level = lat.split(split, depth + 1)
+
+    def _search_along(self, order: list[tuple[int, int]], guards: dict[tuple[int, int], list[CameraSpec]]
+                      ) -> None:
+        """Neighbouring samples along the path see nearly the same image: a full search at every
+        ``stride``-th one, then short searches for the others, warm-started from the frontiers of the
+        full searches before and after them on the path."""
+        lat, search = self.lattice, self.search
+        stride = max(1, self.cfg.path_stride)
+        anchors = list(range(0, len(order), stride))
+        if anchors and anchors[-1] != len(order) - 1 and len(order) > 1:
+            anchors.append(len(order) - 1)
+        warm_generations = min(self.cfg.warm_generations, self.cfg.nsga.generations)
+        search.steps_planned += search.steps(len(order) - len(anchors), warm_generations)
+        # pricing a frontier at a guard camera renders about a population's worth: one step each
+        search.steps_planned += sum(len(g) for g in guards.values())
+        self._optimise([(*order[i], []) for i in anchors], "optimise path samples")
+        anchor_set = set(anchors)
+        jobs = []
+        for i, (c, v) in enumerate(order):
+            if i in anchor_set:
+                continue
+            before = max(a for a in anchors if a < i)
+            after = min(a for a in anchors if a > i)
+            fa = lat.frontier(*order[before]).settings()
+            fb = lat.frontier(*order[after]).settings()
+            warm = [x for pair in itertools.zip_longest(fa, fb) for x in pair if x is not None]
+            jobs.append((c, v, warm))
+        self._optimise(jobs, "refine path samples", generations=warm_generations, planned=True)
+
+    def _optimise(self, jobs: Sequence[tuple[int, int, list[Indices]]], phase: str,
+                  generations: int | None = None, planned: bool = False) -> None:
+        found = self.search.run([self.sample_cams[(c, v)] for c, v, _ in jobs], [w for _, _, w in jobs],
+                                phase, generations, planned)
+        for (c, v, _), points in zip(jobs, found, strict=True):
+            self.lattice.set_frontier(c, v, points)
+
+    def _view_distances(self) -> np.ndarray:
+        d = np.linalg.norm(self.path.targets - self.path.positions, axis=1)
+        return np.maximum(d, 1e-3 * self.lattice.root_size)
+
+    def _group_frames(self) -> dict[tuple[int, int], list[int]]:
+        """Path frames by the (corner, view) the runtime lookup sends them to (the store's own code)."""
+        skel = self.lattice.skeleton(self.search.space, vfov=self.cfg.vfov,
+                                     aspect=self.cfg.width / self.cfg.height)
+        groups: dict[tuple[int, int], list[int]] = {}
+        for i, m in enumerate(self.path.matrices):
+            cv = skel.locate(self.path.positions[i], matrix=m, fov=float(self.path.vfovs[i]),
+                             aspect=float(self.path.aspects[i]))
+            groups.setdefault(cv, []).append(i)
+        return groups
+
+    def _sample_cameras(self, frames: Sequence[int], dist: np.ndarray) -> list[CameraSpec]:
+        """The group's medoid frame (eye and view direction, distances in units of the viewing
+        distance), then up to ``guard_frames`` frames farthest from the chosen ones."""
+        idx = np.asarray(frames, dtype=np.int64)
+        p = self.path.positions[idx]
+        f = self.path.forwards[idx] / np.linalg.norm(self.path.forwards[idx], axis=1, keepdims=True)
+        scale = float(np.median(dist[idx]))
+        cost = (((p[:, None, :] - p[None, :, :]) ** 2).sum(axis=2) / scale**2
+                + ((f[:, None, :] - f[None, :, :]) ** 2).sum(axis=2))
+        chosen = [int(np.argmin(cost.sum(axis=1)))]
+        for _ in range(self.cfg.guard_frames):
+            far = cost[chosen].min(axis=0)
+            k = int(np.argmax(far))
+            if far[k] <= 1e-12:
+                break
+            chosen.append(k)
+        eyes = quantise_eyes(p[chosen], self.lattice.root_min, self.lattice.root_size)
+        fwd = quantise_directions(f[chosen], fine=True)
+        return [CameraSpec(tuple(e), tuple(d), tuple(view_up(d)), self.cfg.vfov, self.cfg.width,
+                           self.cfg.height) for e, d in zip(eyes, fwd, strict=True)]
+
+    def _guard(self, guards: dict[tuple[int, int], list[CameraSpec]]) -> None:
+        """Price every frontier setting at its sample's guard cameras too and keep, per setting, the
+        worst error and power seen: the stored frontier then bounds the frames between the sample and
+        its guards, not just the sample itself."""
+        reqs: list[tuple[CameraSpec, Indices]] = []
+        for cv, cams in guards.items():
+            rec = self.lattice.frontier(*cv)
+            reqs += [(cam, x) for cam in cams for x in rec.settings()]
+        if not reqs:
+            return
+        self.search.check_cancel()
+        self.search.report("price guard frames")
+        res = iter(self.search.evaluate(reqs))
+        for cv, cams in guards.items():
+            rec = self.lattice.frontier(*cv)
+            e = np.asarray([pt[1] for pt in rec.points], dtype=np.float64)
+            pw = np.asarray([pt[2] for pt in rec.points], dtype=np.float64)
+            for _ in cams:
+                r = [next(res) for _ in rec.points]
+                e = np.maximum(e, [x.error for x in r])
+                pw = np.maximum(pw, [x.power_w for x in r])
+            # points the worst case made dominated are dropped where every record becomes a store
+            # frontier (Frontier.from_points in to_store)
+            rec.points = [(x, float(ei), float(pi))
+                          for (x, _, _), ei, pi in zip(rec.points, e, pw, strict=True)]
+
+    def _inherit_unsampled(self) -> None:
+        """Views no path frame looks up take the frontier (and sample camera) of the sample nearest to
+        them: eye distance in units of that sample's viewing distance, plus direction difference."""
+        keys = list(self.sample_cams)
+        eyes = np.asarray([self.sample_cams[k].eye for k in keys])
+        fwd = np.asarray([self.sample_cams[k].forward for k in keys])
+        scale = np.asarray([self.sample_scale[k] for k in keys])
+        for c, views in enumerate(self.lattice.corner_views):
+            pos = self.lattice.position(c)
+            d_eye = ((eyes - pos) ** 2).sum(axis=1) / scale**2
+            for v in range(N_VIEWS):
+                if views[v] != -1:
+                    continue
+                k = int(np.argmin(d_eye + ((fwd - VIEW_FORWARD[v]) ** 2).sum(axis=1)))
+                sc, sv = keys[k]
+                views[v] = self.lattice.corner_views[sc][sv]
+

@@ -1,0 +1,163 @@
+"""The lock-step search scheduler: the Pareto frontiers of many cameras at once, every generation of
+every camera sent to the executor as one batch, with progress and cancellation.
+
+Each search is NSGA-II (or exhaustive enumeration when the space is small) seeded from the run seed
+and the camera, starting from both ends of the space (the maximum-quality setting, error 0 by
+definition, and the cheapest one) plus its warm start. The scheduler knows cameras and settings, not
+corners or views: the sampling strategies (:mod:`.view_cubes`, :mod:`.path_samples`) decide what to
+search where.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import zlib
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from service.evaluation import CameraSpec, Evaluator
+from service.nsga import NSGA2, Archive, NSGAConfig, enumerate_space
+from service.params import Indices, ParameterSpace
+
+Points = list[tuple[Indices, float, float]]  # (full index vector, error, power) of a frontier
+
+
+class Cancelled(Exception):
+    """The optimisation was cancelled through ``should_cancel``."""
+
+
+@dataclass
+class Progress:
+    """Where a run stands: views optimised of those planned so far, renders, cache hits, time."""
+
+    views_done: int = 0
+    views_planned: int = 0
+    evaluations: int = 0
+    cache_hits: int = 0
+    elapsed_s: float = 0.0
+    estimate_s: float | None = None
+    phase: str = "starting"
+
+
+def camera_seed(seed: int, camera: CameraSpec) -> int:
+    return (int(seed) * 1_000_003 + zlib.crc32(camera.key().encode())) % (2**63)
+
+
+class Search:
+    """Runs searches in lock-step and keeps the run's progress (``state``)."""
+
+    def __init__(self, evaluator: Evaluator, space: ParameterSpace, nsga: NSGAConfig, exhaustive_limit: int,
+                 progress: Callable[[Progress], None] | None = None,
+                 should_cancel: Callable[[], bool] | None = None) -> None:
+        self.ev = evaluator
+        self.space = space
+        self.nsga = nsga
+        self.exhaustive_limit = exhaustive_limit
+        self._progress_cb = progress
+        self._should_cancel = should_cancel
+        self.t0 = time.perf_counter()
+        self.steps_done = 0
+        self.steps_planned = 0
+        self.state = Progress(phase="root")
+
+    # -- bookkeeping --------------------------------------------------------------------------------
+
+    def report(self, phase: str | None = None) -> None:
+        if phase is not None:
+            self.state.phase = phase
+        s = self.state
+        s.evaluations = self.ev.evaluations
+        s.cache_hits = self.ev.cache_hits
+        s.elapsed_s = time.perf_counter() - self.t0
+        # time per search step (one generation, or one chunk of an enumeration, of one camera) so far,
+        # times the steps still planned: warm-started searches are shorter than full ones
+        s.estimate_s = (s.elapsed_s / self.steps_done * max(self.steps_planned - self.steps_done, 0)
+                        if self.steps_done else None)
+        if self._progress_cb is not None:
+            self._progress_cb(Progress(**vars(s)))
+
+    def check_cancel(self) -> None:
+        if self._should_cancel is not None and self._should_cancel():
+            self.report("cancelled")
+            raise Cancelled("optimisation cancelled")
+
+    def evaluate(self, requests: Sequence[tuple[CameraSpec, Indices]]) -> list[Any]:
+        """Error and power of (camera, settings) requests, as one batch."""
+        return self.ev.evaluate(requests)
+
+    @property
+    def exhaustive(self) -> bool:
+        return self.space.size <= self.exhaustive_limit
+
+    def steps(self, n_jobs: int, generations: int | None = None) -> int:
+        """Steps of ``n_jobs`` searches run together: chunks of the enumeration, or NSGA-II generations."""
+        if self.exhaustive:
+            n = math.prod(self.space.free_n_values)
+            return n_jobs * -(-n // max(1, 256 // max(1, n_jobs)))
+        return n_jobs * (generations or self.nsga.generations)
+
+    # -- the searches -------------------------------------------------------------------------------
+
+    def run(self, cameras: Sequence[CameraSpec], warm: Sequence[list[Indices]], phase: str,
+            generations: int | None = None, planned: bool = False) -> list[Points]:
+        """The frontier of each camera (warm-started from ``warm``), all searches in lockstep;
+        ``generations`` overrides the configured number (short searches from a good warm start);
+        ``planned``: their steps were already counted in the progress estimate."""
+        if not cameras:
+            return []
+        steps_before = self.steps_done
+        stage_steps = self.steps(len(cameras), generations)
+        if not planned:
+            self.steps_planned += stage_steps
+        archives = (self._enumerate(cameras, phase) if self.exhaustive
+                    else self._nsga(cameras, warm, phase, generations))
+        found = [[(self.space.expand(x), e, p) for x, e, p in arch.frontier()] for arch in archives]
+        self.state.views_done += len(cameras)
+        self.steps_done = max(self.steps_done, steps_before + stage_steps)  # searches that ended early
+        self.report(phase)
+        return found
+
+    def _enumerate(self, cameras: Sequence[CameraSpec], phase: str) -> list[Archive]:
+        xs = enumerate_space(self.space.free_n_values)
+        archives = [Archive() for _ in cameras]
+        chunk = max(1, 256 // len(cameras))
+        for start in range(0, len(xs), chunk):
+            self.check_cancel()
+            part = xs[start:start + chunk]
+            res = self.evaluate([(cam, self.space.expand(x)) for cam in cameras for x in part])
+            for j in range(len(cameras)):
+                for k, x in enumerate(part):
+                    ev = res[j * len(part) + k]
+                    archives[j].add(x, (ev.error, ev.power_w))
+            self.steps_done += len(cameras)
+            self.report(phase)
+        return archives
+
+    def _nsga(self, cameras: Sequence[CameraSpec], warm: Sequence[list[Indices]], phase: str,
+              generations: int | None) -> list[Archive]:
+        algos = []
+        for w, cam in zip(warm, cameras, strict=True):
+            cfg = NSGAConfig(self.nsga.population, generations or self.nsga.generations,
+                             self.nsga.crossover_prob, self.nsga.mutation_prob,
+                             camera_seed(self.nsga.seed, cam))
+            # both ends of the space first (max quality anchors error 0, the cheapest the low-power
+            # end), then the warm start
+            ends = [self.space.max_quality_indices(), self.space.min_quality_indices()]
+            init = list(dict.fromkeys(self.space.restrict(x) for x in [*ends, *w]))
+            algos.append(NSGA2(self.space.free_n_values, cfg, init[: cfg.population]))
+        while True:
+            self.check_cancel()
+            asks = [(j, a.ask()) for j, a in enumerate(algos) if not a.done]
+            asks = [(j, b) for j, b in asks if b]
+            if not asks:
+                break
+            res = self.evaluate([(cameras[j], self.space.expand(x)) for j, b in asks for x in b])
+            k = 0
+            for j, b in asks:
+                algos[j].tell([(r.error, r.power_w) for r in res[k:k + len(b)]])
+                k += len(b)
+            self.steps_done += len(asks)
+            self.report(phase)
+        return [a.archive for a in algos]

@@ -1,0 +1,233 @@
+"""The optimiser's options, declared once: name, type, default, bounds, help, and where each is shown.
+
+Every layer derives its view from :data:`OPTIONS`: the ``render-budget optimize`` arguments
+(:func:`add_arguments`), the REST job request (``service.api.schemas.JobOptionsIn``), the add-on's
+scene properties and panel (``addon/properties.py``, ``addon/panels.py``), the add-on's job request
+(``addon.core.job_runner.JobRequest``), the batch ``optimize`` arguments (``addon/batch.py``) and the
+run configuration (``service.optimize.OptimizeConfig``). Clients send only the options they
+override; the service fills in the defaults declared here and keeps the full set with the job.
+
+Stdlib only: the Blender add-on carries this module (it runs inside Blender's own Python).
+
+Adding an option: append an :class:`Option` to :data:`OPTIONS` and read it in ``service.optimize``
+(``config.<name>``); every layer picks it up, and ``tests/test_options.py`` walks it through them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import operator
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+#: Camera-sample strategies of the octree builder (``service.octree``).
+VIEW_SAMPLING = ("path", "aimed", "axis")
+#: Image-error measures of the evaluator (``service.evaluation``).
+METRICS = ("ssim", "ssim_gaussian", "flip")
+
+
+@dataclass(frozen=True)
+class Option:
+    """One optimiser option.
+
+    ``optional``: ``None`` is a value meaning "derive it" (the help says from what); where a layer
+    cannot hold ``None`` (a Blender integer property) it shows 0. ``public``: offered by the CLI, the
+    REST job request, the add-on and batch; internal options are set by library callers only.
+    ``group`` and ``modes`` lay out the add-on panel: the box an option sits in, and the
+    ``view_sampling`` values it applies to (greyed out for the others)."""
+
+    name: str
+    kind: type  # bool, int, float or str
+    default: Any
+    label: str
+    help: str
+    minimum: float | None = None
+    maximum: float | None = None
+    choices: tuple[str, ...] = ()
+    choice_labels: tuple[str, ...] = ()  # what the add-on shows for each choice
+    optional: bool = False
+    public: bool = True
+    flag: str = ""  # command-line spelling, when not the name with dashes
+    aliases: tuple[str, ...] = ()  # older command-line spellings still accepted
+    metavar: str | None = None
+    group: str = "Optimiser"
+    modes: tuple[str, ...] = ()  # view_sampling values this option matters for (empty: all)
+    soft_max: float | None = None  # the add-on's slider range, when narrower than ``maximum``
+    precision: int | None = None  # digits the add-on shows
+
+    @property
+    def cli_flag(self) -> str:
+        return "--" + (self.flag or self.name.replace("_", "-"))
+
+    def check(self, value: Any) -> Any:
+        """``value`` as this option's type, or ValueError naming the option and its bounds."""
+        if value is None:
+            if self.optional:
+                return None
+            raise ValueError(f"{self.name} must be given (it has no derived default)")
+        if self.kind is bool:
+            if not isinstance(value, bool):
+                raise ValueError(f"{self.name} must be true or false, got {value!r}")
+            return value
+        if self.kind is str:
+            if not isinstance(value, str) or (self.choices and value not in self.choices):
+                raise ValueError(f"{self.name} must be one of {', '.join(self.choices)}, got {value!r}")
+            return value
+        if isinstance(value, bool):
+            raise ValueError(f"{self.name} must be a number, got {value!r}")
+        if self.kind is int:
+            try:
+                v: float = operator.index(value)
+            except TypeError:
+                raise ValueError(f"{self.name} must be a whole number, got {value!r}") from None
+        else:
+            try:
+                v = float(value)
+            except (TypeError, ValueError):
+                raise ValueError(f"{self.name} must be a number, got {value!r}") from None
+            if not math.isfinite(v):
+                raise ValueError(f"{self.name} must be finite, got {value!r}")
+        if (self.minimum is not None and v < self.minimum) or (self.maximum is not None and v > self.maximum):
+            raise ValueError(f"{self.name} must be in {self.bounds_text()}, got {value!r}")
+        return v
+
+    def bounds_text(self) -> str:
+        lo = "-inf" if self.minimum is None else f"{self.minimum:g}"
+        hi = "inf" if self.maximum is None else f"{self.maximum:g}"
+        return f"[{lo}, {hi}]"
+
+
+_SAMPLES = "Camera samples"
+_CUBES = ("aimed", "axis")
+
+OPTIONS: tuple[Option, ...] = (
+    Option("view_sampling", str, "path", "Camera samples",
+           "camera samples: the path's own cameras on a lattice refined by viewing distance (path), or "
+           "the paper's six views per corner with frontier-difference refinement, aimed at what the "
+           "path sees (aimed) or along the world axes (axis)",
+           choices=VIEW_SAMPLING, choice_labels=("Path cameras", "Aimed view cubes", "Axis view cubes"),
+           aliases=("camera-sampling",), group=_SAMPLES),
+    Option("max_depth", int, 6, "Max depth",
+           "deepest octree level (path cameras: caps the refinement; view cubes: the split depth, keep "
+           "it at 1-3)", minimum=0, maximum=8, metavar="N", group=_SAMPLES),
+    Option("min_depth", int, 0, "Min depth",
+           "split the nodes the path passes through at least this deep (0: only where needed)",
+           minimum=0, maximum=8, metavar="N", group=_SAMPLES),
+    Option("path_resolution", float, 0.25, "Path resolution",
+           "path cameras: octree leaves at most this times the viewing distance wide",
+           minimum=0.01, maximum=10.0, metavar="R", group=_SAMPLES, modes=("path",), precision=3),
+    Option("guard_frames", int, 2, "Guard frames",
+           "path cameras: also price each frontier at this many more path cameras, keeping the worst "
+           "error and power", minimum=0, maximum=8, metavar="N", group=_SAMPLES, modes=("path",)),
+    Option("threshold_power_w", float, 0.05, "Power threshold (W)",
+           "view cubes: subdivide where neighbouring frontiers differ by more than this many watts",
+           minimum=1e-4, maximum=1e4, flag="threshold-power", metavar="W", group=_SAMPLES, modes=_CUBES,
+           soft_max=5.0, precision=3),
+    Option("threshold_error", float, 0.01, "Error threshold",
+           "view cubes: subdivide where neighbouring frontiers differ by more than this error",
+           minimum=1e-5, maximum=1.0, metavar="E", group=_SAMPLES, modes=_CUBES, precision=4),
+    Option("population", int, 24, "Population", "NSGA-II population of each camera sample's search",
+           minimum=4, maximum=512, metavar="N"),
+    Option("generations", int, 25, "Generations", "NSGA-II generations of each full search",
+           minimum=1, maximum=500, metavar="N"),
+    Option("seed", int, 0, "Seed", "random seed (the same seed gives the same store)",
+           minimum=0, maximum=2**31 - 1, metavar="N"),
+    Option("exhaustive_limit", int, 512, "Exhaustive up to",
+           "enumerate every setting instead of searching when the space has at most this many",
+           minimum=0, maximum=65536, metavar="N"),
+    Option("metric", str, "ssim", "Error metric",
+           "image error against the maximum-quality render: 1 - SSIM (box or Gaussian window) or FLIP",
+           choices=METRICS, choice_labels=("1 - SSIM", "1 - SSIM (Gaussian window)", "FLIP")),
+    Option("eval_width", int, None, "Evaluation width",
+           "evaluation image width in pixels (default: from the path's aspect ratio)",
+           minimum=8, maximum=1024, optional=True, metavar="PX", group="Evaluation"),
+    Option("eval_height", int, 36, "Evaluation height", "evaluation image height in pixels",
+           minimum=8, maximum=1024, metavar="PX", group="Evaluation"),
+    # internal: set by library callers (tests, benchmarks), not offered by the CLI, REST or add-on
+    Option("margin", float, 0.1, "Margin", "view cubes: fraction of a node's side added around it when "
+           "testing whether the path passes through it", minimum=0.0, public=False),
+    Option("pad_fraction", float, 0.1, "Padding", "root cube padding, as a fraction of the path's extent",
+           minimum=0.0, public=False),
+    Option("min_size", float, 1.0, "Minimum size", "smallest root cube side (metres)", minimum=1e-6,
+           public=False),
+    Option("skip_inert", bool, True, "Skip inert", "leave out the parameters the simulator reports "
+           "cannot change this scene", public=False),
+    Option("power_at_path_resolution", bool, True, "Power at path resolution",
+           "predict power for the path's resolution (dynamic energy scaled by the pixel ratio) rather "
+           "than for the evaluation images", public=False),
+)
+
+BY_NAME: dict[str, Option] = {o.name: o for o in OPTIONS}
+PUBLIC: tuple[Option, ...] = tuple(o for o in OPTIONS if o.public)
+GROUPS: tuple[str, ...] = tuple(dict.fromkeys(o.group for o in PUBLIC))
+
+
+def defaults() -> dict[str, Any]:
+    """Every option at its default."""
+    return {o.name: o.default for o in OPTIONS}
+
+
+def check(values: Mapping[str, Any], *, public_only: bool = False) -> dict[str, Any]:
+    """Validated copy of some option values (unknown names refused); also checks what relates two
+    options (``min_depth <= max_depth``, with the defaults standing in for options not given)."""
+    known = {o.name for o in PUBLIC} if public_only else set(BY_NAME)
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise ValueError(f"unknown optimiser options {unknown}; known: {sorted(known)}")
+    out = {name: BY_NAME[name].check(v) for name, v in values.items()}
+    lo = out.get("min_depth", BY_NAME["min_depth"].default)
+    hi = out.get("max_depth", BY_NAME["max_depth"].default)
+    if lo > hi:
+        raise ValueError(f"min_depth ({lo}) must not exceed max_depth ({hi})")
+    return out
+
+
+def resolve(overrides: Mapping[str, Any]) -> dict[str, Any]:
+    """Every option: the defaults with ``overrides`` (validated) on top."""
+    return {**defaults(), **check(overrides)}
+
+
+def eval_resolution(eval_width: int | None, eval_height: int, aspect: float) -> tuple[int, int]:
+    """The evaluation image size: ``eval_width`` or, when it is None, the height times the path's
+    aspect (at least 8 pixels)."""
+    height = int(eval_height)
+    return (int(eval_width) if eval_width is not None else max(8, round(height * aspect))), height
+
+
+# -- command lines (render-budget optimize; the add-on's batch optimize) ---------------------------------
+
+def _arg_type(opt: Option) -> Any:
+    def parse(text: str) -> Any:
+        try:
+            value: Any = int(text) if opt.kind is int else float(text) if opt.kind is float else text
+            return opt.check(value)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc).removeprefix(f"{opt.name} ")) from None
+
+    parse.__name__ = opt.kind.__name__  # argparse names the type in its messages
+    return parse
+
+
+def add_arguments(parser: argparse.ArgumentParser | Any, *, with_defaults: bool = True) -> None:
+    """One argument per public option (``dest`` = the option name). ``with_defaults=False`` leaves
+    every default None, so the caller can tell which options were given (overrides only)."""
+    for o in PUBLIC:
+        default = o.default if with_defaults else None
+        shown = "" if o.default is None else f" (default {o.default})"  # optional: the help says it
+        parser.add_argument(o.cli_flag, *(f"--{a}" for a in o.aliases), dest=o.name, default=default,
+                            type=None if o.choices else _arg_type(o), choices=o.choices or None,
+                            metavar=o.metavar, help=o.help + shown)
+
+
+def from_arguments(args: argparse.Namespace) -> dict[str, Any]:
+    """The public options given on a command line parsed with ``with_defaults=False`` (None = not
+    given), or all of them with ``with_defaults=True``; validated together."""
+    given = {o.name: getattr(args, o.name) for o in PUBLIC if getattr(args, o.name, None) is not None}
+    return check(given, public_only=True)
+
+
+def only_overrides(values: Mapping[str, Any]) -> dict[str, Any]:
+    """The values that differ from their default (what a client sends)."""
+    return {k: v for k, v in check(values).items() if v != BY_NAME[k].default}

@@ -1,0 +1,76 @@
+"""How a store keeps numbers: arrays as little-endian base64 blobs (``"<dtype>:<base64>"``), error and
+power as 16-bit steps, sample directions as cube-map style integer codes, sample eyes as 16-bit steps
+over the root cube. The optimiser renders with the quantised cameras, so a loaded store reports
+exactly the camera each frontier was measured at."""
+
+from __future__ import annotations
+
+import base64
+from typing import Any
+
+import numpy as np
+
+QMAX = 65535  # 16-bit error (over [0, 1]) and power (over [0, power_scale]) steps
+DIR_Q = 127  # int8 per-view sample directions (version 2)
+DIR_Q16 = 32767  # int16 per-frontier sample directions (version 3, path cameras)
+EYE_Q = 65535  # uint16 sample eyes over the root cube
+_DTYPES = ("<i1", "<u1", "<i2", "<u2", "<u4", "<i4", "<f4", "<f8")
+
+
+def encode(arr: Any, dtype: str) -> str:
+    a = np.ascontiguousarray(np.asarray(arr).astype(dtype, copy=False))
+    return f"{dtype}:" + base64.b64encode(a.tobytes()).decode("ascii")
+
+
+def decode(text: str) -> np.ndarray:
+    dtype, _, data = str(text).partition(":")
+    if dtype not in _DTYPES:
+        raise ValueError(f"unsupported array dtype {dtype!r} in store")
+    try:
+        raw = base64.b64decode(data.encode("ascii"), validate=True)
+    except ValueError as exc:
+        raise ValueError(f"corrupt base64 array in store: {exc}") from exc
+    if len(raw) % np.dtype(dtype).itemsize:
+        raise ValueError("corrupt array length in store")
+    return np.frombuffer(raw, dtype=dtype)
+
+
+def uint_dtype(max_value: int) -> str:
+    """The smallest unsigned dtype holding ``max_value``."""
+    return "<u1" if max_value < 256 else "<u2" if max_value < 65536 else "<u4"
+
+
+def direction_codes(d: np.ndarray, q: int = DIR_Q) -> np.ndarray:
+    """Integer codes of directions: scaled so the largest component is +-q (a cube-map style code, so
+    decoding and re-encoding gives the same codes); int8 for q = 127, int16 for q = 32767."""
+    m = np.abs(d).max(axis=-1, keepdims=True)
+    if np.any(m < 1e-300):
+        raise ValueError("directions must be non-zero")
+    return np.rint(d / m * q).astype(np.int8 if q <= 127 else np.int16)
+
+
+def quantise_directions(directions: Any, *, fine: bool = False) -> np.ndarray:
+    """Unit vectors (..., 3) rounded to the grid the store keeps (int8 per-view directions, or int16
+    per-frontier ones when ``fine``: a path camera's direction to ~0.002 degrees), renormalised."""
+    d = np.asarray(directions, dtype=np.float64)
+    if d.shape[-1:] != (3,) or not np.all(np.isfinite(d)):
+        raise ValueError("directions must be finite (..., 3) vectors")
+    q = direction_codes(d, DIR_Q16 if fine else DIR_Q).astype(np.float64)
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def eye_codes(eyes: Any, root_min: Any, root_size: float) -> np.ndarray:
+    u = (np.asarray(eyes, dtype=np.float64) - np.asarray(root_min, dtype=np.float64)) / float(root_size)
+    return np.rint(np.clip(u, 0.0, 1.0) * EYE_Q).astype(np.uint16)
+
+
+def quantise_eyes(eyes: Any, root_min: Any, root_size: float) -> np.ndarray:
+    """Sample eyes as the store keeps them: uint16 steps over the root cube (clamped into it)."""
+    rm = np.asarray(root_min, dtype=np.float64)
+    return rm + eye_codes(eyes, rm, root_size).astype(np.float64) / EYE_Q * float(root_size)
+
+
+def decode_eyes(text: str, root_min: Any, root_size: float) -> np.ndarray:
+    """Inverse of the eye codes: (F, 3) world positions."""
+    return (np.asarray(root_min, dtype=np.float64)
+            + decode(text).astype(np.float64).reshape(-1, 3) / EYE_Q * float(root_size))

@@ -1,0 +1,217 @@
+"""The runtime lookup: a camera pose and a budget -> the settings a store holds for it.
+
+The work per query: the camera's rotation (plain floats, :func:`service.store.camera.rotation_floats`),
+a descent of a few octree levels to the leaf holding the camera, the nearest of the leaf's eight
+corners, the view-cube face that receives most of the camera's frustum
+(:func:`service.store.camera.frustum_face`: one matrix product over 64 rays) and a binary search on
+that (corner, face)'s frontier. :class:`LookupIndex` precomputes what a query reads: each leaf's corner
+ids and positions, the frustum rays per field of view, each frontier as plain lists and each packed
+setting's values, so a query makes one numpy call (the face) and no other allocation of note.
+"""
+
+from __future__ import annotations
+
+import bisect
+import itertools
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from . import camera
+from .frontier import Frontier
+from .packing import StoredParameter, settings_of, unpack_indices
+
+
+@dataclass(frozen=True)
+class LookupResult:
+    """Settings chosen for one camera and budget, with their predicted error and power and flags."""
+
+    indices: tuple[int, ...]
+    packed: int
+    settings: dict[str, Any]
+    power_w: float
+    error: float
+    clamped: bool
+    infeasible: bool
+    corner: int = -1
+    view: int = -1
+    leaf: int = -1
+
+
+class _FrontierLists:
+    """A frontier as plain lists for :mod:`bisect` (the same answers as ``Frontier.under_power`` /
+    ``under_error``, which it defers to when the frontier is not sorted as a frontier must be)."""
+
+    __slots__ = ("error", "frontier", "neg_error", "packed", "power", "sorted")
+
+    def __init__(self, frontier: Frontier) -> None:
+        self.frontier = frontier
+        self.power = [float(v) for v in frontier.power_w]
+        self.error = [float(v) for v in frontier.error]
+        self.neg_error = [float(v) for v in -frontier.error]
+        self.packed = [int(v) for v in frontier.packed]
+        self.sorted = all(a <= b for a, b in itertools.pairwise(self.power)) and all(
+            a <= b for a, b in itertools.pairwise(self.neg_error))
+
+    def under_power(self, budget: float) -> tuple[int, bool]:
+        if not self.sorted:
+            return self.frontier.under_power(budget)
+        i = bisect.bisect_right(self.power, budget) - 1
+        return (0, True) if i < 0 else (i, False)
+
+    def under_error(self, budget: float) -> tuple[int, bool]:
+        if not self.sorted:
+            return self.frontier.under_error(budget)
+        i = bisect.bisect_left(self.neg_error, -budget)
+        return (len(self.power) - 1, True) if i >= len(self.power) else (i, False)
+
+
+class LookupIndex:
+    """Tables derived from a store for fast lookups (built once per store: a store is not changed after
+    it is made)."""
+
+    def __init__(self, root_min: np.ndarray, root_size: float, lattice_depth: int, children: np.ndarray,
+                 corner_coords: np.ndarray, corner_views: np.ndarray,
+                 parameters: Sequence[StoredParameter] = ()) -> None:
+        self.lattice_depth = lattice_depth
+        self.parameters = tuple(parameters)
+        self.views: list[list[int]] = corner_views.tolist()  # frontier id of each (corner, view)
+        self.leaf_corners: dict[int, np.ndarray] = {}
+        self.node_origin: dict[int, tuple[int, int, int, int]] = {}
+        self._walk(children, corner_coords)
+        side = 1 << lattice_depth
+        cell = root_size / side
+        self._lo = tuple(float(c) for c in root_min)
+        self._hi = tuple(float(c) + root_size for c in root_min)
+        self._lattice_scale = side / root_size
+        self._children = [int(c) for c in children]
+        # per leaf: its corners' ids and positions (the same floats as root_min + coords * cell)
+        self.leaf_corner_pos: dict[int, list[tuple[int, tuple[float, float, float]]]] = {
+            leaf: [(int(c), tuple(float(v) for v in root_min + corner_coords[c] * cell))  # type: ignore[misc]
+                   for c in ids]
+            for leaf, ids in self.leaf_corners.items()}
+        self._frustum_cache: dict[tuple[float, float], tuple[np.ndarray, np.ndarray]] = {}
+        self._last_frustum: tuple[float, float, tuple[np.ndarray, np.ndarray]] | None = None
+        self._frontiers: dict[int, _FrontierLists] = {}
+        self._decoded: dict[int, tuple[tuple[int, ...], dict[str, Any], bool]] = {}
+
+    def _walk(self, children: np.ndarray, corner_coords: np.ndarray) -> None:
+        """Each node's lattice origin and size, each leaf's eight corner ids (child order)."""
+        key = {tuple(int(c) for c in xyz): i for i, xyz in enumerate(corner_coords)}
+        stack = [(0, 0, 0, 0, 1 << self.lattice_depth)]
+        while stack:
+            node, x, y, z, s = stack.pop()
+            self.node_origin[node] = (x, y, z, s)
+            c = int(children[node])
+            if c == -1:
+                ids = []
+                for k in range(8):
+                    xyz = (x + s * (k & 1), y + s * ((k >> 1) & 1), z + s * ((k >> 2) & 1))
+                    if xyz not in key:
+                        raise ValueError(f"leaf {node} misses its corner at lattice {xyz}")
+                    ids.append(key[xyz])
+                self.leaf_corners[node] = np.asarray(ids, dtype=np.int64)
+            else:
+                if s < 2:
+                    raise ValueError("octree deeper than the lattice")
+                h = s // 2
+                for k in range(8):
+                    stack.append((c + k, x + h * (k & 1), y + h * ((k >> 1) & 1), z + h * ((k >> 2) & 1), h))
+
+    def leaf_depths(self, children: np.ndarray) -> dict[int, int]:
+        """Depth of every leaf (root = 0)."""
+        side = 1 << self.lattice_depth
+        return {n: round(math.log2(side / o[3])) for n, o in self.node_origin.items() if children[n] == -1}
+
+    # -- the query's steps --------------------------------------------------------------------------
+
+    def find_leaf(self, position: Any) -> tuple[int, tuple[float, float, float], bool]:
+        """Leaf containing ``position`` (clamped into the root): (leaf, clamped position, clamped)."""
+        px, py, pz = camera.vec3(position, "position")
+        (lx, ly, lz), (hx, hy, hz) = self._lo, self._hi
+        qx, qy, qz = min(max(px, lx), hx), min(max(py, ly), hy), min(max(pz, lz), hz)
+        clamped = (qx, qy, qz) != (px, py, pz)
+        k = self._lattice_scale
+        ux, uy, uz = (qx - lx) * k, (qy - ly) * k, (qz - lz) * k
+        node = 0
+        x = y = z = 0
+        s = 1 << self.lattice_depth
+        children = self._children
+        while children[node] != -1:
+            h = s // 2
+            i = (ux >= x + h) | ((uy >= y + h) << 1) | ((uz >= z + h) << 2)
+            x += h * (i & 1)
+            y += h * ((i >> 1) & 1)
+            z += h * ((i >> 2) & 1)
+            s = h
+            node = children[node] + i
+        return node, (qx, qy, qz), clamped
+
+    def frustum(self, vfov: float, aspect: float) -> tuple[np.ndarray, np.ndarray]:
+        """The frustum rays and weights of a field of view, kept per (vfov, aspect) to 6 decimals (the
+        first camera with those rounded values sets them)."""
+        last = self._last_frustum
+        if last is not None and last[0] == vfov and last[1] == aspect:
+            return last[2]
+        key = (round(vfov, 6), round(aspect, 6))
+        rays = self._frustum_cache.get(key)
+        if rays is None:
+            rays = camera.frustum_rays(vfov, aspect)
+            if len(self._frustum_cache) > 64:
+                self._frustum_cache.clear()
+            self._frustum_cache[key] = rays
+        self._last_frustum = (vfov, aspect, rays)
+        return rays
+
+    def choose_view(self, rotation: Any, vfov: float, aspect: float) -> int:
+        """View-cube face that receives the largest part of the camera frustum."""
+        rays, weights = self.frustum(vfov, aspect)
+        return camera.frustum_face(np.asarray(rotation, dtype=np.float64).reshape(3, 3), rays, weights)
+
+    def locate(self, position: Any, rotation: Any, vfov: float, aspect: float) -> tuple[int, int, int, bool]:
+        """(leaf, corner, view, clamped) a camera looks up: nearest corner of its leaf, then the face."""
+        leaf, q, clamped = self.find_leaf(position)
+        return leaf, self.nearest_corner(leaf, q), self.choose_view(rotation, vfov, aspect), clamped
+
+    def nearest_corner(self, leaf: int, q: tuple[float, float, float]) -> int:
+        """The leaf corner nearest to ``q`` (the first in child order among equally near ones).
+
+        The nearest corner of a cube is the one on ``q``'s side of the middle along each axis; only when
+        ``q`` is (within rounding) on a middle plane are the eight distances compared."""
+        corners = self.leaf_corner_pos[leaf]
+        qx, qy, qz = q
+        (x0, y0, z0), (x1, y1, z1) = corners[0][1], corners[7][1]
+        dx0, dx1 = (x0 - qx) ** 2, (x1 - qx) ** 2
+        dy0, dy1 = (y0 - qy) ** 2, (y1 - qy) ** 2
+        dz0, dz1 = (z0 - qz) ** 2, (z1 - qz) ** 2
+        tie = 1e-12 * (dx0 + dx1 + dy0 + dy1 + dz0 + dz1)
+        if abs(dx1 - dx0) > tie and abs(dy1 - dy0) > tie and abs(dz1 - dz0) > tie:
+            return corners[(dx1 < dx0) | ((dy1 < dy0) << 1) | ((dz1 < dz0) << 2)][0]
+        best = math.inf
+        corner = -1
+        for c, (cx, cy, cz) in corners:
+            dd = (cx - qx) ** 2 + (cy - qy) ** 2 + (cz - qz) ** 2
+            if dd < best:
+                best, corner = dd, c
+        return corner
+
+    def frontier_lists(self, frontier_id: int, frontier: Frontier) -> _FrontierLists:
+        lists = self._frontiers.get(frontier_id)
+        if lists is None or lists.frontier is not frontier:
+            lists = self._frontiers[frontier_id] = _FrontierLists(frontier)
+        return lists
+
+    def decoded(self, packed: int) -> tuple[tuple[int, ...], dict[str, Any]]:
+        """Value indices and a fresh ``{name: value}`` of a packed setting (decoded once per setting;
+        callers may change the dict they get)."""
+        hit = self._decoded.get(packed)
+        if hit is None:
+            indices = unpack_indices(packed, len(self.parameters))
+            settings = settings_of(self.parameters, indices)
+            shared = not any(isinstance(v, list) for v in settings.values())  # lists are made afresh
+            hit = self._decoded[packed] = (indices, settings, shared)
+        indices, settings, shared = hit
+        return indices, dict(settings) if shared else settings_of(self.parameters, indices)

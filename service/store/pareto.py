@@ -1,0 +1,241 @@
+"""The runtime Pareto store: an octree over the camera path with one Pareto frontier per (corner, view).
+
+The service writes stores, the Blender add-on reads them during playback; the document is described in
+:mod:`service.store.format`, the lookup in :mod:`service.store.lookup`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from . import camera, codec, format
+from .camera import VIEW_FORWARD, VIEW_UP, view_up
+from .frontier import Frontier
+from .lookup import LookupIndex, LookupResult
+from .packing import MAX_PARAMS, MAX_VALUES_PER_PARAM, StoredParameter, settings_of
+
+
+def _finite_vec3(v: Any, name: str) -> np.ndarray:
+    a = np.asarray(v, dtype=np.float64).reshape(-1)
+    if a.shape != (3,) or not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} must be 3 finite numbers, got {v!r}")
+    return a
+
+
+@dataclass
+class ParetoStore:
+    """Octree of camera samples with one Pareto frontier per (corner, view); see
+    :mod:`service.store.format` for what each field holds."""
+
+    parameters: tuple[StoredParameter, ...]
+    root_min: np.ndarray
+    root_size: float
+    lattice_depth: int
+    children: np.ndarray  # int32 (n_nodes,)
+    corner_coords: np.ndarray  # int64 (C, 3) lattice coordinates
+    corner_views: np.ndarray  # int64 (C, 6) frontier ids
+    frontiers: list[Frontier]
+    vfov: float = 0.6911
+    aspect: float = 16 / 9
+    profile: str = "mobile"
+    fps: float = 30.0
+    meta: dict[str, Any] = field(default_factory=dict)
+    view_dirs: np.ndarray | None = None  # float64 (C, 6, 3) sample directions; None = the axes
+    frontier_dirs: np.ndarray | None = None  # float64 (F, 3) sample direction of each frontier
+    frontier_eyes: np.ndarray | None = None  # float64 (F, 3) sample eye of each frontier
+
+    def __post_init__(self) -> None:
+        self.root_min = _finite_vec3(self.root_min, "root_min")
+        self.root_size = float(self.root_size)
+        if not (math.isfinite(self.root_size) and self.root_size > 0):
+            raise ValueError("root_size must be positive and finite")
+        if not 0 <= self.lattice_depth <= 16:
+            raise ValueError("lattice_depth must be in 0..16")
+        self.children = np.asarray(self.children, dtype=np.int64).reshape(-1)
+        self.corner_coords = np.asarray(self.corner_coords, dtype=np.int64).reshape(-1, 3)
+        self.corner_views = np.asarray(self.corner_views, dtype=np.int64).reshape(-1, 6)
+        self._check_tree()
+        self._check_sample_cameras()
+        if len(self.parameters) > MAX_PARAMS:
+            raise ValueError(f"at most {MAX_PARAMS} parameters")
+        for prm in self.parameters:
+            if len(prm.values) > MAX_VALUES_PER_PARAM:
+                raise ValueError(f"parameter {prm.name!r} has more than 16 values")
+        self._index = LookupIndex(self.root_min, self.root_size, self.lattice_depth, self.children,
+                                  self.corner_coords, self.corner_views, self.parameters)
+
+    def _check_tree(self) -> None:
+        n_nodes = self.children.size
+        if n_nodes == 0:
+            raise ValueError("a store needs at least the root node")
+        ch = self.children
+        if np.any((ch != -1) & ((ch <= 0) | (ch + 8 > n_nodes))):
+            raise ValueError("children index out of range")
+        if self.corner_coords.shape[0] != self.corner_views.shape[0]:
+            raise ValueError("corner_coords and corner_views disagree on the corner count")
+        side = 1 << self.lattice_depth
+        if self.corner_coords.size and (self.corner_coords.min() < 0 or self.corner_coords.max() > side):
+            raise ValueError("corner lattice coordinates out of range")
+        if self.corner_views.size and (
+            self.corner_views.min() < 0 or self.corner_views.max() >= len(self.frontiers)
+        ):
+            raise ValueError("corner view refers to a missing frontier")
+
+    def _check_sample_cameras(self) -> None:
+        if self.view_dirs is not None:
+            vd = np.asarray(self.view_dirs, dtype=np.float64)
+            if vd.shape != (self.corner_coords.shape[0], 6, 3) or not np.all(np.isfinite(vd)):
+                raise ValueError("view_dirs must be finite (corners, 6, 3)")
+            n = np.linalg.norm(vd, axis=2, keepdims=True)
+            if np.any(n < 1e-9):
+                raise ValueError("view_dirs must be non-zero")
+            self.view_dirs = vd / n
+        if (self.frontier_dirs is None) != (self.frontier_eyes is None):
+            raise ValueError("frontier_dirs and frontier_eyes come together")
+        if self.frontier_dirs is not None:
+            fd = np.asarray(self.frontier_dirs, dtype=np.float64)
+            fe = np.asarray(self.frontier_eyes, dtype=np.float64)
+            nf = len(self.frontiers)
+            if fd.shape != (nf, 3) or fe.shape != (nf, 3) or not (np.all(np.isfinite(fd))
+                                                                   and np.all(np.isfinite(fe))):
+                raise ValueError("frontier_dirs and frontier_eyes must be finite (frontiers, 3)")
+            n = np.linalg.norm(fd, axis=1, keepdims=True)
+            if np.any(n < 1e-9):
+                raise ValueError("frontier_dirs must be non-zero")
+            self.frontier_dirs = fd / n
+            self.frontier_eyes = fe
+
+    # -- what is stored ---------------------------------------------------------------------------
+
+    @property
+    def n_params(self) -> int:
+        return len(self.parameters)
+
+    def corner_positions(self) -> np.ndarray:
+        """World positions (C, 3) of the corners."""
+        cell = self.root_size / (1 << self.lattice_depth)
+        return self.root_min[None, :] + self.corner_coords.astype(np.float64) * cell
+
+    def sample_direction(self, corner: int, view: int) -> np.ndarray:
+        """Unit direction (world) at which the (corner, view) frontier was measured."""
+        if self.frontier_dirs is not None:
+            return self.frontier_dirs[int(self.corner_views[int(corner), int(view)])].copy()
+        if self.view_dirs is None:
+            return VIEW_FORWARD[int(view)].copy()
+        return self.view_dirs[int(corner), int(view)].copy()
+
+    def sample_camera(self, corner: int, view: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(eye, forward, up) of the camera sample behind the (corner, view) frontier."""
+        f = self.sample_direction(corner, view)
+        if self.frontier_eyes is not None:
+            return self.frontier_eyes[int(self.corner_views[int(corner), int(view)])].copy(), f, view_up(f)
+        up = VIEW_UP[int(view)].copy() if self.view_dirs is None else view_up(f)
+        return self.corner_positions()[int(corner)], f, up
+
+    def frontier(self, corner: int, view: int) -> Frontier:
+        return self.frontiers[int(self.corner_views[corner, view])]
+
+    def leaf_depths(self) -> dict[int, int]:
+        """Depth of every leaf (root = 0)."""
+        return self._index.leaf_depths(self.children)
+
+    def leaf_corners(self, leaf: int) -> np.ndarray:
+        """The eight corner ids of a leaf, in child order (bit 0: +x, bit 1: +y, bit 2: +z)."""
+        return self._index.leaf_corners[int(leaf)].copy()
+
+    def settings_of(self, indices: Sequence[int]) -> dict[str, Any]:
+        """Parameter name -> value for value indices (JSON-friendly values)."""
+        return settings_of(self.parameters, indices)
+
+    # -- lookup -----------------------------------------------------------------------------------
+
+    def find_leaf(self, position: Any) -> tuple[int, np.ndarray, bool]:
+        """Leaf containing ``position`` (clamped into the root); returns (leaf, clamped position, clamped)."""
+        leaf, q, clamped = self._index.find_leaf(position)
+        return leaf, np.asarray(q), clamped
+
+    def choose_view(self, rotation: np.ndarray, vfov: float, aspect: float) -> int:
+        """View-cube face that receives the largest (solid-angle weighted) part of the camera frustum."""
+        return self._index.choose_view(rotation, vfov, aspect)
+
+    def locate(self, position: Any, direction: Any = None, matrix: Any = None, fov: float | None = None,
+               aspect: float | None = None, up: Any = None) -> tuple[int, int]:
+        """(corner, view) whose frontier :meth:`lookup` would read for this camera (no budget needed);
+        the optimiser uses it to group path frames by the sample that will serve them."""
+        rot = camera.rotation_floats(direction, matrix, up)
+        vf = self.vfov if fov is None else float(fov)
+        asp = self.aspect if aspect is None else float(aspect)
+        _, corner, view, _ = self._index.locate(position, rot, vf, asp)
+        return corner, view
+
+    def lookup(self, position: Any, direction: Any = None, matrix: Any = None, fov: float | None = None,
+               power_budget: float | None = None, error_budget: float | None = None,
+               aspect: float | None = None, up: Any = None) -> LookupResult:
+        """Settings for a camera at ``position`` looking along ``direction`` (or oriented by ``matrix``,
+        Blender's 4x4 camera world matrix) with vertical field of view ``fov`` in radians, under exactly
+        one of ``power_budget`` (W) or ``error_budget`` (1 - SSIM)."""
+        if (power_budget is None) == (error_budget is None):
+            raise ValueError("give exactly one of power_budget or error_budget")
+        budget = float(power_budget if power_budget is not None else error_budget)  # type: ignore[arg-type]
+        if not math.isfinite(budget):
+            raise ValueError("budget must be finite")
+        index = self._index
+        rot = camera.rotation_floats(direction, matrix, up)
+        vf = camera.check_fov(self.vfov if fov is None else fov)
+        asp = camera.check_aspect(self.aspect if aspect is None else aspect)
+        leaf, corner, view, clamped = index.locate(position, rot, vf, asp)
+        fid = index.views[corner][view]
+        fr = index.frontier_lists(fid, self.frontiers[fid])
+        if power_budget is not None:
+            i, infeasible = fr.under_power(budget)
+        else:
+            i, infeasible = fr.under_error(budget)
+        packed = fr.packed[i]
+        indices, settings = index.decoded(packed)
+        return LookupResult(indices, packed, settings, fr.power[i], fr.error[i], clamped, infeasible,
+                            corner, view, leaf)
+
+    # -- serialisation ----------------------------------------------------------------------------
+
+    def to_dict(self) -> dict[str, Any]:
+        """The versioned JSON document (:mod:`service.store.format`)."""
+        return format.to_dict(self)
+
+    def to_json(self) -> str:
+        return format.to_json(self)
+
+    @staticmethod
+    def from_dict(d: dict[str, Any]) -> ParetoStore:
+        return ParetoStore._build(format.fields_from_dict(d))
+
+    @staticmethod
+    def from_json(text: str | bytes) -> ParetoStore:
+        return ParetoStore._build(format.fields_from_json(text))
+
+    @staticmethod
+    def _build(fields: dict[str, Any]) -> ParetoStore:
+        try:
+            return ParetoStore(**fields)
+        except (KeyError, TypeError) as exc:
+            raise ValueError(f"malformed store: missing or wrong field {exc}") from exc
+
+    def stats(self) -> dict[str, Any]:
+        """Sizes and counts worth reporting (bytes of the JSON, nodes, corners, views, points)."""
+        depths = self.leaf_depths()
+        return {
+            "size_bytes": len(self.to_json().encode()),
+            "nodes": int(self.children.size),
+            "leaves": len(depths),
+            "depth": max(depths.values()) if depths else 0,
+            "corners": int(self.corner_coords.shape[0]),
+            "views": int(self.corner_coords.shape[0] * 6),
+            "unique_frontiers": len(self.frontiers),
+            "frontier_points": int(sum(len(f) for f in self.frontiers)),
+            "error_step": 1.0 / codec.QMAX,
+            "power_step_w": (max((float(f.power_w.max()) for f in self.frontiers), default=1.0)) / codec.QMAX,
+        }

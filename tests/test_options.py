@@ -1,0 +1,183 @@
+"""The optimiser's options, declared once in ``service.options``: every option walked through every
+layer (the ``render-budget optimize`` CLI, the REST job request, the add-on's properties, the batch
+``optimize`` arguments and the run configuration) with the same defaults, bounds and choices."""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+import pytest
+
+from service import options
+from service.api.schemas import JobCreate, JobOptionsIn
+from service.cli import build_parser
+from service.optimize import OptimizeConfig
+
+PUBLIC = options.PUBLIC
+
+
+def _parse_cli(*extra: str) -> argparse.Namespace:
+    return build_parser().parse_args(["optimize", "scene.glb", "--path", "p.json", "--out", "s.json", *extra])
+
+
+def _parse_batch(*extra: str) -> argparse.Namespace:
+    from addon import batch
+
+    return batch.parser().parse_args(["optimize", *extra])
+
+
+def _inside(opt: options.Option) -> list[str]:
+    """Text values at the bounds and the default (what every layer must accept)."""
+    if opt.choices:
+        return list(opt.choices)
+    fmt = (lambda v: str(int(v))) if opt.kind is int else repr
+    return [fmt(opt.minimum), fmt(opt.maximum)] + ([] if opt.default is None else [fmt(opt.default)])
+
+
+def _outside(opt: options.Option) -> list[str]:
+    """Text values every layer must refuse."""
+    if opt.choices:
+        return ["no-such-choice"]
+    if opt.kind is int:
+        return [str(int(opt.minimum) - 1), str(int(opt.maximum) + 1)]
+    return [repr(opt.minimum / 2 if opt.minimum > 0 else opt.minimum - 1), repr(opt.maximum * 2), "nan"]
+
+
+def _value(opt: options.Option, text: str) -> object:
+    return text if opt.kind is str else opt.kind(float(text))
+
+
+def test_schema_defaults_are_valid_and_described() -> None:
+    assert options.check(options.defaults()) == options.defaults()
+    for opt in options.OPTIONS:
+        assert opt.help and opt.label and opt.kind in (bool, int, float, str)
+        if opt.kind in (int, float) and opt.public:
+            assert opt.minimum is not None and opt.maximum is not None, opt.name
+    with pytest.raises(ValueError, match="unknown"):
+        options.check({"no_such_option": 1})
+    with pytest.raises(ValueError, match="min_depth"):
+        options.check({"min_depth": 5, "max_depth": 4})
+    assert options.eval_resolution(None, 36, 16 / 9) == (64, 36)
+    assert options.eval_resolution(50, 40, 16 / 9) == (50, 40)
+    assert options.only_overrides({"seed": 0, "population": 30}) == {"population": 30}
+
+
+@pytest.mark.parametrize("opt", PUBLIC, ids=lambda o: o.name)
+def test_cli_takes_each_option_with_the_schema_default_and_bounds(opt: options.Option) -> None:
+    assert getattr(_parse_cli(), opt.name) == opt.default
+    for text in _inside(opt):
+        assert getattr(_parse_cli(opt.cli_flag, text), opt.name) == _value(opt, text)
+    for text in _outside(opt):
+        with pytest.raises(SystemExit):
+            _parse_cli(opt.cli_flag, text)
+
+
+@pytest.mark.parametrize("opt", PUBLIC, ids=lambda o: o.name)
+def test_batch_optimize_takes_each_option_as_an_override_with_the_same_bounds(opt: options.Option) -> None:
+    assert getattr(_parse_batch(), opt.name) is None  # not given: the .blend's value stays
+    for text in _inside(opt):
+        assert getattr(_parse_batch(opt.cli_flag, text), opt.name) == getattr(
+            _parse_cli(opt.cli_flag, text), opt.name)
+    for text in _outside(opt):
+        with pytest.raises(SystemExit):
+            _parse_batch(opt.cli_flag, text)
+
+
+@pytest.mark.parametrize("opt", PUBLIC, ids=lambda o: o.name)
+def test_rest_job_request_has_the_schema_default_and_bounds(opt: options.Option) -> None:
+    prop = JobOptionsIn.model_json_schema()["properties"][opt.name]
+    assert prop["default"] == opt.default and prop["description"] == opt.help
+    if opt.choices:
+        assert tuple(prop["enum"]) == opt.choices
+    elif opt.kind in (int, float):
+        number = next(p for p in prop.get("anyOf", [prop]) if p.get("type") in ("integer", "number"))
+        assert (number["minimum"], number["maximum"]) == (opt.minimum, opt.maximum)
+    for text in _inside(opt):
+        partner = {"max_depth": 8} if opt.name == "min_depth" else {}  # min_depth <= max_depth
+        got = JobOptionsIn(**{opt.name: _value(opt, text)}, **partner)
+        assert getattr(got, opt.name) == _value(opt, text)
+    for text in _outside(opt):
+        with pytest.raises(ValueError):
+            JobOptionsIn(**{opt.name: text if opt.kind is str else float(text)})
+
+
+def test_public_and_internal_options_reach_the_run_configuration() -> None:
+    config = OptimizeConfig()
+    for opt in options.OPTIONS:
+        assert getattr(config, opt.name) == opt.default
+    assert set(JobOptionsIn.model_fields) == {o.name for o in PUBLIC}
+    with pytest.raises(ValueError, match="max_depth"):
+        OptimizeConfig(max_depth=9)
+    with pytest.raises(TypeError):
+        OptimizeConfig(6)  # keyword only
+
+
+def test_a_job_request_stores_every_option_and_reads_older_spellings() -> None:
+    from service.jobs import LEGACY_SPEC_DEFAULTS, spec_options
+
+    path = {"version": 1, "fps": 30.0, "frames": [{"time": 0.0, "matrix_world": [
+        [1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]], "vfov": 0.7, "resolution": [64, 48]}]}
+    body = JobCreate(scene_id="a" * 64, camera_path=path, options={"population": 30})
+    spec = body.model_dump(mode="json", exclude_none=True)
+    every = {o.name: o.default for o in PUBLIC if o.default is not None}
+    assert spec["options"] == {**every, "population": 30}
+    assert "thresholds" not in spec and "resolution" not in spec
+    assert spec_options(spec)["population"] == 30
+    old = JobCreate(scene_id="a" * 64, camera_path=path, thresholds={"power_w": 0.2}, resolution=(32, 24))
+    got = old.options.model_dump()
+    assert (got["threshold_power_w"], got["eval_width"], got["eval_height"]) == (0.2, 32, 24)
+    with pytest.raises(ValueError, match="disagrees"):
+        JobCreate(scene_id="a" * 64, camera_path=path, thresholds={"error": 0.2},
+                  options={"threshold_error": 0.3})
+    # a request stored by an earlier version (thresholds and resolution apart, fewer options)
+    stored = {"thresholds": {"power_w": 0.1, "error": 0.02}, "resolution": [64, 48],
+              "options": {"max_depth": 2, "population": 8, "generations": 3, "seed": 1,
+                          "exhaustive_limit": 9}}
+    values = spec_options(stored)
+    assert values["view_sampling"] == LEGACY_SPEC_DEFAULTS["view_sampling"] == "aimed"
+    assert (values["eval_width"], values["eval_height"], values["threshold_error"]) == (64, 48, 0.02)
+
+
+# -- the add-on's scene properties (real bpy) -------------------------------------------------------------
+@pytest.fixture(scope="module")
+def scene_props(tmp_path_factory: pytest.TempPathFactory):
+    bpy = pytest.importorskip("bpy")
+    from tests.addon_support import disable_dev, enable_dev, stage_extension
+
+    enable_dev(bpy, stage_extension(tmp_path_factory.mktemp("ext")))
+    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
+    yield bpy.context.scene.render_budget
+    disable_dev()
+
+
+@pytest.mark.blender
+def test_addon_properties_have_the_schema_default_and_bounds(scene_props) -> None:
+    import importlib
+
+    from tests.addon_support import EXT_MODULE
+
+    properties = importlib.import_module(f"{EXT_MODULE}.properties")
+    rna = scene_props.bl_rna.properties
+    values = properties.option_values(scene_props)
+    for opt in PUBLIC:
+        prop = rna[opt.name]
+        assert values[opt.name] == opt.default, opt.name  # 0.05 read back as 0.05, 0 as None
+        assert prop.description.lower().startswith(opt.help.lower())
+        if opt.choices:
+            assert tuple(item.identifier for item in prop.enum_items) == opt.choices
+            continue
+        lo = 0 if opt.optional else opt.minimum  # 0 stands for None
+        assert math.isclose(prop.hard_min, lo, rel_tol=1e-6) and math.isclose(prop.hard_max, opt.maximum,
+                                                                                rel_tol=1e-6), opt.name
+        for text in _outside(opt):
+            with pytest.raises(ValueError):
+                properties.set_option(scene_props, opt.name, _value(opt, text))
+    properties.set_option(scene_props, "eval_width", None)
+    assert scene_props.eval_width == 0 and properties.option_values(scene_props)["eval_width"] is None
+    properties.set_option(scene_props, "threshold_error", 0.003)
+    assert properties.option_values(scene_props)["threshold_error"] == 0.003
+    panels = importlib.import_module(f"{EXT_MODULE}.panels")
+    import inspect
+
+    assert "option_schema.PUBLIC" in inspect.getsource(panels.draw_options)
