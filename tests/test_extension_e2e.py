@@ -10,12 +10,16 @@ plus a line in `STEPS`, and its checks go in the test below.
 
 from __future__ import annotations
 
+import json
 import shutil
+import signal
+import subprocess
 from pathlib import Path
 
 import pytest
 
 from tests import bpy_venv
+from tests.addon_support import wait_gone
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow]
 
@@ -126,8 +130,9 @@ def playback():
     return {"budget": budget, "frames": frames}
 
 
-def disable_mid_job():
-    """A job still running when the extension is disabled (Blender closing a session does the same)."""
+def start_long_job():
+    """Optimize Power as the button starts it (a worker thread follows the job); returns when the job
+    process and its two evaluation workers are at work."""
     sc = bpy.context.scene
     props = sc.render_budget
     props.seed, props.max_depth, props.population, props.generations = 99, 2, 16, 20
@@ -138,10 +143,16 @@ def disable_mid_job():
     ops._active = job
     job.thread.start()
     deadline = time.monotonic() + 120
-    while time.monotonic() < deadline:  # the job process and its two evaluation workers at work
+    while time.monotonic() < deadline:
         if len([1 for _, argv in descendants() if "multiprocessing.spawn" in " ".join(argv)]) >= 2:
             break
         time.sleep(0.02)
+    return job
+
+
+def disable_mid_job():
+    """A job still running when the extension is disabled (Blender closing a session does the same)."""
+    job = start_long_job()
     running = descendants()
     addon_utils.disable(MOD, default_set=True)
     job.thread.join(60)
@@ -158,6 +169,13 @@ def no_children():
 
 STEPS = [install, scene, record, optimize, playback, disable_mid_job, no_children]
 
+if sys.argv[2:] == ["--killed-mid-job"]:  # a job at work, then this process waits to be killed
+    install()
+    scene()
+    start_long_job()
+    sys.stdout.write("RUNNING " + json.dumps([pid for pid, _ in descendants()]) + "\n")
+    sys.stdout.flush()
+    time.sleep(600)
 out = {}
 for step in STEPS:
     t0 = time.monotonic()
@@ -206,3 +224,28 @@ def test_zip_in_a_bpy_only_environment_optimises_plays_back_and_leaves_nothing_r
     step = out["disable_mid_job"]
     assert step["running_before"] >= 3 and not step["enabled"] and not step["thread_alive"]
     assert out["no_children"]["left"] == [], out["no_children"]
+
+
+def test_killing_blender_mid_job_leaves_no_process(extension_zip: Path, tmp_path: Path) -> None:
+    """Blender SIGKILLed while a local job and its workers render: no clean-up code of ours runs, and
+    still nothing is left (the job reads end of file on its lifeline and kills its process group)."""
+    work = tmp_path / "work"
+    work.mkdir()
+    shutil.copy(Path(__file__).with_name("orbit_scene.py"), work / "orbit_scene.py")
+    (work / "script.py").write_text(SCRIPT, encoding="utf-8")
+    blender = subprocess.Popen([str(bpy_venv.python()), "script.py", str(extension_zip), "--killed-mid-job"],
+                               cwd=work, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+                               env=bpy_venv.clean_env(BLENDER_USER_RESOURCES=str(tmp_path / "user")))
+    try:
+        line = ""
+        while not line.startswith("RUNNING "):
+            line = blender.stdout.readline()
+            assert line, "the script ended before its job ran"
+        below = json.loads(line[len("RUNNING "):])
+        assert len(below) >= 3  # the job process and its two evaluation workers (+ resource tracker)
+        blender.send_signal(signal.SIGKILL)
+        blender.wait(timeout=10)
+        assert wait_gone(below) == []
+    finally:
+        if blender.poll() is None:
+            blender.kill()
