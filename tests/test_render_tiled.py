@@ -47,6 +47,25 @@ def test_tiled_frame_equals_the_whole_frame(scene: sim_core.Scene, settings: sim
     assert tiled.multirate_state is None
 
 
+def test_tiled_textured_frame_equals_the_whole_frame() -> None:
+    """Texture fetches (mip level by ray cone, the texture cache model) are the same band by band."""
+    n = 64
+    cells = (np.add.outer(np.arange(n) // 4, np.arange(n) // 4) % 2).astype(np.uint8) * 255
+    tex = sim_core.Texture(np.stack([cells, cells // 2, np.full_like(cells, 40)], axis=2))
+    pos = np.array([[-4, -4, 0], [4, -4, 0], [4, 4, 0], [-4, 4, 0]], dtype=np.float32)
+    tri = np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int64)
+    uv = np.array([[0, 0], [4, 0], [4, 4], [0, 4]], dtype=np.float32)
+    scene = sim_core.Scene.from_arrays(pos, tri, uvs=uv, textures=[tex],
+                                       materials=[sim_core.Material(base_color_texture=0, roughness=0.6)],
+                                       lights=[sim_core.Light(kind="sun", direction=(0.3, 0.2, -1.0))])
+    cam = sim_core.Camera.look_at((0.5, -5.0, 2.0), (0.0, 0.0, 0.0), (0, 0, 1), 0.8, 96, 64)
+    settings = sim_core.RenderSettings(mode="undersample", block=2)
+    whole = sim_core.render(scene, cam, settings)
+    tiled = sim_core.render_tiled(scene, cam, settings, band_pixels=1000)
+    assert whole.counters["texture_fetches"] > 0
+    assert np.array_equal(whole.image, tiled.image) and whole.counters == tiled.counters
+
+
 def test_progress_callback_can_stop_a_render(scene: sim_core.Scene) -> None:
     class Stop(Exception):
         pass
@@ -64,5 +83,5 @@ def test_camera_windows_outside_their_frame_are_rejected(scene: sim_core.Scene, 
     x, y, fw, fh = crop
     with pytest.raises(ValueError, match="window"):
         _core.render_frame(scene.native, cam.frame(), cam.vfov, 120, 20,
-                           sim_core.RenderSettings().to_native(), 1, None, 32768, 64, 4, crop_x=x, crop_y=y,
-                           full_width=fw, full_height=fh)
+                           sim_core.RenderSettings().to_native(), 1, None, 32768, 64, 4, 16384, 64, 4,
+                           crop_x=x, crop_y=y, full_width=fw, full_height=fh)

@@ -138,7 +138,8 @@ def render(scene: Any, matrix_world: Sequence[Sequence[float]], vfov: float, wid
             progress(done / total)
 
     t0 = time.perf_counter()
-    result = sim_core.render_tiled(scene, camera, rs, threads=threads, cache=prof.cache, progress=on_band)
+    result = sim_core.render_tiled(scene, camera, rs, threads=threads, cache=prof.cache,
+                                   texture_cache=prof.texture_cache, progress=on_band)
     seconds = time.perf_counter() - t0
     report = sim_core.price(result, prof, float(fps), scene=scene)
     energy = {"power_w": float(report.power_w), "frame_time_s": float(report.frame_time_s),
