@@ -1,5 +1,6 @@
-"""Optimize power: export the scene (.glb) and the camera path, run a job (a local job process with the
-bundled core by default, or the remote service), keep the store.
+"""Optimize power: send the scene (as the render engine renders it: the depsgraph translator at render level,
+written as a render-budget scene file) and the camera path, run a job (a local job process with the bundled
+core by default, or the remote service), keep the store.
 
 GUI (invoke): the export happens on the main thread, a worker thread follows the job (no bpy), and a timer
 on the main thread drains a queue into the WindowManager progress properties. Background/batch (execute):
@@ -28,7 +29,9 @@ from .core.client import ServiceClient
 from .core.job_runner import JobOutcome, JobRequest, JobUpdate, run_job
 from .core.local_jobs import LocalClient
 from .core.playback_logic import budget_shortfall, predicted_path_summary, summary_text, validate_budget
+from .core.scene_translation import notes_text
 from .properties import option_values
+from .translate import translate_for_render
 
 log = logging.getLogger(__name__)
 STORE_TEXT_PREFIX = "render_budget_store"
@@ -65,18 +68,23 @@ def _default_profile() -> str:
         return "mobile"
 
 
-def export_glb(scene: bpy.types.Scene, directory: str | Path) -> Path:
-    """The scene as glTF binary: modifiers applied, lights and cameras included, Y up (glTF's frame)."""
-    path = Path(directory) / "scene.glb"
+def export_scene(scene: bpy.types.Scene, directory: str | Path) -> Path:
+    """The scene as a final render sees it (modifiers at render level, render visibility, materials, lights,
+    world, camera at the current frame), translated from a render depsgraph and written as a render-budget
+    scene file: exactly what the render engine renders. What the translation approximated is kept in
+    ``scene.render_budget.scene_notes`` (the panel shows it) and travels inside the file to the job."""
+    from sim_core.loaders.scene_file import SUFFIX, write_scene_file
+
     window = bpy.context.window
     with bpy.context.temp_override(scene=scene, **({"window": window} if window else {})):
         if bpy.context.object is not None and bpy.context.object.mode != "OBJECT":
-            bpy.ops.object.mode_set(mode="OBJECT")
-        bpy.ops.export_scene.gltf(filepath=str(path), export_format="GLB", export_apply=True,
-                                  export_lights=True, export_cameras=True, export_yup=True,
-                                  use_active_scene=True)
-    if not path.is_file():
-        raise RuntimeError("glTF export produced no file")
+            bpy.ops.object.mode_set(mode="OBJECT")  # edits in edit mode reach the depsgraph on leaving it
+    translation = translate_for_render(scene)
+    path = Path(directory) / f"scene{SUFFIX}"
+    write_scene_file(path, translation.scene_data, translation.notes)
+    scene.render_budget.scene_notes = notes_text(translation.notes, limit=len(translation.notes))
+    for note in translation.warnings:
+        log.warning("scene translation: %s", note)
     return path
 
 
@@ -92,7 +100,7 @@ def ensure_path(scene: bpy.types.Scene) -> path_format.CameraPath:
 @dataclass
 class Prepared:
     scene_name: str
-    glb: Path
+    scene_file: Path
     path: path_format.CameraPath
     request: JobRequest
     tmpdir: tempfile.TemporaryDirectory = field(repr=False)
@@ -107,11 +115,11 @@ def prepare(scene: bpy.types.Scene) -> Prepared:
     path = ensure_path(scene)
     tmp = tempfile.TemporaryDirectory(prefix="render-budget-export-")
     try:
-        glb = export_glb(scene, tmp.name)
+        scene_file = export_scene(scene, tmp.name)
     except Exception:
         tmp.cleanup()
         raise
-    return Prepared(scene.name, glb, path, request, tmp)
+    return Prepared(scene.name, scene_file, path, request, tmp)
 
 
 @dataclass(frozen=True)
@@ -168,7 +176,7 @@ def run_sync(scene: bpy.types.Scene, client: ServiceClient | LocalClient,
     """The whole optimisation on the calling (main) thread: for background mode, batch and tests."""
     prep = prepare(scene)
     try:
-        outcome = run_job(client, prep.glb, prep.path.to_dict(), prep.request, progress=progress,
+        outcome = run_job(client, prep.scene_file, prep.path.to_dict(), prep.request, progress=progress,
                           timeout_s=timeout_s)
     finally:
         prep.tmpdir.cleanup()
@@ -195,7 +203,7 @@ def _worker(job: _ActiveJob, client: ServiceClient | LocalClient) -> None:
     """Follows the job (HTTP or the local job process); never touches bpy. Posts ('progress'|'done'|'error',
     payload) messages."""
     try:
-        outcome = run_job(client, job.prep.glb, job.prep.path.to_dict(), job.prep.request,
+        outcome = run_job(client, job.prep.scene_file, job.prep.path.to_dict(), job.prep.request,
                           progress=lambda u: job.messages.put(("progress", u)),
                           should_cancel=job.cancel.is_set)
         job.messages.put(("done", outcome))

@@ -23,7 +23,7 @@ from .camera_path import camera_vfov, render_resolution, scene_fps
 from .core import preview as preview_core
 from .core.client import ServiceClient
 from .core.local_jobs import LocalClient
-from .ops_optimize import check_scene, export_glb, fill_parameters
+from .ops_optimize import check_scene, export_scene, fill_parameters
 
 IMAGE_NAME = "Render Budget Preview"
 
@@ -46,7 +46,7 @@ def upload_scene(scene: bpy.types.Scene, client: ServiceClient | LocalClient) ->
 def upload_scene_info(scene: bpy.types.Scene, client: ServiceClient | LocalClient) -> dict[str, Any]:
     """Export and upload; returns the answer (id, statistics, inert parameters)."""
     with tempfile.TemporaryDirectory(prefix="render-budget-upload-") as tmp:
-        info = client.upload_scene(export_glb(scene, tmp))
+        info = client.upload_scene(export_scene(scene, tmp))
     scene.render_budget.scene_id = str(info["id"])
     return info
 
@@ -90,7 +90,7 @@ def prepare(scene: bpy.types.Scene, *, use_active: bool = True, scale: float = 1
     preview_core.check_size(w, h)
     settings = active_settings(scene) if use_active else None
     with tempfile.TemporaryDirectory(prefix="render-budget-preview-") as tmp:
-        sim_scene = preview_core.load_scene(export_glb(scene, tmp))
+        sim_scene = preview_core.load_scene(export_scene(scene, tmp))
     cam = scene.camera
     return PreviewJob(scene.name, scene.frame_current, sim_scene, [list(row) for row in cam.matrix_world],
                       camera_vfov(cam, scene), w, h, settings, scene.render_budget.profile or "mobile",

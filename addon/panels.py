@@ -81,6 +81,12 @@ class VIEW3D_PT_render_budget(bpy.types.Panel):
                 box = layout.box()
                 for i, chunk in enumerate(_wrap(rt.job_status, 48)):
                     box.label(text=chunk, icon="ERROR" if i == 0 else "BLANK1")
+        if props.scene_notes:
+            box = layout.box()
+            box.label(text="The simulated scene differs:", icon="ERROR")
+            for line in props.scene_notes.splitlines():
+                for chunk in _wrap(line, 48):
+                    box.label(text=chunk)
 
         if props.store_text is not None:
             box = layout.box()

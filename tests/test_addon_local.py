@@ -68,6 +68,8 @@ def test_optimize_and_evaluate_run_here_by_default_and_leave_no_process(ext, tmp
     doc = json.loads(props.store_text.as_string())
     assert doc["meta"]["views_optimised"] > 0 and props.job_id and props.store_id
     assert m("service_process").local_job_pids() == [] and job_processes() == []
+    data = Path(m("preferences").get().data_dir)  # the scene as a scene file, the evaluation cache
+    assert (data / "cache" / "eval_cache.sqlite3").is_file() and any((data / "scenes").glob("*.rbscene"))
     sc.frame_set(5)  # the store drives playback
     assert props.playback_status in ("on target", "blending") and props.active_indices
     props.report_frame_step = 4
@@ -150,7 +152,3 @@ def test_analyse_scene_runs_here(ext) -> None:
     inert = {p.name for p in sc.render_budget.parameters if p.inert}
     assert "multirate" in inert or "normal_threshold_deg" in inert  # the simulator said why
 
-
-def test_user_folder_holds_the_local_data(ext) -> None:
-    data = Path(m("preferences").get().data_dir)
-    assert (data / "cache" / "eval_cache.sqlite3").is_file() and any((data / "scenes").glob("*.glb"))

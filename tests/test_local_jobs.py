@@ -46,7 +46,7 @@ def test_upload_answers_what_the_service_answers(glb: Path, tmp_path: Path) -> N
     assert client.health()["mode"] == "local" and "mobile" in client.health()["profiles"]
     bad = tmp_path / "bad.glb"
     bad.write_bytes(b"not a glb")
-    with pytest.raises(ValueError, match="not a binary glTF"):
+    with pytest.raises(ValueError, match="neither a render-budget scene file nor a binary glTF"):
         client.upload_scene(bad)
     with pytest.raises(ServiceError, match="not found"):
         client.submit_job(tiny_job("0" * 64))

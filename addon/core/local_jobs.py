@@ -194,12 +194,15 @@ class LocalClient:
         return {"status": "ok", "mode": "local", "version": getattr(sim_core, "__version__", "?"),
                 "profiles": list(sim_core.list_profiles()), "workers": self.workers, "python": self.python}
 
-    def upload_scene(self, glb_path: str | Path) -> dict[str, Any]:
-        """Analyse a .glb the way POST /scenes does (load with the real loader, statistics, parameters
-        the simulator reports inert) and keep a copy for jobs; answers the same fields."""
-        data = Path(glb_path).read_bytes()
-        if data[:4] != b"glTF":
-            raise ValueError(f"{glb_path} is not a binary glTF (.glb) file")
+    def upload_scene(self, scene_path: str | Path) -> dict[str, Any]:
+        """Analyse a render-budget scene file (what the add-on sends) or a .glb the way POST /scenes does
+        (the real loader, statistics with the translation notes, parameters the simulator reports inert)
+        and keep a copy for jobs; answers the same fields."""
+        from sim_core.loaders.scene_file import is_scene_file
+
+        data = Path(scene_path).read_bytes()
+        if data[:4] != b"glTF" and not is_scene_file(data[:64]):
+            raise ValueError(f"{scene_path} is neither a render-budget scene file nor a binary glTF (.glb)")
         scene_id = hashlib.sha256(data).hexdigest()
         with self._lock:
             known = self._scenes.get(scene_id)
@@ -208,7 +211,7 @@ class LocalClient:
                 return dict(known)
         folder = self.data_dir / "scenes"
         folder.mkdir(parents=True, exist_ok=True)
-        kept = folder / f"{scene_id}.glb"
+        kept = self._scene_file(scene_id, glb=data[:4] == b"glTF")
         if not kept.is_file():
             tmp = kept.with_suffix(".tmp")
             tmp.write_bytes(data)
@@ -221,8 +224,19 @@ class LocalClient:
             while len(self._scenes) > SCENES_KEPT:
                 old, _ = self._scenes.popitem(last=False)
                 self._loaded.pop(old, None)
-                (folder / f"{old}.glb").unlink(missing_ok=True)
+                for stale in folder.glob(f"{old}.*"):
+                    stale.unlink(missing_ok=True)
         return dict(info)
+
+    def _scene_file(self, scene_id: str, glb: bool | None = None) -> Path:
+        """Where a scene is kept: `<id>.glb` or `<id>.rbscene` (None: whichever exists)."""
+        from sim_core.loaders.scene_file import SUFFIX
+
+        folder = self.data_dir / "scenes"
+        if glb is None:
+            found = [p for p in (folder / f"{scene_id}.glb", folder / f"{scene_id}{SUFFIX}") if p.is_file()]
+            return found[0] if found else folder / f"{scene_id}{SUFFIX}"
+        return folder / (f"{scene_id}.glb" if glb else f"{scene_id}{SUFFIX}")
 
     def _remember(self, scene_id: str, scene: Any) -> None:
         """Keep the two most recent loaded scenes (a BVH is the expensive part; memory is the limit)."""
@@ -232,16 +246,16 @@ class LocalClient:
             self._loaded.popitem(last=False)
 
     def _scene(self, scene_id: str) -> Any:
-        import sim_core
+        from service.evaluation import read_scene
 
         with self._lock:
             scene = self._loaded.get(scene_id)
             known = scene_id in self._scenes
         if scene is None:
-            path = self.data_dir / "scenes" / f"{scene_id}.glb"
+            path = self._scene_file(scene_id)
             if not known or not path.is_file():
                 raise ServiceError(404, f"scene {scene_id!r} not found: upload it first")
-            scene = sim_core.Scene.from_gltf(str(path))
+            scene = read_scene(path)
             with self._lock:
                 self._remember(scene_id, scene)
         return scene
@@ -283,7 +297,7 @@ class LocalClient:
 
     def submit_job(self, payload: dict[str, Any]) -> dict[str, Any]:
         scene_id = str(payload.get("scene_id", ""))
-        scene_file = self.data_dir / "scenes" / f"{scene_id}.glb"
+        scene_file = self._scene_file(scene_id)
         if scene_id not in self._scenes or not scene_file.is_file():
             raise ServiceError(404, f"scene {scene_id!r} not found: upload it first")
         job_id = uuid.uuid4().hex
@@ -366,17 +380,29 @@ def _camera_matrix(matrix: Any) -> np.ndarray:
 
 
 def analyse_scene(path: str | Path) -> tuple[Any, dict[str, Any]]:
-    """Load a scene file with the real loader; the scene, its statistics and the parameters it cannot
-    exercise."""
+    """Load a scene file (render-budget scene file or .glb) with the real loader; the scene, its
+    statistics (with a scene file's translation notes) and the parameters it cannot exercise."""
+    from sim_core.loaders.scene_file import is_scene_file, read_scene_file
+
     import sim_core
     from service.params import default_space
 
+    notes: list[Any] = []
+    scene_file = is_scene_file(Path(path))
     try:
-        scene = sim_core.Scene.from_gltf(str(path))
+        if scene_file:
+            content = read_scene_file(path)
+            notes = content.notes
+            scene = sim_core.Scene.from_scene_data(content.data)
+        else:
+            scene = sim_core.Scene.from_gltf(str(path))
     except (ValueError, FileNotFoundError) as exc:
         raise ValueError(f"the simulator cannot load this scene: {exc}") from exc
     stats = {k: (v if isinstance(v, int | float | str | bool | list | dict) else str(v))
              for k, v in dict(scene.stats).items()}
+    stats["format"] = "scene" if scene_file else "glb"
+    if notes:
+        stats["notes"] = notes
     inert = {str(k): str(v) for k, v in sim_core.inert_parameters(scene, default_space().as_render_space())
              .items()}
     return scene, {"content_hash": str(scene.content_hash), "stats": stats, "inert_parameters": inert,

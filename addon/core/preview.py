@@ -39,16 +39,17 @@ class Preview:
 _scenes: OrderedDict[str, Any] = OrderedDict()
 
 
-def load_scene(glb_path: str | Path) -> Any:
-    """The scene of a .glb, loaded once per content (previews of an unchanged scene skip the BVH build)."""
-    import sim_core
+def load_scene(scene_path: str | Path) -> Any:
+    """The scene of a scene file (or .glb), loaded once per content (previews of an unchanged scene skip
+    the BVH build)."""
+    from service.evaluation import read_scene
 
-    data = Path(glb_path).read_bytes()
+    data = Path(scene_path).read_bytes()
     key = hashlib.sha256(data).hexdigest()
     scene = _scenes.get(key)
     if scene is None:
         try:
-            scene = sim_core.Scene.from_gltf(str(glb_path))
+            scene = read_scene(scene_path)
         except (ValueError, FileNotFoundError) as exc:
             raise ValueError(f"the simulator cannot load this scene: {exc}") from exc
         _scenes[key] = scene
