@@ -38,13 +38,9 @@ def active_settings(scene: bpy.types.Scene) -> dict[str, Any] | None:
     return store.settings_of(indices)
 
 
-def upload_scene(scene: bpy.types.Scene, client: ServiceClient | LocalClient) -> str:
-    """Export and upload (the service deduplicates by content hash); remember the id."""
-    return str(upload_scene_info(scene, client)["id"])
-
-
 def upload_scene_info(scene: bpy.types.Scene, client: ServiceClient | LocalClient) -> dict[str, Any]:
-    """Export and upload; returns the answer (id, statistics, inert parameters)."""
+    """Export and upload (deduplicated by content hash); remember the id; returns the answer (id,
+    statistics, inert parameters)."""
     with tempfile.TemporaryDirectory(prefix="render-budget-upload-") as tmp:
         info = client.upload_scene(export_scene(scene, tmp))
     scene.render_budget.scene_id = str(info["id"])

@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import multiprocessing
 import os
 import signal
 import sys
@@ -34,6 +35,12 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
+
+from service.eval_cache import EvalCache
+from service.evaluation import load_scene
+from service.executors import make_executor
+from service.jobs import progress_dict, run_optimisation, validate_job_spec
+from service.optimize import Cancelled
 
 EXIT_DONE, EXIT_FAILED, EXIT_CANCELLED = 0, 1, 3
 PROGRESS_INTERVAL_S = 0.2
@@ -56,8 +63,6 @@ def kill_everything() -> None:
             os.killpg(os.getpid(), signal.SIGKILL)
     except OSError:
         pass
-    import multiprocessing
-
     for child in multiprocessing.active_children():
         child.kill()
     os._exit(EXIT_CANCELLED)
@@ -95,12 +100,6 @@ def parser() -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
-    from service.eval_cache import EvalCache
-    from service.evaluation import load_scene
-    from service.executors import make_executor
-    from service.jobs import progress_dict, run_optimisation, validate_job_spec
-    from service.optimize import Cancelled
-
     cancel = threading.Event()
     watch_lifeline(cancel)
     emit("started", pid=os.getpid())

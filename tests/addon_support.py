@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import os
+import signal
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -132,6 +134,25 @@ def wait_gone(pids: list[int], timeout_s: float = 15.0) -> list[int]:
     while time.monotonic() < deadline and any(alive(p) for p in pids):
         time.sleep(0.1)
     return [p for p in pids if alive(p)]
+
+
+def kill_and_check_nothing_left(parent: subprocess.Popen, below: list[int]) -> None:
+    """SIGKILL the parent of a running local job (no clean-up code of ours runs) and check that the job
+    process and its workers, `below` it, end too."""
+    assert len(below) >= 3  # the job process and its two evaluation workers (+ resource tracker)
+    parent.send_signal(signal.SIGKILL)
+    parent.wait(timeout=10)
+    assert wait_gone(below) == []
+
+
+def cancel_gui_job(bpy: Any, ops: Any, job: Any) -> Any:
+    """What the Cancel button does to a job :func:`start_gui_job` started, then the timer's last step;
+    returns the window manager's runtime state (job status line)."""
+    job.cancel.set()
+    job.thread.join(120)
+    assert not job.thread.is_alive()
+    assert ops._poll_queue() is None
+    return bpy.context.window_manager.render_budget_runtime
 
 
 def store_json(store: ParetoStore) -> str:

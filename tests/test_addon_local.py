@@ -4,6 +4,7 @@ the GUI's worker-thread path), cancel, and a full-HD preview rendered in-process
 
 from __future__ import annotations
 
+import csv
 import importlib
 import json
 import os
@@ -14,7 +15,14 @@ import numpy as np
 import pytest
 
 from tests import orbit_scene
-from tests.addon_support import EXT_MODULE, disable_dev, enable_dev, stage_extension, start_gui_job
+from tests.addon_support import (
+    EXT_MODULE,
+    cancel_gui_job,
+    disable_dev,
+    enable_dev,
+    stage_extension,
+    start_gui_job,
+)
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow]
 bpy = pytest.importorskip("bpy")
@@ -75,9 +83,12 @@ def test_optimize_and_evaluate_run_here_by_default_and_leave_no_process(ext, tmp
     props.report_frame_step = 4
     out = tmp_path / "report"
     assert bpy.ops.render_budget.evaluate_path(directory=str(out)) == {"FINISHED"}
-    rows = (out / "per_frame.csv").read_text().splitlines()
-    assert len(rows) == 1 + 4 * 5  # 4 frames x (ours + 4 presets), measured here
-    assert (out / "report.md").is_file() and len(list((out / "frames").glob("*.png"))) >= 4
+    with (out / "per_frame.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 4 * 6  # 4 frames x (4 presets + ours under each budget), measured here
+    assert {r["mode"] for r in rows} == {"max", "max_mid", "mid_min", "min", "ours_power", "ours_error"}
+    assert (out / "report.md").is_file() and (out / "summary.json").is_file()
+    assert len(list((out / "frames").glob("*.png"))) >= 4 and list((out / "frames").glob("*.exr"))
 
 
 def test_gui_path_follows_the_local_job_to_the_store(ext) -> None:
@@ -104,11 +115,7 @@ def test_cancel_from_the_gui_path_stops_the_job_process(ext) -> None:
     running = job_processes()
     assert running  # the job runs in a child process of this one
     time.sleep(0.5)
-    job.cancel.set()  # what the Cancel button does
-    job.thread.join(120)
-    assert not job.thread.is_alive()
-    assert ops._poll_queue() is None
-    rt = bpy.context.window_manager.render_budget_runtime
+    rt = cancel_gui_job(bpy, ops, job)
     assert "cancelled" in rt.job_status and props.store_text is None
     deadline = time.monotonic() + 30
     while job_processes() and time.monotonic() < deadline:

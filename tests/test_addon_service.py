@@ -5,6 +5,7 @@ thread path and cancel, previews, and headless batch runs writing a report."""
 
 from __future__ import annotations
 
+import csv
 import importlib
 import json
 import math
@@ -21,7 +22,15 @@ import pytest
 from addon.core.client import ServiceClient
 from addon.core.local_service import LocalService, free_port
 from tests import orbit_scene
-from tests.addon_support import EXT_MODULE, REPO_ROOT, disable_dev, enable_dev, stage_extension, start_gui_job
+from tests.addon_support import (
+    EXT_MODULE,
+    REPO_ROOT,
+    cancel_gui_job,
+    disable_dev,
+    enable_dev,
+    stage_extension,
+    start_gui_job,
+)
 
 pytestmark = [pytest.mark.blender, pytest.mark.service, pytest.mark.slow]
 bpy = pytest.importorskip("bpy")
@@ -163,11 +172,7 @@ def test_cancel_from_the_gui_path(ext, service) -> None:
     deadline = time.monotonic() + 60
     while job.messages.qsize() < 2 and time.monotonic() < deadline:  # uploaded, submitted, first poll
         time.sleep(0.02)
-    job.cancel.set()  # what the Cancel button does
-    job.thread.join(120)
-    assert not job.thread.is_alive()
-    assert ops._poll_queue() is None
-    rt = bpy.context.window_manager.render_budget_runtime
+    rt = cancel_gui_job(bpy, ops, job)
     assert "cancelled" in rt.job_status and sc.render_budget.store_text is None
     assert "service state: cancelled" in rt.job_status
     job_id = re.search(r"job (\S+) cancelled", rt.job_status).group(1)
@@ -204,11 +209,22 @@ def test_batch_evaluate_and_playback_write_reports(optimized, service, tmp_path)
                    "--frame-step", "4", "--budget-mode", "error", "--budget", "0.05"], tmp_path)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "evaluate [" in proc.stdout and "Avg. Power (W)" in proc.stdout
-    for name in ("report.md", "per_frame.csv", "power_over_time.png", "error_over_time.png", "store.json"):
+    # the same report folder as `make demo` (one campaign module): both budget modes, summary, PNG + EXR
+    for name in ("report.md", "per_frame.csv", "power_over_time.png", "error_over_time.png", "store.json",
+                 "summary.json"):
         assert (out / name).is_file(), name
-    rows = (out / "per_frame.csv").read_text().splitlines()
-    assert len(rows) == 1 + 4 * 5  # 4 frames x (ours + 4 presets)
-    assert len(list((out / "frames").glob("*.png"))) >= 4
+    with (out / "per_frame.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 4 * 6  # 4 frames x (4 presets + ours under the power and under the error budget)
+    assert {r["mode"] for r in rows} == {"max", "max_mid", "mid_min", "min", "ours_power", "ours_error"}
+    assert sorted({int(r["frame"]) for r in rows}) == [0, 4, 8, 12]  # path indices, as in the demo
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["error_budget"] == pytest.approx(0.05) and summary["frames_evaluated"] == 4
+    assert summary["power_budget_w"] == pytest.approx(2.0)  # the scene's power budget (given)
+    samples = sorted(p.name for p in (out / "frames").iterdir())
+    assert samples[:2] == ["frame00000_max.exr", "frame00000_max.png"]
+    assert {p.rsplit(".", 1)[1] for p in samples} == {"png", "exr"} and len(samples) == 3 * 4 * 2
+    assert "Time per phase" in (out / "report.md").read_text()
     csv_out = tmp_path / "play.csv"
     proc = _batch(["--blend", str(optimized), "playback", "--out", str(csv_out)], tmp_path)
     assert proc.returncode == 0, proc.stderr

@@ -12,14 +12,13 @@ from __future__ import annotations
 
 import json
 import shutil
-import signal
 import subprocess
 from pathlib import Path
 
 import pytest
 
 from tests import bpy_venv
-from tests.addon_support import wait_gone
+from tests.addon_support import kill_and_check_nothing_left
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow]
 
@@ -241,11 +240,7 @@ def test_killing_blender_mid_job_leaves_no_process(extension_zip: Path, tmp_path
         while not line.startswith("RUNNING "):
             line = blender.stdout.readline()
             assert line, "the script ended before its job ran"
-        below = json.loads(line[len("RUNNING "):])
-        assert len(below) >= 3  # the job process and its two evaluation workers (+ resource tracker)
-        blender.send_signal(signal.SIGKILL)
-        blender.wait(timeout=10)
-        assert wait_gone(below) == []
+        kill_and_check_nothing_left(blender, json.loads(line[len("RUNNING "):]))
     finally:
         if blender.poll() is None:
             blender.kill()

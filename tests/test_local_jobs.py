@@ -5,7 +5,6 @@ cancel stops the job and keeps its evaluations; the job and its workers die with
 from __future__ import annotations
 
 import json
-import signal
 import subprocess
 import sys
 import textwrap
@@ -18,7 +17,7 @@ import pytest
 from addon.core.client import ServiceClient, ServiceError
 from addon.core.job_runner import JobCancelled, JobFailed, JobRequest, run_job
 from addon.core.local_jobs import LocalClient, job_command
-from tests.addon_support import descendants, wait_gone
+from tests.addon_support import descendants, kill_and_check_nothing_left
 from tests.api_support import (
     box_scene_glb,
     camera_path,
@@ -71,16 +70,25 @@ def test_local_answers_equal_the_services(glb: Path, tmp_path: Path) -> None:
             ours, theirs = local.evaluate(body), remote.evaluate(body)
             assert ours["error"] == pytest.approx(theirs["error"], abs=1e-12)
             assert ours["power_w"] == pytest.approx(theirs["power_w"], rel=1e-12)
+            # power priced at the path's resolution, scaled once where the frame is evaluated
+            scaled = {**body, "power_resolution": [1280, 720]}
+            big_ours, big_theirs = local.evaluate(scaled), remote.evaluate(scaled)
+            assert big_ours["error"] == pytest.approx(ours["error"], abs=1e-12)
+            assert big_ours["power_w"] > ours["power_w"]
+            for key in ("power_w", "frame_time_s"):
+                assert big_ours[key] == pytest.approx(big_theirs[key], rel=1e-12), key
             for fmt in ("png", "exr"):
                 img_ours = local.render({**body, "format": fmt})
                 img_theirs = remote.render({**body, "format": fmt})
                 assert img_ours.content_type == img_theirs.content_type
-                if fmt == "png":  # same pixels, same encoder
-                    assert img_ours.data == img_theirs.data
+                assert img_ours.data == img_theirs.data  # same pixels, one encoder (sim_core.image)
                 assert img_ours.metadata["energy"]["power_w"] == pytest.approx(
                     img_theirs.metadata["energy"]["power_w"], rel=1e-9)
     with pytest.raises(ValueError, match="not a value of 'sampling'"):
         local.evaluate({**body, "settings": {"sampling": "nonsense"}})
+    for bad in ([0, 720], [1280], "1280x720", [1280.5, 720]):
+        with pytest.raises(ValueError, match="power_resolution"):
+            local.evaluate({**body, "power_resolution": bad})
 
 
 def test_local_job_gives_the_in_process_store(glb: Path, tmp_path: Path) -> None:
@@ -189,11 +197,7 @@ def test_the_job_and_its_workers_die_with_their_parent(tmp_path: Path) -> None:
                               text=True, cwd=Path(__file__).resolve().parent.parent)
     try:
         assert parent.stdout.readline().strip() == "RUNNING"
-        below = descendants(parent.pid)
-        assert len(below) >= 3  # the job process and its two evaluation workers (+ resource tracker)
-        parent.send_signal(signal.SIGKILL)
-        parent.wait(timeout=10)
-        assert wait_gone(below) == []
+        kill_and_check_nothing_left(parent, descendants(parent.pid))
     finally:
         if parent.poll() is None:
             parent.kill()

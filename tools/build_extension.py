@@ -28,6 +28,7 @@ import sys
 import tempfile
 import tomllib
 from pathlib import Path
+from platform import machine as platform_machine
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 ADDON_DIR = REPO_ROOT / "addon"
@@ -62,10 +63,8 @@ def pyproject() -> dict:
 
 def this_platform() -> str:
     """Blender's name for the platform this build runs on (e.g. linux-x64)."""
-    import platform
-
     system = {"darwin": "macos", "win32": "windows"}.get(sys.platform, sys.platform.rstrip("0123456789"))
-    machine = platform.machine().lower()
+    machine = platform_machine().lower()
     return f"{system}-{_MACHINES.get(machine, machine)}"
 
 

@@ -31,11 +31,15 @@ from typing import IO, Any
 
 import numpy as np
 
+import service
+from service.store import camera
+
 from . import preview
 from .client import RenderedImage, ServiceError
 
-# The native core (sim_core, and service modules that import it) loads on first use, not when the add-on
-# registers: playback and the panel work even where it cannot load, and the error then says why.
+# The native core (sim_core, and the service modules that import it) is imported inside the functions that
+# need it, "lazy" below: it loads on first use, not when the add-on registers, so Blender starts without it
+# and playback, the panel and a remote service work even where it cannot load (the error then says why).
 
 TERMINAL = ("done", "failed", "cancelled")
 SCENES_KEPT = 8
@@ -45,8 +49,7 @@ JOB_MODULE = "service.local_job"
 def module_paths() -> list[str]:
     """Folders that hold the bundled packages (the extension's site-packages inside Blender): the job
     process gets them first on its path, since it does not run Blender's start-up code."""
-    import service
-    import sim_core
+    import sim_core  # lazy: the native core (above)
 
     out: list[str] = []
     for mod in (service, sim_core):
@@ -189,7 +192,7 @@ class LocalClient:
 
     # -- what ServiceClient offers ---------------------------------------------------------------------
     def health(self, timeout_s: float | None = None) -> dict[str, Any]:
-        import sim_core
+        import sim_core  # lazy: the native core (above)
 
         return {"status": "ok", "mode": "local", "version": getattr(sim_core, "__version__", "?"),
                 "profiles": list(sim_core.list_profiles()), "workers": self.workers, "python": self.python}
@@ -198,7 +201,7 @@ class LocalClient:
         """Analyse a render-budget scene file (what the add-on sends) or a .glb the way POST /scenes does
         (the real loader, statistics with the translation notes, parameters the simulator reports inert)
         and keep a copy for jobs; answers the same fields."""
-        from sim_core.loaders.scene_file import is_scene_file
+        from sim_core.loaders.scene_file import is_scene_file  # lazy: the native core (above)
 
         data = Path(scene_path).read_bytes()
         if data[:4] != b"glTF" and not is_scene_file(data[:64]):
@@ -230,7 +233,7 @@ class LocalClient:
 
     def _scene_file(self, scene_id: str, glb: bool | None = None) -> Path:
         """Where a scene is kept: `<id>.glb` or `<id>.rbscene` (None: whichever exists)."""
-        from sim_core.loaders.scene_file import SUFFIX
+        from sim_core.loaders.scene_file import SUFFIX  # lazy: the native core (above)
 
         folder = self.data_dir / "scenes"
         if glb is None:
@@ -246,7 +249,7 @@ class LocalClient:
             self._loaded.popitem(last=False)
 
     def _scene(self, scene_id: str) -> Any:
-        from service.evaluation import read_scene
+        from service.evaluation import read_scene  # lazy: loads the native core (above)
 
         with self._lock:
             scene = self._loaded.get(scene_id)
@@ -262,8 +265,10 @@ class LocalClient:
 
     def evaluate(self, payload: dict[str, Any], timeout_s: float | None = None) -> dict[str, Any]:
         """What POST /evaluate answers: error against the maximum-quality render of the same camera
-        and power of `settings` (`{parameter: value}`), here."""
-        from service.evaluation import CameraSpec, evaluate
+        and power of `settings` (`{parameter: value}`), here; with `power_resolution` [w, h], power and
+        frame time for that many pixels (static plus pixel-scaled dynamic power, as a store predicts it),
+        scaled here once as the service does."""
+        from service.evaluation import CameraSpec, evaluate  # lazy: loads the native core (above)
 
         cam = payload["camera"]
         m = _camera_matrix(cam["matrix_world"])
@@ -271,7 +276,8 @@ class LocalClient:
                           width=cam["width"], height=cam["height"])
         space, indices = preview.settings_indices(payload.get("settings"))
         ev = evaluate(self._scene(str(payload["scene_id"])), spec, indices, space,
-                      profile=str(payload.get("profile", "mobile")), fps=float(payload.get("fps", 30.0)))
+                      profile=str(payload.get("profile", "mobile")), fps=float(payload.get("fps", 30.0)),
+                      target_pixels=_pixel_count(payload.get("power_resolution")))
         return {"error": float(ev.error), "power_w": float(ev.power_w),
                 "frame_time_s": float(ev.frame_time_s), "breakdown": dict(ev.breakdown)}
 
@@ -371,6 +377,18 @@ class LocalClient:
         return not self.job_pids()
 
 
+def _pixel_count(power_resolution: Any) -> int | None:
+    """The pixels of POST /evaluate's `power_resolution` ([width, height], each 1..16384), None if absent."""
+    if power_resolution is None:
+        return None
+    try:
+        w, h = power_resolution
+        w, h = camera.check_resolution(w, h)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"power_resolution must be [width, height]: {err}") from None
+    return w * h
+
+
 def _camera_matrix(matrix: Any) -> np.ndarray:
     m = np.array(matrix, dtype=np.float64)
     if m.shape != (4, 4) or not np.all(np.isfinite(m)):
@@ -382,10 +400,10 @@ def _camera_matrix(matrix: Any) -> np.ndarray:
 def analyse_scene(path: str | Path) -> tuple[Any, dict[str, Any]]:
     """Load a scene file (render-budget scene file or .glb) with the real loader; the scene, its
     statistics (with a scene file's translation notes) and the parameters it cannot exercise."""
-    from sim_core.loaders.scene_file import is_scene_file, read_scene_file
+    from sim_core.loaders.scene_file import is_scene_file, read_scene_file  # lazy: the native core (above)
 
-    import sim_core
-    from service.params import default_space
+    import sim_core  # lazy: the native core (above)
+    from service.params import default_space  # lazy: loads the native core (above)
 
     notes: list[Any] = []
     scene_file = is_scene_file(Path(path))

@@ -1,7 +1,8 @@
 """Preview frames in this process with the bundled core: the scene exported from Blender, rendered band by
 band (`sim_core.render_tiled`: progress, cancel, memory of one band for the traversal) at any resolution
 the machine can hold, and priced on a hardware profile. Pure (no bpy): the operator reads the scene and
-camera and writes the image."""
+camera and writes the image. The native core (sim_core, and the service modules that import it) is
+imported inside the functions that use it, "lazy" below: the add-on registers without loading it."""
 
 from __future__ import annotations
 
@@ -42,7 +43,7 @@ _scenes: OrderedDict[str, Any] = OrderedDict()
 def load_scene(scene_path: str | Path) -> Any:
     """The scene of a scene file (or .glb), loaded once per content (previews of an unchanged scene skip
     the BVH build)."""
-    from service.evaluation import read_scene
+    from service.evaluation import read_scene  # lazy: loads the native core (above)
 
     data = Path(scene_path).read_bytes()
     key = hashlib.sha256(data).hexdigest()
@@ -85,33 +86,19 @@ def check_size(width: int, height: int, available: int | None = None) -> None:
 def settings_indices(values: Mapping[str, Any] | None) -> tuple[Any, tuple[int, ...]]:
     """The default parameter space and the indices of `{parameter: value}` (what a store lookup returns);
     parameters left out stay at maximum quality."""
-    from service.params import default_space
+    from service.params import default_space  # lazy: loads the native core (above)
 
     space = default_space()
     return space, space.indices_of(values)
 
 
 def encode(image: np.ndarray, fmt: str) -> bytes:
-    """Linear float RGB as PNG (8-bit sRGB) or EXR (32-bit float) bytes."""
-    import io
+    """Linear float RGB as PNG (8-bit sRGB) or EXR (32-bit float) bytes, as POST /render encodes them."""
+    from sim_core.image import encode_exr, encode_png  # lazy: the native core (above)
 
-    if fmt == "exr":
-        import OpenEXR
-
-        header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-        buf = io.BytesIO()
-        with OpenEXR.File(header, {"RGB": np.ascontiguousarray(image, dtype=np.float32)}) as f:
-            f.write(buf)
-        return buf.getvalue()
-    if fmt != "png":
+    if fmt not in ("png", "exr"):
         raise ValueError(f"format must be png or exr, got {fmt!r}")
-    from PIL import Image
-
-    x = np.clip(np.nan_to_num(np.asarray(image, dtype=np.float64)), 0.0, 1.0)
-    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
-    buf = io.BytesIO()
-    Image.fromarray((srgb * 255.0 + 0.5).astype(np.uint8), "RGB").save(buf, format="PNG")
-    return buf.getvalue()
+    return encode_png(image) if fmt == "png" else encode_exr(image)
 
 
 def render(scene: Any, matrix_world: Sequence[Sequence[float]], vfov: float, width: int, height: int, *,
@@ -120,7 +107,7 @@ def render(scene: Any, matrix_world: Sequence[Sequence[float]], vfov: float, wid
            should_cancel: Callable[[], bool] | None = None) -> Preview:
     """Render and price one frame. `progress(fraction)` after each band; `should_cancel()` is asked after
     each band (raises PreviewCancelled)."""
-    import sim_core
+    import sim_core  # lazy: the native core (above)
 
     check_size(width, height)
     if not (isinstance(fps, int | float) and math.isfinite(fps) and fps > 0):
