@@ -101,8 +101,9 @@ def _filter_axis(src: np.ndarray, axis: int, gaussian: bool, out: np.ndarray, tm
 
 
 def _ssim_rows(x: np.ndarray, y: np.ndarray, row_ranges: list[tuple[int, int]], data_range: float,
-               gaussian: bool) -> float:
-    """Sum of the SSIM map over output rows in ``row_ranges`` of (H, W, C) float64 images.
+               gaussian: bool, out: np.ndarray | None = None) -> float:
+    """Sum of the SSIM map over output rows in ``row_ranges`` of (H, W, C) float64 images; ``out``
+    (output rows x output columns) also receives the map there, averaged over channels.
 
     Four filtered quantities suffice: mean x, mean y, mean (x^2 + y^2) and mean xy, because SSIM only
     uses the sum of the two variances. All buffers are allocated once per call and reused per strip."""
@@ -159,6 +160,8 @@ def _ssim_rows(x: np.ndarray, y: np.ndarray, row_ranges: list[tuple[int, int]], 
         a2 *= a3  # denominator
         a1 /= a2
         total += float(a1.sum(dtype=np.float64))
+        if out is not None:
+            out[r0:r1] = a1.mean(axis=-1)
     return total
 
 
@@ -220,6 +223,30 @@ def ssim_numpy(reference: Any, test: Any, data_range: float = 1.0, gaussian_weig
     else:
         total = _ssim_rows(x, y, ranges, data_range, gaussian_weights)
     return total / (ho * (w - win + 1) * c)
+
+
+def ssim_map(reference: Any, test: Any, data_range: float = 1.0, gaussian_weights: bool = False
+             ) -> np.ndarray:
+    """The local SSIM values whose mean :func:`ssim` is: one per window lying fully inside the image
+    ((H - win + 1) x (W - win + 1), the value of the window centred on each pixel at least half a
+    window from the border), averaged over channels. For a map of where an image differs (the tile
+    estimator's auxiliary images); numpy, float64."""
+    x, y = _check_pair(reference, test)
+    if not (math.isfinite(data_range) and data_range > 0):
+        raise ValueError(f"data_range must be positive and finite, got {data_range}")
+    win = _GAUSS.size if gaussian_weights else UNIFORM_WIN
+    if min(x.shape[0], x.shape[1]) < win:
+        raise ValueError(f"images must be at least {win}x{win} pixels for SSIM, got {x.shape[:2]}")
+    if x.ndim == 2:
+        x, y = x[..., None], y[..., None]
+    x, y = np.ascontiguousarray(x), np.ascontiguousarray(y)
+    h, w, c = x.shape
+    ho = h - win + 1
+    strip = max(4, min(ho, _STRIP_ELEMENTS // (w * c)))
+    out = np.empty((ho, w - win + 1))
+    _ssim_rows(x, y, [(r0, min(r0 + strip, ho)) for r0 in range(0, ho, strip)], data_range, gaussian_weights,
+               out)
+    return out
 
 
 def psnr(reference: Any, test: Any, data_range: float = 1.0) -> float:

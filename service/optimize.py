@@ -18,6 +18,7 @@ import numpy as np
 import sim_core
 from service import options
 from service.camera_path import CameraPath
+from service.display_pricing import DisplayPricer, DisplayPricing
 from service.eval_cache import EvalCache
 from service.evaluation import Evaluator, SceneHandle
 from service.executors import Executor
@@ -74,6 +75,12 @@ def resolve_space(scene: Any, space: ParameterSpace, path: CameraPath, threads: 
     return space.fix_inert({str(k): str(v) for k, v in dict(inert).items()})
 
 
+def display_resolution(path: CameraPath) -> tuple[int, int]:
+    """The resolution the path is shown at: its frames' most common one (the first of the most common)."""
+    sizes = [tuple(f.resolution) for f in path.frames]
+    return max(dict.fromkeys(sizes), key=sizes.count)
+
+
 def path_targets(scene: Any, path: CameraPath) -> tuple[np.ndarray, np.ndarray]:
     """Forward vectors (N, 3) of the path's frames and the points their central rays see (N, 3).
 
@@ -110,6 +117,7 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, config: O
     aspect = float(np.median([f.aspect for f in frames]))
     width, height = options.eval_resolution(config.eval_width, config.eval_height, aspect)
     target_pixels = int(np.median([f.resolution[0] * f.resolution[1] for f in frames]))
+    display = display_resolution(path)
     evaluator = Evaluator(handle, space, cache=cache, executor=executor, profile=config.profile,
                           fps=config.fps, metric=config.metric, threads=config.threads,
                           target_pixels=target_pixels if config.power_at_path_resolution else None)
@@ -122,20 +130,34 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, config: O
         exhaustive_limit=config.exhaustive_limit, vfov=vfov, width=width, height=height,
         view_sampling=config.view_sampling, path_resolution=config.path_resolution,
         guard_frames=config.guard_frames,
+        display=None if config.display_estimator == "preview" else display,
+        display_points=config.display_points,
     )
+    pricing = pricer = None
+    if config.display_estimator != "preview":
+        pricing = DisplayPricing(config.display_estimator, config.display_fraction, seed=config.seed)
+        pricer = DisplayPricer(evaluator, pricing)
     forwards = targets = None
     if config.view_sampling in ("aimed", "path"):
         forwards, targets = path_targets(handle.get(), path)
     frames_in = PathFrames(path.positions(), forwards, targets,
                            np.stack([np.asarray(f.matrix_world, dtype=np.float64) for f in frames]),
                            np.asarray([f.vfov for f in frames]), np.asarray([f.aspect for f in frames]))
-    builder = OctreeBuilder(evaluator, space, frames_in, cfg, progress, should_cancel)
+    builder = OctreeBuilder(evaluator, space, frames_in, cfg, progress, should_cancel, pricer)
     builder.run()
     meta = {
         "thresholds": {"power_w": config.threshold_power_w, "error": config.threshold_error},
         "max_depth": config.max_depth,
         "eval_resolution": [width, height],
         "power_pixels": target_pixels if config.power_at_path_resolution else width * height,
+        # where the store's error and power figures were measured
+        "figures_resolution": list(display) if pricing is not None else [width, height],
+        "display_resolution": list(display),
+        "display_pricing": pricing.key(config.metric) if pricing is not None else "preview",
+        "display_pricing_label": (pricing.label(config.metric) if pricing is not None else
+                                  "preview resolution (power scaled by the pixel ratio)"),
+        "display_cameras": builder.display_cameras,
+        "display_points": builder.display_points,
         "metric": config.metric,
         "view_sampling": config.view_sampling,
         "path_resolution": config.path_resolution,

@@ -26,6 +26,9 @@ from typing import Any
 VIEW_SAMPLING = ("path", "aimed", "axis")
 #: Image-error measures of the evaluator (``service.evaluation``).
 METRICS = ("ssim", "ssim_gaussian", "flip")
+#: How a store's figures are priced at the path's resolution (``service.display_pricing``), or
+#: "preview": the search's own figures at the evaluation resolution, labelled so.
+DISPLAY_ESTIMATORS = ("tiles", "full", "preview")
 
 
 @dataclass(frozen=True)
@@ -145,6 +148,19 @@ OPTIONS: tuple[Option, ...] = (
            minimum=8, maximum=1024, optional=True, metavar="PX", group="Evaluation"),
     Option("eval_height", int, 36, "Evaluation height", "evaluation image height in pixels",
            minimum=8, maximum=1024, metavar="PX", group="Evaluation"),
+    Option("display_estimator", str, "tiles", "Store figures",
+           "how every point the store records is priced at the path's own resolution: a tile estimator "
+           "(a sample of the frame traced at that resolution), whole frames (exact, slow), or preview "
+           "(the search's small images, power scaled by the pixel ratio: a rough preview only)",
+           choices=DISPLAY_ESTIMATORS,
+           choice_labels=("Tile estimator", "Whole frames", "Preview resolution only"),
+           group="Evaluation"),
+    Option("display_fraction", float, 0.1, "Traced share",
+           "tile estimator: share of the frame's blocks traced at the path's resolution",
+           minimum=0.01, maximum=1.0, metavar="F", group="Evaluation", precision=2),
+    Option("display_points", int, 0, "Points priced",
+           "at most this many points of each frontier, spread along it, are priced at the path's "
+           "resolution and kept (0: all)", minimum=0, maximum=64, metavar="N", group="Evaluation"),
     # internal: set by library callers (tests, benchmarks), not offered by the CLI, REST or add-on
     Option("margin", float, 0.1, "Margin", "view cubes: fraction of a node's side added around it when "
            "testing whether the path passes through it", minimum=0.0, public=False),
@@ -154,9 +170,10 @@ OPTIONS: tuple[Option, ...] = (
            public=False),
     Option("skip_inert", bool, True, "Skip inert", "leave out the parameters the simulator reports "
            "cannot change this scene", public=False),
-    Option("power_at_path_resolution", bool, True, "Power at path resolution",
-           "predict power for the path's resolution (dynamic energy scaled by the pixel ratio) rather "
-           "than for the evaluation images", public=False),
+    Option("power_at_path_resolution", bool, True, "Search power at path resolution",
+           "the search compares the evaluation images' power scaled to the path's pixel count (static "
+           "power would hide every difference at a few hundred pixels); a search figure, never a "
+           "store's unless display_estimator is preview", public=False),
 )
 
 BY_NAME: dict[str, Option] = {o.name: o for o in OPTIONS}

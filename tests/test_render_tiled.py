@@ -38,6 +38,8 @@ def test_tiled_frame_equals_the_whole_frame(scene: sim_core.Scene, settings: sim
     assert np.array_equal(whole.image, tiled.image)
     assert whole.counters == tiled.counters
     assert np.array_equal(whole.comparator_histogram, tiled.comparator_histogram)
+    assert np.array_equal(whole.tile_counters, tiled.tile_counters)  # tiles in the same (row-major) order
+    assert np.array_equal(whole.tile_histograms, tiled.tile_histograms)
     for name, aov in whole.aovs.items():
         assert np.array_equal(aov, tiled.aovs[name]), name
     assert sorted((t["x0"], t["y0"], t["width"], t["height"]) for t in whole.tile_stats) == \

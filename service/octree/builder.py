@@ -4,6 +4,7 @@ or the path's own cameras, :mod:`.path_samples`) put together into a runtime sto
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -11,9 +12,10 @@ from typing import Any, Protocol
 import numpy as np
 
 from service import options
-from service.evaluation import Evaluator
+from service.display_pricing import DisplayPricer
+from service.evaluation import CameraSpec, Evaluator
 from service.nsga import NSGAConfig
-from service.params import ParameterSpace
+from service.params import Indices, ParameterSpace
 from service.store import ParetoStore
 
 from .lattice import Lattice, root_cube
@@ -44,6 +46,9 @@ class OctreeConfig:
     guard_frames: int = 2  # "path" sampling: extra path cameras of each sample its frontier is priced at
     path_stride: int = 4  # "path" sampling: a full search at every path_stride-th sample along the path
     warm_generations: int = 5  # "path" sampling: generations of the warm-started searches in between
+    # the path's resolution, where every recorded point is priced again (None: the search's figures)
+    display: tuple[int, int] | None = None
+    display_points: int = 0  # at most this many points of each frontier priced there (0: all)
 
     def __post_init__(self) -> None:
         options.check({name: getattr(self, name) for name in (
@@ -75,6 +80,20 @@ class CameraSampling(Protocol):
         """The store fields saying where the frontiers ``used`` (lattice frontier ids, in store
         order) were measured (``view_dirs`` or ``frontier_dirs`` / ``frontier_eyes``), if any."""
 
+    def pricing_cameras(self) -> dict[int, list[CameraSpec]]:
+        """Every measured frontier (lattice frontier id) with the cameras its points are priced at
+        (its sample first; a frontier keeps each point's worst figures over them)."""
+
+
+def spread_points(points: list[tuple[Indices, float, float]], k: int) -> list[tuple[Indices, float, float]]:
+    """At most ``k`` (0: all) of a frontier's points, spread along it by error: both ends (the least
+    error, where the maximum-quality setting sits, and the cheapest) and evenly between them."""
+    if k <= 0 or len(points) <= k:
+        return list(points)
+    order = sorted(range(len(points)), key=lambda i: (points[i][1], -points[i][2]))
+    picks = sorted({order[round(j * (len(order) - 1) / (k - 1))] for j in range(k)}) if k > 1 else [order[0]]
+    return [points[i] for i in picks]
+
 
 STRATEGIES: dict[str, type] = {"axis": ViewCubeSampling, "aimed": ViewCubeSampling, "path": PathSampling}
 
@@ -84,7 +103,8 @@ class OctreeBuilder:
 
     def __init__(self, evaluator: Evaluator, space: ParameterSpace, path: PathFrames, config: OctreeConfig,
                  progress: Callable[[Progress], None] | None = None,
-                 should_cancel: Callable[[], bool] | None = None) -> None:
+                 should_cancel: Callable[[], bool] | None = None,
+                 pricer: DisplayPricer | None = None) -> None:
         n = len(path.positions)
         path = PathFrames(
             np.asarray(path.positions, dtype=np.float64).reshape(-1, 3),
@@ -102,6 +122,11 @@ class OctreeBuilder:
         self.search = Search(evaluator, space, config.nsga, config.exhaustive_limit, progress, should_cancel)
         strategy = STRATEGIES[config.view_sampling]
         self.sampling: CameraSampling = strategy(self.lattice, self.search, config, path)
+        if (config.display is None) != (pricer is None):
+            raise ValueError("display pricing needs both the display resolution and a pricer")
+        self.pricer = pricer
+        self.display_cameras = 0  # cameras priced at display resolution
+        self.display_points = 0  # frontier points priced there
 
     @property
     def state(self) -> Progress:
@@ -109,6 +134,49 @@ class OctreeBuilder:
 
     def run(self) -> None:
         self.sampling.build()
+        if self.pricer is not None:
+            self._price_at_display()
+        self.search.report("done")
+
+    def _price_at_display(self) -> None:
+        """Every measured frontier's points priced again at the path's resolution at the frontier's
+        cameras (its sample, and for path samples its guards), keeping each point's worst figures
+        there: the store's figures are the display resolution's, the search's only chose the points."""
+        assert self.pricer is not None and self.cfg.display is not None
+        width, height = self.cfg.display
+        search, lat = self.search, self.lattice
+        jobs: list[tuple[int, list[CameraSpec], list[Indices]]] = []
+        for fid, cams in sorted(self.sampling.pricing_cameras().items()):
+            keep = spread_points(lat.frontiers[fid].points, self.cfg.display_points)
+            lat.frontiers[fid].points = keep
+            jobs.append((fid, [dataclasses.replace(c, width=width, height=height) for c in cams],
+                         [x for x, _, _ in keep]))
+        requests = [(cam, xs) for _, cams, xs in jobs for cam in cams]
+        # a camera priced at display resolution costs about this many search steps (ETA only)
+        weight = max(1, round(0.3 * width * height / (self.cfg.width * self.cfg.height)
+                              * max(len(xs) for _, xs in requests) / max(1, self.cfg.nsga.population))
+                     ) if requests else 1
+        search.steps_planned += weight * len(requests)
+        search.check_cancel()
+        search.report("price at display resolution")
+        chunk = max(2, 2 * int(getattr(self.pricer.ev.executor, "workers", 1) or 1))
+        results: list[list[Any]] = []
+        for start in range(0, len(requests), chunk):
+            search.check_cancel()
+            results += self.pricer.price(requests[start:start + chunk])
+            search.steps_done += weight * len(requests[start:start + chunk])
+            search.report("price at display resolution")
+        res = iter(results)
+        for fid, cams, xs in jobs:
+            err = np.zeros(len(xs))
+            pw = np.zeros(len(xs))
+            for _ in cams:
+                evs = next(res)
+                err = np.maximum(err, [e.error for e in evs])
+                pw = np.maximum(pw, [e.power_w for e in evs])
+            lat.frontiers[fid].points = [(x, float(e), float(p)) for x, e, p in zip(xs, err, pw, strict=True)]
+            self.display_points += len(xs)
+        self.display_cameras = len(requests)
 
     def to_store(self, *, profile: str, fps: float, aspect: float, meta: dict) -> ParetoStore:
         """The runtime store: nodes in creation order (children consecutive), shared frontiers."""

@@ -43,6 +43,12 @@ class PathSampling:
             raise ValueError("path view sampling needs one world matrix, fov and aspect per path frame")
         self.sample_cams: dict[tuple[int, int], CameraSpec] = {}  # the camera behind each sample
         self.sample_scale: dict[tuple[int, int], float] = {}  # median viewing distance of its frames
+        self.guards: dict[tuple[int, int], list[CameraSpec]] = {}  # each sample's guard cameras
+
+    def pricing_cameras(self) -> dict[int, list[CameraSpec]]:
+        """Each sample's frontier with its sample camera and guard cameras."""
+        return {self.lattice.corner_views[c][v]: [cam, *self.guards.get((c, v), [])]
+                for (c, v), cam in self.sample_cams.items()}
 
     def store_cameras(self, used: list[int]) -> dict[str, Any]:
         """Every stored frontier's sample camera (format version 3)."""
@@ -67,11 +73,13 @@ class PathSampling:
             self.sample_cams[(c, v)] = cams[0]
             self.sample_scale[(c, v)] = float(np.median(dist[frames]))
             guards[(c, v)] = cams[1:]
+        self.guards = guards
         self._search_along(order, guards)
-        self._guard(guards)
-        self.search.steps_done += sum(len(g) for g in guards.values())
+        if self.cfg.display is None:  # else the guards are priced at display resolution, not here
+            self._guard(guards)
+        if self.cfg.display is None:
+            self.search.steps_done += sum(len(g) for g in guards.values())
         self._inherit_unsampled()
-        self.search.report("done")
 
     def _refine(self, dist: np.ndarray) -> None:
         """Split the nodes the path's frames are in until their side is at most ``path_resolution``
@@ -110,7 +118,8 @@ class PathSampling:
         warm_generations = min(self.cfg.warm_generations, self.cfg.nsga.generations)
         search.steps_planned += search.steps(len(order) - len(anchors), warm_generations)
         # pricing a frontier at a guard camera renders about a population's worth: one step each
-        search.steps_planned += sum(len(g) for g in guards.values())
+        if self.cfg.display is None:
+            search.steps_planned += sum(len(g) for g in guards.values())
         self._optimise([(*order[i], []) for i in anchors], "optimise path samples")
         anchor_set = set(anchors)
         jobs = []

@@ -121,6 +121,10 @@ class ViewCubeSampling:
         corners = range(len(self.lattice.corner_coords))
         return {"view_dirs": np.asarray([self.corner_dirs(c) for c in corners])}
 
+    def pricing_cameras(self) -> dict[int, list[CameraSpec]]:
+        """Each measured frontier with the corner view camera it was measured at."""
+        return {fid: [self.camera(rec.corner, rec.view)] for fid, rec in enumerate(self.lattice.frontiers)}
+
     def _optimise(self, jobs: Sequence[tuple[int, int, list[Indices]]], phase: str) -> None:
         found = self.search.run([self.camera(c, v) for c, v, _ in jobs], [w for _, _, w in jobs], phase)
         for (c, v, _), points in zip(jobs, found, strict=True):
@@ -154,7 +158,6 @@ class ViewCubeSampling:
                 self._differs(self._dist[(cs[a], cs[b], v)])
                 for cs in [lat.node_corners(n)] for a, b in CUBE_EDGES for v in range(N_VIEWS))]
             level = self._subdivide(split, depth + 1)
-        search.report("done")
 
     def _distances(self, pairs: Sequence[tuple[int, int, int]]) -> list[tuple[float, float]]:
         """D_e, D_p (Eq. 4-5) of (corner a, corner b, view) pairs, projections batched."""

@@ -7,7 +7,16 @@ from .camera import Camera
 from .energy import EnergyReport, Profile, list_profiles, load_profile, price
 from .geometry import smooth_normals
 from .image import load_exr
-from .render import COUNTER_NAMES, RenderResult, StereoResult, render, render_stereo, render_tiled
+from .render import (
+    COUNTER_NAMES,
+    RenderResult,
+    StereoResult,
+    render,
+    render_size,
+    render_stereo,
+    render_tiled,
+    render_window,
+)
 from .scene import Scene
 from .scene_data import CameraData, Light, Material, SceneData, Texture
 from .settings import RenderSettings
@@ -37,7 +46,9 @@ __all__ = [
     "load_profile",
     "price",
     "render",
+    "render_size",
     "render_stereo",
     "render_tiled",
+    "render_window",
     "smooth_normals",
 ]

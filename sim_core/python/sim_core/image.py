@@ -18,17 +18,25 @@ from PIL import Image
 from .scene_data import finite_clamped
 
 
-def upsample_bilinear(image: np.ndarray, height: int, width: int) -> np.ndarray:
+def upsample_bilinear(image: np.ndarray, height: int, width: int,
+                      window: tuple[int, int, int, int] | None = None) -> np.ndarray:
     """Bilinear resize of an (h, w[, c]) image to (height, width) with pixel centres aligned (what a
-    display upscaler does). float32 in gives float32 out (the tracer's images); anything else float64."""
+    display upscaler does). float32 in gives float32 out (the tracer's images); anything else float64.
+
+    ``window=(x0, y0, x1, y1)``: only those output columns [x0, x1) and rows [y0, y1), bit for bit the
+    same values as that part of the whole resize; ``image`` may then be known only where the window's
+    pixels read it (``source_span`` says where)."""
     img = np.asarray(image)
     dtype = np.float32 if img.dtype == np.float32 else np.float64
     img = img.astype(dtype, copy=False)
     h, w = img.shape[:2]
+    x0w, y0w, x1w, y1w = (0, 0, width, height) if window is None else (int(v) for v in window)
+    if not (0 <= x0w < x1w <= width and 0 <= y0w < y1w <= height):
+        raise ValueError(f"window {window!r} is not inside the {width}x{height} output")
     if (h, w) == (height, width):
-        return img
-    ys = np.clip((np.arange(height) + 0.5) * h / height - 0.5, 0, h - 1)
-    xs = np.clip((np.arange(width) + 0.5) * w / width - 0.5, 0, w - 1)
+        return img if window is None else img[y0w:y1w, x0w:x1w]
+    ys = _sources(height, h)[y0w:y1w]
+    xs = _sources(width, w)[x0w:x1w]
     y0, x0 = np.floor(ys).astype(np.int64), np.floor(xs).astype(np.int64)
     y1, x1 = np.minimum(y0 + 1, h - 1), np.minimum(x0 + 1, w - 1)
     extra = (None,) * (img.ndim - 2)
@@ -37,6 +45,20 @@ def upsample_bilinear(image: np.ndarray, height: int, width: int) -> np.ndarray:
     top = img[y0][:, x0] * (1 - fx) + img[y0][:, x1] * fx
     bot = img[y1][:, x0] * (1 - fx) + img[y1][:, x1] * fx
     return (top * (1 - fy) + bot * fy).astype(dtype, copy=False)
+
+
+def _sources(out_size: int, in_size: int) -> np.ndarray:
+    """Source coordinate of every output pixel centre (clamped to the image)."""
+    return np.clip((np.arange(out_size) + 0.5) * in_size / out_size - 0.5, 0, in_size - 1)
+
+
+def source_span(out_size: int, in_size: int, start: int, stop: int) -> tuple[int, int]:
+    """The source pixels [first, last + 1) that output pixels [start, stop) of a bilinear resize from
+    ``in_size`` to ``out_size`` read (along one axis)."""
+    if in_size == out_size:
+        return start, stop
+    src = _sources(out_size, in_size)[start:stop]
+    return int(np.floor(src[0])), int(min(np.floor(src[-1]) + 1, in_size - 1)) + 1
 
 
 def linear_to_srgb(image: np.ndarray) -> np.ndarray:

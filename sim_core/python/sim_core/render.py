@@ -178,11 +178,7 @@ def _check(scene: Scene, camera: Camera, settings: RenderSettings | None) -> Ren
         raise ValueError(f"scene must be a sim_core.Scene, got {type(scene).__name__}")
     if not isinstance(camera, Camera):
         raise ValueError(f"camera must be a sim_core.Camera, got {type(camera).__name__}")
-    if settings is None:
-        settings = RenderSettings()
-    if not isinstance(settings, RenderSettings):
-        raise ValueError(f"settings must be a sim_core.RenderSettings, got {type(settings).__name__}")
-    return settings
+    return _check_settings(RenderSettings() if settings is None else settings)
 
 
 def _result(
@@ -272,42 +268,90 @@ def render_tiled(
     w, h = _render_size(camera, settings)
     ts = settings.tile_size
     band = ts * max(1, -(-int(band_pixels) // (w * ts)))
-    frame = camera.frame()
-    native = settings.to_native()
-    n_threads = _threads(threads)
-    cache_args = (*_cache_args(cache), *_cache_args(texture_cache, DEFAULT_TEXTURE_CACHE))
-    image = np.empty((h, w, 3), dtype=np.float32)
-    aovs: dict[str, np.ndarray] = {}
-    counters = dict.fromkeys(COUNTER_NAMES, 0)
-    histogram: np.ndarray | None = None
-    tile_stats: list[dict[str, Any]] = []
+    parts: list[RenderResult] = []
     for y0 in range(0, h, band):
-        rows = min(band, h - y0)
-        d = _core.render_frame(scene.native, frame, camera.vfov, w, rows, native, n_threads, None,
-                               *cache_args, crop_x=0, crop_y=y0, full_width=w, full_height=h)
-        image[y0:y0 + rows] = d["image"]
-        for key in ("depth", "normal", "object_id", "sample_kind", "position"):
-            part = d[key]
-            if key not in aovs:
-                aovs[key] = np.empty((h, *part.shape[1:]), dtype=part.dtype)
-            aovs[key][y0:y0 + rows] = part
-        for k, v in d["counters"].items():
-            counters[k] = counters.get(k, 0) + int(v)
-        hist = np.asarray(d["comparator_histogram"], dtype=np.int64)
-        histogram = hist if histogram is None else histogram + hist
-        tile_stats.extend({**t, "y0": int(t["y0"]) + y0} for t in d["tile_stats"])
+        parts.append(render_window(scene, camera, settings, (0, y0, w, min(band, h - y0)), threads, cache,
+                                   texture_cache))
         if progress is not None:
-            progress(y0 + rows, h)
+            progress(y0 + parts[-1].image.shape[0], h)
+    image = np.concatenate([p.image for p in parts], axis=0)
     return RenderResult(
         image=upsample_bilinear(image, camera.height, camera.width),
-        aovs=aovs,
-        counters=counters,
-        tile_stats=tile_stats,
-        comparator_histogram=histogram if histogram is not None else np.zeros(25, dtype=np.int64),
+        aovs={k: np.concatenate([p.aovs[k] for p in parts], axis=0) for k in parts[0].aovs},
+        counters={k: sum(p.counters.get(k, 0) for p in parts) for k in parts[0].counters},
+        tile_stats=[t for p in parts for t in p.tile_stats],
+        comparator_histogram=np.sum([p.comparator_histogram for p in parts], axis=0),
         multirate_state=None,
         settings=settings,
         camera=camera,
         render_resolution=(w, h),
+        tile_counters=np.concatenate([p.tile_counters for p in parts], axis=0),
+        tile_histograms=np.concatenate([p.tile_histograms for p in parts], axis=0),
+    )
+
+
+def render_size(camera: Camera, settings: RenderSettings) -> tuple[int, int]:
+    """(width, height) actually traced for ``camera`` under ``settings`` (its resolution scale applied)."""
+    return _render_size(camera, _check_settings(settings))
+
+
+def _check_settings(settings: Any) -> RenderSettings:
+    if not isinstance(settings, RenderSettings):
+        raise ValueError(f"settings must be a sim_core.RenderSettings, got {type(settings).__name__}")
+    return settings
+
+
+def render_window(
+    scene: Scene,
+    camera: Camera,
+    settings: RenderSettings,
+    window: tuple[int, int, int, int],
+    threads: int | None = None,
+    cache: Any = None,
+    texture_cache: Any = None,
+) -> RenderResult:
+    """The ``(x, y, width, height)`` window of the frame ``render(scene, camera, settings)`` traces, in
+    pixels of the traced (resolution-scaled) frame, traced alone: rays, sampling seeds and ray cones are
+    the whole frame's. A window on the tile grid (``x``, ``y`` multiples of the tile size, and each side a
+    multiple of it or reaching the frame's edge) traces exactly the frame's tiles there: the same pixels
+    and the same per-tile counters (``tile_counters``, caches cold per tile). Off the grid only the
+    per-pixel modes (1 spp, FSAA) have the frame's pixels there (ValueError for the adaptive ones).
+
+    The result's ``image`` (and AOVs) are the window's pixels at the traced resolution (not upscaled);
+    ``render_resolution`` is the whole traced frame's size; ``tile_stats`` carry frame coordinates;
+    ``counters`` are the window's tiles' sums. No multi-rate history (``multirate_state`` None).
+    """
+    settings = _check(scene, camera, settings)
+    w, h = _render_size(camera, settings)
+    try:
+        x, y, ww, wh = (int(v) for v in window)
+    except (TypeError, ValueError):
+        raise ValueError(f"window must be (x, y, width, height), got {window!r}") from None
+    if ww < 1 or wh < 1 or x < 0 or y < 0 or x + ww > w or y + wh > h:
+        raise ValueError(f"window {window!r} is not inside the traced {w}x{h} frame")
+    ts = settings.tile_size
+    on_grid = (x % ts == 0 and y % ts == 0 and (ww % ts == 0 or x + ww == w)
+               and (wh % ts == 0 or y + wh == h))
+    if not on_grid and settings.mode not in ("1spp", "fsaa"):
+        raise ValueError(f"a window of a {settings.mode!r} frame must lie on its {ts}-pixel tile grid, got "
+                         f"{window!r}")
+    d = _core.render_frame(scene.native, camera.frame(), camera.vfov, ww, wh, settings.to_native(),
+                           _threads(threads), None, *_cache_args(cache),
+                           *_cache_args(texture_cache, DEFAULT_TEXTURE_CACHE),
+                           crop_x=x, crop_y=y, full_width=w, full_height=h)
+    return RenderResult(
+        image=d["image"],
+        aovs={k: d[k] for k in ("depth", "normal", "object_id", "sample_kind", "position")},
+        counters={k: int(v) for k, v in d["counters"].items()},
+        tile_stats=[{**t, "x0": int(t["x0"]) + x, "y0": int(t["y0"]) + y} for t in d["tile_stats"]],
+        comparator_histogram=np.asarray(d["comparator_histogram"], dtype=np.int64),
+        multirate_state=None,
+        settings=settings,
+        camera=camera,
+        render_resolution=(w, h),
+        extra={"window": (x, y, ww, wh)},
+        tile_counters=np.asarray(d["tile_counters"], dtype=np.uint64),
+        tile_histograms=np.asarray(d["tile_histograms"], dtype=np.uint64),
     )
 
 

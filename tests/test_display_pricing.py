@@ -1,0 +1,252 @@
+"""Store figures at the path's display resolution (service.display_pricing): the sampling design's
+invariants, the tile estimator against whole frames rendered independently (exact when every block is
+traced, within its stated bound when a share is), and the optimiser's store priced there."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from sim_core.image import linear_to_srgb, source_span, upsample_bilinear
+from tracer_scenes import teapot_scene
+
+import sim_core
+from service.camera_path import CameraPath
+from service.display_pricing import (
+    DisplayPricing,
+    _rects,
+    inclusion_probabilities,
+    price_camera,
+    serpentine,
+    systematic_sample,
+)
+from service.eval_cache import EvalCache
+from service.evaluation import CameraSpec
+from service.executors import InProcessExecutor
+from service.metrics import ssim, ssim_map
+from service.optimize import OptimizeConfig, display_resolution, optimize_path
+from service.params import default_space
+from service.store import unpack_indices, view_up
+
+SPACE = default_space()
+SUBSPACE = SPACE.subset(["sampling", "max_depth", "resolution_scale"])
+
+
+# -- the sampling design ----------------------------------------------------------------------------------
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.floats(0.01, 100.0), min_size=1, max_size=40), st.floats(0.1, 1.0))
+def test_inclusion_probabilities_sum_to_the_sample_size_and_stay_proportional(size, share) -> None:
+    m = np.asarray(size)
+    n = share * len(m)
+    pi = inclusion_probabilities(m, n)
+    assert np.all((pi > 0) & (pi <= 1.0 + 1e-12))
+    assert pi.sum() == pytest.approx(min(n, len(m)), rel=1e-9)
+    loose = pi < 1.0 - 1e-9
+    if loose.sum() >= 2:  # below the cap, proportional to the size measure
+        ratio = pi[loose] / m[loose]
+        assert np.allclose(ratio, ratio[0], rtol=1e-9)
+    if loose.any() and (~loose).any():  # a block taken with certainty is at least as big as any other
+        assert m[~loose].min() >= m[loose].max() * (1 - 1e-9)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(1, 9), st.integers(1, 7), st.integers(0, 10_000), st.floats(0.05, 1.0))
+def test_systematic_sample_draws_each_block_with_its_probability(nbx, nby, seed, share) -> None:
+    rng = np.random.default_rng(seed)
+    pi = inclusion_probabilities(rng.uniform(0.1, 3.0, nbx * nby), share * nbx * nby)
+    order = serpentine(nbx, nby)
+    assert sorted(order.tolist()) == list(range(nbx * nby))
+    starts = (np.arange(2000) + 0.5) / 2000  # the start is uniform in [0, 1): average over a fine grid
+    hits = np.zeros(nbx * nby)
+    for s in starts:
+        picked = systematic_sample(pi, order, s)
+        assert len(np.unique(picked)) == len(picked)
+        hits[picked] += 1
+    assert np.allclose(hits / len(starts), pi, atol=2.5e-3)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 12), st.integers(1, 12), st.integers(0, 10_000))
+def test_rectangles_cover_a_mask_exactly(h, w, seed) -> None:
+    mask = np.random.default_rng(seed).random((h, w)) < 0.5
+    cover = np.zeros((h, w), dtype=np.int64)
+    for x0, y0, x1, y1 in _rects(mask):
+        cover[y0:y1, x0:x1] += 1
+    assert np.array_equal(cover, mask.astype(np.int64))
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(2, 20), st.integers(2, 20), st.integers(2, 60), st.integers(2, 60), st.integers(0, 999))
+def test_a_window_of_the_upscale_is_that_part_of_the_whole(h, w, out_h, out_w, seed) -> None:
+    rng = np.random.default_rng(seed)
+    img = rng.random((h, w, 3)).astype(np.float32)
+    x0, x1 = sorted(rng.choice(out_w + 1, 2, replace=False).tolist())
+    y0, y1 = sorted(rng.choice(out_h + 1, 2, replace=False).tolist())
+    whole = upsample_bilinear(img, out_h, out_w)
+    np.testing.assert_array_equal(upsample_bilinear(img, out_h, out_w, window=(x0, y0, x1, y1)),
+                                  whole[y0:y1, x0:x1])
+    # the source pixels the window reads are enough: anything else may hold any finite value (the
+    # estimator's canvas is zero where it traced nothing)
+    sx0, sx1 = source_span(out_w, w, x0, x1)
+    sy0, sy1 = source_span(out_h, h, y0, y1)
+    partial = np.full_like(img, 1e6)
+    partial[sy0:sy1, sx0:sx1] = img[sy0:sy1, sx0:sx1]
+    np.testing.assert_array_equal(upsample_bilinear(partial, out_h, out_w, window=(x0, y0, x1, y1)),
+                                  whole[y0:y1, x0:x1])
+
+
+def test_ssim_map_is_what_ssim_averages() -> None:
+    rng = np.random.default_rng(4)
+    a = rng.random((23, 31, 3))
+    b = np.clip(a + 0.1 * rng.standard_normal(a.shape), 0, 1)
+    m = ssim_map(a, b)
+    assert m.shape == (23 - 6, 31 - 6)
+    assert float(m.mean()) == pytest.approx(ssim(a, b), abs=1e-12)
+    with pytest.raises(ValueError):
+        ssim_map(a[:5], b[:5])
+
+
+def test_pricing_options_are_validated() -> None:
+    for bad in ({"estimator": "guess"}, {"fraction": 0.0}, {"fraction": 1.5}, {"block": 24},
+                {"aux_divisor": 3}):
+        with pytest.raises(ValueError):
+            DisplayPricing(**bad)
+    with pytest.raises(ValueError):
+        OptimizeConfig(display_estimator="guess")
+    assert DisplayPricing().block_for(1280, 720) == 64 and DisplayPricing().block_for(640, 360) == 32
+
+
+# -- against whole frames -----------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def scene() -> sim_core.Scene:
+    return teapot_scene()
+
+
+def _camera(width: int, height: int, eye=(0.0, -6.0, 2.5)) -> CameraSpec:
+    fwd = tuple(-np.asarray(eye) + np.array([0.0, 0.0, 0.6]))
+    return CameraSpec(tuple(eye), fwd, tuple(view_up(np.asarray(fwd))), 0.7, width, height)
+
+
+def _settings(n: int, seed: int) -> list[tuple[int, ...]]:
+    counts = [len(p.values) for p in SPACE.parameters]
+    rng = np.random.default_rng(seed)
+    return [SPACE.max_quality_indices()] + [tuple(int(v) for v in rng.integers(0, counts)) for _ in range(n)]
+
+
+_REFERENCES: dict[tuple, np.ndarray] = {}
+
+
+def _independent(scene: sim_core.Scene, cam: CameraSpec, idx, space=SPACE) -> tuple[float, float, float]:
+    """Error, power and frame time of a setting at ``cam``'s size from two whole renders, priced by the
+    energy model directly (not through the estimator's code)."""
+    mq = space.max_quality_indices()
+    key = (id(scene), cam.key(), cam.width, cam.height, repr(space.to_settings(mq)))
+    if key not in _REFERENCES:
+        _REFERENCES[key] = sim_core.render(scene, cam.to_camera(), space.to_settings(mq)).image
+    ref = _REFERENCES[key]
+    r = sim_core.render(scene, cam.to_camera(), space.to_settings(idx))
+    err = 1.0 - ssim(linear_to_srgb(ref), linear_to_srgb(r.image), data_range=1.0)
+    rep = sim_core.price(r, sim_core.load_profile("mobile"), 30.0)
+    return min(max(err, 0.0), 1.0), float(rep.power_w), float(rep.frame_time_s)
+
+
+def test_whole_frames_and_every_block_traced_equal_independent_renders(scene) -> None:
+    cam = _camera(160, 96)
+    sets = _settings(4, seed=2)
+    full = price_camera(scene, cam, sets, SPACE, profile="mobile", fps=30.0, metric="ssim",
+                        pricing=DisplayPricing("full"))
+    tiles = price_camera(scene, cam, sets, SPACE, profile="mobile", fps=30.0, metric="ssim",
+                         pricing=DisplayPricing("tiles", fraction=1.0))
+    for idx, f, t in zip(sets, full, tiles, strict=True):
+        err, power, frame_time = _independent(scene, cam, idx)
+        assert f.error == pytest.approx(err, abs=1e-12) and f.power_w == pytest.approx(power, rel=1e-12)
+        assert f.frame_time_s == pytest.approx(frame_time, rel=1e-12)
+        # every block traced: the ratio estimators are the sums themselves
+        assert t.error == pytest.approx(err, abs=1e-9) and t.power_w == pytest.approx(power, rel=1e-9)
+        assert t.breakdown["display.se_error"] == 0.0
+    assert full[0].error == 0.0 and len({round(f.error, 6) for f in full}) > 2
+
+
+@pytest.mark.parametrize("eye,seed,size,share", [
+    ((0.0, -6.0, 2.5), 5, (256, 144), 0.25),
+    pytest.param((4.0, -3.5, 1.2), 6, (512, 288), 0.1, marks=pytest.mark.slow),
+])
+def test_a_share_of_the_blocks_estimates_the_whole_frame(scene, eye, seed, size, share) -> None:
+    """A share of the blocks traced: every setting's error within 3 standard errors (as the estimator
+    states them) plus 0.004 of the whole frame's, power within 4 %. (On frames of a few hundred 16-pixel
+    blocks; on 256x144 from the second eye one setting's power is 10 % off, inside its stated 26 %
+    relative standard error of the ray count: bench/RESULTS.md has the measured spread.)"""
+    cam = _camera(*size, eye)
+    sets = _settings(6, seed)
+    pricing = DisplayPricing("tiles", fraction=share, seed=seed)
+    est = price_camera(scene, cam, sets, SPACE, profile="mobile", fps=30.0, metric="ssim", pricing=pricing)
+    for idx, e in zip(sets, est, strict=True):
+        err, power, _ = _independent(scene, cam, idx)
+        se = e.breakdown["display.se_error"]
+        assert math.isfinite(se) and se >= 0.0
+        assert abs(e.error - err) <= 3 * se + 0.004, (idx, e.error, err, se)
+        assert abs(e.power_w / power - 1.0) <= 0.04, (idx, e.power_w, power)
+        assert e.breakdown["display.width"] == size[0]
+        assert 0 < e.breakdown["display.pixel_fraction"] < min(1.0, 3 * share)
+
+
+# -- the optimiser's store --------------------------------------------------------------------------------
+def _orbit_path(n: int, resolution: tuple[int, int]) -> CameraPath:
+    ang = np.linspace(-0.6, 0.9, n)
+    pos = [(6.0 * np.sin(a), -6.0 * np.cos(a), 2.5) for a in ang]
+    dirs = [(-x, -y, 0.6 - z) for x, y, z in pos]
+    return CameraPath.from_positions(pos, dirs, vfov=0.7, resolution=resolution)
+
+
+def _options(**kw) -> OptimizeConfig:
+    base = dict(threshold_power_w=0.01, threshold_error=0.005, max_depth=3, population=6, generations=3,
+                exhaustive_limit=0, eval_width=16, eval_height=12, seed=3, view_sampling="path",
+                path_resolution=0.5, guard_frames=0, skip_inert=False)
+    base.update(kw)
+    return OptimizeConfig(**base)
+
+
+@pytest.mark.slow
+def test_store_figures_are_whole_frames_at_the_paths_resolution(scene) -> None:
+    """With whole-frame pricing and no guard frames, every point of every stored frontier is what an
+    independent render of that setting at the path's resolution, at the frontier's sample camera, gives;
+    the preview run's figures are not (power scaled from 16x12 is another number)."""
+    path = _orbit_path(6, (96, 72))
+    assert display_resolution(path) == (96, 72)
+    cache = EvalCache()
+    store = optimize_path(scene, path, SUBSPACE, _options(display_estimator="full"), cache=cache,
+                          executor=InProcessExecutor())
+    assert store.meta["figures_resolution"] == [96, 72] and store.meta["display_pricing"].startswith("full")
+    assert store.meta["display_points"] > 0 and store.meta["display_cameras"] == len(store.frontiers)
+    preview = optimize_path(scene, path, SUBSPACE, _options(display_estimator="preview"), cache=cache,
+                            executor=InProcessExecutor())
+    assert preview.meta["figures_resolution"] == [16, 12] and preview.meta["display_points"] == 0
+    step = store.stats()["power_step_w"]
+    differs = 0
+    for fid, fr in enumerate(store.frontiers):
+        eye, fwd = store.frontier_eyes[fid], store.frontier_dirs[fid]
+        cam = CameraSpec(tuple(eye), tuple(fwd), tuple(view_up(fwd)), store.vfov, 96, 72)
+        for packed, e, p in zip(fr.packed, fr.error, fr.power_w, strict=True):
+            idx = unpack_indices(int(packed), store.n_params)
+            err, power, _ = _independent(scene, cam, idx, SUBSPACE)
+            # (within the store's quantisation of the sample camera and of power)
+            assert e == pytest.approx(err, abs=2e-3) and p == pytest.approx(power, rel=0.01, abs=step)
+        pfr = preview.frontiers[min(fid, len(preview.frontiers) - 1)]
+        differs += len(pfr.error) != len(fr.error) or not (np.allclose(pfr.error, fr.error, atol=1e-3)
+                                                          and np.allclose(pfr.power_w, fr.power_w, rtol=0.01))
+    assert differs > 0
+
+
+@pytest.mark.slow
+def test_tile_estimated_store_keeps_a_few_points_per_frontier(scene) -> None:
+    path = _orbit_path(6, (128, 96))
+    store = optimize_path(scene, path, SUBSPACE, _options(display_estimator="tiles", display_fraction=0.3,
+                                                          display_points=3),
+                          cache=EvalCache(), executor=InProcessExecutor())
+    assert store.meta["display_pricing"].startswith("tiles") and store.meta["figures_resolution"] == [128, 96]
+    assert "tile estimator" in store.meta["display_pricing_label"]
+    for fr in store.frontiers:
+        assert 1 <= len(fr.packed) <= 3 and float(fr.error.min()) == 0.0  # max quality always kept
