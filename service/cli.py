@@ -22,13 +22,14 @@ from typing import Any
 from service import options
 from service.camera_path import CameraPath
 from service.eval_cache import DEFAULT_MAX_BYTES, EvalCache
-from service.evaluation import load_scene
+from service.evaluation import load_scene, read_scene
 from service.executors import make_executor
 from service.optimize import OptimizeConfig, optimize_path
 from service.params import default_space
 from service.serve_options import add_serve_arguments, serve_overrides
 from service.storage import EVAL_CACHE_NAME, read_active_scene_hashes
 from service.store import ParetoStore
+from service.verify import verify_store
 
 
 def _default_cache() -> Path:
@@ -66,6 +67,16 @@ def _finite(text: str) -> float:
     return v
 
 
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, got {text!r}") from None
+    if w < 8 or h < 8:
+        raise argparse.ArgumentTypeError(f"must be at least 8x8, got {text!r}")
+    return w, h
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="render-budget", description="Power-optimal ray-tracing settings along "
                                 "camera paths, from a simulated mobile ray-tracing GPU.")
@@ -98,6 +109,20 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--power-budget", type=_finite, metavar="W")
     b.add_argument("--error-budget", type=_finite, metavar="E")
     q.add_argument("--json", action="store_true", help="print JSON")
+
+    v = sub.add_parser("verify", help="render sampled path frames with the store's settings at the path's "
+                       "resolution and set the measured error and power against the store's predictions")
+    v.add_argument("store", type=Path)
+    v.add_argument("--scene", type=Path, required=True, help="the store's scene file")
+    v.add_argument("--path", type=Path, required=True, help="camera-path JSON")
+    vb = v.add_mutually_exclusive_group(required=True)
+    vb.add_argument("--power-budget", type=_positive, metavar="W")
+    vb.add_argument("--error-budget", type=_positive, metavar="E")
+    v.add_argument("--frames", type=int, default=8, help="path frames to render, spread evenly (default 8)")
+    v.add_argument("--resolution", type=_size, default=None, metavar="WxH",
+                   help="render at this size instead of the path's own")
+    v.add_argument("--threads", type=int, default=None, help="tracer threads per render")
+    v.add_argument("--json", type=Path, default=None, metavar="FILE", help="also write the report as JSON")
 
     add_serve_arguments(sub.add_parser("serve", help="run the REST service"))
 
@@ -202,6 +227,24 @@ def _query(args: argparse.Namespace) -> int:
     return 0
 
 
+def _verify(args: argparse.Namespace) -> int:
+    store = ParetoStore.from_json(args.store.read_bytes())
+    path = CameraPath.load(args.path)
+    scene = read_scene(args.scene)
+
+    def progress(done: int, total: int) -> None:
+        print(f"  rendered frame {done}/{total}", file=sys.stderr, flush=True)
+
+    report = verify_store(scene, store, path, error_budget=args.error_budget, power_budget=args.power_budget,
+                          frames=args.frames, resolution=args.resolution, threads=args.threads,
+                          progress=progress)
+    print(report.table())
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(report.to_dict(), indent=1), encoding="utf-8")
+    return 0
+
+
 def _cache(args: argparse.Namespace) -> int:
 
     if args.data_dir is not None:
@@ -249,6 +292,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _query(args)
         if args.command == "cache":
             return _cache(args)
+        if args.command == "verify":
+            return _verify(args)
         return _serve(args)
     except (ValueError, FileNotFoundError, IsADirectoryError) as exc:
         print(f"render-budget {args.command}: error: {exc}", file=sys.stderr)

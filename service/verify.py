@@ -1,0 +1,169 @@
+"""Verify a store against renders: does what it promises hold at the resolution the path is shown at?
+
+A sample of path frames, spread evenly over the path, is looked up in the store under a budget (each frame
+on its own, no temporal filter: the store's own promise for that camera). The chosen settings are then
+rendered at the path's resolution (or a stated one) together with the maximum-quality reference there,
+and the error and power measured exactly as the optimiser measures them (``service.evaluation.evaluate``:
+1 - SSIM after the display transform, the energy model on the render's own counters) are set against the
+store's predictions: per frame, the share of frames within the budget, how far the predictions are off,
+and the worst frames.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+from service.camera_path import CameraPath
+from service.evaluation import CameraSpec, evaluate
+from service.params import default_space
+from service.store import ParetoStore
+
+#: A prediction holds when the measured power is within this share of it (the issue's 10 % target).
+POWER_TOLERANCE = 0.10
+
+
+@dataclass(frozen=True)
+class FrameCheck:
+    """One verified frame: the store's choice and prediction, and what a render measured."""
+
+    frame: int
+    time: float
+    settings: dict[str, Any]
+    predicted_error: float
+    predicted_power_w: float
+    measured_error: float
+    measured_power_w: float
+    measured_frame_time_s: float
+    within_budget: bool
+    infeasible: bool  # the store said nothing meets the budget here (it returned its nearest setting)
+    clamped: bool  # the camera was outside the store's region
+
+    @property
+    def power_ratio(self) -> float:
+        """Measured / predicted power."""
+        return self.measured_power_w / self.predicted_power_w if self.predicted_power_w > 0 else math.inf
+
+
+@dataclass(frozen=True)
+class VerifyReport:
+    """Predicted against measured figures of a store on a sample of its path's frames."""
+
+    budget_mode: str  # "error" or "power"
+    budget_value: float
+    resolution: tuple[int, int]
+    profile: str
+    fps: float
+    frames: list[FrameCheck]
+    store_figures_resolution: tuple[int, int] | None  # where the store says its figures were measured
+
+    def summary(self) -> dict[str, Any]:
+        """Share within budget, prediction errors and the worst frames (by how far over budget)."""
+        fr = self.frames
+        de = np.asarray([f.measured_error - f.predicted_error for f in fr])
+        ratio = np.asarray([f.power_ratio for f in fr])
+        return {
+            "frames": len(fr),
+            "within_budget": int(sum(f.within_budget for f in fr)),
+            "share_within_budget": float(np.mean([f.within_budget for f in fr])) if fr else math.nan,
+            "mean_abs_error_difference": float(np.mean(np.abs(de))) if fr else math.nan,
+            "max_abs_error_difference": float(np.max(np.abs(de))) if fr else math.nan,
+            "mean_error_measured": float(np.mean([f.measured_error for f in fr])) if fr else math.nan,
+            "median_power_ratio": float(np.median(ratio)) if fr else math.nan,
+            "share_power_within_10pct": float(np.mean(np.abs(ratio - 1.0) <= POWER_TOLERANCE)) if fr
+            else math.nan,
+            "mean_power_measured_w": float(np.mean([f.measured_power_w for f in fr])) if fr else math.nan,
+            "worst_frames": [f.frame for f in self.worst(3)],
+        }
+
+    def worst(self, k: int) -> list[FrameCheck]:
+        """The ``k`` frames furthest over (or least under) the budget, relative to it."""
+        def excess(f: FrameCheck) -> float:
+            value = f.measured_error if self.budget_mode == "error" else f.measured_power_w
+            return value / self.budget_value - 1.0
+        return sorted(self.frames, key=excess, reverse=True)[:k]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"budget_mode": self.budget_mode, "budget_value": self.budget_value,
+                "resolution": list(self.resolution), "profile": self.profile, "fps": self.fps,
+                "store_figures_resolution": (list(self.store_figures_resolution)
+                                             if self.store_figures_resolution else None),
+                "summary": self.summary(), "frames": [asdict(f) for f in self.frames]}
+
+    def table(self) -> str:
+        """A Markdown table of the frames, then the summary."""
+        w, h = self.resolution
+        lines = [f"verified at {w}x{h}, {self.budget_mode} budget {self.budget_value:g}, "
+                 f"profile {self.profile} at {self.fps:g} fps",
+                 "| frame | time s | error predicted | error measured | power predicted W | power measured W "
+                 "| measured / predicted | within budget |",
+                 "|---|---|---|---|---|---|---|---|"]
+        for f in self.frames:
+            note = " (infeasible)" if f.infeasible else ""
+            lines.append(f"| {f.frame} | {f.time:.2f} | {f.predicted_error:.4f} | {f.measured_error:.4f} | "
+                         f"{f.predicted_power_w:.3f} | {f.measured_power_w:.3f} | {f.power_ratio:.2f} | "
+                         f"{'yes' if f.within_budget else 'NO'}{note} |")
+        s = self.summary()
+        share = 100 * s["share_within_budget"]
+        lines += ["", f"within budget: {s['within_budget']}/{s['frames']} ({share:.0f} %)",
+                  f"mean |measured - predicted| error: {s['mean_abs_error_difference']:.4f} "
+                  f"(max {s['max_abs_error_difference']:.4f})",
+                  f"measured / predicted power: median {s['median_power_ratio']:.3f}, "
+                  f"{100 * s['share_power_within_10pct']:.0f} % of frames within 10 %",
+                  f"worst frames: {', '.join(str(i) for i in s['worst_frames'])}"]
+        return "\n".join(lines)
+
+
+def sample_frames(n: int, count: int) -> list[int]:
+    """``count`` frame numbers spread evenly over a path of ``n`` frames (centres of equal parts)."""
+    if n < 1:
+        raise ValueError("the path has no frames")
+    if count < 1:
+        raise ValueError(f"frames to verify must be >= 1, got {count}")
+    count = min(count, n)
+    return sorted({min(n - 1, int((k + 0.5) * n / count)) for k in range(count)})
+
+
+def verify_store(scene: Any, store: ParetoStore, path: CameraPath, *, error_budget: float | None = None,
+                 power_budget: float | None = None, frames: int = 8,
+                 resolution: tuple[int, int] | None = None, threads: int | None = None,
+                 progress: Callable[[int, int], None] | None = None) -> VerifyReport:
+    """Render a sample of ``path``'s frames at ``resolution`` (default: each frame's own) with the
+    settings ``store`` picks under the budget and measure them; ``scene`` is the store's scene."""
+    if (error_budget is None) == (power_budget is None):
+        raise ValueError("give exactly one of error_budget or power_budget")
+    mode, value = ("error", error_budget) if error_budget is not None else ("power", power_budget)
+    value = float(value)  # type: ignore[arg-type]
+    if not (math.isfinite(value) and value > 0):
+        raise ValueError(f"the budget must be a positive finite number, got {value!r}")
+    if resolution is not None:
+        rw, rh = (int(v) for v in resolution)
+        if rw < 8 or rh < 8:
+            raise ValueError(f"resolution must be at least 8x8, got {resolution!r}")
+    metric = str(store.meta.get("metric", "ssim"))
+    space = default_space()
+    numbers = sample_frames(len(path), frames)
+    checks: list[FrameCheck] = []
+    size = None
+    for done, number in enumerate(numbers):
+        f = path.frames[number]
+        m = np.asarray(f.matrix_world, dtype=np.float64)
+        r = store.lookup(f.position, matrix=m, fov=f.vfov, aspect=f.aspect, error_budget=error_budget,
+                         power_budget=power_budget)
+        size = (rw, rh) if resolution is not None else tuple(f.resolution)
+        cam = CameraSpec(tuple(m[:3, 3]), tuple(-m[:3, 2]), tuple(m[:3, 1]), f.vfov, *size)
+        ev = evaluate(scene, cam, space.indices_of(r.settings), space, profile=store.profile, fps=store.fps,
+                      metric=metric, threads=threads)
+        within = ev.error <= value if mode == "error" else ev.power_w <= value
+        checks.append(FrameCheck(number, float(f.time), dict(r.settings), float(r.error), float(r.power_w),
+                                 float(ev.error), float(ev.power_w), float(ev.frame_time_s), bool(within),
+                                 bool(r.infeasible), bool(r.clamped)))
+        if progress is not None:
+            progress(done + 1, len(numbers))
+    figures = store.meta.get("figures_resolution")
+    return VerifyReport(mode, value, size or (0, 0), store.profile, float(store.fps), checks,
+                        tuple(int(v) for v in figures) if figures else None)

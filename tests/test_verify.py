@@ -1,0 +1,110 @@
+"""render-budget verify: sampled path frames rendered at the path's resolution with the store's settings,
+measured error and power set against the store's predictions (figures equal independent renders)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from sim_core.image import linear_to_srgb
+
+import sim_core
+from service import cli
+from service.camera_path import CameraPath
+from service.eval_cache import EvalCache
+from service.executors import InProcessExecutor
+from service.metrics import ssim
+from service.optimize import OptimizeConfig, optimize_path
+from service.params import default_space
+from service.verify import sample_frames, verify_store
+from tests.api_support import teapot_scene_glb
+
+SPACE = default_space().subset(["sampling", "max_depth", "resolution_scale"])
+
+
+def _orbit_path(n: int, resolution: tuple[int, int]) -> CameraPath:
+    ang = np.linspace(-0.6, 0.9, n)
+    pos = [(6.0 * np.sin(a), -6.0 * np.cos(a), 2.5) for a in ang]
+    dirs = [(-x, -y, 0.6 - z) for x, y, z in pos]
+    return CameraPath.from_positions(pos, dirs, vfov=0.7, resolution=resolution)
+
+
+@pytest.fixture(scope="module")
+def setup(tmp_path_factory: pytest.TempPathFactory):
+    d = tmp_path_factory.mktemp("verify")
+    scene_file = d / "teapot.glb"
+    scene_file.write_bytes(teapot_scene_glb())
+    scene = sim_core.Scene.from_gltf(str(scene_file))
+    path = _orbit_path(10, (96, 72))
+    opts = OptimizeConfig(threshold_power_w=0.01, threshold_error=0.005, max_depth=3, population=6,
+                          generations=3, exhaustive_limit=0, eval_width=16, eval_height=12, seed=3,
+                          view_sampling="path", path_resolution=0.5, guard_frames=2,
+                          display_estimator="full")
+    store = optimize_path(scene, path, SPACE, opts, cache=EvalCache(), executor=InProcessExecutor())
+    store_file, path_file = d / "store.json", d / "path.json"
+    store_file.write_text(store.to_json(), encoding="utf-8")
+    path.save(path_file)
+    return d, scene, scene_file, store, store_file, path, path_file
+
+
+def test_sample_frames_spread_over_the_path() -> None:
+    assert sample_frames(10, 4) == [1, 3, 6, 8]
+    assert sample_frames(3, 8) == [0, 1, 2]
+    with pytest.raises(ValueError):
+        sample_frames(0, 2)
+    with pytest.raises(ValueError):
+        sample_frames(5, 0)
+
+
+@pytest.mark.slow
+def test_verify_measures_independent_renders_of_the_stores_choices(setup) -> None:
+    _, scene, _, store, _, path, _ = setup
+    budget = 0.02
+    report = verify_store(scene, store, path, error_budget=budget, frames=4)
+    assert [f.frame for f in report.frames] == sample_frames(len(path), 4)
+    assert report.resolution == (96, 72) and report.store_figures_resolution == (96, 72)
+    space = default_space()
+    mq = space.to_settings(space.max_quality_indices())
+    for f in report.frames:
+        fr = path.frames[f.frame]
+        r = store.lookup(fr.position, matrix=np.asarray(fr.matrix_world), fov=fr.vfov, aspect=fr.aspect,
+                         error_budget=budget)
+        assert f.settings == r.settings and f.predicted_error == r.error and f.predicted_power_w == r.power_w
+        cam = sim_core.Camera.from_blender(np.asarray(fr.matrix_world), fr.vfov, 96, 72)
+        ref = sim_core.render(scene, cam, mq)
+        img = sim_core.render(scene, cam, space.to_settings(space.indices_of(r.settings)))
+        err = max(0.0, 1.0 - ssim(linear_to_srgb(ref.image), linear_to_srgb(img.image), data_range=1.0))
+        power = sim_core.price(img, sim_core.load_profile(store.profile), store.fps).power_w
+        assert f.measured_error == pytest.approx(err, abs=1e-12)
+        assert f.measured_power_w == pytest.approx(power, rel=1e-12)
+        assert f.within_budget == (f.measured_error <= budget)
+    s = report.summary()
+    assert s["frames"] == 4 and s["within_budget"] == sum(f.within_budget for f in report.frames)
+    de = [abs(f.measured_error - f.predicted_error) for f in report.frames]
+    assert s["mean_abs_error_difference"] == pytest.approx(float(np.mean(de)))
+    # the store was priced at this very resolution with guard frames: its promises hold closely here
+    assert s["mean_abs_error_difference"] < 0.01 and 0.8 < s["median_power_ratio"] < 1.2
+    with pytest.raises(ValueError):
+        verify_store(scene, store, path, error_budget=0.02, power_budget=1.0)
+    with pytest.raises(ValueError):
+        verify_store(scene, store, path, error_budget=float("nan"))
+
+
+@pytest.mark.slow
+def test_cli_verify_prints_the_table_and_writes_json(setup, capsys) -> None:
+    d, _, scene_file, store, store_file, _, path_file = setup
+    budget = float(np.median(store.frontiers[0].power_w))
+    out = d / "verify.json"
+    code = cli.main(["verify", str(store_file), "--scene", str(scene_file), "--path", str(path_file),
+                     "--power-budget", str(budget), "--frames", "3", "--resolution", "64x48",
+                     "--json", str(out)])
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "verified at 64x48, power budget" in text and "within budget:" in text
+    doc = json.loads(out.read_text())
+    assert doc["resolution"] == [64, 48] and len(doc["frames"]) == 3 and doc["budget_mode"] == "power"
+    assert doc["summary"]["within_budget"] == sum(f["measured_power_w"] <= budget for f in doc["frames"])
+    assert cli.main(["verify", str(store_file), "--scene", str(scene_file), "--path", str(path_file),
+                     "--error-budget", "0.02", "--frames", "0"]) == 1
+    assert "frames to verify" in capsys.readouterr().err
