@@ -2,7 +2,7 @@
 
 A sample of path frames, spread evenly over the path, is looked up in the store under a budget (each frame
 on its own, no temporal filter: the store's own promise for that camera). The chosen settings are then
-rendered at the path's resolution (or a stated one) together with the maximum-quality reference there,
+rendered at the path's resolution (or a stated one) together with the store's maximum-quality reference,
 and the error and power measured exactly as the optimiser measures them (``service.evaluation.evaluate``:
 1 - SSIM after the display transform, the energy model on the render's own counters) are set against the
 store's predictions: per frame, the share of frames within the budget, how far the predictions are off,
@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+import sim_core
 from service.camera_path import CameraPath
 from service.evaluation import CameraSpec, evaluate
 from service.params import default_space
@@ -146,6 +147,10 @@ def verify_store(scene: Any, store: ParetoStore, path: CameraPath, *, error_budg
             raise ValueError(f"resolution must be at least 8x8, got {resolution!r}")
     metric = str(store.meta.get("metric", "ssim"))
     space = default_space()
+    # the store's own maximum quality is the reference its errors were measured against (parameters
+    # it does not carry at the default space's best, as in its lookups' settings)
+    best = store.settings_of([p.max_quality for p in store.parameters])
+    reference = space.to_settings(space.indices_of(best))
     numbers = sample_frames(len(path), frames)
     checks: list[FrameCheck] = []
     size = None
@@ -156,8 +161,9 @@ def verify_store(scene: Any, store: ParetoStore, path: CameraPath, *, error_budg
                          power_budget=power_budget)
         size = (rw, rh) if resolution is not None else tuple(f.resolution)
         cam = CameraSpec(tuple(m[:3, 3]), tuple(-m[:3, 2]), tuple(m[:3, 1]), f.vfov, *size)
+        ref = sim_core.render(scene, cam.to_camera(), reference, threads=threads).image
         ev = evaluate(scene, cam, space.indices_of(r.settings), space, profile=store.profile, fps=store.fps,
-                      metric=metric, threads=threads)
+                      metric=metric, threads=threads, reference=ref)
         within = ev.error <= value if mode == "error" else ev.power_w <= value
         checks.append(FrameCheck(number, float(f.time), dict(r.settings), float(r.error), float(r.power_w),
                                  float(ev.error), float(ev.power_w), float(ev.frame_time_s), bool(within),

@@ -357,3 +357,35 @@ def test_an_idle_event_stream_sends_keepalives_and_ends_cleanly(tmp_path: Path) 
                         assert c.post(f"/jobs/{job['id']}/cancel").status_code == 200
         assert lines[:2] == ["id: 1", "event: queued"]
         assert "event: cancelled" in lines and lines.count(": keepalive") >= 2  # and then the stream ended
+
+
+def test_verify_a_store_over_rest(client: httpx.Client, finished: dict[str, Any],
+                                  scene: dict[str, Any]) -> None:
+    """POST /stores/{id}/verify renders sampled path frames with the store's settings; its measured power
+    is what POST /evaluate gives for the same frame and settings (errors: tests/test_verify.py)."""
+    job = finished["job"]
+    path = camera_path(3)
+    r = client.post(f"/stores/{job['store_id']}/verify",
+                    json={"camera_path": path, "error_budget": 0.05, "frames": 2})
+    assert r.status_code == 200, r.text
+    doc = r.json()
+    assert doc["budget_mode"] == "error" and doc["resolution"] == [64, 48] and len(doc["frames"]) == 2
+    assert doc["store_figures_resolution"] == [64, 48]  # the job's store was priced at the path's size
+    store = ParetoStore.from_json(client.get(f"/stores/{job['store_id']}").text)
+    best = store.settings_of([p.max_quality for p in store.parameters])
+    for f in doc["frames"]:
+        frame = path["frames"][f["frame"]]
+        cam = {"matrix_world": frame["matrix_world"], "vfov": frame["vfov"], "width": 64, "height": 48}
+        ev = client.post("/evaluate", json={"scene_id": scene["id"], "camera": cam,
+                                            "settings": f["settings"]})
+        assert ev.status_code == 200
+        assert f["measured_power_w"] == pytest.approx(ev.json()["power_w"], rel=1e-9)
+        if f["settings"] == best:
+            assert f["measured_error"] == 0.0
+        assert f["within_budget"] == (f["measured_error"] <= 0.05)
+    assert doc["summary"]["frames"] == 2
+    both = client.post(f"/stores/{job['store_id']}/verify",
+                       json={"camera_path": path, "error_budget": 0.05, "power_budget_w": 1.0})
+    assert both.status_code == 422
+    missing = client.post("/stores/nope/verify", json={"camera_path": path, "error_budget": 0.05})
+    assert missing.status_code == 404

@@ -413,6 +413,39 @@ class EvaluateResponse(BaseModel):
     breakdown: dict[str, Any]
 
 
+# -- verify ------------------------------------------------------------------------------------------
+class VerifyRequest(StrictModel):
+    """Render a sample of the path's frames with the store's settings and measure them (service.verify)."""
+
+    camera_path: CameraPathIn
+    power_budget_w: Annotated[float, Field(strict=True, gt=0.0, le=1e4)] | None = None
+    error_budget: Annotated[float, Field(strict=True, gt=0.0, le=1.0)] | None = None
+    frames: Annotated[int, Field(strict=True, ge=1, le=32)] = Field(
+        default=8, description="path frames to render, spread evenly over the path")
+    resolution: tuple[PixelCount, PixelCount] | None = Field(
+        default=None, description="[width, height] to render at; default: each frame's own resolution")
+
+    @model_validator(mode="after")
+    def _one_budget(self) -> VerifyRequest:
+        if (self.power_budget_w is None) == (self.error_budget is None):
+            raise ValueError("give exactly one of power_budget_w and error_budget")
+        if self.resolution is not None:
+            check_resolution(*self.resolution)
+        return self
+
+
+class VerifyResult(BaseModel):
+    budget_mode: Literal["error", "power"]
+    budget_value: float
+    resolution: list[int]
+    profile: str
+    fps: float
+    store_figures_resolution: list[int] | None = Field(
+        description="where the store says its figures were measured (its meta)")
+    summary: dict[str, Any]
+    frames: list[dict[str, Any]]
+
+
 # -- health ------------------------------------------------------------------------------------------
 class Health(BaseModel):
     status: Literal["ok"]

@@ -1,5 +1,5 @@
-"""GET /stores (a page), GET and DELETE /stores/{id} (the Pareto store document) and
-POST /stores/{id}/query (runtime lookup, sec. 6)."""
+"""GET /stores (a page), GET and DELETE /stores/{id} (the Pareto store document),
+POST /stores/{id}/query (runtime lookup, sec. 6) and POST /stores/{id}/verify (its promises measured)."""
 
 from __future__ import annotations
 
@@ -7,14 +7,16 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Query, Request, Response, status
 
+from service.camera_path import CameraPath
 from service.storage import StoreRecord
 from service.store import TemporalFilter, pack_indices
+from service.verify import verify_store
 
-from ..checks import deleted
-from ..deps import StorageDep, StoreRecordDep, StoresDep
+from ..checks import deleted, scene_or_404
+from ..deps import ScenesDep, SettingsDep, StorageDep, StoreRecordDep, StoresDep
 from ..errors import ApiError, error_responses
 from ..lean_route import LeanJsonRoute
-from ..schemas import QueryResult, SceneId, StorePage, StorePublic, StoreQuery
+from ..schemas import QueryResult, SceneId, StorePage, StorePublic, StoreQuery, VerifyRequest, VerifyResult
 
 router = APIRouter(prefix="/stores", tags=["stores"])
 
@@ -52,6 +54,33 @@ def delete_store(store_id: str, storage: StorageDep, stores: StoresDep) -> Respo
     answer = deleted(lambda: storage.delete_store(store_id=store_id), f"store {store_id!r} not found")
     stores.drop(store_id)
     return answer
+
+
+@router.post("/{store_id}/verify", response_model=VerifyResult, operation_id="verify_store",
+             responses=error_responses(404, 422))
+def verify(body: VerifyRequest, record: StoreRecordDep, storage: StorageDep, scenes: ScenesDep,
+           stores: StoresDep, settings: SettingsDep) -> VerifyResult:
+    """Render ``frames`` path frames, spread evenly, at the path's resolution (or ``resolution``) with the
+    settings the store picks under the budget, and set the measured error and power against the store's
+    predictions: per frame, the share within budget, the worst frames. Runs while the request waits
+    (about two full-size renders a frame)."""
+    try:
+        path = CameraPath.from_dict(body.camera_path.model_dump())
+    except ValueError as exc:
+        raise ApiError(422, f"camera_path: {exc}") from exc
+    sizes = [body.resolution] if body.resolution is not None else [f.resolution for f in path.frames]
+    biggest = max(int(w) * int(h) for w, h in sizes)
+    if biggest > settings.max_render_pixels:
+        raise ApiError(422, f"verify renders {biggest} pixels a frame, over the limit of "
+                            f"{settings.max_render_pixels} pixels (give a smaller resolution)")
+    scene = scene_or_404(storage, scenes, record.scene_id)
+    try:
+        report = verify_store(scene, stores.get(record.id), path, error_budget=body.error_budget,
+                              power_budget=body.power_budget_w, frames=body.frames,
+                              resolution=body.resolution, threads=settings.render_threads)
+    except ValueError as exc:
+        raise ApiError(422, f"verify: {exc}") from exc
+    return VerifyResult(**report.to_dict())
 
 
 def answer_query(store: Any, body: StoreQuery) -> QueryResult:
