@@ -417,6 +417,9 @@ class EvaluateResponse(BaseModel):
 class VerifyRequest(StrictModel):
     """Render a sample of the path's frames with the store's settings and measure them (service.verify)."""
 
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, json_schema_extra=exactly_one(
+        (("power_budget_w",), ("error_budget",)), (("error_budget",), ("power_budget_w",))))
+
     camera_path: CameraPathIn
     power_budget_w: Annotated[float, Field(strict=True, gt=0.0, le=1e4)] | None = None
     error_budget: Annotated[float, Field(strict=True, gt=0.0, le=1.0)] | None = None
