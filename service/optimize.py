@@ -75,10 +75,14 @@ def resolve_space(scene: Any, space: ParameterSpace, path: CameraPath, threads: 
     return space.fix_inert({str(k): str(v) for k, v in dict(inert).items()})
 
 
-def display_resolution(path: CameraPath) -> tuple[int, int]:
-    """The resolution the path is shown at: its frames' most common one (the first of the most common)."""
+def display_resolution(path: CameraPath, height: int | None = None) -> tuple[int, int]:
+    """The resolution the path is shown at: its frames' most common one (the first of the most common),
+    or ``height`` pixels high with that one's aspect."""
     sizes = [tuple(f.resolution) for f in path.frames]
-    return max(dict.fromkeys(sizes), key=sizes.count)
+    w, h = max(dict.fromkeys(sizes), key=sizes.count)
+    if height is None or height == h:
+        return int(w), int(h)
+    return max(16, round(height * w / h)), int(height)
 
 
 def path_targets(scene: Any, path: CameraPath) -> tuple[np.ndarray, np.ndarray]:
@@ -117,7 +121,7 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, config: O
     aspect = float(np.median([f.aspect for f in frames]))
     width, height = options.eval_resolution(config.eval_width, config.eval_height, aspect)
     target_pixels = int(np.median([f.resolution[0] * f.resolution[1] for f in frames]))
-    display = display_resolution(path)
+    display = display_resolution(path, config.display_height)
     evaluator = Evaluator(handle, space, cache=cache, executor=executor, profile=config.profile,
                           fps=config.fps, metric=config.metric, threads=config.threads,
                           target_pixels=target_pixels if config.power_at_path_resolution else None)

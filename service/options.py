@@ -158,9 +158,15 @@ OPTIONS: tuple[Option, ...] = (
     Option("display_fraction", float, 0.1, "Traced share",
            "tile estimator: share of the frame's blocks traced at the path's resolution",
            minimum=0.01, maximum=1.0, metavar="F", group="Evaluation", precision=2),
-    Option("display_points", int, 0, "Points priced",
-           "at most this many points of each frontier, spread along it, are priced at the path's "
-           "resolution and kept (0: all)", minimum=0, maximum=64, metavar="N", group="Evaluation"),
+    Option("display_points", int, 8, "Points priced",
+           "at most this many points of each frontier, spread along it (both ends kept), are priced at the "
+           "path's resolution and kept in the store (0: all; each costs a share of a full-size frame at "
+           "every camera the frontier is priced at)", minimum=0, maximum=64, metavar="N",
+           group="Evaluation"),
+    Option("display_height", int, None, "Display height",
+           "price the store's figures at this height (width from the path's aspect) instead of the path's "
+           "own resolution: a stated smaller display size when full size is too slow", minimum=16,
+           maximum=4320, optional=True, metavar="PX", group="Evaluation"),
     # internal: set by library callers (tests, benchmarks), not offered by the CLI, REST or add-on
     Option("margin", float, 0.1, "Margin", "view cubes: fraction of a node's side added around it when "
            "testing whether the path passes through it", minimum=0.0, public=False),

@@ -24,7 +24,8 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 TEAPOT = REPO_ROOT / "blend_scenes" / "build" / "teapot"
 MODES = {"ours_power", "ours_error", "max", "max_mid", "mid_min", "min"}
 TINY = ["--scene", "teapot", "--resolution", "32x18", "--frames", "6", "--max-depth", "0",
-        "--population", "4", "--generations", "2", "--samples", "1", "--sample-resolution", "16x9"]
+        "--population", "4", "--generations", "2", "--samples", "1", "--sample-resolution", "16x9",
+        "--display-height", "36", "--display-points", "3", "--verify-frames", "2"]
 
 
 def _port_closed(url: str) -> bool:
@@ -102,6 +103,14 @@ def test_demo_end_to_end_tiny(tmp_path: Path) -> None:
     for text in ("Avg. Power (W)", "Ours (power budget)", "Ours (error budget)", "Max-Mid", "Budget kept",
                  "Table 2", "Valley (paper)", "Time per phase", "Diagnostic"):
         assert text in report_md, text
+
+    # the store's figures were priced at the stated display size, and verified there
+    assert summary["store"]["meta"]["figures_resolution"] == [64, 36]
+    verify = json.loads((out / "verify.json").read_text())
+    assert verify["resolution"] == [64, 36] and len(verify["frames"]) == 2
+    assert verify["summary"]["within_budget"] == sum(f["measured_error"] <= eb for f in verify["frames"])
+    assert "Verify: the store's predictions against renders at 64x36" in (out / "verify.md").read_text()
+    assert "Within budget:" in proc.stdout
 
 
 @pytest.mark.slow

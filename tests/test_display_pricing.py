@@ -215,7 +215,7 @@ def test_store_figures_are_whole_frames_at_the_paths_resolution(scene) -> None:
     independent render of that setting at the path's resolution, at the frontier's sample camera, gives;
     the preview run's figures are not (power scaled from 16x12 is another number)."""
     path = _orbit_path(6, (96, 72))
-    assert display_resolution(path) == (96, 72)
+    assert display_resolution(path) == (96, 72) and display_resolution(path, 36) == (48, 36)
     cache = EvalCache()
     store = optimize_path(scene, path, SUBSPACE, _options(display_estimator="full"), cache=cache,
                           executor=InProcessExecutor())

@@ -10,7 +10,10 @@
 4. runs the evaluation campaign (``addon.core.campaign``: the same code as the Blender add-on's
    *Evaluate Path*): the paper's four presets, the store under a power budget and under an error budget,
    the report folder (Table 3, per-frame CSV, plots, sample frames, store, summary, Table 2);
-5. stops the service, also on failure, Ctrl-C or SIGTERM.
+5. verifies the store (POST /stores/{id}/verify): sampled path frames rendered at the size the store's
+   figures were priced at, with the settings it picks under the error budget, measured against its
+   predictions (``verify.md``, ``verify.json`` in the report folder);
+6. stops the service, also on failure, Ctrl-C or SIGTERM.
 
 The error budget is issue 7's 0.02; the power budget is placed between the Min and Max presets' measured
 powers or between the store frontiers' ends, never tuned on the budget modes' results. Nothing here
@@ -71,6 +74,8 @@ def parser() -> argparse.ArgumentParser:
     ap.add_argument("--sample-resolution", type=campaign.parse_size, default=None,
                     help="sample frames' WxH (default: height 72, width from the path's aspect)")
     ap.add_argument("--concurrency", type=int, default=2, help="evaluations in flight")
+    ap.add_argument("--verify-frames", type=int, default=6,
+                    help="path frames the store is verified on at its figures' resolution (0: skip)")
     ap.add_argument("--job-timeout", type=float, default=3600.0, help="seconds before giving up")
     ap.add_argument("--skip-build", action="store_true", help="use the built scene as it is")
     option_schema.add_arguments(ap.add_argument_group("optimiser options (the service's defaults unless "
@@ -194,10 +199,46 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         outcome = campaign.run(client, store_text, path, spec, out, title=args.scene, pre=pre, clock=clock,
                                progress=progress, say=say)
         summarise(outcome, out)
+        if args.verify_frames > 0:
+            verify(client, job["store_id"], path_doc, outcome.summary["store"]["meta"], args, out, clock)
         return outcome.summary
     finally:
         service.stop()
         say("service stopped")
+
+
+def verify(client: Any, store_id: str, path_doc: dict[str, Any], meta: dict[str, Any],
+           args: argparse.Namespace, out: Path, clock: campaign.Clock) -> None:
+    """The store's promises under the error budget, measured at the resolution its figures are for."""
+    size = meta.get("figures_resolution") or path_doc["frames"][0]["resolution"]
+    say(f"== verify the store: {args.verify_frames} path frames at {size[0]}x{size[1]} "
+        f"(POST /stores/{{id}}/verify, error budget {args.error_budget})")
+    t = clock.start()
+    doc = client.verify(store_id, {"camera_path": path_doc, "error_budget": args.error_budget,
+                                   "frames": args.verify_frames, "resolution": [int(v) for v in size]},
+                        timeout_s=3600.0)
+    spent = clock.stop("verify", t)
+    s = doc["summary"]
+    lines = [f"# Verify: the store's predictions against renders at {size[0]}x{size[1]}", "",
+             f"Store figures priced by: {meta.get('display_pricing_label', 'preview resolution')} at "
+             f"{'x'.join(str(v) for v in meta.get('figures_resolution') or size)}; path resolution "
+             f"{'x'.join(str(v) for v in path_doc['frames'][0]['resolution'])}; error budget "
+             f"{args.error_budget}; {s['frames']} frames spread over the path, each looked up on its own.",
+             "",
+             "| frame | error predicted | error measured | power predicted W | power measured W "
+             "| within budget |",
+             "|---|---|---|---|---|---|"]
+    lines += [f"| {f['frame']} | {f['predicted_error']:.4f} | {f['measured_error']:.4f} | "
+              f"{f['predicted_power_w']:.3f} | {f['measured_power_w']:.3f} | "
+              f"{'yes' if f['within_budget'] else 'NO'} |" for f in doc["frames"]]
+    lines += ["", f"Within budget: {s['within_budget']}/{s['frames']}; mean |measured - predicted| error "
+              f"{s['mean_abs_error_difference']:.4f}; measured / predicted power median "
+              f"{s['median_power_ratio']:.3f}, {100 * s['share_power_within_10pct']:.0f} % of frames within "
+              f"10 %; {spent['wall_s']:.0f} s wall."]
+    (out / "verify.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    (out / "verify.json").write_text(json.dumps(doc, indent=1), encoding="utf-8")
+    for line in lines[5:]:
+        say(f"  {line}")
 
 
 def summarise(outcome: campaign.Outcome, out: Path) -> None:

@@ -165,6 +165,11 @@ class ServiceClient:
     def query(self, store_id: str, payload: dict[str, Any]) -> dict[str, Any]:
         return self._json("POST", f"/stores/{_segment(store_id)}/query", payload)
 
+    def verify(self, store_id: str, payload: dict[str, Any],
+               timeout_s: float | None = None) -> dict[str, Any]:
+        """POST /stores/{id}/verify: the store's predictions against renders of sampled path frames."""
+        return self._json("POST", f"/stores/{_segment(store_id)}/verify", payload, timeout_s=timeout_s)
+
     def evaluate(self, payload: dict[str, Any], timeout_s: float | None = None) -> dict[str, Any]:
         return self._json("POST", "/evaluate", payload, timeout_s=timeout_s)
 
