@@ -20,6 +20,7 @@ _MODULE_NAMES = (
     "ops_optimize",
     "ops_preview",
     "ops_report",
+    "engine",
     "panels",
 )
 

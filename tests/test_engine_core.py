@@ -276,6 +276,10 @@ def test_fingerprint_and_scene_cache() -> None:
     c = two_boxes()
     c.materials[1] = sim_core.Material(base_color=(0.8, 0.2, 0.1), roughness=0.31)
     assert engine_scene.fingerprint(a) != engine_scene.fingerprint(c)
+    d = two_boxes()  # where it came from and the cameras of the file do not change the render
+    d.source = "elsewhere.glb"
+    d.cameras = [sim_core.CameraData(np.eye(4), 0.7)]
+    assert engine_scene.fingerprint(a) == engine_scene.fingerprint(d)
     cache = engine_scene.SceneCache()
     s1 = cache.scene_for(a)
     assert cache.scene_for(two_boxes()) is s1 and cache.builds == 1

@@ -306,3 +306,17 @@ class AnimationLog:
         if not self._fh.closed:
             self._fh.close()
 
+
+
+def animation_csv_path(output_path: str | Path) -> Path:
+    """Where an animation's per-frame CSV goes: beside the frames, named after their prefix
+    (``render/shot_`` -> ``render/shot_render_budget.csv``; a folder -> ``render_budget.csv`` in it)."""
+    text = str(output_path)
+    folder, name = (text, "") if text.endswith(("/", "\\")) else (str(Path(text).parent), Path(text).name)
+    name = name.replace("#", "")
+    stem, ext = name.rsplit(".", 1) if "." in name else (name, "")
+    if ext.lower() not in ("", "png", "exr", "jpg", "jpeg", "tif", "tiff", "webp", "bmp", "hdr"):
+        stem = name  # a dot that is not an image extension belongs to the name
+    if stem and not stem.endswith(("_", "-", ".", " ")):
+        stem += "_"
+    return Path(folder) / f"{stem}render_budget.csv"

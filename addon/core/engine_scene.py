@@ -74,11 +74,22 @@ def _feed(h: Any, value: Any) -> None:
         h.update(f"{type(value).__name__}:{value!r};".encode())
 
 
+#: SceneData fields that do not change what the engine renders: the cameras a scene file carries (the
+#: engine renders Blender's camera) and where the data came from.
+NOT_RENDERED = frozenset({"cameras", "source"})
+
+
 def fingerprint(scene_data: Any) -> str:
-    """Content hash of a translated scene (``sim_core.SceneData`` or anything built of arrays,
-    dataclasses, sequences and plain values)."""
+    """Content hash of what a translated scene renders (``sim_core.SceneData``: every field but
+    :data:`NOT_RENDERED`; any dataclass of arrays, dataclasses, sequences and plain values)."""
     h = hashlib.blake2b(digest_size=20)
-    _feed(h, scene_data)
+    if dataclasses.is_dataclass(scene_data) and not isinstance(scene_data, type):
+        for f in dataclasses.fields(scene_data):
+            if f.name not in NOT_RENDERED:
+                h.update(f.name.encode())
+                _feed(h, getattr(scene_data, f.name))
+    else:
+        _feed(h, scene_data)
     return h.hexdigest()
 
 

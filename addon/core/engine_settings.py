@@ -165,15 +165,24 @@ class SettingsChooser:
         self.manual = tuple(manual)
         self.budget = budget
         self.driver = PlaybackDriver(store, period_s) if store is not None and budget is not None else None
+        self.note = "" if self.driver else ("no budget set: manual settings" if store is not None
+                                            else "no store: manual settings")
 
     @property
     def uses_store(self) -> bool:
         return self.driver is not None
 
+    @property
+    def store(self) -> pareto_store.ParetoStore | None:
+        return self.driver.store if self.driver is not None else None
+
+    def manual_settings(self) -> FrameSettings:
+        return FrameSettings("manual", self.manual, note=self.note)
+
     def choose(self, matrix_world: Sequence[Sequence[float]], vfov: float, aspect: float,
                time_s: float) -> FrameSettings:
         if self.driver is None or self.budget is None:
-            return FrameSettings("manual", self.manual, note="manual settings (no store or no budget)")
+            return self.manual_settings()
         if not (math.isfinite(vfov) and math.isfinite(aspect) and aspect > 0):
             raise ValueError(f"camera fov/aspect must be finite and positive, got {vfov}, {aspect}")
         frame = self.driver.step(matrix_world, vfov, aspect, time_s, self.budget.mode, self.budget.value)

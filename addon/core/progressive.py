@@ -115,13 +115,14 @@ class ProgressiveDriver:
                 self._cond.wait(left)
             return True
 
-    def close(self, timeout: float = 10.0) -> None:
-        """Cancel what is in flight and end the worker (what the engine does when it is freed)."""
+    def close(self, wait: bool = True, timeout: float = 10.0) -> None:
+        """Cancel what is in flight and end the worker (what the engine does when it is freed); the
+        worker stops at its next band (``wait``: block until it has)."""
         with self._cond:
             self._closed = True
             self._pending = None
             self._cond.notify_all()
-        if threading.current_thread() is not self._thread:
+        if wait and threading.current_thread() is not self._thread:
             self._thread.join(timeout)
 
     @property

@@ -110,8 +110,8 @@ class ViewportRenderer:
     def error(self) -> str | None:
         return self.driver.error
 
-    def close(self) -> None:
-        self.driver.close()
+    def close(self, wait: bool = True) -> None:
+        self.driver.close(wait)
         self.scenes.clear()
 
     def _render(self, payload: ViewPayload, width: int, height: int,
