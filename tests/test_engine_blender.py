@@ -187,6 +187,32 @@ def test_exr_header_and_transparent_film(scene, tmp_path) -> None:
     np.testing.assert_allclose(rgba[..., 3], out.combined[..., 3], atol=1e-3)
 
 
+def test_lens_shift_renders_the_cameras_window(scene, tmp_path) -> None:
+    """The camera's projection (calc_matrix_camera) gives the fov the store is looked up with; a lens
+    shift moves the frame over the scene (the cube moves the other way in the image)."""
+    from service.store.camera import projection_window
+
+    sc = scene
+    camera_vfov = ext_module("camera_path").camera_vfov
+    proj = sc.camera.calc_matrix_camera(bpy.context.evaluated_depsgraph_get(), x=64, y=36)
+    vfov, full_w, full_h, _x0, _y0 = projection_window(proj, 64, 36)
+    assert (full_w, full_h) == (64, 36) and vfov == pytest.approx(camera_vfov(sc.camera, sc), rel=1e-5)
+    render = ext_module("engine.render")
+
+    def cube_x() -> float:
+        index = render.last_frame.output.passes["IndexOB"][..., 0]
+        return float(np.argwhere(index == 3.0)[:, 1].mean())
+
+    render_still(sc, tmp_path / "centred.png")
+    centred = cube_x()
+    sc.camera.data.shift_x = 0.125  # an eighth of the frame width (the larger side)
+    render_still(sc, tmp_path / "shifted.png")
+    out = render.last_frame.output
+    assert out.combined.shape == (36, 64, 4)
+    assert centred - cube_x() == pytest.approx(8.0, abs=1.0)
+    assert "window" in out.metadata()["render_budget.note"]
+
+
 def test_manual_settings_win_when_chosen_even_with_a_store(scene, tmp_path) -> None:
     load_store(tmp_path)
     scene.render_budget_engine.settings_source = "MANUAL"

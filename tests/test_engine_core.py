@@ -180,6 +180,21 @@ def test_the_power_pass_is_hot_where_the_work_is(scene: sim_core.Scene) -> None:
     assert power[~sky].mean() > 3 * power[sky].mean() > 0
 
 
+def test_a_window_of_a_frame_keeps_its_share(scene: sim_core.Scene) -> None:
+    """An off-centre camera renders a window of a larger centred frame: images cropped, the power its
+    share of the frame's (the Power pass over the window)."""
+    out = render_frame(scene, VIEW, FrameSettings("manual", CHEAP), profile="mobile", fps=30.0)
+    win = out.window(10, 4, 50, 40)
+    assert win.combined.shape == (40, 50, 4) and all(p.shape[:2] == (40, 50) for p in win.passes.values())
+    np.testing.assert_array_equal(win.passes["Depth"], out.passes["Depth"][4:44, 10:60])
+    assert win.passes["Power"].sum() * 1e-6 == pytest.approx(win.dynamic_power_w, rel=1e-6)
+    assert 0 < win.dynamic_power_w < out.dynamic_power_w
+    assert win.power_w - win.dynamic_power_w == pytest.approx(out.power_w - out.dynamic_power_w)
+    assert win.frame_time_s < out.frame_time_s and "window" in win.metadata()["render_budget.note"]
+    with pytest.raises(ValueError, match="outside"):
+        out.window(60, 0, 50, 10)
+
+
 def test_cancel_between_bands(scene: sim_core.Scene) -> None:
     with pytest.raises(RenderCancelled):
         render_frame(scene, VIEW, FrameSettings("manual", CHEAP), profile="mobile", fps=30.0,

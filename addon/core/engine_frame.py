@@ -19,6 +19,7 @@ power (static power is the same everywhere and left out).
 from __future__ import annotations
 
 import csv
+import dataclasses
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -105,6 +106,28 @@ class FrameOutput:
     render_s: float
     counters: dict[str, int] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
+
+    def window(self, x0: int, y0: int, width: int, height: int) -> FrameOutput:
+        """The ``width`` x ``height`` part at (``x0``, ``y0``) of this frame: how an off-centre camera
+        (lens shift) is rendered, as a window of the centred frame traced around it. Power and frame time
+        become the window's share (its Power pass; the frame time scaled by the same share of dynamic
+        energy), and a note says the frame traced was larger."""
+        full_h, full_w = self.combined.shape[:2]
+        if not (0 <= x0 and 0 <= y0 and x0 + width <= full_w and y0 + height <= full_h):
+            raise ValueError(f"window {width}x{height} at ({x0}, {y0}) is outside the "
+                             f"{full_w}x{full_h} frame")
+        rows, cols = slice(y0, y0 + height), slice(x0, x0 + width)
+        passes = {k: np.ascontiguousarray(v[rows, cols]) for k, v in self.passes.items()}
+        dynamic = float(passes["Power"].sum(dtype=np.float64)) * 1e-6
+        area = width * height / (full_w * full_h)
+        share = dynamic / self.dynamic_power_w if self.dynamic_power_w > 0 else area
+        frame_time = self.frame_time_s * share
+        note = (f"off-centre camera: a {full_w}x{full_h} centred frame was traced and its {width}x{height} "
+                f"window kept; power and frame time are the window's share")
+        return dataclasses.replace(
+            self, combined=np.ascontiguousarray(self.combined[rows, cols]), passes=passes,
+            power_w=self.power_w - self.dynamic_power_w + dynamic, dynamic_power_w=dynamic,
+            frame_time_s=frame_time, deadline_met=frame_time <= 1.0 / self.fps, notes=(*self.notes, note))
 
     def metadata(self) -> dict[str, str]:
         """Image metadata (stamp fields, written into the EXR header / PNG text by Blender)."""

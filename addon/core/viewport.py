@@ -122,10 +122,9 @@ class ViewportRenderer:
                            profile=payload.profile, fps=payload.fps,
                            object_pass_index=payload.scene.object_pass_index or None,
                            transparent=payload.transparent, threads=self.threads, should_cancel=should_stop)
-        image = np.ascontiguousarray(out.combined[y0:y0 + height, x0:x0 + width])
+        if (full_w, full_h) != (width, height):
+            out = out.window(x0, y0, width, height)
         s = payload.settings
-        # the window's share of the frame's dynamic power (the rest of the frame is outside the view)
-        share = float(out.passes["Power"][y0:y0 + height, x0:x0 + width].sum() * 1e-6)
-        info = ViewInfo(s.text(), s.source, out.power_w - out.dynamic_power_w, share,
+        info = ViewInfo(s.text(), s.source, out.power_w - out.dynamic_power_w, out.dynamic_power_w,
                         s.predicted_power_w, s.predicted_error, (width, height))
-        return image, info
+        return out.combined, info

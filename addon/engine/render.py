@@ -29,6 +29,7 @@ from ..core.engine_frame import PASSES, AnimationLog, CameraView, FrameOutput, R
 from ..core.engine_frame import animation_csv_path as csv_path_of
 from ..core.engine_scene import SceneCache, needs_translation
 from ..core.engine_settings import Budget, FrameSettings, SettingsChooser, indices_of_values, manual_indices
+from ..core.vendored import camera as camera_maths
 from ..core.viewport import ViewportRenderer
 from ..handlers import add_handler, remove_handler
 from ..playback import scene_time, store_of
@@ -204,12 +205,12 @@ class RenderBudgetEngine(bpy.types.RenderEngine):
         if cam is None or cam.type != "CAMERA":
             raise ValueError("the scene has no active camera")
         w, h = render_resolution(scene)
-        vfov = camera_vfov(cam, scene)  # ValueError for orthographic and panoramic cameras
-        notes = []
-        if cam.data.shift_x or cam.data.shift_y:
-            notes.append("camera lens shift is not simulated (centred frame rendered)")
-        if scene.render.use_border:
-            notes.append("render region ignored (the whole frame is rendered)")
+        vfov = camera_vfov(cam, scene)  # what the store is looked up with; ValueError unless perspective
+        r = scene.render
+        projection = cam.calc_matrix_camera(depsgraph, x=w, y=h, scale_x=r.pixel_aspect_x,
+                                            scale_y=r.pixel_aspect_y)
+        trace_vfov, full_w, full_h, x0, y0 = camera_maths.projection_window(projection, w, h)
+        notes = ["render region ignored (the whole frame is rendered)"] if r.use_border else []
         self.update_stats("", f"{ENGINE_LABEL} | translating the scene")
         data, pass_index = scene_source.translate(depsgraph)
         if self.test_break():
@@ -222,11 +223,13 @@ class RenderBudgetEngine(bpy.types.RenderEngine):
         fps = scene_fps(scene)
         profile = profile_of(scene, chooser.store)
         self.update_stats("", f"{ENGINE_LABEL} | {settings.source} settings | tracing {w}x{h}")
-        out = render_frame(sim_scene, CameraView(cam.matrix_world, vfov, w, h), settings, profile=profile,
-                           fps=fps, object_pass_index=pass_index, transparent=scene.render.film_transparent,
-                           threads=_threads(scene), progress=self.update_progress,
-                           should_cancel=self.test_break)
-        out.notes = tuple(notes)
+        out = render_frame(sim_scene, CameraView(cam.matrix_world, trace_vfov, full_w, full_h), settings,
+                           profile=profile, fps=fps, object_pass_index=pass_index,
+                           transparent=r.film_transparent, threads=_threads(scene),
+                           progress=self.update_progress, should_cancel=self.test_break)
+        if (full_w, full_h) != (w, h):  # lens shift: the camera's window of a larger centred frame
+            out = out.window(x0, y0, w, h)
+        out.notes = (*out.notes, *notes)
         layer_passes = self._write_result(out, depsgraph.view_layer.name)
         if session is not None:
             session.log.add(scene.frame_current, t, out)
