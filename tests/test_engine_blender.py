@@ -125,6 +125,15 @@ def test_the_engine_registers_with_its_properties_and_borrowed_panels(ext) -> No
         enable_dev(bpy, Path())
 
 
+def test_the_compositor_offers_every_pass(scene) -> None:
+    tree = bpy.data.node_groups.new("Compositing", "CompositorNodeTree")
+    scene.compositing_node_group = tree
+    node = tree.nodes.new("CompositorNodeRLayers")
+    node.scene = scene
+    offered = [o.name for o in node.outputs if o.enabled]
+    assert offered == ["Image", "Alpha", *PASS_NAMES[1:]]
+
+
 # -- a frame with every pass --------------------------------------------------------------------------
 def test_a_frame_renders_with_every_pass_and_its_metadata(scene, tmp_path) -> None:
     from PIL import Image
