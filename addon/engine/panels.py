@@ -29,6 +29,12 @@ class _EnginePanel:
     def poll(cls, context: bpy.types.Context) -> bool:
         return context.engine in cls.COMPAT_ENGINES
 
+    def split_layout(self) -> bpy.types.UILayout:
+        """The layout with labels left of their fields, as Blender's own Render Properties."""
+        self.layout.use_property_split = True
+        self.layout.use_property_decorate = False
+        return self.layout
+
 
 class RENDER_PT_render_budget_settings(_EnginePanel, bpy.types.Panel):
     bl_label = "Settings"
@@ -50,9 +56,7 @@ class RENDER_PT_render_budget_quality(_EnginePanel, bpy.types.Panel):
     bl_parent_id = "RENDER_PT_render_budget_settings"
 
     def draw(self, context: bpy.types.Context) -> None:
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout = self.split_layout()
         eng, props = context.scene.render_budget_engine, context.scene.render_budget
         chosen_by_store = eng.settings_source == "STORE" and props.store_text is not None
         if chosen_by_store:
@@ -68,9 +72,7 @@ class RENDER_PT_render_budget_budget(_EnginePanel, bpy.types.Panel):
     bl_parent_id = "RENDER_PT_render_budget_settings"
 
     def draw(self, context: bpy.types.Context) -> None:
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout = self.split_layout()
         props = context.scene.render_budget
         layout.row().prop(props, "budget_mode", expand=True)
         layout.prop(props, "power_budget" if props.budget_mode == "POWER" else "error_budget")
@@ -87,9 +89,7 @@ class RENDER_PT_render_budget_hardware(_EnginePanel, bpy.types.Panel):
     bl_label = "Hardware"
 
     def draw(self, context: bpy.types.Context) -> None:
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
+        layout = self.split_layout()
         scene = context.scene
         props = scene.render_budget
         if len(props.profiles):
@@ -105,8 +105,7 @@ class RENDER_PT_render_budget_viewport(_EnginePanel, bpy.types.Panel):
     bl_options = {"DEFAULT_CLOSED"}  # noqa: RUF012
 
     def draw(self, context: bpy.types.Context) -> None:
-        self.layout.use_property_split = True
-        self.layout.prop(context.scene.render_budget_engine, "viewport_scale")
+        self.split_layout().prop(context.scene.render_budget_engine, "viewport_scale")
 
 
 class RENDER_PT_render_budget_film(_EnginePanel, bpy.types.Panel):
@@ -114,8 +113,7 @@ class RENDER_PT_render_budget_film(_EnginePanel, bpy.types.Panel):
     bl_options = {"DEFAULT_CLOSED"}  # noqa: RUF012
 
     def draw(self, context: bpy.types.Context) -> None:
-        self.layout.use_property_split = True
-        self.layout.prop(context.scene.render, "film_transparent", text="Transparent")
+        self.split_layout().prop(context.scene.render, "film_transparent", text="Transparent")
 
 
 class RENDER_PT_render_budget_last(_EnginePanel, bpy.types.Panel):
