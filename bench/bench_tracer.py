@@ -4,8 +4,9 @@ Scenes: the Stanford bunny (69K triangles) and a 3 x 3 grid of bunnies (625K tri
 Rays: 512 x 512 camera rays; diffuse bounce rays leave the primary hit points (offset 1e-4 of the scene
 size along the geometric normal) in cosine-distributed directions. Both tracers get the same float32
 arrays; each timing is the median of several interleaved repetitions of the process CPU time (the machine
-is shared). Ours is timed twice: walking the binary BVH (bvh2, what the T&I model prices and what
-`scene.intersect` used before) and the 4-wide BVH collapsed from it (bvh4, what `scene.intersect` uses).
+is shared). Ours is timed twice: walking the binary BVH (bvh2, the slow reference walk) and the 4-wide BVH
+collapsed from it (bvh4, what `scene.intersect`, the renderer and the T&I model walk). The rays of real
+renders (shadow, AO, reflection, refraction) are benchmarked in bench_render_rays.py.
 
     .venv/bin/python bench/bench_tracer.py [--repeats 5] [--res 512]
 """

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from sim_core import _core
 
@@ -67,3 +69,43 @@ def test_bad_geometry_is_rejected() -> None:
     for args in ((3000, 64, 4), (4096, 48, 4), (4096, 64, 3), (128, 64, 4)):
         with pytest.raises(ValueError):
             _core.CacheConfig(*args)
+
+
+def _reference_lru_misses(addresses: list[int], nbytes: int, size: int, line: int, ways: int) -> list[int]:
+    """Textbook set-associative LRU (one ordered list per set): the miss count after every access."""
+    sets: dict[int, list[int]] = {}
+    nsets = size // (line * ways)
+    misses, out = 0, []
+    for a in addresses:
+        for ln in range(a // line, (a + nbytes - 1) // line + 1):
+            s = sets.setdefault(ln % nsets, [])
+            if ln in s:
+                s.remove(ln)
+            else:
+                misses += 1
+                if len(s) == ways:
+                    s.pop(0)
+            s.append(ln)
+        out.append(misses)
+    return out
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    geometry=st.sampled_from([(256, 64, 2), (1024, 64, 4), (4096, 64, 1), (2048, 128, 4), (512, 32, 8)]),
+    lines=st.lists(st.integers(0, 63), min_size=1, max_size=300),
+    offset=st.integers(0, 127),
+    nbytes=st.sampled_from([1, 32, 48, 64, 128]),
+)
+def test_model_equals_textbook_lru(geometry: tuple[int, int, int], lines: list[int], offset: int,
+                                   nbytes: int) -> None:
+    # Repeated lines (the model's shortcut for the previous line) and straddling fetches included.
+    size, line, ways = geometry
+    addresses = [ln * 48 + offset for ln in lines]
+    c = _core.CacheModel(_core.CacheConfig(size, line, ways))
+    got = []
+    for a in addresses:
+        c.access(a, nbytes)
+        got.append(c.misses)
+    assert got == _reference_lru_misses(addresses, nbytes, size, line, ways)
+    assert c.dram_bytes == c.misses * line

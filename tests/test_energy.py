@@ -48,7 +48,7 @@ def test_load_profile_by_path_and_errors(tmp_path: Path) -> None:
     with pytest.raises(FileNotFoundError):
         load_profile("no-such-profile")
     broken = tmp_path / "broken.toml"
-    broken.write_text(src.read_text().replace("traversal_step = 24.0", "traversal_step = -1.0"))
+    broken.write_text(src.read_text().replace("traversal_step = 100.0", "traversal_step = -1.0"))
     with pytest.raises(ValueError, match="traversal_step"):
         load_profile(broken)
     missing = tmp_path / "missing.toml"
@@ -96,6 +96,19 @@ def test_each_counter_moves_only_its_block() -> None:
         r = price({**COUNTERS, counter: 1000}, "mobile", 30.0)
         changed = {b for b in BLOCKS if r.energy_j[b] != base.energy_j[b]}
         assert changed == {block}, (counter, changed)
+
+
+@pytest.mark.parametrize("profile", ["mobile", "desktop"])
+def test_a_node_visit_is_one_wide_node_step(profile: str) -> None:
+    """bvh_node_visits counts 4-wide node steps: priced per step, timed as four box tests each."""
+    from sim_core import _core
+
+    assert _core.BVH_NODE_BOXES == 4 and _core.BVH_NODE_BYTES == 128 and _core.TRIANGLE_RECORD_BYTES == 48
+    p = load_profile(profile)
+    r = price({"bvh_node_visits": 1000}, p, 30.0)
+    assert r.energy_j["traversal"] == pytest.approx(1000 * p.energy_pj["traversal_step"] * 1e-12, rel=1e-12)
+    steps_per_cycle = p.throughput["ti_box_tests_per_cycle"] / 4
+    assert r.cycles["traversal"] == pytest.approx(1000 / steps_per_cycle, rel=1e-12)
 
 
 def test_dynamic_energy_is_linear_in_activity() -> None:

@@ -1,6 +1,7 @@
 #include "sim_core/render.h"
 
 #include <algorithm>
+#include <stdexcept>
 
 #include "sim_core/adaptive_sampling.h"
 
@@ -39,14 +40,17 @@ TileStat TileGrid::tile(std::size_t t) const {
 }
 
 void render_tiles(const Scene& scene, const Camera& camera, const RenderSettings& settings, const CacheConfig& cache,
-                  const TileGrid& grid, int threads, RenderOutput* out, const TileRenderer& render) {
+                  const TileGrid& grid, int threads, const TraceOptions& trace, RenderOutput* out,
+                  const TileRenderer& render) {
+  trace.validate();
   const std::size_t ntiles = static_cast<std::size_t>(grid.count());
   out->tiles.resize(ntiles);
   std::vector<Counters> tile_counters(ntiles);
   std::vector<ComparatorHistogram> tile_hist(ntiles);
+  std::vector<std::vector<TracedRay>> tile_rays(trace.log_rays ? ntiles : 0);
   parallel_chunks(ntiles, threads, 1, [&](std::size_t begin, std::size_t end) {
     for (std::size_t t = begin; t < end; ++t) {
-      TileContext ctx(scene, settings, camera, cache);
+      TileContext ctx(scene, settings, camera, cache, trace);
       TileStat& stat = out->tiles[t];
       stat = grid.tile(t);
       render(ctx, stat, t);
@@ -60,16 +64,18 @@ void render_tiles(const Scene& scene, const Camera& camera, const RenderSettings
       stat.cache_misses = ctx.counters.cache_misses;
       tile_counters[t] = ctx.counters;
       tile_hist[t] = ctx.histogram;
+      if (trace.log_rays) tile_rays[t] = std::move(ctx.ray_log);
     }
   });
   for (std::size_t t = 0; t < ntiles; ++t) {
+    if (trace.log_rays) out->rays.insert(out->rays.end(), tile_rays[t].begin(), tile_rays[t].end());
     out->counters += tile_counters[t];
     for (std::size_t i = 0; i < out->histogram.size(); ++i) out->histogram[i] += tile_hist[t][i];
   }
 }
 
 RenderOutput render_frame(const Scene& scene, const Camera& camera, const RenderSettings& settings, int threads,
-                          const MultirateState* previous, const CacheConfig& cache) {
+                          const MultirateState* previous, const CacheConfig& cache, const TraceOptions& trace) {
   settings.validate();
   camera.validate();
   cache.validate();
@@ -79,7 +85,7 @@ RenderOutput render_frame(const Scene& scene, const Camera& camera, const Render
   const bool use_prev = settings.multirate && settings.adaptive() && previous &&
                         previous->matches(grid.tiles_x, grid.tiles_y, grid.tile_size, camera.width, camera.height);
   const int k = settings.subgrid();
-  render_tiles(scene, camera, settings, cache, grid, threads, &out, [&](TileContext& ctx, TileStat& stat, std::size_t t) {
+  render_tiles(scene, camera, settings, cache, grid, threads, trace, &out, [&](TileContext& ctx, TileStat& stat, std::size_t t) {
     int spacing = 1;
     if (settings.adaptive()) {
       spacing = settings.block;

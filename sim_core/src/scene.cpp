@@ -130,15 +130,29 @@ Vec3 Scene::geometric_normal(std::uint32_t i) const {
   return Vec3(static_cast<float>(n[0] / len), static_cast<float>(n[1] / len), static_cast<float>(n[2] / len));
 }
 
-void Scene::intersect_many(const float* origins, const float* directions, std::size_t n, float* t_out,
-                           std::int64_t* prim_out, int threads, int bvh_width) const {
+namespace {
+
+// Ray i of a batch; false when it cannot be traced (non-finite, zero direction, NaN or negative tmax).
+bool batch_ray(const float* origins, const float* directions, const float* tmax, std::size_t i, Ray* r) {
+  r->origin = Vec3(origins[3 * i], origins[3 * i + 1], origins[3 * i + 2]);
+  r->dir = Vec3(directions[3 * i], directions[3 * i + 1], directions[3 * i + 2]);
+  r->tmax = tmax ? tmax[i] : kInf;
+  return is_finite(r->origin) && is_finite(r->dir) && dot(r->dir, r->dir) != 0.f && r->tmax >= 0.f;
+}
+
+void check_width(int bvh_width) {
   if (bvh_width != 2 && bvh_width != 4) throw std::invalid_argument("bvh_width must be 2 or 4");
+}
+
+}  // namespace
+
+void Scene::intersect_many(const float* origins, const float* directions, std::size_t n, float* t_out,
+                           std::int64_t* prim_out, int threads, int bvh_width, const float* tmax) const {
+  check_width(bvh_width);
   parallel_chunks(n, threads, 4096, [&](std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i) {
       Ray r;
-      r.origin = Vec3(origins[3 * i], origins[3 * i + 1], origins[3 * i + 2]);
-      r.dir = Vec3(directions[3 * i], directions[3 * i + 1], directions[3 * i + 2]);
-      if (!is_finite(r.origin) || !is_finite(r.dir) || dot(r.dir, r.dir) == 0.f) {
+      if (!batch_ray(origins, directions, tmax, i, &r)) {
         t_out[i] = kInf;
         prim_out[i] = -1;
         continue;
@@ -146,6 +160,19 @@ void Scene::intersect_many(const float* origins, const float* directions, std::s
       const Hit h = bvh_width == 4 ? closest(r) : closest_binary(r);
       t_out[i] = h.t;
       prim_out[i] = h.hit() ? static_cast<std::int64_t>(tris_[h.tri].prim) : -1;
+    }
+  });
+}
+
+void Scene::occluded_many(const float* origins, const float* directions, const float* tmax, std::size_t n,
+                          std::uint8_t* occluded_out, int threads, int bvh_width) const {
+  check_width(bvh_width);
+  parallel_chunks(n, threads, 4096, [&](std::size_t begin, std::size_t end) {
+    NullRecorder rec;
+    for (std::size_t i = begin; i < end; ++i) {
+      Ray r;
+      occluded_out[i] = batch_ray(origins, directions, tmax, i, &r) &&
+                        (bvh_width == 4 ? occluded(r, rec) : occluded_binary(r, rec));
     }
   });
 }

@@ -2,19 +2,21 @@
 
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
 
 #include "sim_core/low_discrepancy.h"
 
 namespace sim_core {
 namespace {
 
-// Observes the traversal for the energy model: node and triangle fetches go through the tile's cache,
-// closest-hit comparisons into the comparator histogram.
+// Observes the traversal for the energy model: node and triangle fetches go through the tile's cache (a
+// node record i of `bytes` bytes sits at kNodeBaseAddress + i * bytes), closest-hit comparisons into the
+// comparator histogram.
 struct TileRecorder {
   TileContext& ctx;
-  void node(std::uint32_t i) {
+  void node(std::uint32_t i, std::uint32_t bytes) {
     ++ctx.counters.bvh_node_visits;
-    ctx.cache.access(kNodeBaseAddress + static_cast<std::uint64_t>(i) * sizeof(BvhNode), sizeof(BvhNode));
+    ctx.cache.access(kNodeBaseAddress + static_cast<std::uint64_t>(i) * bytes, bytes);
   }
   void tri(std::uint32_t i) {
     ++ctx.counters.triangle_tests;
@@ -142,6 +144,24 @@ class Shader {
   TileContext& ctx_;
   TileRecorder rec_;
 
+  // The tile's tree walk (the 4-wide BVH, or the binary reference walk when the context asks for it):
+  // closest hit, and any hit for shadow and ambient-occlusion rays.
+  Hit closest(const Ray& ray, RayKind kind) {
+    if (ctx_.trace.log_rays) ctx_.ray_log.push_back({ray, traced_kind(kind)});
+    return ctx_.trace.bvh_width == 2 ? ctx_.scene.closest_binary(ray, rec_) : ctx_.scene.closest(ray, rec_);
+  }
+  bool occluded(const Ray& ray, TracedKind kind) {
+    if (ctx_.trace.log_rays) ctx_.ray_log.push_back({ray, kind});
+    return ctx_.trace.bvh_width == 2 ? ctx_.scene.occluded_binary(ray, rec_) : ctx_.scene.occluded(ray, rec_);
+  }
+  static TracedKind traced_kind(RayKind kind) {
+    switch (kind) {
+      case RayKind::kReflection: return TracedKind::kReflection;
+      case RayKind::kGlossy: return TracedKind::kGlossy;
+      case RayKind::kRefraction: return TracedKind::kRefraction;
+      default: return TracedKind::kPrimary;
+    }
+  }
   void count_ray(RayKind kind);
   // Environment phase: what a ray that leaves the scene sees (cone-filtered for glossy rays when asked).
   Vec3 environment(const Ray& ray, RayKind kind, float cone);
@@ -178,7 +198,7 @@ void Shader::count_ray(RayKind kind) {
 Vec3 Shader::trace(const Ray& ray, RayKind kind, Branch branch, float cone, HitInfo* info,
                    SampleGeometry* geom) {
   count_ray(kind);
-  const Hit hit = ctx_.scene.closest(ray, rec_);
+  const Hit hit = closest(ray, kind);
   if (!hit.hit()) {
     if (info) info->object = -1;
     return environment(ray, kind, cone);
@@ -309,7 +329,7 @@ float Shader::light_visibility(const Light& L, std::size_t index, const SurfaceP
     }
     ++ctx_.counters.rays_shadow;
     ++ctx_.counters.rays_total;
-    if (ctx_.scene.occluded(sr, rec_)) ++blocked;
+    if (occluded(sr, TracedKind::kShadow)) ++blocked;
   }
   if (blocked > 0 && index < 32) *shadow_bits |= 1u << index;
   return 1.f - static_cast<float>(blocked) / static_cast<float>(ns);
@@ -336,7 +356,7 @@ float Shader::ambient_visibility(const SurfacePoint& s, std::uint32_t random_key
     ar.tmax = ctx_.ao_distance;
     ++ctx_.counters.rays_ao;
     ++ctx_.counters.rays_total;
-    if (!ctx_.scene.occluded(ar, rec_)) ++open;
+    if (!occluded(ar, TracedKind::kAo)) ++open;
   }
   return static_cast<float>(open) / static_cast<float>(samples);
 }
@@ -416,8 +436,14 @@ void Shader::add_refraction(const SurfacePoint& s, const SurfaceBrdf& brdf, cons
 
 }  // namespace
 
-TileContext::TileContext(const Scene& s, const RenderSettings& st, const Camera& c, const CacheConfig& cc)
-    : scene(s), settings(st), camera(c), cache(cc) {
+void TraceOptions::validate() const {
+  if (bvh_width != 2 && bvh_width != 4) throw std::invalid_argument("bvh_width must be 2 or 4");
+}
+
+TileContext::TileContext(const Scene& s, const RenderSettings& st, const Camera& c, const CacheConfig& cc,
+                         const TraceOptions& options)
+    : scene(s), settings(st), camera(c), cache(cc), trace(options) {
+  trace.validate();
   cos_threshold = st.normal_threshold_deg < 0.f ? 2.f : std::cos(st.normal_threshold_deg * kPi / 180.f);
   ao_distance = st.ao_distance > 0.f ? st.ao_distance : 0.1f * s.diagonal();
 }

@@ -263,12 +263,12 @@ void trace_pixel(TileContext& ctx, int xx, int yy, int k, TileStat* stat, FrameB
 
 StereoOutput render_stereo(const Scene& scene, const Camera& left, const Camera& right,
                            const RenderSettings& settings, int threads, const MultirateState* previous,
-                           const CacheConfig& cache) {
+                           const CacheConfig& cache, const TraceOptions& trace) {
   right.validate();
   if (left.width != right.width || left.height != right.height)
     throw std::invalid_argument("stereo eyes must have the same resolution");
   StereoOutput out;
-  out.left = render_frame(scene, left, settings, threads, previous, cache);
+  out.left = render_frame(scene, left, settings, threads, previous, cache, trace);
   const FrameBuffers& L = out.left.fb;
   const int W = L.width, H = L.height;
   const std::size_t n = static_cast<std::size_t>(W) * H;
@@ -283,7 +283,7 @@ StereoOutput render_stereo(const Scene& scene, const Camera& left, const Camera&
   // 4. Right eye, tile by tile: reuse valid pixels, trace bad ones (every sub-pixel of the grid).
   R.fb.allocate(W, H);
   const int k = settings.subgrid();
-  render_tiles(scene, right, settings, cache, TileGrid(W, H, settings.tile_size), threads, &R,
+  render_tiles(scene, right, settings, cache, TileGrid(W, H, settings.tile_size), threads, trace, &R,
                [&](TileContext& ctx, TileStat& stat, std::size_t) {
                  ctx.counters.gbuffer_prefetch_bytes +=
                      stereo_prefetch_texels(left, right, stat.x0, stat.y0, stat.width, stat.height, landed.any_hit(),

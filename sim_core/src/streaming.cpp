@@ -7,13 +7,14 @@
 namespace sim_core {
 namespace {
 
+// Per-ray traversal as the tracer does it (4-wide nodes: four box tests per node fetch).
 struct CountingRecorder {
   TraversalTraffic* t;
   CacheModel* cache;
-  void node(std::uint32_t i) {
+  void node(std::uint32_t i, std::uint32_t bytes) {
     ++t->node_fetches;
-    ++t->box_tests;
-    if (cache) cache->access(kNodeBaseAddress + std::uint64_t{i} * sizeof(BvhNode), sizeof(BvhNode));
+    t->box_tests += kBoxesPerNodeStep;
+    if (cache) cache->access(kNodeBaseAddress + std::uint64_t{i} * bytes, bytes);
   }
   void tri(std::uint32_t i) {
     ++t->triangle_fetches;
@@ -32,8 +33,10 @@ struct Elem {
   float entry;
 };
 
+// A node of the 4-wide tree and the rays that entered it: an interior node (count 0, `child` = node index)
+// or a leaf (`count` triangles in blocks from `child` on).
 struct Work {
-  std::uint32_t node;
+  std::uint32_t child, count;
   std::vector<Elem> stream;
 };
 
@@ -44,20 +47,22 @@ void check_rays(const Ray* rays, std::size_t n, const Hit* hits) {
 
 // Node and triangle bytes of the fetches counted so far.
 void count_fetch_bytes(TraversalTraffic* t) {
-  t->node_bytes = t->node_fetches * sizeof(BvhNode);
+  t->node_bytes = t->node_fetches * sizeof(Bvh4Node);
   t->triangle_bytes = t->triangle_fetches * sizeof(TriRecord);
 }
 
-// One stream of rays pushed through the BVH node by node (streaming.h): a depth-first stack of
+// One stream of rays pushed through the 4-wide BVH node by node (streaming.h): a depth-first stack of
 // (node, ray stream) work items, compacted at every pop.
 class StreamTraversal {
  public:
   StreamTraversal(const Scene& scene, const Ray* rays, std::size_t n, Hit* hits, TraversalTraffic* t)
-      : scene_(scene), nodes_(scene.bvh().nodes), rays_(rays), hits_(hits), t_(*t) {
+      : scene_(scene), bvh_(scene.bvh4()), rays_(rays), hits_(hits), t_(*t) {
     prepared_.reserve(n);
+    prepared4_.reserve(n);
     best_.resize(n);
     for (std::size_t i = 0; i < n; ++i) {
       prepared_.emplace_back(rays[i]);
+      prepared4_.emplace_back(prepared_.back(), rays[i].tmin);
       best_[i] = rays[i].tmax;
       hits[i] = Hit{};
     }
@@ -69,40 +74,31 @@ class StreamTraversal {
       Work w = std::move(stack_.back());
       stack_.pop_back();
       if (!compact(&w)) continue;
-      const BvhNode& node = nodes_[w.node];
-      if (node.count == 0) {
-        split_interior(node, w);
+      if (w.count == 0) {
+        split_interior(w);
       } else {
-        intersect_leaf(node, w);
+        intersect_leaf(w);
       }
     }
   }
 
  private:
   const Scene& scene_;
-  const std::vector<BvhNode>& nodes_;
+  const Bvh4& bvh_;
   const Ray* rays_;
   Hit* hits_;
   TraversalTraffic& t_;
   std::vector<PreparedRay> prepared_;
+  std::vector<PreparedRay4> prepared4_;
   std::vector<float> best_;  // closest hit so far per ray (its tmax at the start)
   std::vector<Work> stack_;
-  std::vector<Elem> out0_, out1_;
+  std::vector<Elem> out_[4];
 
-  // Entry distance of ray `ray` into node `node` within its current interval (inf: missed).
-  float entry(std::uint32_t node, std::uint32_t ray) const {
-    return box_entry(nodes_[node], prepared_[ray], rays_[ray].tmin, best_[ray]);
-  }
-
-  // Root: fetched once, every ray tested against its box.
+  // The root is visited by every ray (as the per-ray walk does): its stream holds them all.
   void push_root() {
-    Work root{0, {}};
-    ++t_.node_fetches;
-    for (std::uint32_t i = 0; i < prepared_.size(); ++i) {
-      ++t_.box_tests;
-      const float e = entry(0, i);
-      if (e != kInf) root.stream.push_back({i, e});
-    }
+    Work root{0, 0, {}};
+    root.stream.reserve(prepared_.size());
+    for (std::uint32_t i = 0; i < prepared_.size(); ++i) root.stream.push_back({i, -kInf});
     t_.stream_elements_written += root.stream.size();
     if (!root.stream.empty()) stack_.push_back(std::move(root));
   }
@@ -111,7 +107,7 @@ class StreamTraversal {
   bool compact(Work* w) {
     std::size_t kept = 0;
     for (const Elem& e : w->stream) {
-      if (e.entry < best_[e.ray]) w->stream[kept++] = e;
+      if (e.entry <= best_[e.ray] * kSlabRobust) w->stream[kept++] = e;  // ClosestHitQuery::skip's test
     }
     t_.culled_at_pop += w->stream.size() - kept;
     t_.stream_elements_read += w->stream.size();  // the compaction pass reads every element once
@@ -119,50 +115,60 @@ class StreamTraversal {
     return !w->stream.empty();
   }
 
-  // Interior: one fetch of the sibling pair for the whole stream; two conditional output streams, pushed
-  // depth first with the nearer child (by mean entry distance) on top so its hits cull the farther stream.
-  void split_interior(const BvhNode& node, const Work& w) {
-    const std::uint32_t c = node.first;
-    t_.node_fetches += 2;
+  // Interior: one fetch of the node (its four child boxes) for the whole stream; one conditional output
+  // stream per child, pushed depth first nearest (by mean entry distance) on top so its hits cull the
+  // farther streams. The order is the per-ray walk's (same sort), so a one-ray stream visits what the ray
+  // would.
+  void split_interior(const Work& w) {
+    const Bvh4Node& node = bvh_.nodes[w.child];
+    ++t_.node_fetches;
     ++t_.interior_streams;
     t_.interior_stream_rays += w.stream.size();
-    out0_.clear();
-    out1_.clear();
-    double sum0 = 0.0, sum1 = 0.0;
+    double sum[4] = {0.0, 0.0, 0.0, 0.0};
+    for (auto& o : out_) o.clear();
     for (const Elem& e : w.stream) {
-      t_.box_tests += 2;
-      const float t0 = entry(c, e.ray);
-      const float t1 = entry(c + 1, e.ray);
-      if (t0 != kInf) { out0_.push_back({e.ray, t0}); sum0 += t0; }
-      if (t1 != kInf) { out1_.push_back({e.ray, t1}); sum1 += t1; }
+      t_.box_tests += kBoxesPerNodeStep;
+      alignas(16) float tn[4];
+      const int mask = box_entry4(node, prepared_[e.ray], prepared4_[e.ray], rays_[e.ray].tmin, best_[e.ray], tn);
+      for (int c = 0; c < 4; ++c) {
+        if (!(mask & (1 << c))) continue;
+        out_[c].push_back({e.ray, tn[c]});
+        sum[c] += tn[c];
+      }
     }
-    t_.stream_elements_written += out0_.size() + out1_.size();
-    const bool first0 = !out0_.empty() && (out1_.empty() || sum0 / out0_.size() <= sum1 / out1_.size());
-    if (first0) {
-      if (!out1_.empty()) stack_.push_back({c + 1, out1_});
-      stack_.push_back({c, out0_});
-    } else {
-      if (!out0_.empty()) stack_.push_back({c, out0_});
-      if (!out1_.empty()) stack_.push_back({c + 1, out1_});
+    struct Child { int index; double mean; };
+    Child order[4];
+    int nh = 0;
+    for (int c = 0; c < 4; ++c) {
+      if (out_[c].empty()) continue;
+      t_.stream_elements_written += out_[c].size();
+      const Child ch{c, sum[c] / static_cast<double>(out_[c].size())};
+      int j = nh++;
+      while (j > 0 && order[j - 1].mean < ch.mean) { order[j] = order[j - 1]; --j; }  // descending
+      order[j] = ch;
+    }
+    for (int k = 0; k < nh; ++k) {
+      const int c = order[k].index;
+      stack_.push_back({node.child[c], node.count[c], out_[c]});
     }
   }
 
   // Leaf: its triangles fetched once, each tested against every ray of the stream.
-  void intersect_leaf(const BvhNode& node, const Work& w) {
+  void intersect_leaf(const Work& w) {
     ++t_.leaf_streams;
     t_.leaf_stream_rays += w.stream.size();
-    const std::uint32_t end = node.first + node.count;
-    t_.triangle_fetches += node.count;
-    for (std::uint32_t k = node.first; k < end; ++k) {
+    const std::uint32_t first = bvh_.blocks[w.child].first, end = first + w.count;
+    t_.triangle_fetches += w.count;
+    for (std::uint32_t k = first; k < end; ++k) {
       const TriRecord& tri = scene_.tri(k);
       for (const Elem& e : w.stream) {
         ++t_.triangle_tests;
         float tt, b0, b1, b2;
         bool compared = false;
-        if (intersect_triangle(tri, prepared_[e.ray], rays_[e.ray].tmin, best_[e.ray], &tt, &b0, &b1, &b2,
-                               &compared)) {
+        Hit& h = hits_[e.ray];
+        if (intersect_triangle(tri, prepared_[e.ray], rays_[e.ray].tmin, closest_limit(best_[e.ray], h.tri, k), &tt,
+                               &b0, &b1, &b2, &compared)) {
           best_[e.ray] = tt;
-          Hit& h = hits_[e.ray];
           h.t = tt; h.tri = k; h.b0 = b0; h.b1 = b1; h.b2 = b2;
         }
       }
@@ -200,7 +206,7 @@ TraversalTraffic streaming_traversal(const Scene& scene, const Ray* rays, std::s
   TraversalTraffic t;
   t.rays = n;
   StreamTraversal traversal(scene, rays, n, hits, &t);
-  if (n == 0 || scene.bvh().nodes.empty()) return t;
+  if (n == 0 || scene.bvh4().nodes.empty()) return t;
   traversal.run();
   count_fetch_bytes(&t);
   t.scene_dram_bytes = t.node_bytes + t.triangle_bytes;

@@ -1,6 +1,7 @@
-// Bounding volume hierarchy over triangles: binned SAH build, compact 32-byte nodes, sibling pairs stored
-// next to each other so one 64-byte line fetch brings both children of a node (what the T&I unit's node
-// cache sees). Triangles are stored in traversal (leaf) order as 48-byte records.
+// Bounding volume hierarchy over triangles: binned SAH build of a binary tree (compact 32-byte nodes, sibling
+// pairs stored next to each other so one 64-byte line fetch brings both children of a node), collapsed into
+// the 4-wide tree the renderer walks (Bvh4). Triangles are stored in traversal (leaf) order as 48-byte
+// records, the unit the T&I model fetches and tests.
 #pragma once
 #include <cstdint>
 #include <vector>
@@ -46,18 +47,23 @@ struct Bvh {
   int leaf_count = 0;
 };
 
-// 4-wide node for the host-side closest-hit queries (Scene::intersect_many), 128 bytes (two 64-byte lines):
-// child boxes in SoA order so one SSE slab test covers all four. Collapsed from the binary SAH tree, so it
-// has the same leaves (the same triangle ranges) and the same boxes; only the interior levels are merged.
+// 4-wide node, 128 bytes (two 64-byte lines): what the renderer (and with it the energy model's T&I unit)
+// and the host-side queries walk. Child boxes in SoA order so one SSE slab test covers all four. Collapsed
+// from the binary SAH tree, so its boxes are the binary tree's and its leaves the binary leaves, except that
+// a subtree of at most four triangles becomes one leaf (one SIMD block); only the interior levels are merged.
 // count[i] == 0: child i is interior node child[i] (or an empty slot, whose box is inverted so every ray
 // misses it); count[i] > 0: child i is a leaf of count[i] triangles stored from block child[i] on.
-// The energy model's T&I unit still walks the binary tree (32-byte nodes, counters and cache addresses).
+// One visit of a node tests its four child boxes (empty slots included) in one step; the cache model sees
+// it as a 128-byte fetch at kNodeBaseAddress + index * 128.
 struct alignas(64) Bvh4Node {
   float box[6][4];  // lo.x, hi.x, lo.y, hi.y, lo.z, hi.z, each for children 0..3
   std::uint32_t child[4];
   std::uint32_t count[4];
 };
 static_assert(sizeof(Bvh4Node) == 128, "BVH4 nodes must be 128 bytes");
+// Ray-box tests of one visit (step) of a 4-wide node: its four child slots, empty ones included, as the
+// modelled T&I unit tests them.
+inline constexpr std::uint32_t kBoxesPerNodeStep = 4;
 
 // Up to four triangles of one leaf in SoA order (v[vertex][axis][lane]) for a 4-wide triangle test.
 struct alignas(16) TriBlock4 {

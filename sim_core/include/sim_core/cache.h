@@ -28,19 +28,47 @@ struct CacheStats {
 class CacheModel {
  public:
   explicit CacheModel(const CacheConfig& config);
-  // Touches every line that [address, address + bytes) spans.
-  void access(std::uint64_t address, std::uint32_t bytes);
+  // Touches every line that [address, address + bytes) spans. Inline: the tracer calls it for every node
+  // and triangle fetch.
+  void access(std::uint64_t address, std::uint32_t bytes) {
+    if (bytes == 0) return;
+    if (!config_.enabled()) {
+      // No cache: every fetch is a DRAM read of whole 32-byte bursts.
+      stats_.accesses += 1;
+      stats_.misses += 1;
+      stats_.dram_bytes += (bytes + 31u) / 32u * 32u;
+      return;
+    }
+    const std::uint64_t first = address >> line_shift_;
+    const std::uint64_t last = (address + bytes - 1) >> line_shift_;
+    for (std::uint64_t line = first; line <= last; ++line) access_line(line);
+  }
   const CacheStats& stats() const { return stats_; }
   void reset();
 
  private:
   CacheConfig config_;
-  std::uint32_t sets_ = 0;
+  std::uint64_t set_mask_ = 0;  // sets - 1 (the set count is a power of two)
   std::uint32_t line_shift_ = 0;
-  std::uint64_t clock_ = 0;
-  std::vector<std::uint64_t> tags_;      // sets_ * ways, ~0 = invalid
-  std::vector<std::uint64_t> last_use_;  // LRU timestamps
+  // Each set's resident lines, most recently used first (~0 = empty way, always at the end): a hit moves
+  // its line to the front, a miss drops the last one (true LRU without timestamps).
+  std::vector<std::uint64_t> lines_;  // sets * ways
   CacheStats stats_;
+
+  void access_line(std::uint64_t line) {
+    ++stats_.accesses;
+    std::uint64_t* set = &lines_[static_cast<std::size_t>(line & set_mask_) * config_.ways];
+    if (set[0] == line) return;  // already the most recently used line of its set
+    std::uint32_t w = 1;
+    while (w < config_.ways && set[w] != line) ++w;
+    if (w == config_.ways) {  // miss: the least recently used (or an empty) way goes
+      ++stats_.misses;
+      stats_.dram_bytes += config_.line_bytes;
+      w = config_.ways - 1;
+    }
+    for (; w > 0; --w) set[w] = set[w - 1];
+    set[0] = line;
+  }
 };
 
 }  // namespace sim_core

@@ -1,16 +1,19 @@
 // Ray traversal of the BVH and the watertight ray-triangle test (Woop, Benthin, Wald 2013, "Watertight
 // Ray/Triangle Intersection"). Header-only so the traversal loops inline. One traversal core per tree
-// (traverse_bvh: binary, traverse_bvh4: 4-wide) serves every query; a query (ClosestHitQuery, AnyHitQuery)
-// decides what a leaf's triangles do and when the walk may stop. A Recorder policy observes every node
-// fetch, triangle fetch and closest-hit comparison of the binary walk (NullRecorder for plain queries,
-// the tile recorder with cache model and counters inside the renderer).
+// (traverse_bvh4: the 4-wide tree the renderer and the host-side queries walk; traverse_bvh: the binary
+// tree, kept as the slow reference) serves every query; a query (ClosestHitQuery, AnyHitQuery) decides what
+// a leaf's triangles do and when the walk may stop. A Recorder policy observes every node fetch, triangle
+// fetch and closest-hit comparison of either walk (NullRecorder for plain queries, the tile recorder with
+// cache model and counters inside the renderer).
 //
-// The scalar triangle test (intersect_triangle) and its 4-lane SIMD twin (intersect_block4) are kept as a
+// The scalar triangle test (intersect_triangle) and its 4-lane SIMD twin (test_block4) are kept as a
 // slow-reference / fast-path pair: the same operations in the same order, bit-identical per lane.
 #pragma once
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
+#include <type_traits>
 #include <utility>
 
 #if defined(__SSE2__) && !defined(SIM_CORE_NO_SSE)
@@ -41,11 +44,17 @@ struct Hit {
   bool hit() const { return tri != ~0u; }
 };
 
+// What a traversal reports to its recorder: node(i, bytes) = fetch of node record i, `bytes` long (32: a
+// binary node, one box; 128: a 4-wide node, four child boxes tested in one step); tri(i) = fetch and test of
+// the 48-byte triangle record i; compare(t, best) = one closest-hit distance comparison (candidate t against
+// the current best). NullRecorder observes nothing (plain queries).
 struct NullRecorder {
-  void node(std::uint32_t) {}
+  void node(std::uint32_t, std::uint32_t) {}
   void tri(std::uint32_t) {}
   void compare(float, float) {}
 };
+template <class Recorder>
+inline constexpr bool kRecords = !std::is_same_v<Recorder, NullRecorder>;
 
 // Per-ray constants of the traversal and of the watertight test.
 struct PreparedRay {
@@ -82,6 +91,23 @@ struct PreparedRay {
     sy = dir[ky] * sz;
   }
 };
+
+// The next float above a finite x >= 0.
+inline float next_up(float x) {
+  std::uint32_t bits;
+  std::memcpy(&bits, &x, sizeof bits);
+  ++bits;
+  std::memcpy(&x, &bits, sizeof bits);
+  return x;
+}
+
+// The closest-hit order is (t, triangle index), lexicographic: coplanar overlapping triangles are hit at
+// exactly the same t, and the lower index wins whichever order a walk (binary, 4-wide, streaming) meets
+// them in. Returns the far end of the open interval triangle i must fall in to become the closest hit
+// when (best, best_tri) is the closest so far (best_tri ~0u: none yet, best = the ray's tmax).
+inline float closest_limit(float best, std::uint32_t best_tri, std::uint32_t i) {
+  return best_tri != ~0u && i < best_tri ? next_up(best) : best;
+}
 
 // Robust slab test (Ize 2013 / pbrt: far distance scaled by 1 + 2*gamma(3) so rounding never culls a box
 // the exact ray hits) of the box whose planes nearer / farther along the ray are `near` / `far` (per axis).
@@ -195,13 +221,18 @@ inline bool intersect_triangle(const TriRecord& tri, const PreparedRay& r, float
   return true;
 }
 
-// Up to four triangles of a block at once: the same operations, in the same order, as
-// intersect_triangle, so every lane's edge functions and t are bit-identical to the scalar test. A lane
-// with an edge function exactly 0 goes through the scalar test (its double-precision edge decision).
-// Updates best/hit with the nearest accepted lane (ties: lowest index, as a sequential loop would).
-inline void intersect_block4(const TriBlock4& b, const TriRecord* tris, const PreparedRay& r, float tmin,
-                             float* best, Hit* hit) {
 #if SIM_CORE_SSE
+// The watertight test of up to four triangles of a block at once, before any decision: the same operations,
+// in the same order, as intersect_triangle, so every lane's edge functions, t and barycentrics are
+// bit-identical to the scalar test's. `crossed`: lanes whose ray crosses the triangle's plane inside its
+// edges (the scalar test's `compared`); `inside`: those with tmin < t < far; `edge0`: lanes with an edge
+// function exactly 0, which the scalar test decides in double precision (in neither mask).
+struct Block4Test {
+  int crossed, inside, edge0;
+  __m128 t, u, v, w, rcp;
+};
+
+inline Block4Test test_block4(const TriBlock4& b, const PreparedRay& r, float tmin, float far) {
   const int kx = r.kx, ky = r.ky, kz = r.kz;
   const __m128 okx = _mm_set1_ps(r.org[kx]), oky = _mm_set1_ps(r.org[ky]), okz = _mm_set1_ps(r.org[kz]);
   const __m128 sx = _mm_set1_ps(r.sx), sy = _mm_set1_ps(r.sy), sz = _mm_set1_ps(r.sz);
@@ -214,53 +245,30 @@ inline void intersect_block4(const TriBlock4& b, const TriRecord* tris, const Pr
   const __m128 by = _mm_sub_ps(_mm_sub_ps(_mm_load_ps(b.v[1][ky]), oky), _mm_mul_ps(sy, bz));
   const __m128 cx = _mm_sub_ps(_mm_sub_ps(_mm_load_ps(b.v[2][kx]), okx), _mm_mul_ps(sx, cz));
   const __m128 cy = _mm_sub_ps(_mm_sub_ps(_mm_load_ps(b.v[2][ky]), oky), _mm_mul_ps(sy, cz));
-  const __m128 u = _mm_sub_ps(_mm_mul_ps(cx, by), _mm_mul_ps(cy, bx));
-  const __m128 v = _mm_sub_ps(_mm_mul_ps(ax, cy), _mm_mul_ps(ay, cx));
-  const __m128 w = _mm_sub_ps(_mm_mul_ps(bx, ay), _mm_mul_ps(by, ax));
+  Block4Test out;
+  out.u = _mm_sub_ps(_mm_mul_ps(cx, by), _mm_mul_ps(cy, bx));
+  out.v = _mm_sub_ps(_mm_mul_ps(ax, cy), _mm_mul_ps(ay, cx));
+  out.w = _mm_sub_ps(_mm_mul_ps(bx, ay), _mm_mul_ps(by, ax));
   const __m128 zero = _mm_setzero_ps();
   const int valid = (1 << b.count) - 1;
-  const int edge0 = _mm_movemask_ps(_mm_or_ps(_mm_or_ps(_mm_cmpeq_ps(u, zero), _mm_cmpeq_ps(v, zero)),
-                                              _mm_cmpeq_ps(w, zero))) & valid;
-  const __m128 anyneg = _mm_or_ps(_mm_or_ps(_mm_cmplt_ps(u, zero), _mm_cmplt_ps(v, zero)), _mm_cmplt_ps(w, zero));
-  const __m128 anypos = _mm_or_ps(_mm_or_ps(_mm_cmpgt_ps(u, zero), _mm_cmpgt_ps(v, zero)), _mm_cmpgt_ps(w, zero));
-  const __m128 det = _mm_add_ps(_mm_add_ps(u, v), w);
-  const __m128 ts = _mm_add_ps(_mm_add_ps(_mm_mul_ps(u, _mm_mul_ps(sz, az)), _mm_mul_ps(v, _mm_mul_ps(sz, bz))),
-                               _mm_mul_ps(w, _mm_mul_ps(sz, cz)));
-  const __m128 rcp = _mm_div_ps(_mm_set1_ps(1.f), det);
-  const __m128 t = _mm_mul_ps(ts, rcp);
-  const __m128 ok = _mm_and_ps(_mm_andnot_ps(_mm_and_ps(anyneg, anypos), _mm_cmpneq_ps(det, zero)),
-                               _mm_and_ps(_mm_cmpgt_ps(t, _mm_set1_ps(tmin)), _mm_cmplt_ps(t, _mm_set1_ps(*best))));
-  int mask = _mm_movemask_ps(ok) & valid & ~edge0;
-  if (mask == 0 && edge0 == 0) return;
-  alignas(16) float tl[4], ul[4], vl[4], wl[4], rl[4];
-  _mm_store_ps(tl, t);
-  for (int l = 0; l < 4; ++l) {
-    const std::uint32_t i = b.first + static_cast<std::uint32_t>(l);
-    if (edge0 & (1 << l)) {
-      float tt = 0.f, b0 = 0.f, b1 = 0.f, b2 = 0.f;
-      bool compared = false;
-      if (intersect_triangle(tris[i], r, tmin, *best, &tt, &b0, &b1, &b2, &compared)) {
-        *best = tt;
-        hit->t = tt; hit->tri = i; hit->b0 = b0; hit->b1 = b1; hit->b2 = b2;
-      }
-    } else if ((mask & (1 << l)) && tl[l] < *best) {
-      _mm_store_ps(ul, u); _mm_store_ps(vl, v); _mm_store_ps(wl, w); _mm_store_ps(rl, rcp);
-      *best = tl[l];
-      hit->t = tl[l]; hit->tri = i; hit->b0 = ul[l] * rl[l]; hit->b1 = vl[l] * rl[l]; hit->b2 = wl[l] * rl[l];
-    }
-  }
-#else
-  for (std::uint32_t l = 0; l < b.count; ++l) {
-    const std::uint32_t i = b.first + l;
-    float tt = 0.f, b0 = 0.f, b1 = 0.f, b2 = 0.f;
-    bool compared = false;
-    if (intersect_triangle(tris[i], r, tmin, *best, &tt, &b0, &b1, &b2, &compared)) {
-      *best = tt;
-      hit->t = tt; hit->tri = i; hit->b0 = b0; hit->b1 = b1; hit->b2 = b2;
-    }
-  }
-#endif
+  out.edge0 = _mm_movemask_ps(_mm_or_ps(_mm_or_ps(_mm_cmpeq_ps(out.u, zero), _mm_cmpeq_ps(out.v, zero)),
+                                        _mm_cmpeq_ps(out.w, zero))) & valid;
+  const __m128 anyneg = _mm_or_ps(_mm_or_ps(_mm_cmplt_ps(out.u, zero), _mm_cmplt_ps(out.v, zero)),
+                                  _mm_cmplt_ps(out.w, zero));
+  const __m128 anypos = _mm_or_ps(_mm_or_ps(_mm_cmpgt_ps(out.u, zero), _mm_cmpgt_ps(out.v, zero)),
+                                  _mm_cmpgt_ps(out.w, zero));
+  const __m128 det = _mm_add_ps(_mm_add_ps(out.u, out.v), out.w);
+  const __m128 ts = _mm_add_ps(_mm_add_ps(_mm_mul_ps(out.u, _mm_mul_ps(sz, az)), _mm_mul_ps(out.v, _mm_mul_ps(sz, bz))),
+                               _mm_mul_ps(out.w, _mm_mul_ps(sz, cz)));
+  out.rcp = _mm_div_ps(_mm_set1_ps(1.f), det);
+  out.t = _mm_mul_ps(ts, out.rcp);
+  const __m128 crossed = _mm_andnot_ps(_mm_and_ps(anyneg, anypos), _mm_cmpneq_ps(det, zero));
+  const __m128 in_range = _mm_and_ps(_mm_cmpgt_ps(out.t, _mm_set1_ps(tmin)), _mm_cmplt_ps(out.t, _mm_set1_ps(far)));
+  out.crossed = _mm_movemask_ps(crossed) & valid & ~out.edge0;
+  out.inside = _mm_movemask_ps(_mm_and_ps(crossed, in_range)) & valid & ~out.edge0;
+  return out;
 }
+#endif
 
 // Traversal queries: what the triangles of a leaf do to a query, how far along the ray boxes still
 // matter, and which popped subtrees may be skipped. The traversal loops below (traverse_bvh over the binary
@@ -268,7 +276,9 @@ inline void intersect_block4(const TriBlock4& b, const TriRecord* tris, const Pr
 //
 // ClosestHitQuery keeps the nearest accepted triangle, shrinks the search interval to it, reports every
 // distance comparison to the recorder (the comparator model) and skips popped subtrees that start behind
-// the closest hit. AnyHitQuery (shadow and ambient-occlusion rays) keeps the ray's interval, never skips
+// the closest hit (with the slab test's robust margin: a box whose rounded entry lies a few ulps past the
+// closest hit may still hold a nearer triangle, e.g. one lying in the box's face, so both trees find the
+// same nearest t). AnyHitQuery (shadow and ambient-occlusion rays) keeps the ray's interval, never skips
 // a popped subtree and stops at the first accepted triangle; it makes no closest-hit comparisons.
 struct ClosestHitQuery {
   Hit hit;
@@ -276,13 +286,13 @@ struct ClosestHitQuery {
 
   explicit ClosestHitQuery(const Ray& ray) : best(ray.tmax) {}
   float far() const { return best; }
-  bool skip(float entry) const { return !(entry < best); }
+  bool skip(float entry) const { return !(entry <= best * kSlabRobust); }
   // Tests triangle i; true would stop the traversal (a closest-hit query never stops early).
   template <class Recorder>
   bool triangle(const TriRecord& tri, std::uint32_t i, const PreparedRay& r, float tmin, Recorder& rec) {
     float t = 0.f, b0 = 0.f, b1 = 0.f, b2 = 0.f;
     bool compared = false;
-    const bool h = intersect_triangle(tri, r, tmin, best, &t, &b0, &b1, &b2, &compared);
+    const bool h = intersect_triangle(tri, r, tmin, closest_limit(best, hit.tri, i), &t, &b0, &b1, &b2, &compared);
     if (compared) rec.compare(t, best);
     if (h) {
       best = t;
@@ -290,15 +300,43 @@ struct ClosestHitQuery {
     }
     return false;
   }
-  // Up to four triangles of a BVH4 leaf at once (the 4-wide tree has no recorder).
-  bool block4(const TriBlock4& b, const TriRecord* tris, const PreparedRay& r, float tmin) {
-    intersect_block4(b, tris, r, tmin, &best, &hit);
+  // Up to four triangles of a 4-wide leaf at once: the same fetches, comparisons (with the same operands,
+  // lane by lane) and result as triangle() on each lane in order.
+  template <class Recorder>
+  bool block4(const TriBlock4& b, const TriRecord* tris, const PreparedRay& r, float tmin, Recorder& rec) {
+    if constexpr (kRecords<Recorder>)
+      for (std::uint32_t l = 0; l < b.count; ++l) rec.tri(b.first + l);
+#if SIM_CORE_SSE
+    // Lanes at exactly `best` may still win a tie (closest_limit): test up to the next float.
+    const Block4Test k = test_block4(b, r, tmin, hit.hit() ? next_up(best) : best);
+    // Without a recorder only accepted lanes matter; with one, every comparison is reported.
+    const int decide = (kRecords<Recorder> ? k.crossed : k.inside) | k.edge0;
+    if (decide == 0) return false;
+    alignas(16) float tl[4];
+    _mm_store_ps(tl, k.t);
+    for (std::uint32_t l = 0; l < b.count; ++l) {
+      const int bit = 1 << l;
+      const std::uint32_t i = b.first + l;
+      if (k.edge0 & bit) {
+        triangle(tris[i], i, r, tmin, rec);
+      } else if (k.crossed & bit) {
+        rec.compare(tl[l], best);
+        if (tl[l] > tmin && tl[l] < closest_limit(best, hit.tri, i)) {
+          alignas(16) float ul[4], vl[4], wl[4], rl[4];
+          _mm_store_ps(ul, k.u); _mm_store_ps(vl, k.v); _mm_store_ps(wl, k.w); _mm_store_ps(rl, k.rcp);
+          best = tl[l];
+          hit.t = tl[l]; hit.tri = i; hit.b0 = ul[l] * rl[l]; hit.b1 = vl[l] * rl[l]; hit.b2 = wl[l] * rl[l];
+        }
+      }
+    }
+#else
+    for (std::uint32_t l = 0; l < b.count; ++l) triangle(tris[b.first + l], b.first + l, r, tmin, rec);
+#endif
     return false;
   }
 };
 
-// Shadow and ambient-occlusion rays. It has a binary-tree leaf test only: without a 4-wide one (block4),
-// traverse_bvh4 does not compile with this query until one is written.
+// Shadow and ambient-occlusion rays.
 struct AnyHitQuery {
   bool occluded = false;
   float tmax;
@@ -313,10 +351,38 @@ struct AnyHitQuery {
     if (intersect_triangle(tri, r, tmin, tmax, &t, &b0, &b1, &b2, &compared)) occluded = true;
     return occluded;
   }
+  // Up to four triangles of a 4-wide leaf: tests (and fetches) lanes in order up to the first accepted one,
+  // as triangle() on each lane would.
+  template <class Recorder>
+  bool block4(const TriBlock4& b, const TriRecord* tris, const PreparedRay& r, float tmin, Recorder& rec) {
+#if SIM_CORE_SSE
+    const Block4Test k = test_block4(b, r, tmin, tmax);
+    if ((k.inside | k.edge0) == 0) {
+      if constexpr (kRecords<Recorder>)
+        for (std::uint32_t l = 0; l < b.count; ++l) rec.tri(b.first + l);
+      return false;
+    }
+    for (std::uint32_t l = 0; l < b.count; ++l) {
+      const int bit = 1 << l;
+      const std::uint32_t i = b.first + l;
+      rec.tri(i);
+      if (k.inside & bit) return occluded = true;
+      if ((k.edge0 & bit) && triangle(tris[i], i, r, tmin, rec)) return true;
+    }
+    return false;
+#else
+    for (std::uint32_t l = 0; l < b.count; ++l) {
+      rec.tri(b.first + l);
+      if (triangle(tris[b.first + l], b.first + l, r, tmin, rec)) return true;
+    }
+    return false;
+#endif
+  }
 };
 
-// Depth-first walk of the binary BVH, nearer child first, for any query. The recorder sees every node
-// fetch (both children of each interior node entered) and every triangle fetch.
+// Depth-first walk of the binary BVH, nearer child first, for any query: the slow reference of
+// traverse_bvh4. The recorder sees every 32-byte node fetch (the root, then both children of each interior
+// node entered) and every triangle fetch.
 template <class Query, class Recorder>
 inline void traverse_bvh(const BvhNode* nodes, const TriRecord* tris, const Ray& ray, Query& query,
                          Recorder& rec) {
@@ -324,15 +390,15 @@ inline void traverse_bvh(const BvhNode* nodes, const TriRecord* tris, const Ray&
   struct Entry { std::uint32_t node; float t; };
   Entry stack[64];
   int sp = 0;
-  rec.node(0);
+  rec.node(0, sizeof(BvhNode));
   if (box_entry(nodes[0], r, ray.tmin, query.far()) == kInf) return;
   std::uint32_t cur = 0;
   for (;;) {
     const BvhNode& n = nodes[cur];
     if (n.count == 0) {
       const std::uint32_t c = n.first;
-      rec.node(c);
-      rec.node(c + 1);
+      rec.node(c, sizeof(BvhNode));
+      rec.node(c + 1, sizeof(BvhNode));
       float t0, t1;
       prefetch_node(nodes[c], nodes, tris);
       prefetch_node(nodes[c + 1], nodes, tris);
@@ -360,7 +426,7 @@ inline void traverse_bvh(const BvhNode* nodes, const TriRecord* tris, const Ray&
   }
 }
 
-// Closest hit along r within (r.tmin, r.tmax).
+// Closest hit along r within (r.tmin, r.tmax), binary walk.
 template <class Recorder>
 inline Hit intersect_closest(const BvhNode* nodes, const TriRecord* tris, const Ray& ray, Recorder& rec) {
   ClosestHitQuery query(ray);
@@ -368,7 +434,7 @@ inline Hit intersect_closest(const BvhNode* nodes, const TriRecord* tris, const 
   return query.hit;
 }
 
-// Any hit within (r.tmin, r.tmax): shadow and ambient-occlusion rays.
+// Any hit within (r.tmin, r.tmax), binary walk.
 template <class Recorder>
 inline bool intersect_any(const BvhNode* nodes, const TriRecord* tris, const Ray& ray, Recorder& rec) {
   AnyHitQuery query(ray);
@@ -439,11 +505,12 @@ inline void prefetch_bvh4_child(const Bvh4Node* nodes, const TriBlock4* blocks, 
 #endif
 }
 
-// Depth-first walk of the 4-wide BVH, hit children nearest first, for any query with a block4 leaf test
-// (no recorder: the host-side query path).
-template <class Query>
+// Depth-first walk of the 4-wide BVH, hit children nearest first, for any query. The recorder sees one
+// 128-byte node fetch per interior node visited (its four child boxes are tested in that step; a child
+// pushed and then skipped at pop is never fetched) and every triangle a leaf's blocks test.
+template <class Query, class Recorder>
 inline void traverse_bvh4(const Bvh4Node* nodes, const TriBlock4* blocks, const TriRecord* tris,
-                          const Ray& ray, Query& query) {
+                          const Ray& ray, Query& query, Recorder& rec) {
   const PreparedRay r(ray);
   const PreparedRay4 r4(r, ray.tmin);
   struct Entry { std::uint32_t child, count; float t; };
@@ -453,6 +520,7 @@ inline void traverse_bvh4(const Bvh4Node* nodes, const TriBlock4* blocks, const 
   for (;;) {
     if (cur_count == 0) {
       const Bvh4Node& n = nodes[cur];
+      rec.node(cur, sizeof(Bvh4Node));
       alignas(16) float tn[4];
       const int mask = box_entry4(n, r, r4, ray.tmin, query.far(), tn);
       if (mask != 0) {
@@ -475,7 +543,7 @@ inline void traverse_bvh4(const Bvh4Node* nodes, const TriBlock4* blocks, const 
     } else {
       const std::uint32_t nb = (cur_count + 3) / 4;
       for (std::uint32_t k = 0; k < nb; ++k)
-        if (query.block4(blocks[cur + k], tris, r, ray.tmin)) return;
+        if (query.block4(blocks[cur + k], tris, r, ray.tmin, rec)) return;
     }
     for (;;) {
       if (sp == 0) return;
@@ -485,14 +553,26 @@ inline void traverse_bvh4(const Bvh4Node* nodes, const TriBlock4* blocks, const 
   }
 }
 
-// Closest hit along r within (r.tmin, r.tmax) over the 4-wide BVH. Same boxes, leaves and triangle test
-// as intersect_closest, so hit/miss and t agree with it exactly; only which of two triangles at exactly
-// the same t wins may differ (ties are broken by visiting order).
+// Closest hit along r within (r.tmin, r.tmax) over the 4-wide BVH. Same boxes and triangle test as
+// intersect_closest (its leaves group the same triangles, small subtrees merged) and the same (t, index)
+// order, so hit/miss, t and triangle agree with it; they can differ only where two different triangles lie
+// at the same exact distance but their rounded t differ (coplanar duplicates seen from a ray starting on
+// them), and a walk that culls the box of the one with the smaller rounded t never tests it.
+template <class Recorder>
 inline Hit intersect_closest4(const Bvh4Node* nodes, const TriBlock4* blocks, const TriRecord* tris,
-                              const Ray& ray) {
+                              const Ray& ray, Recorder& rec) {
   ClosestHitQuery query(ray);
-  traverse_bvh4(nodes, blocks, tris, ray, query);
+  traverse_bvh4(nodes, blocks, tris, ray, query, rec);
   return query.hit;
+}
+
+// Any hit within (r.tmin, r.tmax) over the 4-wide BVH: the same answer as intersect_any.
+template <class Recorder>
+inline bool intersect_any4(const Bvh4Node* nodes, const TriBlock4* blocks, const TriRecord* tris, const Ray& ray,
+                           Recorder& rec) {
+  AnyHitQuery query(ray);
+  traverse_bvh4(nodes, blocks, tris, ray, query, rec);
+  return query.occluded;
 }
 
 }  // namespace sim_core

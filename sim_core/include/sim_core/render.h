@@ -70,18 +70,22 @@ struct RenderOutput {
   std::vector<TileStat> tiles;
   ComparatorHistogram histogram{};
   MultirateState multirate;
+  std::vector<TracedRay> rays;  // with TraceOptions::log_rays: every traced ray, tile by tile in tile order
 };
 
-// Renders every tile of `grid` on `threads` threads. Each tile gets its own TileContext (cold cache) and its
+// Renders every tile of `grid` on `threads` threads. Each tile gets its own TileContext (cold cache, rays
+// traced as `trace` says) and its
 // TileStat with the rect set; render(ctx, stat, t) traces the tile and writes its pixels. The driver then
 // folds the tile's pixels, frame-buffer flush and cache statistics into its counters and adds every tile's
 // counters and comparator histogram to `out` in tile order (the same totals for any thread count).
 using TileRenderer = std::function<void(TileContext& ctx, TileStat& stat, std::size_t tile)>;
 void render_tiles(const Scene& scene, const Camera& camera, const RenderSettings& settings, const CacheConfig& cache,
-                  const TileGrid& grid, int threads, RenderOutput* out, const TileRenderer& render);
+                  const TileGrid& grid, int threads, const TraceOptions& trace, RenderOutput* out,
+                  const TileRenderer& render);
 
 // Renders `camera` (already at render resolution) with `settings`. `previous` may be null.
 RenderOutput render_frame(const Scene& scene, const Camera& camera, const RenderSettings& settings, int threads,
-                          const MultirateState* previous, const CacheConfig& cache);
+                          const MultirateState* previous, const CacheConfig& cache,
+                          const TraceOptions& trace = {});
 
 }  // namespace sim_core

@@ -56,21 +56,39 @@ class Scene {
         const std::uint32_t* material_ids, const std::uint32_t* object_ids, const float* materials,
         std::size_t material_count, const float* lights, std::size_t light_count, Environment env);
 
-  // Unrecorded closest hit (host-side queries): the 4-wide BVH. Same hit/miss and t as the binary walk.
-  Hit closest(const Ray& r) const { return intersect_closest4(bvh4_.nodes.data(), bvh4_.blocks.data(), tris_.data(), r); }
-  Hit closest_binary(const Ray& r) const {
+  // Closest hit and any hit (shadow and ambient-occlusion rays) over the 4-wide BVH: what the renderer and
+  // the host-side queries walk. The recorder sees 128-byte node fetches and 48-byte triangle fetches.
+  Hit closest(const Ray& r) const {
     NullRecorder rec;
-    return intersect_closest(bvh_.nodes.data(), tris_.data(), r, rec);
+    return closest(r, rec);
   }
   template <class Rec>
-  Hit closest(const Ray& r, Rec& rec) const { return intersect_closest(bvh_.nodes.data(), tris_.data(), r, rec); }
+  Hit closest(const Ray& r, Rec& rec) const {
+    return intersect_closest4(bvh4_.nodes.data(), bvh4_.blocks.data(), tris_.data(), r, rec);
+  }
   template <class Rec>
-  bool occluded(const Ray& r, Rec& rec) const { return intersect_any(bvh_.nodes.data(), tris_.data(), r, rec); }
+  bool occluded(const Ray& r, Rec& rec) const {
+    return intersect_any4(bvh4_.nodes.data(), bvh4_.blocks.data(), tris_.data(), r, rec);
+  }
+  // The binary walk: the slow reference the wide walk is checked against (same hit/miss, t and
+  // occlusion); its recorder sees 32-byte node fetches.
+  Hit closest_binary(const Ray& r) const {
+    NullRecorder rec;
+    return closest_binary(r, rec);
+  }
+  template <class Rec>
+  Hit closest_binary(const Ray& r, Rec& rec) const { return intersect_closest(bvh_.nodes.data(), tris_.data(), r, rec); }
+  template <class Rec>
+  bool occluded_binary(const Ray& r, Rec& rec) const { return intersect_any(bvh_.nodes.data(), tris_.data(), r, rec); }
 
-  // N rays (origins, directions: N*3 floats) -> t (inf on miss), original prim id (-1 on miss);
-  // multithreaded over chunks of rays. bvh_width 4 (default) walks the BVH4, 2 the binary BVH (benchmarks).
+  // N rays (origins, directions: N*3 floats; tmax: N floats or null for +inf) -> t (inf on miss), original
+  // prim id (-1 on miss); multithreaded over chunks of rays. bvh_width 4 (default) walks the BVH4, 2 the
+  // binary BVH (the reference; benchmarks).
   void intersect_many(const float* origins, const float* directions, std::size_t n, float* t_out,
-                      std::int64_t* prim_out, int threads, int bvh_width = 4) const;
+                      std::int64_t* prim_out, int threads, int bvh_width = 4, const float* tmax = nullptr) const;
+  // Any-hit queries of N rays within (0, tmax[i]) (null tmax: +inf): occluded_out[i] = 1 when something is hit.
+  void occluded_many(const float* origins, const float* directions, const float* tmax, std::size_t n,
+                     std::uint8_t* occluded_out, int threads, int bvh_width = 4) const;
 
   const TriRecord& tri(std::uint32_t i) const { return tris_[i]; }
   const TriShading& shading(std::uint32_t i) const { return shading_[i]; }

@@ -5,6 +5,7 @@
 // closest-hit comparison and environment lookup is counted into the tile's context.
 #pragma once
 #include <cstdint>
+#include <vector>
 
 #include "sim_core/cache.h"
 #include "sim_core/camera.h"
@@ -33,7 +34,26 @@ struct SampleResult {
   SampleGeometry geom;
 };
 
-// Per-tile state of the T&I unit model: counters, node/triangle cache, comparator histogram.
+// Kinds of traced rays, as a ray log records them (the order of the rays_* counters).
+enum class TracedKind : std::uint8_t { kPrimary, kShadow, kReflection, kRefraction, kAo, kGlossy };
+
+// One ray as a tile traced it: shadow and ambient-occlusion rays are any-hit queries, the others closest-hit.
+struct TracedRay {
+  Ray ray;
+  TracedKind kind;
+};
+
+// How tiles trace their rays; the defaults are what the energy model prices.
+struct TraceOptions {
+  // 4: the 4-wide BVH; 2: the binary walk, the slow reference that gives the same images (its counters
+  // count 32-byte binary nodes).
+  int bvh_width = 4;
+  bool log_rays = false;  // keep every traced ray (benchmarks replay a render's rays through other tracers)
+  void validate() const;  // throws std::invalid_argument
+};
+
+// Per-tile state of the T&I unit model: counters, node/triangle cache, comparator histogram, and how the
+// tile's rays are traced.
 struct TileContext {
   const Scene& scene;
   const RenderSettings& settings;
@@ -41,10 +61,13 @@ struct TileContext {
   CacheModel cache;
   Counters counters;
   ComparatorHistogram histogram{};
+  TraceOptions trace;
+  std::vector<TracedRay> ray_log;  // with trace.log_rays: every ray, in tracing order
   float cos_threshold;  // cos(normal_threshold); > 1 when nothing may pass
   float ao_distance;
 
-  TileContext(const Scene& s, const RenderSettings& st, const Camera& c, const CacheConfig& cc);
+  TileContext(const Scene& s, const RenderSettings& st, const Camera& c, const CacheConfig& cc,
+              const TraceOptions& trace = {});
   void finish();  // folds cache statistics into the counters
 };
 

@@ -27,6 +27,6 @@ std::uint64_t stereo_prefetch_texels(const Camera& left, const Camera& right, in
 
 StereoOutput render_stereo(const Scene& scene, const Camera& left, const Camera& right,
                            const RenderSettings& settings, int threads, const MultirateState* previous,
-                           const CacheConfig& cache);
+                           const CacheConfig& cache, const TraceOptions& trace = {});
 
 }  // namespace sim_core

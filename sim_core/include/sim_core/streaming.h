@@ -1,14 +1,15 @@
 // Streaming ray traversal (thesis ch. 3) against per-ray traversal: memory traffic per frame.
 //
-// Per-ray traversal is what the tracer does: each ray walks the BVH on its own, fetching every node pair
-// and triangle it visits. Streaming traversal pushes a whole stream of rays through the BVH node by node:
-// a work stack holds (node, ray stream) pairs; an interior node's child pair is fetched ONCE for the whole
-// stream, every ray is tested against both child boxes, and the rays that enter a child are compacted into
-// that child's conditional output stream (no masks, thesis sec. 3.1.2); a leaf's triangles are fetched once
-// and tested against every ray of its stream. Before a stream is processed, rays whose entry distance is
-// no longer in front of their closest hit are dropped (compaction again). The thesis uses a kd-tree with
-// kd-restart; over our BVH a depth-first stack of streams plays the restart stream's role (no ray re-enters
-// the root). Both modes use the same box and watertight triangle tests, so they find the same closest hits.
+// Per-ray traversal is what the tracer does: each ray walks the 4-wide BVH on its own, fetching every node
+// (128 bytes, four child boxes) and triangle it visits. Streaming traversal pushes a whole stream of rays
+// through the same tree node by node: a work stack holds (node, ray stream) pairs; an interior node is
+// fetched ONCE for the whole stream, every ray is tested against its four child boxes, and the rays that
+// enter a child are compacted into that child's conditional output stream (no masks, thesis sec. 3.1.2); a
+// leaf's triangles are fetched once and tested against every ray of its stream. Before a stream is
+// processed, rays whose entry distance is no longer in front of their closest hit are dropped (compaction
+// again). The thesis uses a kd-tree with kd-restart; over our BVH a depth-first stack of streams plays the
+// restart stream's role (no ray re-enters the root). Both modes use the same box and watertight triangle
+// tests, so they find the same closest hits.
 #pragma once
 #include <cstdint>
 #include <vector>
@@ -22,12 +23,12 @@ namespace sim_core {
 
 struct TraversalTraffic {
   std::uint64_t rays = 0;
-  std::uint64_t node_fetches = 0;      // BVH nodes read (32 B each)
+  std::uint64_t node_fetches = 0;      // 4-wide BVH nodes read (128 B each)
   std::uint64_t triangle_fetches = 0;  // triangle records read (48 B each)
   std::uint64_t node_bytes = 0;
   std::uint64_t triangle_bytes = 0;
   std::uint64_t scene_dram_bytes = 0;  // node + triangle bytes that reach DRAM (after the cache, if any)
-  std::uint64_t box_tests = 0;         // ray-box tests
+  std::uint64_t box_tests = 0;         // ray-box tests (four per node fetch and ray)
   std::uint64_t triangle_tests = 0;    // ray-triangle tests
   // Streaming only: ray-stream traffic (each stream element is read once by the kernel that consumes it
   // and written once into each output stream it enters), and stream statistics.

@@ -332,8 +332,12 @@ def price(result: Any, profile: Profile | str | Path, fps: float, *, scene: Any 
     energy["env_filter"] = (env_ops * e["srp_op"] + env_reads * e["env_texel_read"]) * pj
     cycles["env_filter"] = env_ops / thr["srp_ops_per_cycle"]
 
+    # One node visit is one step of the 4-wide tree: four ray-box tests (and the ordering of the hit
+    # children), priced per step; the unit's box testers set the step rate.
+    from . import _core
+
     energy["traversal"] = n("bvh_node_visits") * e["traversal_step"] * pj
-    cycles["traversal"] = n("bvh_node_visits") / thr["ti_box_tests_per_cycle"]
+    cycles["traversal"] = n("bvh_node_visits") * int(_core.BVH_NODE_BOXES) / thr["ti_box_tests_per_cycle"]
     energy["intersection"] = n("triangle_tests") * e["triangle_test"] * pj
     cycles["intersection"] = n("triangle_tests") / thr["ti_triangle_tests_per_cycle"]
     comp = comparator_stats(hist, prof.comparator_energy_scale)

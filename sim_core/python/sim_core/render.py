@@ -52,6 +52,27 @@ COUNTER_NAMES: tuple[str, ...] = (
 )
 
 
+# Kinds of TracedRays.kind (the native TracedKind): shadow and ao rays are any-hit queries, the rest closest
+# hit.
+RAY_KINDS: tuple[str, ...] = ("primary", "shadow", "reflection", "refraction", "ao", "glossy")
+ANY_HIT_KINDS: tuple[str, ...] = ("shadow", "ao")
+
+
+@dataclass(frozen=True)
+class TracedRays:
+    """Every ray a render traced (``render(..., log_rays=True)``), tile by tile in tile order: what a
+    benchmark replays through another tracer. Ray i spans (0, tmax[i]) along directions[i] (not unit)."""
+
+    origins: np.ndarray  # (N, 3) float32
+    directions: np.ndarray  # (N, 3) float32
+    tmax: np.ndarray  # (N,) float32, inf for unbounded rays
+    kind: np.ndarray  # (N,) uint8 index into RAY_KINDS
+
+    def of_kind(self, name: str) -> np.ndarray:
+        """Boolean mask of the rays of one kind (a RAY_KINDS name)."""
+        return self.kind == RAY_KINDS.index(name)
+
+
 @dataclass
 class RenderResult:
     """One rendered frame.
@@ -73,6 +94,7 @@ class RenderResult:
     camera: Camera
     render_resolution: tuple[int, int]  # (width, height) actually traced
     extra: dict[str, Any] = field(default_factory=dict)
+    rays: TracedRays | None = None  # with render(..., log_rays=True)
 
     @property
     def traced_ratio(self) -> float:
@@ -146,6 +168,16 @@ def _upscale(img: np.ndarray, height: int, width: int) -> np.ndarray:
     return (top * (1 - fy) + bot * fy).astype(np.float32)
 
 
+def _trace_args(bvh_width: Any, log_rays: Any) -> dict[str, Any]:
+    if bvh_width not in (2, 4) or isinstance(bvh_width, bool):
+        raise ValueError(
+            f"bvh_width must be 4 (the 4-wide BVH) or 2 (the binary reference walk), got {bvh_width!r}"
+        )
+    if not isinstance(log_rays, bool):
+        raise ValueError(f"log_rays must be a bool, got {log_rays!r}")
+    return {"bvh_width": int(bvh_width), "log_rays": log_rays}
+
+
 def _check(scene: Scene, camera: Camera, settings: RenderSettings | None) -> RenderSettings:
     if not isinstance(scene, Scene):
         raise ValueError(f"scene must be a sim_core.Scene, got {type(scene).__name__}")
@@ -164,6 +196,7 @@ def _result(
     aovs = {k: d[k] for k in ("depth", "normal", "object_id", "sample_kind")}
     aovs["position"] = d["position"]
     counters = {k: int(v) for k, v in d["counters"].items()}
+    rays = TracedRays(**d["rays"]) if "rays" in d else None
     return RenderResult(
         image=_upscale(d["image"], camera.height, camera.width),
         aovs=aovs,
@@ -174,6 +207,7 @@ def _result(
         settings=settings,
         camera=camera,
         render_resolution=size,
+        rays=rays,
     )
 
 
@@ -184,13 +218,20 @@ def render(
     threads: int | None = None,
     previous: Any = None,
     cache: Any = None,
+    *,
+    bvh_width: int = 4,
+    log_rays: bool = False,
 ) -> RenderResult:
     """Render one frame; multithreaded over tiles with the GIL released.
 
     previous: the previous frame's RenderResult (or its multirate_state) for multi-rate tiles.
     cache: node/triangle cache of the T&I unit (CacheConfig, dict or (size_bytes, line_bytes, ways));
       None uses DEFAULT_CACHE; size 0 disables it (every fetch goes to DRAM).
+    bvh_width: 4 walks the 4-wide BVH (what the energy model prices); 2 the binary BVH, the slow reference
+      (the same images but where coplanar duplicates' rounded t differ; node counters in 32-byte nodes).
+    log_rays: also return every traced ray (``result.rays``), e.g. to replay them through another tracer.
     """
+    trace = _trace_args(bvh_width, log_rays)
     settings = _check(scene, camera, settings)
     w, h = _render_size(camera, settings)
     d = _core.render_frame(
@@ -203,6 +244,7 @@ def render(
         _threads(threads),
         _previous(previous),
         *_cache_args(cache),
+        **trace,
     )
     return _result(d, camera, settings, (w, h))
 
@@ -215,12 +257,17 @@ def render_stereo(
     threads: int | None = None,
     previous: Any = None,
     cache: Any = None,
+    *,
+    bvh_width: int = 4,
+    log_rays: bool = False,
 ) -> StereoResult:
     """Render a stereo pair around `camera` (eyes at -/+ eye_separation / 2 along its right axis).
 
     The left eye is rendered with `settings`; the right eye reuses reprojected left-eye shading where valid
     and traces the bad pixels (holes from disocclusion or the frame edge, depth mismatches).
+    bvh_width and log_rays as for render().
     """
+    trace = _trace_args(bvh_width, log_rays)
     settings = _check(scene, camera, settings)
     if (
         isinstance(eye_separation, bool)
@@ -242,6 +289,7 @@ def render_stereo(
         _threads(threads),
         _previous(previous),
         *_cache_args(cache),
+        **trace,
     )
     return StereoResult(
         left=_result(d["left"], left, settings, (w, h)),

@@ -318,19 +318,40 @@ class Scene:
 
     # ---- queries --------------------------------------------------------------------------------
     def intersect(
-        self, origins: Any, directions: Any, threads: int | None = None
+        self, origins: Any, directions: Any, threads: int | None = None, *, tmax: Any = None
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Closest hit of N rays: (t float32, inf on miss; prim_id int64 original triangle index, -1 on miss).
+        """Closest hit of N rays within (0, tmax): (t float32, inf on miss; prim_id int64 original triangle
+        index, -1 on miss).
 
-        t is in units of the direction's length. Multithreaded, GIL released.
+        t is in units of the direction's length; tmax (N,) defaults to +inf. Multithreaded, GIL released.
+        Walks the 4-wide BVH the renderer walks.
         """
+        o, d, tm = self._rays(origins, directions, tmax)
+        return self._native.intersect(o, d, _threads(threads), tmax=tm)
+
+    def occluded(
+        self, origins: Any, directions: Any, tmax: Any = None, threads: int | None = None
+    ) -> np.ndarray:
+        """Any-hit (shadow-ray) query of N rays: True where a triangle lies in (0, tmax) (default +inf)."""
+        o, d, tm = self._rays(origins, directions, tmax)
+        return self._native.occluded(o, d, _threads(threads), tmax=tm)
+
+    @staticmethod
+    def _rays(origins: Any, directions: Any, tmax: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         o = _as_array(origins, "origins", np.float32, 3)
         d = _as_array(directions, "directions", np.float32, 3)
         if o.shape != d.shape:
             raise ValueError(f"origins {o.shape} and directions {d.shape} must have the same shape")
         if np.any(~np.any(d != 0, axis=1)):
             raise ValueError("directions must be non-zero")
-        return self._native.intersect(o, d, _threads(threads))
+        if tmax is None:
+            return o, d, None
+        tm = np.asarray(tmax, dtype=np.float32)
+        if tm.shape != (o.shape[0],):
+            raise ValueError(f"tmax must have shape ({o.shape[0]},), got {tm.shape}")
+        if np.isnan(tm).any() or (tm < 0).any():
+            raise ValueError("tmax must be >= 0 (inf allowed)")
+        return o, d, np.ascontiguousarray(tm)
 
     @property
     def stats(self) -> dict[str, Any]:

@@ -40,7 +40,15 @@ Camera camera_from_frame(CameraFrame frame, float vfov, int width, int height) {
   return c;
 }
 
-nb::dict render_output_dict(const RenderOutput& o) {
+TraceOptions trace_options(int bvh_width, bool log_rays) {
+  TraceOptions t;
+  t.bvh_width = bvh_width;
+  t.log_rays = log_rays;
+  t.validate();
+  return t;
+}
+
+nb::dict render_output_dict(const RenderOutput& o, const TraceOptions& trace) {
   nb::dict d;
   const std::size_t h = static_cast<std::size_t>(o.fb.height), w = static_cast<std::size_t>(o.fb.width);
   d["image"] = to_numpy(o.fb.color, {h, w, 3});
@@ -73,6 +81,24 @@ nb::dict render_output_dict(const RenderOutput& o) {
   }
   d["tile_stats"] = tiles;
   d["multirate_state"] = nb::cast(o.multirate);
+  if (trace.log_rays) {
+    const std::size_t n = o.rays.size();
+    std::vector<float> origins(3 * n), directions(3 * n), tmax(n);
+    std::vector<std::uint8_t> kind(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      const Ray& r = o.rays[i].ray;
+      origins[3 * i] = r.origin.x; origins[3 * i + 1] = r.origin.y; origins[3 * i + 2] = r.origin.z;
+      directions[3 * i] = r.dir.x; directions[3 * i + 1] = r.dir.y; directions[3 * i + 2] = r.dir.z;
+      tmax[i] = r.tmax;
+      kind[i] = static_cast<std::uint8_t>(o.rays[i].kind);
+    }
+    nb::dict rays;
+    rays["origins"] = to_numpy(origins, {n, 3});
+    rays["directions"] = to_numpy(directions, {n, 3});
+    rays["tmax"] = to_numpy(tmax, {n});
+    rays["kind"] = to_numpy(kind, {n});
+    d["rays"] = rays;
+  }
   return d;
 }
 
@@ -95,19 +121,21 @@ void bind_render(nb::module_& m) {
       "render_frame",
       [](const Scene& scene, CameraFrame frame, float vfov, int width, int height, const RenderSettings& settings,
          int threads, const MultirateState* previous, std::uint32_t cache_size, std::uint32_t cache_line,
-         std::uint32_t cache_ways) {
+         std::uint32_t cache_ways, int bvh_width, bool log_rays) {
         const Camera cam = camera_from_frame(frame, vfov, width, height);
+        const TraceOptions trace = trace_options(bvh_width, log_rays);
         const CacheConfig cc{cache_size, cache_line, cache_ways};
         RenderOutput out;
         {
           nb::gil_scoped_release release;
-          out = render_frame(scene, cam, settings, threads, previous, cc);
+          out = render_frame(scene, cam, settings, threads, previous, cc, trace);
         }
-        return render_output_dict(out);
+        return render_output_dict(out, trace);
       },
       "scene"_a, "frame"_a, "vfov"_a, "width"_a, "height"_a, "settings"_a, "threads"_a, "previous"_a.none(),
-      "cache_size"_a, "cache_line"_a, "cache_ways"_a,
-      "Renders one frame. frame rows: position, right, up, forward (unit) of the camera.");
+      "cache_size"_a, "cache_line"_a, "cache_ways"_a, "bvh_width"_a = 4, "log_rays"_a = false,
+      "Renders one frame. frame rows: position, right, up, forward (unit) of the camera. bvh_width 2: the "
+      "binary reference walk; log_rays: also return every traced ray (\"rays\").");
 }
 
 }  // namespace sim_core

@@ -13,6 +13,9 @@ namespace sim_core {
 using CameraFrame = nanobind::ndarray<const float, nanobind::shape<4, 3>, nanobind::c_contig, nanobind::device::cpu>;
 
 Camera camera_from_frame(CameraFrame frame, float vfov, int width, int height);  // validated
-nanobind::dict render_output_dict(const RenderOutput& o);
+// With `trace.log_rays`, the dict also holds "rays": {origins (N, 3), directions (N, 3), tmax (N,), kind (N,)
+// uint8 TracedKind}.
+nanobind::dict render_output_dict(const RenderOutput& o, const TraceOptions& trace);
+TraceOptions trace_options(int bvh_width, bool log_rays);  // validated
 
 }  // namespace sim_core

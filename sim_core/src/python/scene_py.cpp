@@ -46,9 +46,37 @@ std::unique_ptr<Scene> make_scene(Arr2<float, 3> positions, Arr2<std::uint32_t, 
                                  std::move(env));
 }
 
+// A new 1-D numpy array of n elements owned by Python (freed with its last reference), filled through data().
+template <class T>
+class NumpyVector {
+ public:
+  explicit NumpyVector(std::size_t n)
+      : n_(n), data_(new T[n > 0 ? n : 1]), owner_(data_, [](void* p) noexcept { delete[] static_cast<T*>(p); }) {}
+  T* data() { return data_; }
+  nb::ndarray<nb::numpy, T, nb::ndim<1>> array() const { return {data_, {n_}, owner_}; }
+
+ private:
+  std::size_t n_;
+  T* data_;
+  nb::capsule owner_;
+};
+
+// Rows of a ray batch; checks that directions (and tmax, when given) match the origins.
+std::size_t batch_size(const Arr2<float, 3>& origins, const Arr2<float, 3>& directions,
+                       const std::optional<Arr1<float>>& tmax) {
+  const std::size_t n = origins.shape(0);
+  if (directions.shape(0) != n) throw std::invalid_argument("origins and directions differ in length");
+  if (tmax && tmax->shape(0) != n) throw std::invalid_argument("tmax needs one entry per ray");
+  return n;
+}
+
 }  // namespace
 
 void bind_scene(nb::module_& m) {
+  // The traffic model's record sizes (ARCHITECTURE.md, counter meanings).
+  m.attr("BVH_NODE_BYTES") = sizeof(Bvh4Node);
+  m.attr("BVH_NODE_BOXES") = kBoxesPerNodeStep;
+  m.attr("TRIANGLE_RECORD_BYTES") = sizeof(TriRecord);
   nb::class_<Scene>(m, "NativeScene",
                     "Native scene (BVH + shading data). Build it through sim_core.Scene, which validates.")
       .def_static("build", &make_scene, "positions"_a, "triangles"_a, "prim_ids"_a, "normals"_a.none(),
@@ -56,45 +84,73 @@ void bind_scene(nb::module_& m) {
                   "env_map"_a.none())
       .def(
           "intersect",
-          [](const Scene& s, Arr2<float, 3> origins, Arr2<float, 3> directions, int threads, int bvh_width) {
-            if (bvh_width != 2 && bvh_width != 4) throw std::invalid_argument("bvh_width must be 2 or 4");
-            const std::size_t n = origins.shape(0);
-            if (directions.shape(0) != n) throw std::invalid_argument("origins and directions differ in length");
-            float* t = new float[n > 0 ? n : 1];
-            std::int64_t* prim = new std::int64_t[n > 0 ? n : 1];
-            nb::capsule t_owner(t, [](void* p) noexcept { delete[] static_cast<float*>(p); });
-            nb::capsule p_owner(prim, [](void* p) noexcept { delete[] static_cast<std::int64_t*>(p); });
+          [](const Scene& s, Arr2<float, 3> origins, Arr2<float, 3> directions, int threads, int bvh_width,
+             std::optional<Arr1<float>> tmax) {
+            const std::size_t n = batch_size(origins, directions, tmax);
+            NumpyVector<float> t(n);
+            NumpyVector<std::int64_t> prim(n);
             {
               nb::gil_scoped_release release;
-              s.intersect_many(origins.data(), directions.data(), n, t, prim, threads, bvh_width);
+              s.intersect_many(origins.data(), directions.data(), n, t.data(), prim.data(), threads, bvh_width,
+                               tmax ? tmax->data() : nullptr);
             }
-            return nb::make_tuple(nb::ndarray<nb::numpy, float, nb::ndim<1>>(t, {n}, t_owner),
-                                  nb::ndarray<nb::numpy, std::int64_t, nb::ndim<1>>(prim, {n}, p_owner));
+            return nb::make_tuple(t.array(), prim.array());
           },
-          "origins"_a, "directions"_a, "threads"_a = 1, "bvh_width"_a = 4)
+          "origins"_a, "directions"_a, "threads"_a = 1, "bvh_width"_a = 4, "tmax"_a = nb::none(),
+          "Closest hits (t, original prim id) within (0, tmax) (default +inf).")
+      .def(
+          "occluded",
+          [](const Scene& s, Arr2<float, 3> origins, Arr2<float, 3> directions, int threads, int bvh_width,
+             std::optional<Arr1<float>> tmax) {
+            const std::size_t n = batch_size(origins, directions, tmax);
+            NumpyVector<bool> hit(n);
+            {
+              nb::gil_scoped_release release;
+              static_assert(sizeof(bool) == sizeof(std::uint8_t), "bool must be one byte");
+              s.occluded_many(origins.data(), directions.data(), tmax ? tmax->data() : nullptr, n,
+                              reinterpret_cast<std::uint8_t*>(hit.data()), threads, bvh_width);
+            }
+            return hit.array();
+          },
+          "origins"_a, "directions"_a, "threads"_a = 1, "bvh_width"_a = 4, "tmax"_a = nb::none(),
+          "Any-hit (occlusion) queries within (0, tmax) (default +inf): True where something is hit.")
       .def(
           "traversal_stats",
-          [](const Scene& s, Arr2<float, 3> origins, Arr2<float, 3> directions) {
+          [](const Scene& s, Arr2<float, 3> origins, Arr2<float, 3> directions, const std::string& query,
+             int bvh_width, std::optional<Arr1<float>> tmax) {
+            if (query != "closest" && query != "any") throw std::invalid_argument("query must be 'closest' or 'any'");
+            if (bvh_width != 2 && bvh_width != 4) throw std::invalid_argument("bvh_width must be 2 or 4");
+            const std::size_t n = batch_size(origins, directions, tmax);
             struct Count {
-              std::uint64_t nodes = 0, tris = 0, cmps = 0;
-              void node(std::uint32_t) { ++nodes; }
+              std::uint64_t nodes = 0, node_bytes = 0, tris = 0, cmps = 0, hits = 0;
+              void node(std::uint32_t, std::uint32_t bytes) { ++nodes; node_bytes += bytes; }
               void tri(std::uint32_t) { ++tris; }
               void compare(float, float) { ++cmps; }
             } c;
-            const std::size_t n = std::min(origins.shape(0), directions.shape(0));
             {
               nb::gil_scoped_release release;
               for (std::size_t i = 0; i < n; ++i) {
                 Ray r;
                 r.origin = Vec3(origins(i, 0), origins(i, 1), origins(i, 2));
                 r.dir = Vec3(directions(i, 0), directions(i, 1), directions(i, 2));
-                s.closest(r, c);
+                if (tmax) r.tmax = (*tmax)(i);
+                const bool any = query == "any";
+                const bool h = bvh_width == 4 ? (any ? s.occluded(r, c) : s.closest(r, c).hit())
+                                              : (any ? s.occluded_binary(r, c) : s.closest_binary(r, c).hit());
+                c.hits += h ? 1 : 0;
               }
             }
-            return nb::make_tuple(c.nodes, c.tris, c.cmps);
+            nb::dict d;
+            d["node_fetches"] = c.nodes;
+            d["node_bytes"] = c.node_bytes;
+            d["triangle_tests"] = c.tris;
+            d["comparisons"] = c.cmps;
+            d["hits"] = c.hits;
+            return d;
           },
-          "origins"_a, "directions"_a,
-          "Totals of (node fetches, triangle tests, closest-hit comparisons) for closest-hit queries.")
+          "origins"_a, "directions"_a, "query"_a = "closest", "bvh_width"_a = 4, "tmax"_a = nb::none(),
+          "What one query per ray reports to the traversal's recorder, summed: node_fetches, node_bytes, "
+          "triangle_tests, comparisons (closest-hit distance comparisons), hits.")
       .def_prop_ro("triangle_count", &Scene::triangle_count)
       .def_prop_ro("bvh_node_count", [](const Scene& s) { return s.bvh().nodes.size(); })
       .def_prop_ro("bvh_depth", [](const Scene& s) { return s.bvh().depth; })
