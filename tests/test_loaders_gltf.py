@@ -16,6 +16,8 @@ from hypothesis import strategies as st
 from sim_core.loaders import GLTF_TO_BLENDER, load_gltf
 from sim_core.loaders.gltf import LIGHT_RADIUS_EXTRAS_KEY, LUMENS_PER_WATT
 
+import sim_core
+
 # --------------------------------------------------------------------------------------------------
 # A tiny glTF writer for hand-made test files
 # --------------------------------------------------------------------------------------------------
@@ -201,6 +203,90 @@ def test_undecodable_texture(tmp_path: Path) -> None:
     b.gltf["meshes"][0]["primitives"][0]["material"] = 0
     with pytest.raises(ValueError, match="cannot be decoded"):
         load_gltf(b.glb(tmp_path / "tex.glb"))
+
+
+def _png(rgba: np.ndarray) -> bytes:
+    import io
+
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(rgba).save(buf, format="PNG")
+    return buf.getvalue()
+
+
+def _textured_triangle(b: _Builder, uv: np.ndarray, material: dict, image: np.ndarray,
+                       sampler: dict | None = None) -> None:
+    pos = b.accessor(TRI, 5126, "VEC3")
+    tex = b.accessor(uv.astype(np.float32), 5126, "VEC2")
+    b.node(mesh=b.mesh([{"attributes": {"POSITION": pos, "TEXCOORD_0": tex}, "material": 0}]))
+    b.gltf["images"] = [{"bufferView": b.view(_png(image)), "mimeType": "image/png", "name": "img"}]
+    b.gltf["textures"] = [{"source": 0, **({"sampler": 0} if sampler is not None else {})}]
+    if sampler is not None:
+        b.gltf["samplers"] = [sampler]
+    b.gltf["materials"] = [material]
+
+
+def test_base_color_texture_uvs_sampler_and_alpha(tmp_path: Path) -> None:
+    image = np.zeros((2, 4, 4), np.uint8)
+    image[..., 0] = np.arange(8).reshape(2, 4) * 30
+    image[..., 3] = 255
+    image[1, 3, 3] = 0  # one transparent texel: the texture can cut the surface out
+    uv = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])  # glTF UVs: v down from the image's top
+    b = _Builder()
+    _textured_triangle(b, uv, {"pbrMetallicRoughness": {"baseColorTexture": {"index": 0},
+                                                         "baseColorFactor": [0.5, 1.0, 1.0, 0.8]},
+                               "alphaMode": "MASK", "alphaCutoff": 0.3},
+                       image, sampler={"wrapS": 33071, "wrapT": 33648})
+    sd = load_gltf(b.glb(tmp_path / "tex.glb"))
+    (t,) = sd.textures
+    assert np.array_equal(t.image, image) and t.colorspace == "srgb"
+    assert (t.wrap_u, t.wrap_v) == ("clamp", "mirror")
+    (m,) = sd.materials
+    assert m.base_color_texture == 0 and m.base_color == (0.5, 1.0, 1.0)
+    assert (m.alpha, m.alpha_mode, m.alpha_cutoff) == (pytest.approx(0.8), "clip", pytest.approx(0.3))
+    # Blender's convention: v up, so glTF's (u, v) becomes (u, 1 - v).
+    assert np.allclose(sd.uvs, [[0.0, 1.0], [1.0, 1.0], [0.0, 0.0]])
+    scene = sim_core.Scene.from_scene_data(sd)
+    assert {"textures", "alpha_cutouts"} <= set(scene.stats["effects"])
+
+
+def test_texture_transform_and_blend_mode(tmp_path: Path) -> None:
+    image = np.full((4, 4, 3), 200, np.uint8)
+    uv = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    transform = {"offset": [0.25, 0.5], "rotation": math.pi / 2, "scale": [2.0, 3.0]}
+    b = _Builder()
+    _textured_triangle(b, uv, {"pbrMetallicRoughness": {"baseColorTexture": {
+        "index": 0, "extensions": {"KHR_texture_transform": transform}}}, "alphaMode": "BLEND"}, image)
+    sd = load_gltf(b.glb(tmp_path / "tex.glb"))
+    # KHR_texture_transform: uv' = T R S uv with R = [[cos, sin], [-sin, cos]] (the extension's matrix).
+    c, s_ = math.cos(math.pi / 2), math.sin(math.pi / 2)
+    rs = np.array([[c, s_], [-s_, c]]) @ np.diag([2.0, 3.0])
+    expected = uv @ rs.T + [0.25, 0.5]
+    assert np.allclose(sd.uvs, np.stack([expected[:, 0], 1.0 - expected[:, 1]], axis=1), atol=1e-6)
+    (m,) = sd.materials
+    assert m.alpha_mode == "hashed" and sd.textures[0].wrap_u == "repeat"
+    # An opaque texture with alpha 1 can never cut anything out: no alpha tests are modelled.
+    assert "alpha_cutouts" not in sim_core.Scene.from_scene_data(sd).stats["effects"]
+
+
+def test_untextured_scene_has_no_uvs(tmp_path: Path) -> None:
+    b = _Builder()
+    _one_triangle(b)
+    sd = load_gltf(b.glb(tmp_path / "t.glb"))
+    assert sd.uvs is None and sd.textures == []
+
+
+def test_spot_blend_comes_back_from_the_inner_cone(tmp_path: Path) -> None:
+    b = _Builder()
+    _one_triangle(b)
+    cone = {"outerConeAngle": 0.6, "innerConeAngle": 0.6 * 0.75}  # Blender: inner = outer * (1 - blend)
+    b.gltf["extensions"] = {"KHR_lights_punctual": {"lights": [{"type": "spot", "intensity": 1000.0,
+                                                                 "spot": cone}]}}
+    b.node(extensions={"KHR_lights_punctual": {"light": 0}})
+    (light,) = load_gltf(b.glb(tmp_path / "spot.glb")).lights
+    assert light.spot_angle == pytest.approx(0.6) and light.spot_blend == pytest.approx(0.25)
+    assert light.intensity == pytest.approx(1000.0 / LUMENS_PER_WATT)
 
 
 def test_environment_extras_exr(tmp_path: Path) -> None:
@@ -648,24 +734,38 @@ def test_corner_cases_match_blenders_gltf_importer(bpy_mod, tmp_path: Path) -> N
 
 
 @pytest.mark.blender
-def test_blender_base_color_texture_becomes_its_mean(bpy_mod, tmp_path: Path) -> None:
+def test_blender_base_color_texture_travels_with_its_uvs(bpy_mod, tmp_path: Path) -> None:
+    """A Blender image texture comes back as the same image (row 0 at the top, sRGB bytes) and the mesh's
+    own UVs (Blender's convention, v up), so the simulator samples what Cycles samples."""
     bpy = bpy_mod
     _reset(bpy)
     bpy.ops.mesh.primitive_cube_add()
+    cube = bpy.context.active_object
     mat = bpy.data.materials.new("Textured")
     tree = mat.node_tree
-    img = bpy.data.images.new("halves", 8, 8)  # sRGB byte image: top half red, bottom half blue
-    px = np.zeros((8, 8, 4), np.float32)
+    img = bpy.data.images.new("halves", 8, 8)  # sRGB byte image: top half red, bottom half half-blue
+    px = np.zeros((8, 8, 4), np.float32)  # Blender's rows run bottom to top
     px[..., 3] = 1.0
-    px[:4, :, 0] = 1.0
-    px[4:, :, 2] = 0.5
+    px[4:, :, 0] = 1.0
+    px[:4, :, 2] = 0.5
     img.pixels.foreach_set(px.reshape(-1))
     img.pack()
     tex = tree.nodes.new("ShaderNodeTexImage")
     tex.image = img
+    tex.extension = "EXTEND"
     tree.links.new(tex.outputs["Color"], tree.nodes["Principled BSDF"].inputs["Base Color"])
-    bpy.context.active_object.data.materials.append(mat)
+    cube.data.materials.append(mat)
     sd = load_gltf(_export(bpy, tmp_path / "tex.glb"))
     (m,) = [m for m in sd.materials if m.name == "Textured"]
-    blue = ((0.5 + 0.055) / 1.055) ** 2.4  # sRGB 0.5 in linear light
-    assert np.allclose(m.base_color, [0.5, 0.0, 0.5 * blue], atol=0.01)
+    assert m.base_color == (1.0, 1.0, 1.0) and m.base_color_texture == 0
+    (t,) = sd.textures
+    assert t.image.dtype == np.uint8 and t.image.shape[:2] == (8, 8) and t.colorspace == "srgb"
+    assert t.wrap_u == t.wrap_v == "clamp"
+    assert np.all(t.image[:4, :, :3] == [255, 0, 0]) and np.all(t.image[4:, :, :3] == [0, 0, 128])
+    # Every loaded vertex (position, UV) is one of the cube's loops in Blender (positions: Z up).
+    mesh = cube.data
+    loops = {(tuple(np.round(np.array(mesh.vertices[lp.vertex_index].co), 4)),
+              tuple(np.round(np.array(mesh.uv_layers.active.data[lp.index].uv), 4))) for lp in mesh.loops}
+    mine = {(tuple(np.round(p, 4)), tuple(np.round(uv, 4)))
+            for p, uv in zip(sd.positions, sd.uvs, strict=True)}
+    assert mine == loops

@@ -60,7 +60,8 @@ def test_bad_shapes_and_ids_raise():
         sim_core.Scene.from_arrays(POS, TRI, normals=np.ones((2, 3)))
     with pytest.raises(ValueError, match="environment"):
         sim_core.Scene.from_arrays(POS, TRI, environment=(1.0, 2.0))
-    with pytest.raises(ValueError, match="environment map must be finite"):
+    # A map's non-finite or negative texels are clamped with a warning (HDRIs hold such texels), not rejected.
+    with pytest.warns(UserWarning, match="environment map: clamped 0 value"):
         sim_core.Scene.from_arrays(POS, TRI, environment=np.full((4, 8, 3), np.nan, np.float32))
     with pytest.raises(ValueError, match="materials must be"):
         sim_core.Scene.from_arrays(POS, TRI, materials=["red"])  # type: ignore[list-item]

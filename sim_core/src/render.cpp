@@ -41,7 +41,7 @@ TileStat TileGrid::tile(std::size_t t) const {
 
 void render_tiles(const Scene& scene, const Camera& camera, const RenderSettings& settings, const CacheConfig& cache,
                   const TileGrid& grid, int threads, const TraceOptions& trace, RenderOutput* out,
-                  const TileRenderer& render) {
+                  const TileRenderer& render, const CacheConfig& texture_cache) {
   trace.validate();
   const std::size_t ntiles = static_cast<std::size_t>(grid.count());
   out->tiles.resize(ntiles);
@@ -50,7 +50,7 @@ void render_tiles(const Scene& scene, const Camera& camera, const RenderSettings
   std::vector<std::vector<TracedRay>> tile_rays(trace.log_rays ? ntiles : 0);
   parallel_chunks(ntiles, threads, 1, [&](std::size_t begin, std::size_t end) {
     for (std::size_t t = begin; t < end; ++t) {
-      TileContext ctx(scene, settings, camera, cache, trace);
+      TileContext ctx(scene, settings, camera, cache, trace, texture_cache);
       TileStat& stat = out->tiles[t];
       stat = grid.tile(t);
       render(ctx, stat, t);
@@ -75,10 +75,12 @@ void render_tiles(const Scene& scene, const Camera& camera, const RenderSettings
 }
 
 RenderOutput render_frame(const Scene& scene, const Camera& camera, const RenderSettings& settings, int threads,
-                          const MultirateState* previous, const CacheConfig& cache, const TraceOptions& trace) {
+                          const MultirateState* previous, const CacheConfig& cache, const TraceOptions& trace,
+                          const CacheConfig& texture_cache) {
   settings.validate();
   camera.validate();
   cache.validate();
+  texture_cache.validate();
   RenderOutput out;
   const TileGrid grid(camera.width, camera.height, settings.tile_size);
   out.fb.allocate(camera.width, camera.height);
@@ -92,7 +94,7 @@ RenderOutput render_frame(const Scene& scene, const Camera& camera, const Render
       if (use_prev) spacing = multirate_block(previous->block[t], previous->ratio[t], previous->checks[t], settings);
     }
     render_tile(ctx, out.fb, stat.x0, stat.y0, stat.width, stat.height, k, spacing, &stat);
-  });
+  }, texture_cache);
   const std::size_t ntiles = out.tiles.size();
   MultirateState& ms = out.multirate;
   ms.tiles_x = grid.tiles_x; ms.tiles_y = grid.tiles_y; ms.tile_size = grid.tile_size;

@@ -31,10 +31,34 @@ struct TileRecorder {
 
 enum class RayKind { kPrimary, kReflection, kGlossy, kRefraction };
 
+// Cut-out layers a ray may pass before the surface counts as opaque (a bound, so no scene can hang it).
+constexpr int kMaxCutoutLayers = 64;
+// Glossy rays a rough reflection spawns at the primary hit (one deeper down the ray tree).
+constexpr int kGlossyRays = 4;
+// An area light's specular term integrates its emitter as kAreaCells x kAreaCells cells.
+constexpr int kAreaCells = 4;
+
+// The footprint of a ray (ray cones, Ray Tracing Gems ch. 20): width at its origin and spread angle;
+// the width at distance t is width + spread * t. It picks texture mip levels.
+struct RayCone {
+  float width = 0.f;
+  float spread = 0.f;
+  float at(float t) const { return width + spread * t; }
+};
+
+// What an escaping glossy ray's environment lookup averages: a cone (the SAT filter's footprint).
+struct Lobe {
+  Vec3 axis;
+  float half_angle = 0.f;
+};
+
+// Schlick's Fresnel, its grazing value f90 = min(1, 50 f0) (Karis 2013): no reflectance at all (f0 = 0, a
+// dielectric of IOR 1, like Principled BSDF at IOR 1) stays none at grazing angles.
 Vec3 schlick(Vec3 f0, float cos_theta) {
   const float m = std::min(1.f, std::max(0.f, 1.f - cos_theta));
   const float m2 = m * m, w = m2 * m2 * m;
-  return f0 + (Vec3(1.f, 1.f, 1.f) - f0) * w;
+  const float f90 = std::min(1.f, 50.f * max_component(f0));
+  return f0 + (Vec3(f90, f90, f90) - f0) * w;
 }
 // Exact unpolarised Fresnel reflectance of a dielectric interface; eta = n_i / n_t.
 float fresnel_dielectric(float cos_i, float eta) {
@@ -45,26 +69,109 @@ float fresnel_dielectric(float cos_i, float eta) {
   const float rp = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
   return 0.5f * (rs * rs + rp * rp);
 }
-float smoothstep(float e0, float e1, float x) {
-  if (e0 == e1) return x >= e1 ? 1.f : 0.f;
-  const float t = std::min(1.f, std::max(0.f, (x - e0) / (e1 - e0)));
+
+// Share of a material's specular reflection that reflection rays trace: all of a metal's, and a
+// dielectric's fading out as its roughness reaches Material::kReflectRoughness. The rest (rough lobes)
+// reflects the environment's cosine-convolved radiance in the ambient phase.
+float reflection_gloss(const Material& mat) {
+  const float smooth = std::min(1.f, std::max(0.f, 1.f - mat.roughness / Material::kReflectRoughness));
+  return mat.metallic + (1.f - mat.metallic) * smooth;
+}
+// Normal-incidence reflectance of a dielectric of index `ior` in air: ((ior - 1) / (ior + 1))^2 (0.04 at 1.5,
+// 0 at 1: Principled BSDF's specular from its IOR at the default IOR level).
+float dielectric_f0(float ior) {
+  const float r = (ior - 1.f) / (ior + 1.f);
+  return r * r;
+}
+// GGX roughness of a material (Principled BSDF: alpha = roughness^2), floored so lobes stay finite.
+float ggx_alpha(float roughness) {
+  const float r = std::max(roughness, 0.02f);
+  return r * r;
+}
+// Half angle of the cone the SAT filter averages for a glossy reflection: 3 alpha (the median reflected
+// angle of GGX is ~2 alpha, its lobe's long tail reaches well beyond), at most the filter's widest cone.
+float glossy_cone(float roughness) {
+  return std::min(3.f * ggx_alpha(roughness), EnvironmentFilter::kMaxConeHalfAngle);
+}
+// Cycles' spot cone: smoothstep over the outer `blend` fraction of (1 - cos(half angle)); a hard edge
+// when blend is 0. `from_light` is the unit direction from the light to the point.
+float spot_attenuation(const Light& L, Vec3 from_light) {
+  const float c = dot(from_light, L.direction);
+  const float cos_half = std::cos(L.spot_angle);
+  if (!(c > cos_half)) return 0.f;
+  const float width = (1.f - cos_half) * L.spot_blend;
+  if (!(width > 0.f)) return 1.f;
+  const float t = std::min(1.f, (c - cos_half) / width);
   return t * t * (3.f - 2.f * t);
 }
 
-// Half angle of the cone a glossy reflection samples (and the SAT filter averages over).
-float glossy_cone(float roughness) {
-  return std::min(roughness, 1.f) * EnvironmentFilter::kMaxConeHalfAngle;
+// Projected solid angle of a planar polygon (vertices relative to the receiving point) above the plane
+// with unit normal n: Lambert's formula after clipping the polygon to n's hemisphere (Sutherland-Hodgman).
+// The irradiance of a uniform Lambertian emitter of radiance L is L times this.
+float projected_solid_angle(const Vec3* vertices, int count, Vec3 n) {
+  constexpr int kMax = 24;
+  Vec3 clipped[kMax];
+  int m = 0;
+  for (int i = 0; i < count && m < kMax - 1; ++i) {
+    const Vec3 a = vertices[i], b = vertices[(i + 1) % count];
+    const float da = dot(a, n), db = dot(b, n);
+    if (da > 0.f) clipped[m++] = a;
+    if ((da > 0.f) != (db > 0.f)) clipped[m++] = a + (b - a) * (da / (da - db));
+  }
+  if (m < 3) return 0.f;
+  float sum = 0.f;
+  for (int i = 0; i < m; ++i) {
+    const Vec3 a = normalize(clipped[i]), b = normalize(clipped[(i + 1) % m]);
+    const Vec3 c = cross(a, b);
+    const float len = length(c);
+    if (!(len > 0.f)) continue;
+    sum += std::atan2(len, dot(a, b)) * dot(c, n) / len;
+  }
+  return 0.5f * std::fabs(sum);
+}
+
+// Outline of an area light for the irradiance formula: its 4 corners, or an area-preserving 16-gon for
+// an ellipse (circumradius scaled by sqrt(pi / (8 sin(pi / 8))) so the polygon's area is the ellipse's).
+int area_outline(const Light& L, Vec3 origin, Vec3* out) {
+  const Vec3 c = L.position - origin;
+  const Vec3 hu = L.axis_u * (0.5f * L.size_u), hv = L.axis_v * (0.5f * L.size_v);
+  if (L.shape == AreaShape::kRectangle) {
+    out[0] = c - hu - hv; out[1] = c + hu - hv; out[2] = c + hu + hv; out[3] = c - hu + hv;
+    return 4;
+  }
+  constexpr int kSides = 16;
+  const float k = 1.0129670f;
+  for (int i = 0; i < kSides; ++i) {
+    const float phi = 2.f * kPi * static_cast<float>(i) / kSides;
+    out[i] = c + hu * (k * std::cos(phi)) + hv * (k * std::sin(phi));
+  }
+  return kSides;
+}
+
+// A point of an area light's emitting surface from a unit-square sample (uniform over the shape).
+Vec3 area_point(const Light& L, Sample2 s) {
+  float x = s.u - 0.5f, y = s.v - 0.5f;
+  if (L.shape == AreaShape::kEllipse) {
+    concentric_disk(s, &x, &y);
+    x *= 0.5f; y *= 0.5f;
+  }
+  return L.position + L.axis_u * (x * L.size_u) + L.axis_v * (y * L.size_v);
 }
 
 // Where a ray sits in its sample's ray tree: bounce depth and branch code (root 1, reflection child
 // 3p + 1, refraction child 3p + 2). Random numbers hash (sample key, branch), never the tracing order.
+// `tile` (0..3) is the sample's place in a 2x2 block of the sample grid: glossy lobes are sampled with a
+// fixed stratified pattern per place, so the 2x2 block (an FSAA pixel's sub-samples, or neighbouring
+// pixels) covers 4x the lobe directions, without noise.
 struct Branch {
   std::uint32_t key;
   std::uint32_t path;
   int depth;
+  std::uint32_t tile = 0;
   std::uint32_t random_key() const { return hash_combine(key, path); }
-  Branch reflected() const { return {key, path * 3u + 1u, depth + 1}; }
-  Branch refracted() const { return {key, path * 3u + 2u, depth + 1}; }
+  // Glossy ray i of a reflection gets its own random numbers (i << 20 stays clear of depth-4 codes).
+  Branch reflected(std::uint32_t i = 0) const { return {key, (path * 3u + 1u) + (i << 20), depth + 1, tile}; }
+  Branch refracted() const { return {key, path * 3u + 2u, depth + 1, tile}; }
 };
 
 struct HitInfo {  // what the caller (primary sample) records about a ray's first hit
@@ -75,10 +182,13 @@ struct HitInfo {  // what the caller (primary sample) records about a ray's firs
   std::uint32_t shadow_bits = 0;
 };
 
-// Geometry of a ray's hit, oriented towards the incoming ray.
+// Geometry of a ray's hit, oriented towards the incoming ray, with its textured base colour and alpha.
 struct SurfacePoint {
   const TriRecord* tri;
   const Material* mat;
+  Vec3 base_color;  // material base colour times its texture (linear)
+  float alpha;      // material alpha times the texture's alpha
+  float cone_width; // the ray footprint's width here (texture level of detail, shadow-ray alpha tests)
   Vec3 p;           // hit point
   Vec3 dir;         // unit incoming direction
   Vec3 view;        // -dir
@@ -90,38 +200,53 @@ struct SurfacePoint {
   Vec3 origin_in;   // spawn point for rays entering the surface (refraction)
 };
 
-// The material's scattering terms at a hit: Lambert diffuse plus normalised Blinn-Phong specular with
-// Schlick's Fresnel, scaled by the opaque (non-transmitted) fraction.
+// The material's scattering terms at a hit: Lambert diffuse under a GGX microfacet specular lobe (alpha =
+// roughness^2 as in the Principled BSDF; Trowbridge-Reitz distribution, height-correlated Smith
+// visibility, Schlick's Fresnel with f0 from the IOR for dielectrics), scaled by the opaque
+// (non-transmitted) fraction. As in Principled BSDF, the diffuse base is what the dielectric specular
+// layer lets through (1 - its Fresnel reflectance at the view angle). Metals take their specular colour
+// from the (textured) base colour.
 struct SurfaceBrdf {
   Vec3 base_color;
   float opaque;
   Vec3 diffuse_albedo;
   Vec3 f0;
-  float shininess;
-  float spec_norm;
+  float alpha;
 
-  explicit SurfaceBrdf(const Material& mat)
-      : base_color(mat.base_color),
+  SurfaceBrdf(const Material& mat, Vec3 base, float n_dot_v)
+      : base_color(base),
         opaque(1.f - mat.transmission),
-        diffuse_albedo(mat.base_color * ((1.f - mat.metallic) * opaque)),
-        f0(lerp(Vec3(0.04f, 0.04f, 0.04f), mat.base_color, mat.metallic)) {
-    const float r = std::max(mat.roughness, 0.02f);
-    shininess = std::min(2.f / (r * r * r * r) - 2.f, 1.0e4f);
-    spec_norm = (shininess + 8.f) / (8.f * kPi);
+        f0(lerp(Vec3(1.f, 1.f, 1.f) * dielectric_f0(mat.ior), base, mat.metallic)),
+        alpha(ggx_alpha(mat.roughness)) {
+    const float layer = 1.f - schlick(Vec3(1.f, 1.f, 1.f) * dielectric_f0(mat.ior), n_dot_v).x;
+    diffuse_albedo = base * ((1.f - mat.metallic) * opaque * layer);
   }
-  // BRDF value for light arriving from unit `to_light`, seen from unit `view`, about shading normal n.
-  Vec3 eval(Vec3 n, Vec3 to_light, Vec3 view) const {
+  Vec3 diffuse() const { return diffuse_albedo * (1.f / kPi); }
+  // Specular BRDF for light arriving from unit `to_light`, seen from unit `view`, about shading normal n.
+  // A light of angular radius `widen` widens the lobe to alpha + widen / 2 (Karis 2013, "Real Shading in
+  // Unreal Engine 4"): its highlight spreads over the emitter instead of peaking at one point.
+  Vec3 specular(Vec3 n, Vec3 to_light, Vec3 view, float widen = 0.f) const {
+    if (!(opaque > 0.f) || !(max_component(f0) > 0.f)) return Vec3();
+    const float n_l = std::max(dot(n, to_light), 1e-4f), n_v = std::max(dot(n, view), 1e-4f);
     const Vec3 h = normalize(to_light + view);
-    const float spec = spec_norm * std::pow(std::max(dot(n, h), 0.f), shininess);
-    return diffuse_albedo * (1.f / kPi) + schlick(f0, std::max(dot(h, view), 0.f)) * (spec * opaque);
+    // Floored at 0.01 (roughness 0.1): a point light on a near-mirror is a highlight of bounded
+    // brightness rather than one firefly pixel.
+    const float a = std::min(1.f, std::max(0.01f, alpha + 0.5f * std::max(widen, 0.f)));
+    const float a2 = a * a;
+    const float n_h = std::max(dot(n, h), 0.f);
+    const float q = n_h * n_h * (a2 - 1.f) + 1.f;
+    const float d = a2 / (kPi * q * q);
+    // Height-correlated Smith visibility G / (4 n.l n.v) (Heitz 2014).
+    const float vis = 0.5f / (n_l * std::sqrt(n_v * n_v * (1.f - a2) + a2) + n_v * std::sqrt(n_l * n_l * (1.f - a2) + a2));
+    return schlick(f0, std::max(dot(h, view), 0.f)) * (d * vis * opaque);
   }
 };
 
 // Light arriving at a surface point from one light, before shadowing.
 struct LightArrival {
-  Vec3 to_light;  // unit direction towards the light (its centre)
-  float n_dot_l;
-  Vec3 radiance;  // after distance falloff and spot cone
+  Vec3 to_centre;   // unit direction towards the light's centre (shadow rays of hard shadows)
+  Vec3 irradiance;  // unshadowed, cosine at the receiver included (colour x intensity x geometry)
+  Vec3 specular;    // unshadowed radiance the specular lobe reflects of this light
 };
 
 // How much of a hit's light goes into each secondary ray (the Fresnel split of reflection/refraction).
@@ -137,8 +262,10 @@ class Shader {
   explicit Shader(TileContext& ctx) : ctx_(ctx), rec_{ctx} {}
 
   // Radiance along `ray`. `info` (may be null) receives the first hit; `geom` (primary ray only) the
-  // first hits of its reflection/refraction rays.
-  Vec3 trace(const Ray& ray, RayKind kind, Branch branch, float cone, HitInfo* info, SampleGeometry* geom);
+  // first hits of its reflection/refraction rays. `lobe` (glossy rays only) is what a filtered
+  // environment lookup averages when the ray leaves the scene.
+  Vec3 trace(const Ray& ray, RayKind kind, Branch branch, RayCone cone, const Lobe* lobe, HitInfo* info,
+             SampleGeometry* geom);
 
  private:
   TileContext& ctx_;
@@ -146,8 +273,9 @@ class Shader {
 
   // The tile's tree walk (the 4-wide BVH, or the binary reference walk when the context asks for it):
   // closest hit, and any hit for shadow and ambient-occlusion rays.
-  Hit closest(const Ray& ray, RayKind kind) {
-    if (ctx_.trace.log_rays) ctx_.ray_log.push_back({ray, traced_kind(kind)});
+  Hit closest(const Ray& ray, RayKind kind) { return closest_traced(ray, traced_kind(kind)); }
+  Hit closest_traced(const Ray& ray, TracedKind kind) {  // also shadow and AO rays through cut-outs
+    if (ctx_.trace.log_rays) ctx_.ray_log.push_back({ray, kind});
     return ctx_.trace.bvh_width == 2 ? ctx_.scene.closest_binary(ray, rec_) : ctx_.scene.closest(ray, rec_);
   }
   bool occluded(const Ray& ray, TracedKind kind) {
@@ -164,25 +292,37 @@ class Shader {
   }
   void count_ray(RayKind kind);
   // Environment phase: what a ray that leaves the scene sees (cone-filtered for glossy rays when asked).
-  Vec3 environment(const Ray& ray, RayKind kind, float cone);
-  // Primary-hit phase: hit point, oriented normals and spawn points.
-  SurfacePoint surface_at(const Ray& ray, const Hit& hit) const;
+  Vec3 environment(const Ray& ray, RayKind kind, const Lobe* lobe);
+  // Primary-hit phase: hit point, oriented normals, spawn points, then the texture phase (textured base
+  // colour and alpha, mip level from the ray cone's width here).
+  SurfacePoint surface_at(const Ray& ray, const Hit& hit, float cone_width);
+  Rgba texture_sample(const Material& mat, std::uint32_t tri, const Hit& hit, float cone_width, float cos_incidence);
+  // Alpha phase: whether a hit of a cut-out material lets the ray through (clip: alpha below the cutoff;
+  // hashed: alpha below a per-sample random threshold). Counts the test.
+  bool cut_out(const Material& mat, float alpha, std::uint32_t random_key, int layer);
+  // Any hit before ray.tmax, looking through cut-outs (the plain any-hit walk when the scene has none).
+  bool occluded_past_cutouts(Ray ray, TracedKind kind, std::uint32_t random_key, float cone_width);
   // Direct-light phase: every light's contribution, shadowed by shadow rays; sets one shadow bit per
   // occluded light.
   void add_direct_light(const SurfacePoint& s, const SurfaceBrdf& brdf, std::uint32_t random_key, Vec3* color,
                         std::uint32_t* shadow_bits);
-  bool light_arrival(const Light& light, const SurfacePoint& s, LightArrival* out) const;
-  // Fraction of shadow rays towards `light` that reach it (1 with shadows off); counts its shadow bit.
-  float light_visibility(const Light& light, std::size_t index, const SurfacePoint& s, Vec3 to_light,
+  bool light_arrival(const Light& light, const SurfacePoint& s, const SurfaceBrdf& brdf, LightArrival* out);
+  bool area_arrival(const Light& light, const SurfacePoint& s, const SurfaceBrdf& brdf, LightArrival* out);
+  // Fraction of shadow rays towards `light` that reach it (1 with shadows off): one ray to its centre
+  // (hard), or N stratified points on its emitter (sphere disk, sun cone, area surface); counts its bit.
+  float light_visibility(const Light& light, std::size_t index, const SurfacePoint& s, const LightArrival& a,
                          std::uint32_t random_key, std::uint32_t* shadow_bits);
-  // Ambient phase: the environment's mean radiance on the diffuse term, occluded by AO rays.
+  // Ambient phase: the environment's irradiance at the normal (SH for a map) on the diffuse term and its
+  // prefiltered reflection on the rough specular share reflection rays leave out, occluded by AO rays.
   void add_ambient_light(const SurfacePoint& s, const SurfaceBrdf& brdf, std::uint32_t random_key, Vec3* color);
-  float ambient_visibility(const SurfacePoint& s, std::uint32_t random_key);
-  // Secondary-ray phases (Whitted): the Fresnel split, then reflection and refraction.
+  float ambient_visibility(const SurfacePoint& s, std::uint32_t random_key, Vec3* open_radiance);
+  // Secondary-ray phases (Whitted): the Fresnel split, then reflection (mirror, or a few GGX-distributed
+  // glossy rays whose escapes read the cone-filtered environment) and refraction.
   SecondaryWeights secondary_weights(const SurfacePoint& s, const SurfaceBrdf& brdf) const;
-  void add_reflection(const SurfacePoint& s, Vec3 weight, Branch branch, SampleGeometry* geom, Vec3* color);
+  void add_reflection(const SurfacePoint& s, Vec3 weight, Branch branch, RayCone cone, SampleGeometry* geom,
+                      Vec3* color);
   void add_refraction(const SurfacePoint& s, const SurfaceBrdf& brdf, const SecondaryWeights& w, Branch branch,
-                      SampleGeometry* geom, Vec3* color);
+                      RayCone cone, SampleGeometry* geom, Vec3* color);
 };
 
 void Shader::count_ray(RayKind kind) {
@@ -195,18 +335,40 @@ void Shader::count_ray(RayKind kind) {
   }
 }
 
-Vec3 Shader::trace(const Ray& ray, RayKind kind, Branch branch, float cone, HitInfo* info,
+// Where a ray continues after passing through the surface it hit at `hit` (alpha cut-outs): just behind
+// the surface, same direction, what is left of its extent.
+Ray continue_past(const Ray& ray, const Hit& hit, Vec3 p, Vec3 ng) {
+  Ray next = ray;
+  next.origin = offset_ray_origin(p, dot(ray.dir, ng) > 0.f ? ng : -ng);
+  next.tmin = 0.f;
+  next.tmax = ray.tmax - hit.t;
+  return next;
+}
+
+Vec3 Shader::trace(const Ray& ray, RayKind kind, Branch branch, RayCone cone, const Lobe* lobe, HitInfo* info,
                    SampleGeometry* geom) {
   count_ray(kind);
-  const Hit hit = closest(ray, kind);
-  if (!hit.hit()) {
-    if (info) info->object = -1;
-    return environment(ray, kind, cone);
-  }
-  ++ctx_.counters.shading_evals;
-  const SurfacePoint s = surface_at(ray, hit);
-  const SurfaceBrdf brdf(*s.mat);
+  const float dir_len = length(ray.dir);
   const std::uint32_t random_key = branch.random_key();
+  Ray r = ray;
+  float travelled = 0.f;  // distance from ray.origin to r.origin (past cut-out layers)
+  Hit hit;
+  SurfacePoint s;
+  for (int layer = 0;; ++layer) {
+    hit = closest(r, kind);
+    if (!hit.hit()) {
+      if (info) info->object = -1;
+      return environment(r, kind, lobe);
+    }
+    s = surface_at(r, hit, cone.at(travelled + hit.t * dir_len));
+    if (!s.mat->cuts_out || layer + 1 >= kMaxCutoutLayers || !cut_out(*s.mat, s.alpha, random_key, layer)) break;
+    travelled += hit.t * dir_len;
+    r = continue_past(r, hit, s.p, s.ng);
+    ++ctx_.counters.rays_alpha;
+    ++ctx_.counters.rays_total;
+  }
+  ++ctx_.counters.shading_evals;  // the surface that stops the ray (cut-out layers cost alpha tests)
+  const SurfaceBrdf brdf(*s.mat, s.base_color, s.n_dot_v);
   Vec3 color = s.mat->emission;
   std::uint32_t shadow_bits = 0;
   add_direct_light(s, brdf, random_key, &color, &shadow_bits);
@@ -220,23 +382,43 @@ Vec3 Shader::trace(const Ray& ray, RayKind kind, Branch branch, float cone, HitI
   }
   if (branch.depth < ctx_.settings.max_depth) {
     const SecondaryWeights w = secondary_weights(s, brdf);
-    if (max_component(w.reflection) > 0.f) add_reflection(s, w.reflection, branch, geom, &color);
-    if (w.refracts && w.refraction > 0.f) add_refraction(s, brdf, w, branch, geom, &color);
+    const RayCone here{s.cone_width, cone.spread};
+    if (max_component(w.reflection) > 0.f) add_reflection(s, w.reflection, branch, here, geom, &color);
+    if (w.refracts && w.refraction > 0.f) add_refraction(s, brdf, w, branch, here, geom, &color);
   }
   return color;
 }
 
-Vec3 Shader::environment(const Ray& ray, RayKind kind, float cone) {
+Vec3 Shader::environment(const Ray& ray, RayKind kind, const Lobe* lobe) {
   const Environment& env = ctx_.scene.environment();
-  if (kind == RayKind::kGlossy && ctx_.settings.env_filter != EnvFilter::kOff && env.is_map()) {
+  if (kind == RayKind::kGlossy && lobe && ctx_.settings.env_filter != EnvFilter::kOff && env.is_map()) {
     ++ctx_.counters.env_filtered_lookups;
-    return env.filtered(ray.dir, cone, static_cast<int>(ctx_.settings.env_filter));
+    return env.filtered(lobe->axis, lobe->half_angle, static_cast<int>(ctx_.settings.env_filter));
   }
   if (env.is_map()) ++ctx_.counters.env_lookups;  // a constant colour needs no lookup
   return env.radiance(ray.dir);
 }
 
-SurfacePoint Shader::surface_at(const Ray& ray, const Hit& hit) const {
+Rgba Shader::texture_sample(const Material& mat, std::uint32_t tri, const Hit& hit, float cone_width,
+                            float cos_incidence) {
+  const Scene& scene = ctx_.scene;
+  const Texture& tex = scene.texture(mat.base_color_texture);
+  const TriTexcoord* tc = scene.texcoord(tri);
+  float u = 0.f, v = 0.f, lod = kInf;  // without UVs a texture contributes its mean (the 1x1 level)
+  if (tc) {
+    scene.uv_at(tri, hit.b0, hit.b1, hit.b2, &u, &v);
+    lod = texture_lod(tc->lod_bias, tex.width(), tex.height(), cone_width, cos_incidence);
+  }
+  ++ctx_.counters.texture_fetches;
+  const std::uint64_t base = kTextureBaseAddress + scene.texture_base(mat.base_color_texture);
+  const std::uint32_t bytes = tex.texel_bytes();
+  return tex.sample(u, v, lod, [&](std::uint64_t offset) {
+    ++ctx_.counters.texel_reads;
+    ctx_.texture_cache.access(base + offset, bytes);
+  });
+}
+
+SurfacePoint Shader::surface_at(const Ray& ray, const Hit& hit, float cone_width) {
   const Scene& scene = ctx_.scene;
   SurfacePoint s;
   s.tri = &scene.tri(hit.tri);
@@ -256,7 +438,48 @@ SurfacePoint Shader::surface_at(const Ray& ray, const Hit& hit) const {
   s.n_dot_v = std::max(dot(s.n, s.view), 0.f);
   s.origin_out = offset_ray_origin(s.p, s.ng);
   s.origin_in = offset_ray_origin(s.p, -s.ng);
+  s.cone_width = cone_width;
+  s.base_color = s.mat->base_color;
+  s.alpha = s.mat->alpha;
+  if (s.mat->base_color_texture >= 0) {
+    const Rgba t = texture_sample(*s.mat, hit.tri, hit, cone_width, dot(s.dir, s.ng));
+    s.base_color = s.base_color * t.rgb;
+    s.alpha *= t.a;
+  }
   return s;
+}
+
+bool Shader::cut_out(const Material& mat, float alpha, std::uint32_t random_key, int layer) {
+  ++ctx_.counters.alpha_tests;
+  if (mat.alpha_mode == AlphaMode::kClip) return alpha < mat.alpha_cutoff;
+  const std::uint32_t akey = hash_combine(random_key, (static_cast<std::uint32_t>(SamplePurpose::kAlpha) << 8) +
+                                                          static_cast<std::uint32_t>(layer));
+  return alpha <= u32_to_unit(hash_u32(akey));  // hashed: passes through with probability 1 - alpha
+}
+
+bool Shader::occluded_past_cutouts(Ray ray, TracedKind kind, std::uint32_t random_key, float cone_width) {
+  const Scene& scene = ctx_.scene;
+  if (!scene.has_cutouts()) return occluded(ray, kind);
+  // Cut-outs need the hit's material and texture: closest hits, layer by layer (what an any-hit shader
+  // does on a GPU).
+  for (int layer = 0; layer < kMaxCutoutLayers; ++layer) {
+    const Hit hit = closest_traced(ray, kind);
+    if (!hit.hit()) return false;
+    const TriRecord& tri = scene.tri(hit.tri);
+    const Material& mat = scene.materials()[tri.material];
+    if (!mat.cuts_out) return true;
+    float alpha = mat.alpha;
+    const Vec3 ng = scene.shading(hit.tri).ng;
+    if (mat.base_color_texture >= 0)
+      alpha *= texture_sample(mat, hit.tri, hit, cone_width, dot(normalize(ray.dir), ng)).a;
+    if (!cut_out(mat, alpha, random_key, layer)) return true;
+    const float* v = tri.v;
+    const Vec3 p = Vec3(v[0], v[1], v[2]) * hit.b0 + Vec3(v[3], v[4], v[5]) * hit.b1 + Vec3(v[6], v[7], v[8]) * hit.b2;
+    ray = continue_past(ray, hit, p, ng);
+    ++ctx_.counters.rays_alpha;
+    ++ctx_.counters.rays_total;
+  }
+  return true;  // a wall of cut-out layers counts as opaque
 }
 
 void Shader::add_direct_light(const SurfacePoint& s, const SurfaceBrdf& brdf, std::uint32_t random_key,
@@ -266,88 +489,168 @@ void Shader::add_direct_light(const SurfacePoint& s, const SurfaceBrdf& brdf, st
   const std::size_t light_count = brdf.opaque > 0.f ? lights.size() : 0;
   for (std::size_t li = 0; li < light_count; ++li) {
     LightArrival a;
-    if (!light_arrival(lights[li], s, &a)) continue;
-    const float visibility = light_visibility(lights[li], li, s, a.to_light, random_key, shadow_bits);
+    if (!light_arrival(lights[li], s, brdf, &a)) continue;
+    const float visibility = light_visibility(lights[li], li, s, a, random_key, shadow_bits);
     if (visibility <= 0.f) continue;
-    *color += brdf.eval(s.n, a.to_light, s.view) * a.radiance * (a.n_dot_l * visibility);
+    *color += (brdf.diffuse() * a.irradiance + a.specular) * visibility;
   }
 }
 
-bool Shader::light_arrival(const Light& L, const SurfacePoint& s, LightArrival* out) const {
+bool Shader::light_arrival(const Light& L, const SurfacePoint& s, const SurfaceBrdf& brdf, LightArrival* out) {
+  if (L.kind == LightKind::kArea) return area_arrival(L, s, brdf, out);
   Vec3 to_light;
-  float dist = kInf;
+  float falloff = 1.f;  // 1 / distance^2 (sun: 1)
+  float source_angle = 0.f;
   if (L.kind == LightKind::kSun) {
     to_light = -L.direction;
+    source_angle = L.radius;
   } else {
     const Vec3 d = L.position - s.p;
-    dist = length(d);
+    const float dist = length(d);
     if (!(dist > 0.f)) return false;
     to_light = d / dist;
+    // A sphere light of radius R lights like a disk facing the point (Cycles' soft falloff):
+    // irradiance I / (d^2 + R^2), which stays finite on the light's surface.
+    falloff = 1.f / (dist * dist + L.radius * L.radius);
+    if (L.radius > 0.f) source_angle = std::atan2(L.radius, dist);
   }
   const float n_dot_l = dot(s.n, to_light);
   if (n_dot_l <= 0.f || dot(s.ng, to_light) <= 0.f) return false;  // facing away: no light, no shadow ray
-  Vec3 radiance = L.color * L.intensity;
-  if (L.kind != LightKind::kSun) radiance = radiance / (dist * dist);
-  if (L.kind == LightKind::kSpot) {
-    const float c = dot(-to_light, L.direction);
-    radiance = radiance * smoothstep(std::cos(L.spot_angle), std::cos(L.spot_angle * 0.85f), c);
-  }
-  if (max_component(radiance) <= 0.f) return false;
-  out->to_light = to_light;
-  out->n_dot_l = n_dot_l;
-  out->radiance = radiance;
+  Vec3 irradiance = L.color * (L.intensity * falloff * n_dot_l);
+  if (L.kind == LightKind::kSpot) irradiance = irradiance * spot_attenuation(L, -to_light);
+  if (max_component(irradiance) <= 0.f) return false;
+  out->to_centre = to_light;
+  out->irradiance = irradiance;
+  out->specular = brdf.specular(s.n, to_light, s.view, source_angle) * irradiance;
   return true;
 }
 
-float Shader::light_visibility(const Light& L, std::size_t index, const SurfacePoint& s, Vec3 to_light,
+bool Shader::area_arrival(const Light& L, const SurfacePoint& s, const SurfaceBrdf& brdf, LightArrival* out) {
+  ++ctx_.counters.area_light_evals;
+  // One-sided: only points in front of the emitting face receive light.
+  if (!(dot(s.p - L.position, L.direction) > 0.f)) return false;
+  Vec3 outline[16];
+  const int count = area_outline(L, s.p, outline);
+  const float g = projected_solid_angle(outline, count, s.n);  // irradiance per unit radiance (exact)
+  if (!(g > 0.f)) return false;
+  const Vec3 centre = L.position - s.p;
+  const float dist = length(centre);
+  if (!(dist > 0.f)) return false;
+  const Vec3 radiance = L.color * L.intensity;
+  out->to_centre = centre / dist;
+  out->irradiance = radiance * g;
+  // Specular: the emitter as kAreaCells x kAreaCells equal-area cells, each a small source at its centre
+  // whose lobe is widened by the cell's angular size (a filtered quadrature: smooth highlights of the
+  // emitter's shape, no single-point overestimate for large lights).
+  out->specular = Vec3();
+  if (max_component(brdf.f0) > 0.f && brdf.opaque > 0.f) {
+    const float cell_area = L.area() / static_cast<float>(kAreaCells * kAreaCells);
+    for (int j = 0; j < kAreaCells; ++j)
+      for (int i = 0; i < kAreaCells; ++i) {
+        const Sample2 cell{(i + 0.5f) / kAreaCells, (j + 0.5f) / kAreaCells};
+        const Vec3 d = area_point(L, cell) - s.p;
+        const float d2 = dot(d, d), len = std::sqrt(d2);
+        if (!(len > 0.f)) continue;
+        const Vec3 l = d / len;
+        const float cos_r = dot(s.n, l), cos_e = -dot(l, L.direction);
+        if (!(cos_r > 0.f && cos_e > 0.f)) continue;
+        const float solid = cell_area * cos_e / d2;  // the cell's solid angle
+        const float widen = std::sqrt(solid / kPi);  // its equivalent cone's half angle
+        out->specular += brdf.specular(s.n, l, s.view, widen) * (solid * cos_r);
+      }
+    out->specular = out->specular * radiance;
+  }
+  return max_component(out->irradiance) > 0.f;
+}
+
+float Shader::light_visibility(const Light& L, std::size_t index, const SurfacePoint& s, const LightArrival& a,
                                std::uint32_t random_key, std::uint32_t* shadow_bits) {
   const RenderSettings& st = ctx_.settings;
   if (st.shadow_samples <= 0) return 1.f;
-  // Soft shadows sample the light's sphere (point, spot) or cone of directions (sun).
-  const bool soft = L.radius > 0.f && st.shadow_samples > 1;
+  const bool area = L.kind == LightKind::kArea;
+  const bool soft = (area || L.radius > 0.f) && st.shadow_samples > 1;
   const int ns = soft ? st.shadow_samples : 1;
-  int blocked = 0;
+  // Visible fraction of the light. Points of an area light are weighted by how much they light the
+  // point (cos at the receiver x cos at the emitter / d^2): near parts of a large emitter matter more.
+  float open = 0.f, total = 0.f;
+  bool any_blocked = false;
   const std::uint32_t skey = hash_combine(random_key, (static_cast<std::uint32_t>(SamplePurpose::kShadow) << 8) +
                                                           static_cast<std::uint32_t>(index));
   Vec3 t, b;
-  onb(to_light, &t, &b);
+  onb(a.to_centre, &t, &b);
   for (int i = 0; i < ns; ++i) {
     Ray sr;
     sr.origin = s.origin_out;
+    float weight = 1.f;
     if (L.kind == LightKind::kSun) {
-      sr.dir = soft ? uniform_cone(r2_sample(skey, i), to_light, L.radius) : to_light;
+      sr.dir = soft ? uniform_cone(r2_sample(skey, i), a.to_centre, L.radius) : a.to_centre;
       sr.tmax = kInf;
     } else {
       Vec3 target = L.position;
-      if (soft) {
+      if (soft && area) {
+        target = area_point(L, r2_sample(skey, i));
+      } else if (soft) {
         float dx, dy;
         concentric_disk(r2_sample(skey, i), &dx, &dy);
         target = target + t * (dx * L.radius) + b * (dy * L.radius);
       }
       sr.dir = target - sr.origin;
       sr.tmax = 1.f - 1e-4f;  // stop just short of the light
+      if (soft && area) {
+        const float d2 = dot(sr.dir, sr.dir);
+        weight = std::max(0.f, dot(sr.dir, s.n)) * std::max(0.f, -dot(sr.dir, L.direction)) / (d2 * d2);
+        if (!(weight > 0.f)) continue;  // a point below the horizon or behind the emitter: no light, no ray
+      }
     }
     ++ctx_.counters.rays_shadow;
     ++ctx_.counters.rays_total;
-    if (occluded(sr, TracedKind::kShadow)) ++blocked;
+    total += weight;
+    if (occluded_past_cutouts(sr, TracedKind::kShadow, hash_combine(skey, static_cast<std::uint32_t>(i)),
+                              s.cone_width)) {
+      any_blocked = true;
+    } else {
+      open += weight;
+    }
   }
-  if (blocked > 0 && index < 32) *shadow_bits |= 1u << index;
-  return 1.f - static_cast<float>(blocked) / static_cast<float>(ns);
+  if (any_blocked && index < 32) *shadow_bits |= 1u << index;
+  return total > 0.f ? open / total : 0.f;
 }
 
 void Shader::add_ambient_light(const SurfacePoint& s, const SurfaceBrdf& brdf, std::uint32_t random_key,
                                Vec3* color) {
-  const Vec3 ambient = ctx_.scene.environment().mean();
-  if (!(max_component(brdf.diffuse_albedo) > 0.f && max_component(ambient) > 0.f)) return;
-  const float ao = ambient_visibility(s, random_key);
-  *color += brdf.diffuse_albedo * ambient * ao;
+  const Environment& env = ctx_.scene.environment();
+  if (!(max_component(env.mean()) > 0.f)) return;
+  const float rough = 1.f - reflection_gloss(*s.mat);
+  const bool diffuse = max_component(brdf.diffuse_albedo) > 0.f;
+  const bool specular = rough > 0.f && brdf.opaque > 0.f && max_component(brdf.f0) > 0.f;
+  if (!diffuse && !specular) return;
+  // Diffuse: the environment's irradiance / pi over the directions AO rays find open (with no AO rays,
+  // unoccluded at the normal). Rough specular (the share reflection rays do not trace): the cosine-
+  // convolved environment around the mirror direction, a wide lobe's prefiltered reflection, times the
+  // open fraction.
+  Vec3 open_radiance;
+  const float open = ambient_visibility(s, random_key, &open_radiance);
+  Vec3 ambient;
+  const bool map = env.is_map();  // a constant colour needs no SH evaluation
+  if (diffuse) {
+    const bool unoccluded = ctx_.settings.ao_samples <= 0;
+    ambient += brdf.diffuse_albedo * (unoccluded ? env.diffuse_radiance(s.n) : open_radiance);
+    if (map && unoccluded) ++ctx_.counters.env_sh_evals;
+  }
+  if (specular) {
+    ambient += schlick(brdf.f0, s.n_dot_v) * env.diffuse_radiance(reflect(s.dir, s.n)) * (rough * brdf.opaque * open);
+    if (map) ++ctx_.counters.env_sh_evals;
+  }
+  *color += ambient;
 }
 
-float Shader::ambient_visibility(const SurfacePoint& s, std::uint32_t random_key) {
+float Shader::ambient_visibility(const SurfacePoint& s, std::uint32_t random_key, Vec3* open_radiance) {
   const int samples = ctx_.settings.ao_samples;
   if (samples <= 0) return 1.f;
+  const Environment& env = ctx_.scene.environment();
   const std::uint32_t akey = hash_combine(random_key, static_cast<std::uint32_t>(SamplePurpose::kAo) << 8);
   int open = 0;
+  Vec3 sum;
   for (int i = 0; i < samples; ++i) {
     Ray ar;
     ar.origin = s.origin_out;
@@ -356,8 +659,15 @@ float Shader::ambient_visibility(const SurfacePoint& s, std::uint32_t random_key
     ar.tmax = ctx_.ao_distance;
     ++ctx_.counters.rays_ao;
     ++ctx_.counters.rays_total;
-    if (!occluded(ar, TracedKind::kAo)) ++open;
+    if (!occluded_past_cutouts(ar, TracedKind::kAo, hash_combine(akey, static_cast<std::uint32_t>(i)), s.cone_width)) {
+      ++open;
+      // Cosine-distributed directions: the mean of the (smooth) radiance over the open ones estimates
+      // the occluded irradiance / pi, light from the blocked directions removed, not scaled.
+      sum += env.smooth_radiance(ar.dir);
+      if (env.is_map()) ++ctx_.counters.env_sh_evals;
+    }
   }
+  *open_radiance = sum * (1.f / static_cast<float>(samples));
   return static_cast<float>(open) / static_cast<float>(samples);
 }
 
@@ -366,11 +676,7 @@ SecondaryWeights Shader::secondary_weights(const SurfacePoint& s, const SurfaceB
   SecondaryWeights w;
   Vec3 specular;             // reflection of the opaque part (metal or smooth dielectric coat)
   float dielectric = 0.f;    // Fresnel reflection of the transmissive part
-  if (mat.reflects()) {
-    const float gloss = mat.metallic + (1.f - mat.metallic) *
-                                           std::min(1.f, std::max(0.f, 1.f - mat.roughness / Material::kReflectRoughness));
-    specular = schlick(brdf.f0, s.n_dot_v) * (gloss * brdf.opaque);
-  }
+  if (mat.reflects()) specular = schlick(brdf.f0, s.n_dot_v) * (reflection_gloss(mat) * brdf.opaque);
   if (mat.refracts()) {
     const float eta = s.front ? 1.f / mat.ior : mat.ior;
     const float fr = fresnel_dielectric(s.n_dot_v, eta);
@@ -386,46 +692,96 @@ SecondaryWeights Shader::secondary_weights(const SurfacePoint& s, const SurfaceB
   return w;
 }
 
-void Shader::add_reflection(const SurfacePoint& s, Vec3 weight, Branch branch, SampleGeometry* geom,
+// The cone a filtered environment lookup averages, kept above the surface: a cone reaching under the
+// horizon (grazing views) keeps its upper edge and brings its lower edge up to the horizon.
+Lobe above_horizon(Vec3 axis, float half_angle, Vec3 ng) {
+  Lobe lobe{axis, half_angle};
+  const float elevation = std::asin(std::min(1.f, std::max(-1.f, dot(axis, ng))));
+  if (elevation >= half_angle) return lobe;
+  const Vec3 along = axis - ng * dot(axis, ng);
+  const float len = length(along);
+  if (!(len > 0.f)) return lobe;
+  const float e = 0.5f * (elevation + half_angle);
+  lobe.axis = normalize(along * (std::cos(e) / len) + ng * std::sin(e));
+  lobe.half_angle = e;
+  return lobe;
+}
+
+// Smith's Lambda of GGX for a direction at cosine c to the normal (Heitz 2014).
+float smith_lambda(float c, float alpha) {
+  const float c2 = std::max(c * c, 1e-8f);
+  return 0.5f * (std::sqrt(1.f + alpha * alpha * (1.f - c2) / c2) - 1.f);
+}
+
+void Shader::add_reflection(const SurfacePoint& s, Vec3 weight, Branch branch, RayCone cone, SampleGeometry* geom,
                             Vec3* color) {
   const Material& mat = *s.mat;
-  Vec3 rdir = reflect(s.dir, s.n);
-  if (dot(rdir, s.ng) <= 0.f) rdir = reflect(s.dir, s.ng);
+  Vec3 mirror = reflect(s.dir, s.n);
+  if (dot(mirror, s.ng) <= 0.f) mirror = reflect(s.dir, s.ng);
   const bool glossy = mat.roughness > 1e-3f && !mat.refracts();
-  RayKind kind = RayKind::kReflection;
-  float cone = 0.f;
+  // Directions to trace and their weights. A mirror: one ray. A rough lobe: GGX microfacet normals
+  // (stratified by the R2 sequence), the view mirrored about each, weighted by G2 (v.h) / ((n.h) (n.v))
+  // (the importance-sampling weight of D(h) (n.h)) and normalised to the weights' sum: the energy single
+  // scattering loses at grazing angles comes back, as Cycles' multiscatter GGX returns it. A glossy ray
+  // that leaves the scene reads the filtered environment around its own direction over most of the
+  // lobe's cone, so the rays together span the lobe's off-specular spread at grazing views.
+  struct Dir { Vec3 d; float w; };
+  Dir dirs[kGlossyRays];
+  int count = 0;
+  float total = 0.f;
+  const float lobe_cone = glossy ? glossy_cone(mat.roughness) : 0.f;
+  RayCone next = cone;
   if (glossy) {
-    kind = RayKind::kGlossy;
-    cone = glossy_cone(mat.roughness);
-    if (ctx_.settings.env_filter == EnvFilter::kOff) {
-      // Point-sampled glossy lobe: one ray in the cone (the filtered path traces the mirror ray and
-      // lets the summed-area table average the environment over the cone instead).
-      const std::uint32_t gkey =
-          hash_combine(branch.random_key(), static_cast<std::uint32_t>(SamplePurpose::kGlossy) << 8);
-      const Vec3 g = uniform_cone(r2_sample(gkey, 0), rdir, cone);
-      if (dot(g, s.ng) > 0.f) rdir = g;
+    const int rays = branch.depth == 0 ? kGlossyRays : 1;
+    const float alpha = ggx_alpha(mat.roughness);
+    next.spread += lobe_cone / std::sqrt(static_cast<float>(rays));  // one ray's share of the blur
+    // Lobe directions: a fixed stratified set (not rotated per sample: a rough reflection is smooth, not
+    // noisy), a different quarter of it at each place of the 2x2 sample block.
+    const std::uint32_t gkey = static_cast<std::uint32_t>(SamplePurpose::kGlossy) << 8;
+    const float n_v = std::max(s.n_dot_v, 1e-4f);
+    for (int i = 0; i < rays; ++i) {
+      const Vec3 h = ggx_normal(r2_sample(gkey, static_cast<std::uint32_t>(i + rays * static_cast<int>(branch.tile))),
+                                s.n, alpha);
+      const Vec3 l = reflect(s.dir, h);
+      const float n_l = dot(l, s.n), n_h = dot(h, s.n), v_h = dot(s.view, h);
+      if (!(dot(l, s.ng) > 0.f && n_l > 0.f && n_h > 0.f && v_h > 0.f)) continue;  // below the surface
+      const float g2 = 1.f / (1.f + smith_lambda(n_v, alpha) + smith_lambda(n_l, alpha));
+      const float w = g2 * v_h / (n_h * n_v);
+      if (!(w > 0.f) || !std::isfinite(w)) continue;
+      dirs[count++] = {l, w};
+      total += w;
     }
   }
-  Ray rr;
-  rr.origin = s.origin_out;
-  rr.dir = rdir;
-  HitInfo sec;
-  const Vec3 c = trace(rr, kind, branch.reflected(), cone, geom ? &sec : nullptr, nullptr);
-  *color += c * weight;
-  if (geom) {
-    geom->sec_object[0] = sec.object;
-    geom->sec_normal[0] = sec.normal;
-    geom->sec_shadow_bits |= sec.shadow_bits;
+  if (count == 0) {  // a mirror, or no lobe sample above the surface: the mirror direction
+    dirs[0] = {mirror, 1.f};
+    count = 1;
+    total = 1.f;
+  }
+  for (int i = 0; i < count; ++i) {
+    Ray rr;
+    rr.origin = s.origin_out;
+    rr.dir = dirs[i].d;
+    HitInfo sec;
+    const Lobe own = above_horizon(dirs[i].d, 0.75f * lobe_cone, s.ng);
+    const Vec3 c = trace(rr, glossy ? RayKind::kGlossy : RayKind::kReflection,
+                         branch.reflected(static_cast<std::uint32_t>(i)), next, glossy ? &own : nullptr,
+                         (geom && i == 0) ? &sec : nullptr, nullptr);
+    *color += c * weight * (dirs[i].w / total);
+    if (geom && i == 0) {
+      geom->sec_object[0] = sec.object;
+      geom->sec_normal[0] = sec.normal;
+      geom->sec_shadow_bits |= sec.shadow_bits;
+    }
   }
 }
 
 void Shader::add_refraction(const SurfacePoint& s, const SurfaceBrdf& brdf, const SecondaryWeights& w,
-                            Branch branch, SampleGeometry* geom, Vec3* color) {
+                            Branch branch, RayCone cone, SampleGeometry* geom, Vec3* color) {
   Ray tr;
   tr.origin = s.origin_in;
   tr.dir = w.refraction_dir;
   HitInfo sec;
-  const Vec3 c = trace(tr, RayKind::kRefraction, branch.refracted(), 0.f, geom ? &sec : nullptr, nullptr);
+  const Vec3 c = trace(tr, RayKind::kRefraction, branch.refracted(), cone, nullptr, geom ? &sec : nullptr, nullptr);
   *color += c * brdf.base_color * w.refraction;
   if (geom) {
     geom->sec_object[1] = sec.object;
@@ -441,11 +797,12 @@ void TraceOptions::validate() const {
 }
 
 TileContext::TileContext(const Scene& s, const RenderSettings& st, const Camera& c, const CacheConfig& cc,
-                         const TraceOptions& options)
-    : scene(s), settings(st), camera(c), cache(cc), trace(options) {
+                         const TraceOptions& options, const CacheConfig& texture_cc)
+    : scene(s), settings(st), camera(c), cache(cc), texture_cache(texture_cc), trace(options) {
   trace.validate();
   cos_threshold = st.normal_threshold_deg < 0.f ? 2.f : std::cos(st.normal_threshold_deg * kPi / 180.f);
   ao_distance = st.ao_distance > 0.f ? st.ao_distance : 0.1f * s.diagonal();
+  pixel_spread = 2.f * c.tan_half() / static_cast<float>(std::max(1, c.height)) / static_cast<float>(st.subgrid());
 }
 
 void TileContext::finish() {
@@ -453,6 +810,9 @@ void TileContext::finish() {
   counters.cache_accesses += cs.accesses;
   counters.cache_misses += cs.misses;
   counters.dram_bytes_read += cs.dram_bytes;
+  const CacheStats& ts = texture_cache.stats();  // texel reads are counted as they happen
+  counters.texture_cache_misses += ts.misses;
+  counters.texture_dram_bytes += ts.dram_bytes;
 }
 
 SampleResult trace_sample(TileContext& ctx, float px, float py, std::uint32_t key) {
@@ -461,7 +821,15 @@ SampleResult trace_sample(TileContext& ctx, float px, float py, std::uint32_t ke
   const Ray ray = ctx.camera.primary(px, py);
   SampleResult out;
   HitInfo info;
-  out.color = shader.trace(ray, RayKind::kPrimary, Branch{key, 1u, 0}, 0.f, &info, &out.geom);
+  // A pixel off the image centre subtends a smaller angle: cos^2 of its angle to the axis (radially), so a
+  // plane facing the camera gets the same texel footprint everywhere.
+  const float c = dot(ray.dir, ctx.camera.forward);
+  const RayCone cone{0.f, ctx.pixel_spread * c * c};
+  const int k = ctx.settings.subgrid();
+  const auto sx = static_cast<std::uint32_t>(std::floor(px * static_cast<float>(k)));
+  const auto sy = static_cast<std::uint32_t>(std::floor(py * static_cast<float>(k)));
+  const Branch root{key, 1u, 0, (sx & 1u) + 2u * (sy & 1u)};
+  out.color = shader.trace(ray, RayKind::kPrimary, root, cone, nullptr, &info, &out.geom);
   out.geom.object = info.object;
   if (info.object >= 0) {
     out.geom.normal = info.normal;

@@ -263,12 +263,12 @@ void trace_pixel(TileContext& ctx, int xx, int yy, int k, TileStat* stat, FrameB
 
 StereoOutput render_stereo(const Scene& scene, const Camera& left, const Camera& right,
                            const RenderSettings& settings, int threads, const MultirateState* previous,
-                           const CacheConfig& cache, const TraceOptions& trace) {
+                           const CacheConfig& cache, const TraceOptions& trace, const CacheConfig& texture_cache) {
   right.validate();
   if (left.width != right.width || left.height != right.height)
     throw std::invalid_argument("stereo eyes must have the same resolution");
   StereoOutput out;
-  out.left = render_frame(scene, left, settings, threads, previous, cache, trace);
+  out.left = render_frame(scene, left, settings, threads, previous, cache, trace, texture_cache);
   const FrameBuffers& L = out.left.fb;
   const int W = L.width, H = L.height;
   const std::size_t n = static_cast<std::size_t>(W) * H;
@@ -302,7 +302,8 @@ StereoOutput render_stereo(const Scene& scene, const Camera& left, const Camera&
                      ++ctx.counters.tile_buffer_writes;
                    }
                  }
-               });
+               },
+               texture_cache);
   R.multirate = out.left.multirate;
   out.reuse_ratio = n ? static_cast<double>(R.counters.samples_reused) / static_cast<double>(n) : 0.0;
   return out;

@@ -27,7 +27,8 @@ int main() {
     }
     prim.push_back(static_cast<std::int64_t>(i));
   }
-  const float material[sim_core::kMaterialFields] = {0.8f, 0.8f, 0.8f, 0.f, 0.5f, 0.f, 1.5f, 0.f, 0.f, 0.f};
+  const float material[sim_core::kMaterialFields] = {0.8f, 0.8f, 0.8f, 0.f, 0.5f, 0.f, 1.5f,
+                                                     0.f,  0.f,  0.f,  1.f, 0.f, 0.5f, -1.f};
   sim_core::Scene scene(pos.data(), pos.size() / 3, tris.data(), ntri, prim.data(), nullptr, nullptr, nullptr,
                         material, 1, nullptr, 0, sim_core::Environment(sim_core::Vec3(0.f, 0.f, 0.f)));
   std::vector<sim_core::Ray> rays(2000);

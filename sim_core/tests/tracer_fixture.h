@@ -51,9 +51,11 @@ inline Scene make_scene() {
   for (std::size_t i = 0; i < nt; ++i) ids[i] = static_cast<std::int64_t>(i);
   std::vector<std::uint32_t> mats(nt, 0u);
   mats[nt - 1] = mats[nt - 2] = 1u;
-  const float materials[2 * kMaterialFields] = {0.9f, 0.8f, 0.7f, 1.f, 0.2f, 0.f, 1.5f, 0.f, 0.f, 0.f,
-                                                0.5f, 0.5f, 0.5f, 0.f, 0.9f, 0.f, 1.5f, 0.f, 0.f, 0.f};
-  const float lights[kLightFields] = {0.f, 3.f, -2.f, 5.f, 0.f, 0.f, -1.f, 1.f, 1.f, 1.f, 40.f, 0.3f, 0.7f};
+  // base rgb, metallic, roughness, transmission, ior, emission rgb, alpha, alpha mode, cutoff, texture
+  const float materials[2 * kMaterialFields] = {0.9f, 0.8f, 0.7f, 1.f, 0.2f, 0.f, 1.5f, 0.f, 0.f, 0.f, 1.f, 0.f, 0.5f, -1.f,
+                                                0.5f, 0.5f, 0.5f, 0.f, 0.9f, 0.f, 1.5f, 0.f, 0.f, 0.f, 1.f, 0.f, 0.5f, -1.f};
+  // kind, position, direction, colour, intensity, radius, spot angle, spot blend (area fields unused)
+  const float lights[kLightFields] = {0.f, 3.f, -2.f, 5.f, 0.f, 0.f, -1.f, 1.f, 1.f, 1.f, 40.f, 0.3f, 0.7f, 0.15f};
   return Scene(pos.data(), pos.size() / 3, tri.data(), nt, ids.data(), nullptr, mats.data(), obj.data(),
                materials, 2, lights, 1, Environment(Vec3(0.3f, 0.3f, 0.35f)));
 }

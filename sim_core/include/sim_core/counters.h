@@ -1,5 +1,12 @@
 // Activity counters of one render, the events the energy model prices (names fixed in ARCHITECTURE.md).
 // Every tile owns a Counters and the frame sums them in tile order, so totals are independent of threads.
+// Shading-feature counters (all 0 when a scene lacks the feature): rays_alpha = continuation rays past
+// alpha cut-outs (a ray kind, part of rays_total), alpha_tests = alpha evaluations at hits of cut-out
+// materials, area_light_evals = unshadowed area-light evaluations (emitter polygon + representative
+// point), texture_fetches = filtered texture lookups, texel_reads = texels they read through the texture
+// cache, texture_cache_misses / texture_dram_bytes = that cache's misses and the line bytes they fetch,
+// env_sh_evals = spherical-harmonic evaluations of an environment map (ambient light: one per hit without
+// AO rays, one per open AO ray, one per rough-specular ambient term; 0 for a constant-colour world).
 #pragma once
 #include <cstdint>
 
@@ -11,7 +18,8 @@ namespace sim_core {
   X(similarity_checks) X(interpolations) X(reprojections) X(tile_buffer_reads) X(tile_buffer_writes)     \
   X(framebuffer_bytes) X(gbuffer_prefetch_bytes) X(cache_accesses) X(cache_misses) X(dram_bytes_read)    \
   X(closest_hit_comparisons) X(env_lookups) X(env_filtered_lookups) X(samples_traced)                    \
-  X(samples_interpolated) X(samples_reused) X(pixels)
+  X(samples_interpolated) X(samples_reused) X(pixels) X(rays_alpha) X(alpha_tests) X(area_light_evals)  \
+  X(texture_fetches) X(texel_reads) X(texture_cache_misses) X(texture_dram_bytes) X(env_sh_evals)
 
 struct Counters {
 #define SIM_CORE_DECLARE(name) std::uint64_t name = 0;

@@ -39,7 +39,7 @@ inline Sample2 r2_sample(std::uint32_t key, std::uint32_t i) {
 }
 
 // Purposes of random numbers along a path (mixed into the key).
-enum class SamplePurpose : std::uint32_t { kShadow = 1, kAo = 2, kGlossy = 3 };
+enum class SamplePurpose : std::uint32_t { kShadow = 1, kAo = 2, kGlossy = 3, kAlpha = 4 };
 
 inline Vec3 cosine_hemisphere(Sample2 s, Vec3 n) {
   const float r = std::sqrt(s.u), phi = 2.f * kPi * s.v;
@@ -57,6 +57,17 @@ inline Vec3 uniform_cone(Sample2 s, Vec3 axis, float half) {
   Vec3 t, b;
   onb(axis, &t, &b);
   return normalize(t * (sn * std::cos(phi)) + b * (sn * std::sin(phi)) + axis * c);
+}
+
+// Microfacet normal of the GGX (Trowbridge-Reitz) distribution with roughness alpha around unit n, sampled
+// proportionally to D(h) cos(theta_h) (Walter et al. 2007, eq. 35-36).
+inline Vec3 ggx_normal(Sample2 s, Vec3 n, float alpha) {
+  const float tan2 = alpha * alpha * s.u / std::max(1e-7f, 1.f - s.u);
+  const float c = 1.f / std::sqrt(1.f + tan2), sn = std::sqrt(std::max(0.f, 1.f - c * c));
+  const float phi = 2.f * kPi * s.v;
+  Vec3 t, b;
+  onb(n, &t, &b);
+  return normalize(t * (sn * std::cos(phi)) + b * (sn * std::sin(phi)) + n * c);
 }
 
 // Uniform point on the unit disk (concentric mapping, Shirley & Chiu).

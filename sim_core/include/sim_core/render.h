@@ -81,11 +81,12 @@ struct RenderOutput {
 using TileRenderer = std::function<void(TileContext& ctx, TileStat& stat, std::size_t tile)>;
 void render_tiles(const Scene& scene, const Camera& camera, const RenderSettings& settings, const CacheConfig& cache,
                   const TileGrid& grid, int threads, const TraceOptions& trace, RenderOutput* out,
-                  const TileRenderer& render);
+                  const TileRenderer& render, const CacheConfig& texture_cache = kDefaultTextureCache);
 
-// Renders `camera` (already at render resolution) with `settings`. `previous` may be null.
+// Renders `camera` (already at render resolution) with `settings`. `previous` may be null. `cache` is the
+// T&I unit's node/triangle cache, `texture_cache` the shading cores' texture cache.
 RenderOutput render_frame(const Scene& scene, const Camera& camera, const RenderSettings& settings, int threads,
                           const MultirateState* previous, const CacheConfig& cache,
-                          const TraceOptions& trace = {});
+                          const TraceOptions& trace = {}, const CacheConfig& texture_cache = kDefaultTextureCache);
 
 }  // namespace sim_core

@@ -3,6 +3,7 @@
 // afterwards, so any number of threads may trace it concurrently.
 #pragma once
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -11,34 +12,60 @@
 #include "sim_core/intersect.h"
 #include "sim_core/math.h"
 #include "sim_core/parallel.h"
+#include "sim_core/texture.h"
 
 namespace sim_core {
 
+// How a material's alpha acts (Blender's Principled alpha, glTF's alphaMode): ignored (opaque), a hard
+// cut-out below `alpha_cutoff` (clip), or a stochastic cut-out per sample (hashed: a surface of alpha a
+// stops a fraction a of the samples, which average to a blend, as Cycles renders alpha).
+enum class AlphaMode : int { kOpaque = 0, kClip = 1, kHashed = 2 };
+
 struct Material {
-  Vec3 base_color{0.8f, 0.8f, 0.8f};
+  Vec3 base_color{0.8f, 0.8f, 0.8f};  // linear; multiplied by the base-colour texture when there is one
   float metallic = 0.f;
   float roughness = 0.5f;
   float transmission = 0.f;
   float ior = 1.5f;
   Vec3 emission{0.f, 0.f, 0.f};
+  float alpha = 1.f;                   // multiplied by the texture's alpha
+  AlphaMode alpha_mode = AlphaMode::kOpaque;
+  float alpha_cutoff = 0.5f;           // clip threshold
+  std::int32_t base_color_texture = -1;  // index into the scene's textures, -1 none
+  bool cuts_out = false;               // set by the scene: some hit of this material can be cut out
   // A material traces reflection rays when it is metallic or smoother than this roughness.
   static constexpr float kReflectRoughness = 0.5f;
   bool reflects() const { return metallic > 0.f || roughness < kReflectRoughness; }
   bool refracts() const { return transmission > 0.f; }
 };
-inline constexpr int kMaterialFields = 10;  // base rgb, metallic, roughness, transmission, ior, emission rgb
+// base rgb, metallic, roughness, transmission, ior, emission rgb, alpha, alpha mode, alpha cutoff, texture
+inline constexpr int kMaterialFields = 14;
 
-enum class LightKind : int { kPoint = 0, kSpot = 1, kSun = 2 };
+// Light kinds. Intensity is what the shader multiplies: radiant intensity (W/sr) of a point or spot
+// light, irradiance (W/m^2) of a sun, radiance (W/(m^2 sr)) of an area light's emitting face (sim_core's
+// Python Light.from_blender converts Blender's watts).
+enum class LightKind : int { kPoint = 0, kSpot = 1, kSun = 2, kArea = 3 };
+enum class AreaShape : int { kRectangle = 0, kEllipse = 1 };  // square / disk are the equal-sided cases
 struct Light {
   LightKind kind = LightKind::kPoint;
   Vec3 position;
-  Vec3 direction{0.f, 0.f, -1.f};  // where the light shines (spot, sun)
+  Vec3 direction{0.f, 0.f, -1.f};  // where the light shines (spot, sun, area: the emitting side)
   Vec3 color{1.f, 1.f, 1.f};
   float intensity = 1.f;
   float radius = 0.f;              // sphere radius (point/spot) or angular radius in radians (sun)
   float spot_angle = 0.7853982f;   // half angle of the spot cone
+  float spot_blend = 0.15f;        // Blender's spot_blend: smooth edge over this fraction of the cone
+  AreaShape shape = AreaShape::kRectangle;
+  float size_u = 0.f, size_v = 0.f;  // area light extents (m) along axis_u and axis_v (ellipse: diameters)
+  Vec3 axis_u{1.f, 0.f, 0.f};      // unit, orthogonal to direction (the light's local X)
+  Vec3 axis_v{0.f, 1.f, 0.f};      // unit, axis_u x direction (the light's local Y)
+  float area() const {
+    return kind == LightKind::kArea ? size_u * size_v * (shape == AreaShape::kEllipse ? 0.25f * kPi : 1.f) : 0.f;
+  }
 };
-inline constexpr int kLightFields = 13;  // kind, position xyz, direction xyz, color rgb, intensity, radius, spot
+// kind, position xyz, direction xyz, color rgb, intensity, radius, spot angle, spot blend, shape, size u,
+// size v, axis u xyz
+inline constexpr int kLightFields = 20;
 inline constexpr int kMaxLights = 32;    // one shadow bit per light
 
 struct TriShading {
@@ -46,15 +73,23 @@ struct TriShading {
   Vec3 ng;    // unit geometric normal (winding order)
 };
 
+// Texture coordinates of a triangle's vertices and its texture level-of-detail term.
+struct TriTexcoord {
+  float uv[6];     // (u, v) at v0, v1, v2 (Blender's convention: v up)
+  float lod_bias;  // 0.5 * log2(UV area / world area): texels per metre, before the texture's size
+};
+
 class Scene {
  public:
   // positions: V*3 floats; triangles: T*3 indices (< V, non-degenerate); prim_ids: caller's original index
   // of each triangle; normals: V*3 or null; material_ids, object_ids: T each or null;
-  // materials: M * kMaterialFields; lights: L * kLightFields. Throws std::invalid_argument on bad input.
+  // materials: M * kMaterialFields; lights: L * kLightFields; uvs: V*2 or null; textures: what the
+  // materials' texture indices refer to. Throws std::invalid_argument on bad input.
   Scene(const float* positions, std::size_t vertex_count, const std::uint32_t* triangles,
         std::size_t triangle_count, const std::int64_t* prim_ids, const float* normals,
         const std::uint32_t* material_ids, const std::uint32_t* object_ids, const float* materials,
-        std::size_t material_count, const float* lights, std::size_t light_count, Environment env);
+        std::size_t material_count, const float* lights, std::size_t light_count, Environment env,
+        const float* uvs = nullptr, std::vector<std::shared_ptr<const Texture>> textures = {});
 
   // Closest hit and any hit (shadow and ambient-occlusion rays) over the 4-wide BVH: what the renderer and
   // the host-side queries walk. The recorder sees 128-byte node fetches and 48-byte triangle fetches.
@@ -92,6 +127,14 @@ class Scene {
 
   const TriRecord& tri(std::uint32_t i) const { return tris_[i]; }
   const TriShading& shading(std::uint32_t i) const { return shading_[i]; }
+  // Texture coordinates of triangle i, or null when the scene has no UVs.
+  const TriTexcoord* texcoord(std::uint32_t i) const { return texcoords_.empty() ? nullptr : &texcoords_[i]; }
+  // Interpolated (u, v) at barycentrics (b0, b1, b2) of triangle i; (0, 0) without UVs.
+  void uv_at(std::uint32_t i, float b0, float b1, float b2, float* u, float* v) const;
+  const Texture& texture(std::int32_t i) const { return *textures_[static_cast<std::size_t>(i)]; }
+  std::size_t texture_count() const { return textures_.size(); }
+  // Start of texture i in the modelled texture address space (textures laid out one after another).
+  std::uint64_t texture_base(std::int32_t i) const { return texture_bases_[static_cast<std::size_t>(i)]; }
   Vec3 geometric_normal(std::uint32_t i) const;  // unit, from the winding (v1 - v0) x (v2 - v0)
   const std::vector<Material>& materials() const { return materials_; }
   const std::vector<Light>& lights() const { return lights_; }
@@ -105,10 +148,15 @@ class Scene {
   bool has_refraction() const { return has_refraction_; }
   bool has_reflection() const { return has_reflection_; }
   bool has_emission() const { return has_emission_; }
+  bool has_textures() const { return has_textures_; }   // some material samples a texture
+  bool has_cutouts() const { return has_cutouts_; }     // some material can be cut out by its alpha
 
  private:
   std::vector<TriRecord> tris_;
   std::vector<TriShading> shading_;
+  std::vector<TriTexcoord> texcoords_;  // leaf order; empty without UVs
+  std::vector<std::shared_ptr<const Texture>> textures_;
+  std::vector<std::uint64_t> texture_bases_;
   std::vector<Material> materials_;
   std::vector<Light> lights_;
   Environment env_;
@@ -116,9 +164,8 @@ class Scene {
   Bvh4 bvh4_;
   Vec3 lo_, hi_;
   bool has_refraction_ = false, has_reflection_ = false, has_emission_ = false;
+  bool has_textures_ = false, has_cutouts_ = false;
 };
-
-
 
 }  // namespace sim_core
 

@@ -1,8 +1,9 @@
 // Shading of one sample: the Whitted ray tree of a primary ray, traced and shaded in named phases
-// (shader.cpp): primary hit -> surface point and material terms -> emission -> direct light with shadow
-// rays -> ambient light with ambient-occlusion rays -> mirror/glossy reflection and Fresnel refraction
-// (recursively) -> environment for rays that leave the scene. Every ray, node and triangle fetch,
-// closest-hit comparison and environment lookup is counted into the tile's context.
+// (shader.cpp): primary hit (past alpha cut-outs) -> surface point, texture and material terms ->
+// emission -> direct light (point, spot, sun, area) with shadow rays -> ambient light with
+// ambient-occlusion rays -> mirror/glossy reflection and Fresnel refraction (recursively) -> environment
+// for rays that leave the scene. Every ray, node and triangle fetch, closest-hit comparison, texel read and
+// environment lookup is counted into the tile's context.
 #pragma once
 #include <cstdint>
 #include <vector>
@@ -34,6 +35,9 @@ struct SampleResult {
   SampleGeometry geom;
 };
 
+// Texture cache of the shading cores when no hardware profile provides one (16 KiB, 64-byte lines, 4 ways).
+inline constexpr CacheConfig kDefaultTextureCache{16384, 64, 4};
+
 // Kinds of traced rays, as a ray log records them (the order of the rays_* counters).
 enum class TracedKind : std::uint8_t { kPrimary, kShadow, kReflection, kRefraction, kAo, kGlossy };
 
@@ -52,22 +56,24 @@ struct TraceOptions {
   void validate() const;  // throws std::invalid_argument
 };
 
-// Per-tile state of the T&I unit model: counters, node/triangle cache, comparator histogram, and how the
-// tile's rays are traced.
+// Per-tile state of the T&I unit model: counters, node/triangle cache, texture cache, comparator histogram,
+// and how the tile's rays are traced.
 struct TileContext {
   const Scene& scene;
   const RenderSettings& settings;
   const Camera& camera;
   CacheModel cache;
+  CacheModel texture_cache;  // texel reads of base-colour textures (untouched by scenes without textures)
   Counters counters;
   ComparatorHistogram histogram{};
   TraceOptions trace;
   std::vector<TracedRay> ray_log;  // with trace.log_rays: every ray, in tracing order
   float cos_threshold;  // cos(normal_threshold); > 1 when nothing may pass
   float ao_distance;
+  float pixel_spread;   // angle between neighbouring samples (the primary ray cone's spread, radians)
 
   TileContext(const Scene& s, const RenderSettings& st, const Camera& c, const CacheConfig& cc,
-              const TraceOptions& trace = {});
+              const TraceOptions& trace = {}, const CacheConfig& texture_cc = kDefaultTextureCache);
   void finish();  // folds cache statistics into the counters
 };
 

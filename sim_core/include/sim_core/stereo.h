@@ -27,6 +27,7 @@ std::uint64_t stereo_prefetch_texels(const Camera& left, const Camera& right, in
 
 StereoOutput render_stereo(const Scene& scene, const Camera& left, const Camera& right,
                            const RenderSettings& settings, int threads, const MultirateState* previous,
-                           const CacheConfig& cache, const TraceOptions& trace = {});
+                           const CacheConfig& cache, const TraceOptions& trace = {},
+                           const CacheConfig& texture_cache = kDefaultTextureCache);
 
 }  // namespace sim_core

@@ -7,7 +7,7 @@ from .camera import Camera
 from .energy import EnergyReport, Profile, list_profiles, load_profile, price
 from .render import COUNTER_NAMES, RenderResult, StereoResult, render, render_stereo
 from .scene import Scene, load_exr, smooth_normals
-from .scene_data import CameraData, Light, Material, SceneData
+from .scene_data import CameraData, Light, Material, SceneData, Texture
 from .settings import RenderSettings
 
 __version__ = _core.__version__
@@ -26,6 +26,7 @@ __all__ = [
     "SceneAnalysis",
     "SceneData",
     "StereoResult",
+    "Texture",
     "__version__",
     "analyze",
     "inert_parameters",

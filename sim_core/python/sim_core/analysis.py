@@ -30,9 +30,12 @@ class SceneAnalysis:
     glossy: bool  # some reflective material is rough (cone-filtered environment lookups)
     refraction: bool  # some material transmits (refraction rays)
     emission: bool
-    soft_shadows: bool  # some light has a radius (shadow samples > 1 matter)
+    soft_shadows: bool  # some light has a radius or an area (shadow samples > 1 matter)
     environment_map: bool  # an equirectangular map (environment filtering can matter)
     effects: tuple[str, ...]
+    area_lights: bool = False  # some light is an area light (area-light evaluations)
+    textures: bool = False  # some material samples a base-colour texture (texture fetches, texture cache)
+    alpha_cutouts: bool = False  # some material can be cut out by its alpha (alpha tests, continuation rays)
 
     def possible_counters(self) -> set[str]:
         """Counters that can be non-zero for this scene; the rest stay 0 in every render."""
@@ -52,6 +55,14 @@ class SceneAnalysis:
             always.add("rays_refraction")
         if self.glossy and self.environment_map:
             always.add("env_filtered_lookups")
+        if self.environment_map:
+            always.add("env_sh_evals")
+        if self.area_lights:
+            always.add("area_light_evals")
+        if self.textures:
+            always |= {"texture_fetches", "texel_reads", "texture_cache_misses", "texture_dram_bytes"}
+        if self.alpha_cutouts:
+            always |= {"alpha_tests", "rays_alpha"}
         return always
 
 
@@ -64,28 +75,22 @@ def analyze(scene: Any) -> SceneAnalysis:
     glossy = any((m.metallic > 0.0 or m.roughness < 0.5) and m.roughness > 0.0 for m in mats)
     refraction = any(m.transmission > 0.0 for m in mats)
     emission = any(max(m.emission) > 0.0 for m in mats)
-    soft = any(light.radius > 0.0 for light in lights)
+    soft = any(light.radius > 0.0 or light.kind == "area" for light in lights)
     effects = tuple(stats.get("effects", ()))
     env_map = "environment_map" in effects
-    eff = []
-    if lights:
-        eff.append("shadows")
-    if soft:
-        eff.append("soft_shadows")
-    if reflection:
-        eff.append("reflection")
-    if glossy:
-        eff.append("glossy_reflection")
-    if refraction:
-        eff.append("refraction")
-    if emission:
-        eff.append("emission")
-    if env_map:
-        eff.append("environment_map")
+    area = any(light.kind == "area" for light in lights)
+    textures = "textures" in effects
+    cutouts = "alpha_cutouts" in effects
+    flags = ((bool(lights), "shadows"), (soft, "soft_shadows"), (reflection, "reflection"),
+             (glossy, "glossy_reflection"), (refraction, "refraction"), (emission, "emission"),
+             (env_map, "environment_map"), (area, "area_lights"), (textures, "textures"),
+             (cutouts, "alpha_cutouts"))
+    eff = [name for on, name in flags if on]
     return SceneAnalysis(
         triangles=int(stats.get("triangles", 0)), lights=len(lights), shadow_bits=len(lights),
         reflection=reflection, glossy=glossy, refraction=refraction, emission=emission, soft_shadows=soft,
-        environment_map=env_map, effects=tuple(eff),
+        environment_map=env_map, effects=tuple(eff), area_lights=area, textures=textures,
+        alpha_cutouts=cutouts,
     )
 
 

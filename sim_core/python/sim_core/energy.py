@@ -51,37 +51,40 @@ COUNTERS: tuple[str, ...] = (
     "similarity_checks", "interpolations", "reprojections", "tile_buffer_reads", "tile_buffer_writes",
     "framebuffer_bytes", "gbuffer_prefetch_bytes", "cache_accesses", "cache_misses", "dram_bytes_read",
     "closest_hit_comparisons", "env_lookups", "env_filtered_lookups", "samples_traced",
-    "samples_interpolated", "samples_reused", "pixels",
+    "samples_interpolated", "samples_reused", "pixels", "rays_alpha", "alpha_tests", "area_light_evals",
+    "texture_fetches", "texel_reads", "texture_cache_misses", "texture_dram_bytes", "env_sh_evals",
 )
 
 # Which hardware unit each block runs on (units run concurrently; blocks on one unit add up, except the
 # T&I unit whose traversal and intersection pipelines overlap).
 BLOCK_UNIT: dict[str, str] = {
     "raygen": "srp", "shading": "srp", "similarity": "srp", "interpolation": "srp",
-    "reprojection": "srp", "env_filter": "srp",
+    "reprojection": "srp", "env_filter": "srp", "area_lights": "srp", "alpha_test": "srp", "texture": "srp",
     "traversal": "ti", "intersection": "ti", "comparator": "ti", "cache": "ti",
     "tile_buffer": "tile_buffer",
-    "dram": "dram", "framebuffer_dma": "dram", "gbuffer_prefetch": "dram",
+    "dram": "dram", "framebuffer_dma": "dram", "gbuffer_prefetch": "dram", "texture_dram": "dram",
 }
 BLOCKS: tuple[str, ...] = tuple(BLOCK_UNIT)
 
 _SECTIONS: dict[str, tuple[str, ...]] = {
     "clock": ("srp_hz", "ti_hz"),
     "throughput": ("srp_ops_per_cycle", "ti_box_tests_per_cycle", "ti_triangle_tests_per_cycle",
-                   "cache_line_accesses_per_cycle", "tile_buffer_accesses_per_cycle", "dram_bytes_per_s"),
+                   "cache_line_accesses_per_cycle", "tile_buffer_accesses_per_cycle", "dram_bytes_per_s",
+                   "texels_per_cycle"),
     "ops": ("raygen", "shading", "similarity", "interpolation", "reprojection", "env_lookup",
-            "env_filtered_lookup"),
+            "env_filtered_lookup", "env_sh_eval", "texture_filter", "alpha_test", "area_light"),
     "energy_pj": ("srp_op", "traversal_step", "triangle_test", "tile_buffer_access", "cache_line_access",
-                  "env_texel_read", "dram_read_byte", "dram_write_byte", "dma_byte"),
+                  "env_texel_read", "texel_read", "dram_read_byte", "dram_write_byte", "dma_byte"),
     "comparator": ("energy_scale",),
     "cache": ("size_bytes", "line_bytes", "ways"),
+    "texture_cache": ("size_bytes", "line_bytes", "ways"),
     "static": ("power_w",),
 }
 
 
 @dataclass(frozen=True)
 class Profile:
-    """A hardware profile: clocks, throughputs, per-event energies, cache geometry, static power."""
+    """A hardware profile: clocks, throughputs, per-event energies, cache geometries, static power."""
 
     name: str
     description: str
@@ -96,6 +99,9 @@ class Profile:
     cache_ways: int
     static_power_w: float
     source: str = ""
+    texture_cache_size_bytes: int = 16384
+    texture_cache_line_bytes: int = 64
+    texture_cache_ways: int = 4
 
     @property
     def cache(self) -> Any:
@@ -103,6 +109,15 @@ class Profile:
         from . import _core
 
         return _core.CacheConfig(self.cache_size_bytes, self.cache_line_bytes, self.cache_ways)
+
+    @property
+    def texture_cache(self) -> Any:
+        """The texture cache geometry as a native ``CacheConfig`` (``render(texture_cache=...)``)."""
+        from . import _core
+
+        return _core.CacheConfig(
+            self.texture_cache_size_bytes, self.texture_cache_line_bytes, self.texture_cache_ways
+        )
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], source: str = "") -> Profile:
@@ -117,19 +132,22 @@ class Profile:
                 v = data[sec][k]
                 if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
                     raise ValueError(f"{where}: [{sec}] {k} must be a finite number, got {v!r}")
-                positive = sec in ("clock", "throughput", "cache") or (sec == "comparator")
+                positive = sec in ("clock", "throughput", "cache", "texture_cache") or (sec == "comparator")
                 if v < 0 or (positive and v <= 0):
                     raise ValueError(f"{where}: [{sec}] {k} must be {'> 0' if positive else '>= 0'}, got {v}")
         style = data["comparator"].get("style", "sync")
         if style not in ("sync", "async"):
             raise ValueError(f"{where}: [comparator] style must be 'sync' or 'async', got {style!r}")
-        cache = data["cache"]
-        for k in ("size_bytes", "line_bytes", "ways"):
-            v = cache[k]
-            if int(v) != v or int(v) & (int(v) - 1):
-                raise ValueError(f"{where}: [cache] {k} must be a power-of-two integer, got {v}")
-        if cache["size_bytes"] < cache["line_bytes"] * cache["ways"]:
-            raise ValueError(f"{where}: [cache] size_bytes must hold at least one set (line_bytes * ways)")
+        cache, texture_cache = data["cache"], data["texture_cache"]
+        for sec, geometry in (("cache", cache), ("texture_cache", texture_cache)):
+            for k in ("size_bytes", "line_bytes", "ways"):
+                v = geometry[k]
+                if int(v) != v or int(v) & (int(v) - 1):
+                    raise ValueError(f"{where}: [{sec}] {k} must be a power-of-two integer, got {v}")
+            if geometry["size_bytes"] < geometry["line_bytes"] * geometry["ways"]:
+                raise ValueError(
+                    f"{where}: [{sec}] size_bytes must hold at least one set (line_bytes * ways)"
+                )
         name = data.get("name")
         if not isinstance(name, str) or not name:
             raise ValueError(f"{where}: 'name' must be a non-empty string")
@@ -147,6 +165,9 @@ class Profile:
             cache_ways=int(cache["ways"]),
             static_power_w=float(data["static"]["power_w"]),
             source=source,
+            texture_cache_size_bytes=int(texture_cache["size_bytes"]),
+            texture_cache_line_bytes=int(texture_cache["line_bytes"]),
+            texture_cache_ways=int(texture_cache["ways"]),
         )
 
 
@@ -328,9 +349,19 @@ def price(result: Any, profile: Profile | str | Path, fps: float, *, scene: Any 
     env_map = scene is None or "environment_map" in (getattr(scene, "stats", {}) or {}).get("effects", ())
     lookups = n("env_lookups") if env_map else 0
     env_reads = lookups + n("env_filtered_lookups") * _filtered_reads_per_lookup(settings)
-    env_ops = lookups * ops["env_lookup"] + n("env_filtered_lookups") * ops["env_filtered_lookup"]
+    env_ops = (lookups * ops["env_lookup"] + n("env_filtered_lookups") * ops["env_filtered_lookup"]
+               + n("env_sh_evals") * ops["env_sh_eval"])
     energy["env_filter"] = (env_ops * e["srp_op"] + env_reads * e["env_texel_read"]) * pj
     cycles["env_filter"] = env_ops / thr["srp_ops_per_cycle"]
+    # Shading features a scene may lack (their counters are then 0 and so is their cost): area lights,
+    # alpha tests of cut-out materials, base-colour textures (filter ops + texel reads from the texture
+    # cache; its line fills are DRAM traffic below).
+    srp_block("area_lights", n("area_light_evals"), ops["area_light"])
+    srp_block("alpha_test", n("alpha_tests"), ops["alpha_test"])
+    srp_block("texture", n("texture_fetches"), ops["texture_filter"])
+    energy["texture"] += n("texel_reads") * e["texel_read"] * pj
+    # The filter arithmetic overlaps the texel reads; the slower of the two sets the block's time.
+    cycles["texture"] = max(cycles["texture"], n("texel_reads") / thr["texels_per_cycle"])
 
     # One node visit is one step of the 4-wide tree: four ray-box tests (and the ordering of the hit
     # children), priced per step; the unit's box testers set the step rate.
@@ -359,6 +390,8 @@ def price(result: Any, profile: Profile | str | Path, fps: float, *, scene: Any 
     cycles["framebuffer_dma"] = n("framebuffer_bytes") / bytes_per_srp_cycle
     energy["gbuffer_prefetch"] = n("gbuffer_prefetch_bytes") * (e["dram_read_byte"] + e["dma_byte"]) * pj
     cycles["gbuffer_prefetch"] = n("gbuffer_prefetch_bytes") / bytes_per_srp_cycle
+    energy["texture_dram"] = n("texture_dram_bytes") * e["dram_read_byte"] * pj
+    cycles["texture_dram"] = n("texture_dram_bytes") / bytes_per_srp_cycle
 
     for k, v in energy.items():
         if not math.isfinite(v):
@@ -369,8 +402,8 @@ def price(result: Any, profile: Profile | str | Path, fps: float, *, scene: Any 
         # Traversal and intersection pipelines (and the cache ports feeding them) work concurrently.
         "ti": max(cycles["traversal"], cycles["intersection"], cycles["cache"]) / clk["ti_hz"],
         "tile_buffer": cycles["tile_buffer"] / clk["srp_hz"],
-        "dram": (n("dram_bytes_read") + n("framebuffer_bytes") + n("gbuffer_prefetch_bytes"))
-        / thr["dram_bytes_per_s"],
+        "dram": (n("dram_bytes_read") + n("framebuffer_bytes") + n("gbuffer_prefetch_bytes")
+                 + n("texture_dram_bytes")) / thr["dram_bytes_per_s"],
     }
     bottleneck = max(unit_time, key=lambda u: unit_time[u])
     frame_time = unit_time[bottleneck]
@@ -405,7 +438,8 @@ def price(result: Any, profile: Profile | str | Path, fps: float, *, scene: Any 
         mrays_per_s=mrays,
         perf_per_watt=perf_per_watt,
         rays_total=rays,
-        dram_bytes=n("dram_bytes_read") + n("framebuffer_bytes") + n("gbuffer_prefetch_bytes"),
+        dram_bytes=n("dram_bytes_read") + n("framebuffer_bytes") + n("gbuffer_prefetch_bytes")
+        + n("texture_dram_bytes"),
         comparator=comp,
         blocks_used=tuple(b for b in BLOCKS if energy[b] > 0),
     )

@@ -19,6 +19,8 @@ from .settings import RenderSettings
 
 # Default node/triangle cache of the T&I unit model when no hardware profile provides one.
 DEFAULT_CACHE = (32 * 1024, 64, 4)
+# Default texture cache of the shading cores (the native kDefaultTextureCache).
+DEFAULT_TEXTURE_CACHE = (16 * 1024, 64, 4)
 
 COUNTER_NAMES: tuple[str, ...] = (
     "rays_primary",
@@ -49,6 +51,14 @@ COUNTER_NAMES: tuple[str, ...] = (
     "samples_interpolated",
     "samples_reused",
     "pixels",
+    "rays_alpha",
+    "alpha_tests",
+    "area_light_evals",
+    "texture_fetches",
+    "texel_reads",
+    "texture_cache_misses",
+    "texture_dram_bytes",
+    "env_sh_evals",
 )
 
 
@@ -112,9 +122,9 @@ class StereoResult:
     depth_mismatches: int = 0  # farther samples showing through a reprojected nearer surface
 
 
-def _cache_args(cache: Any) -> tuple[int, int, int]:
+def _cache_args(cache: Any, default: tuple[int, int, int] = DEFAULT_CACHE) -> tuple[int, int, int]:
     if cache is None:
-        return DEFAULT_CACHE
+        return default
     if isinstance(cache, dict):
         vals = (cache.get("size_bytes"), cache.get("line_bytes", 64), cache.get("ways", 4))
     elif isinstance(cache, tuple | list):
@@ -218,6 +228,7 @@ def render(
     threads: int | None = None,
     previous: Any = None,
     cache: Any = None,
+    texture_cache: Any = None,
     *,
     bvh_width: int = 4,
     log_rays: bool = False,
@@ -227,6 +238,8 @@ def render(
     previous: the previous frame's RenderResult (or its multirate_state) for multi-rate tiles.
     cache: node/triangle cache of the T&I unit (CacheConfig, dict or (size_bytes, line_bytes, ways));
       None uses DEFAULT_CACHE; size 0 disables it (every fetch goes to DRAM).
+    texture_cache: the shading cores' texture cache, same forms (a profile's ``texture_cache``); None uses
+      DEFAULT_TEXTURE_CACHE. Only scenes with textures touch it.
     bvh_width: 4 walks the 4-wide BVH (what the energy model prices); 2 the binary BVH, the slow reference
       (the same images but where coplanar duplicates' rounded t differ; node counters in 32-byte nodes).
     log_rays: also return every traced ray (``result.rays``), e.g. to replay them through another tracer.
@@ -244,6 +257,7 @@ def render(
         _threads(threads),
         _previous(previous),
         *_cache_args(cache),
+        *_cache_args(texture_cache, DEFAULT_TEXTURE_CACHE),
         **trace,
     )
     return _result(d, camera, settings, (w, h))
@@ -257,6 +271,7 @@ def render_stereo(
     threads: int | None = None,
     previous: Any = None,
     cache: Any = None,
+    texture_cache: Any = None,
     *,
     bvh_width: int = 4,
     log_rays: bool = False,
@@ -289,6 +304,7 @@ def render_stereo(
         _threads(threads),
         _previous(previous),
         *_cache_args(cache),
+        *_cache_args(texture_cache, DEFAULT_TEXTURE_CACHE),
         **trace,
     )
     return StereoResult(

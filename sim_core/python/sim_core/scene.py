@@ -7,6 +7,7 @@ bad file gives a clear ValueError instead of a crash or a silently wrong image.
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 from collections.abc import Sequence
 from typing import Any
@@ -14,18 +15,21 @@ from typing import Any
 import numpy as np
 
 from . import _core
-from .scene_data import CameraData, Light, Material, SceneData
+from .scene_data import ALPHA_MODES, WRAPS, CameraData, Light, Material, SceneData, Texture, finite_clamped
 
 # Blender's default world colour: what a scene without an environment sees.
 DEFAULT_ENVIRONMENT = (0.050876, 0.050876, 0.050876)
-_LIGHT_KINDS = {"point": 0, "spot": 1, "sun": 2}
+_LIGHT_KINDS = {"point": 0, "spot": 1, "sun": 2, "area": 3}
+_MATERIAL_FIELDS = 14
+_LIGHT_FIELDS = 20
 
 
 def load_exr(path: str | os.PathLike[str]) -> np.ndarray:
     """Read an OpenEXR image as (H, W, 3) float32 linear RGB (an equirectangular environment map).
 
-    Raises FileNotFoundError when the file is missing and ValueError when it is not a readable RGB EXR or
-    holds non-finite or negative values.
+    Raises FileNotFoundError when the file is missing and ValueError when it is not a readable RGB EXR.
+    Negative and non-finite texels (most of Blender's bundled HDRIs hold tiny negative ones) are clamped
+    with a warning, never rejected.
     """
     import OpenEXR
 
@@ -49,9 +53,7 @@ def load_exr(path: str | os.PathLike[str]) -> np.ndarray:
         raise ValueError(f"{p}: not a readable EXR file ({exc})") from None
     if rgb.ndim != 3 or rgb.shape[2] != 3:
         raise ValueError(f"{p}: expected an (H, W, 3) image, got shape {rgb.shape}")
-    if not np.all(np.isfinite(rgb)) or np.any(rgb < 0):
-        raise ValueError(f"{p}: environment map must be finite and >= 0")
-    return np.ascontiguousarray(rgb)
+    return np.ascontiguousarray(finite_clamped(rgb, p))
 
 
 def smooth_normals(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
@@ -93,28 +95,41 @@ def _as_array(value: Any, name: str, dtype: type, ncols: int | None) -> np.ndarr
     return np.ascontiguousarray(arr, dtype=dtype)
 
 
-def _environment(env: Any) -> tuple[np.ndarray, np.ndarray | None]:
+def _environment(env: Any, strength: float = 1.0) -> tuple[np.ndarray, np.ndarray | None]:
+    """(constant colour, map or None) times ``strength``. A map's negative or non-finite texels are
+    clamped with a warning (HDRIs often hold tiny negative ones); a bad constant colour is an error."""
+    if isinstance(strength, bool) or not isinstance(strength, int | float | np.floating) or not (
+        math.isfinite(strength) and strength >= 0
+    ):
+        raise ValueError(f"environment strength must be finite and >= 0, got {strength!r}")
     if env is None:
-        return np.asarray(DEFAULT_ENVIRONMENT, dtype=np.float32), None
+        return np.asarray(DEFAULT_ENVIRONMENT, dtype=np.float32) * np.float32(strength), None
     arr = np.asarray(env, dtype=np.float32)
     if arr.shape == (3,):
         if not np.all(np.isfinite(arr)) or np.any(arr < 0):
             raise ValueError(f"environment colour must be finite and >= 0, got {arr.tolist()}")
-        return arr, None
+        return arr * np.float32(strength), None
     if arr.ndim == 3 and arr.shape[2] == 3 and arr.shape[0] >= 1 and arr.shape[1] >= 1:
-        if not np.all(np.isfinite(arr)) or np.any(arr < 0):
-            raise ValueError("environment map must be finite and >= 0")
+        arr = finite_clamped(arr, "environment map")
+        if strength != 1.0:
+            arr = arr * np.float32(strength)
         return np.zeros(3, np.float32), np.ascontiguousarray(arr)
     raise ValueError(f"environment must be an RGB triple or an (H, W, 3) map, got shape {arr.shape}")
 
 
-def _material_table(materials: Sequence[Material]) -> np.ndarray:
+def _material_table(materials: Sequence[Material], texture_count: int) -> np.ndarray:
     rows = []
-    for m in materials:
+    for i, m in enumerate(materials):
         if not isinstance(m, Material):
             raise ValueError(f"materials must be sim_core.Material, got {type(m).__name__}")
-        rows.append([*m.base_color, m.metallic, m.roughness, m.transmission, m.ior, *m.emission])
-    return np.asarray(rows, dtype=np.float32).reshape(-1, 10)
+        tex = -1 if m.base_color_texture is None else m.base_color_texture
+        if tex >= texture_count:
+            raise ValueError(
+                f"material {i} ({m.name!r}) uses texture {tex} but the scene has {texture_count} texture(s)"
+            )
+        rows.append([*m.base_color, m.metallic, m.roughness, m.transmission, m.ior, *m.emission, m.alpha,
+                     ALPHA_MODES.index(m.alpha_mode), m.alpha_cutoff, tex])
+    return np.asarray(rows, dtype=np.float32).reshape(-1, _MATERIAL_FIELDS)
 
 
 def _light_table(lights: Sequence[Light]) -> np.ndarray:
@@ -131,9 +146,28 @@ def _light_table(lights: Sequence[Light]) -> np.ndarray:
                 light.intensity,
                 light.radius,
                 light.spot_angle,
+                light.spot_blend,
+                0 if light.shape in ("square", "rectangle") else 1,
+                light.size,
+                light.size_y,
+                *light.tangent,
             ]
         )
-    return np.asarray(rows, dtype=np.float32).reshape(-1, 13)
+    return np.asarray(rows, dtype=np.float32).reshape(-1, _LIGHT_FIELDS)
+
+
+def _native_textures(textures: Sequence[Texture]) -> list[Any]:
+    out = []
+    for i, t in enumerate(textures):
+        if not isinstance(t, Texture):
+            raise ValueError(f"textures must be sim_core.Texture, got {type(t).__name__} at index {i}")
+        rgba = t.rgba()
+        wu, wv = WRAPS.index(t.wrap_u), WRAPS.index(t.wrap_v)
+        if rgba.dtype == np.uint8:
+            out.append(_core.NativeTexture.from_rgba8(rgba, t.colorspace == "srgb", wu, wv))
+        else:
+            out.append(_core.NativeTexture.from_rgba32f(rgba, wu, wv))
+    return out
 
 
 class Scene:
@@ -160,6 +194,7 @@ class Scene:
         self.cameras = cameras
         self.source = source
         self.object_names: list[str] = []  # indexed by object id, when the loader knows them
+        self.textures: list[Texture] = []
 
     # ---- construction -------------------------------------------------------------------------
     @classmethod
@@ -177,13 +212,20 @@ class Scene:
         cameras: Sequence[CameraData] | None = None,
         object_names: Sequence[str] | None = None,
         source: str = "",
+        uvs: Any = None,
+        textures: Sequence[Texture] | None = None,
+        environment_strength: float = 1.0,
+        environment_rotation: float = 0.0,
     ) -> Scene:
         """Validate flat arrays and build the native scene.
 
         positions (V, 3) floats; triangles (T, 3) vertex indices; normals (V, 3) per-vertex shading normals;
-        material_ids / object_ids (T,) per triangle. Degenerate (zero-area) triangles are dropped and
-        counted in `stats["degenerate_dropped"]`; `intersect` still reports original triangle indices.
-        Raises ValueError on NaN/Inf, out-of-range indices or an empty scene.
+        material_ids / object_ids (T,) per triangle; uvs (V, 2) texture coordinates (Blender's convention)
+        for the materials' base-colour textures (``textures``, shared by index; a textured material in a
+        scene without UVs shows its texture's mean colour). environment: see ``SceneData``. Degenerate
+        (zero-area) triangles are dropped and counted in `stats["degenerate_dropped"]`; `intersect` still
+        reports original triangle indices. Raises ValueError on NaN/Inf, out-of-range indices or an empty
+        scene; clamps (with a warning) negative or non-finite environment and float-texture texels.
         """
         pos = _as_array(positions, "positions", np.float32, 3)
         tri = _as_array(triangles, "triangles", np.int64, 3)
@@ -200,8 +242,15 @@ class Scene:
             nrm = _as_array(normals, "normals", np.float32, 3)
             if nrm.shape[0] != pos.shape[0]:
                 raise ValueError(f"normals must have one row per vertex ({pos.shape[0]}), got {nrm.shape[0]}")
+        uv = None
+        if uvs is not None:
+            uv = _as_array(uvs, "uvs", np.float32, 2)
+            if uv.shape[0] != pos.shape[0]:
+                raise ValueError(f"uvs must have one row per vertex ({pos.shape[0]}), got {uv.shape[0]}")
+        texs = list(textures) if textures else []
+        native_textures = _native_textures(texs)
         mats = list(materials) if materials else [Material()]
-        mtab = _material_table(mats)
+        mtab = _material_table(mats, len(texs))
         if material_ids is None:
             mid = np.zeros(n_tri, np.uint32)
         else:
@@ -226,7 +275,10 @@ class Scene:
         if len(lts) > 32:
             raise ValueError(f"at most 32 lights are supported (one shadow bit each), got {len(lts)}")
         ltab = _light_table(lts)
-        env_color, env_map = _environment(environment)
+        env_color, env_map = _environment(environment, environment_strength)
+        rotation = float(environment_rotation)
+        if not math.isfinite(rotation):
+            raise ValueError(f"environment_rotation must be finite, got {environment_rotation!r}")
 
         # Degenerate triangles: repeated vertices or zero area (computed in double precision).
         p64 = pos.astype(np.float64)
@@ -249,10 +301,20 @@ class Scene:
             ltab,
             env_color,
             env_map,
+            uv,
+            native_textures,
+            rotation,
         )
 
         h = hashlib.sha256()
-        for arr in (pos, tri.astype(np.uint32), nrm, mid, oid, mtab, ltab, env_color, env_map):
+        texture_parts: list[Any] = []
+        for t in texs:
+            sampling = f"{t.colorspace},{t.wrap_u},{t.wrap_v}".encode()
+            texture_parts += [t.image, np.frombuffer(sampling, np.uint8)]
+        rot = None if rotation == 0.0 else np.asarray([rotation], np.float64)
+        # Parts a scene without UVs, textures or rotation lacks add nothing: old hashes stay valid.
+        extra = [a for a in (uv, rot) if a is not None] + texture_parts
+        for arr in (pos, tri.astype(np.uint32), nrm, mid, oid, mtab, ltab, env_color, env_map, *extra):
             if arr is None:
                 h.update(b"<none>")
             else:
@@ -269,10 +331,16 @@ class Scene:
             effects.append("refraction")
         if any(max(m.emission) > 0 for m in mats):
             effects.append("emission")
-        if any(light.radius > 0 for light in lts):
+        if any(light.radius > 0 or light.kind == "area" for light in lts):
             effects.append("soft_shadows")
+        if any(light.kind == "area" for light in lts):
+            effects.append("area_lights")
         if env_map is not None:
             effects.append("environment_map")
+        if any(m.base_color_texture is not None for m in mats):
+            effects.append("textures")
+        if native.has_cutouts:
+            effects.append("alpha_cutouts")
         stats = {
             "triangles": int(np.count_nonzero(keep)),
             "degenerate_dropped": dropped,
@@ -283,6 +351,7 @@ class Scene:
         }
         scene = cls(native, stats, h.hexdigest(), mats, lts, list(cameras or []), source)
         scene.object_names = [str(n) for n in object_names] if object_names else []
+        scene.textures = texs
         return scene
 
     @classmethod
@@ -300,6 +369,10 @@ class Scene:
             cameras=data.cameras,
             object_names=getattr(data, "object_names", None),
             source=data.source,
+            uvs=data.uvs,
+            textures=data.textures,
+            environment_strength=data.environment_strength,
+            environment_rotation=data.environment_rotation,
         )
 
     @classmethod

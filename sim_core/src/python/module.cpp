@@ -7,6 +7,7 @@
 namespace nb = nanobind;
 
 namespace sim_core {
+void bind_texture(nb::module_& m);     // NativeTexture: a base-colour image with its mip pyramid
 void bind_scene(nb::module_& m);       // NativeScene: construction, intersect, traversal statistics
 void bind_settings(nb::module_& m);    // NativeRenderSettings
 void bind_render(nb::module_& m);      // MultirateState, render_frame
@@ -22,6 +23,7 @@ void bind_ssim(nb::module_& m);        // ssim_mean
 NB_MODULE(_core, m) {
   m.doc() = "render-budget native simulator core";
   m.attr("__version__") = sim_core::kVersion;
+  sim_core::bind_texture(m);
   sim_core::bind_scene(m);
   sim_core::bind_settings(m);
   sim_core::bind_render(m);

@@ -121,19 +121,22 @@ void bind_render(nb::module_& m) {
       "render_frame",
       [](const Scene& scene, CameraFrame frame, float vfov, int width, int height, const RenderSettings& settings,
          int threads, const MultirateState* previous, std::uint32_t cache_size, std::uint32_t cache_line,
-         std::uint32_t cache_ways, int bvh_width, bool log_rays) {
+         std::uint32_t cache_ways, std::uint32_t texture_cache_size, std::uint32_t texture_cache_line,
+         std::uint32_t texture_cache_ways, int bvh_width, bool log_rays) {
         const Camera cam = camera_from_frame(frame, vfov, width, height);
         const TraceOptions trace = trace_options(bvh_width, log_rays);
         const CacheConfig cc{cache_size, cache_line, cache_ways};
+        const CacheConfig tc{texture_cache_size, texture_cache_line, texture_cache_ways};
         RenderOutput out;
         {
           nb::gil_scoped_release release;
-          out = render_frame(scene, cam, settings, threads, previous, cc, trace);
+          out = render_frame(scene, cam, settings, threads, previous, cc, trace, tc);
         }
         return render_output_dict(out, trace);
       },
       "scene"_a, "frame"_a, "vfov"_a, "width"_a, "height"_a, "settings"_a, "threads"_a, "previous"_a.none(),
-      "cache_size"_a, "cache_line"_a, "cache_ways"_a, "bvh_width"_a = 4, "log_rays"_a = false,
+      "cache_size"_a, "cache_line"_a, "cache_ways"_a, "texture_cache_size"_a, "texture_cache_line"_a,
+      "texture_cache_ways"_a, "bvh_width"_a = 4, "log_rays"_a = false,
       "Renders one frame. frame rows: position, right, up, forward (unit) of the camera. bvh_width 2: the "
       "binary reference walk; log_rays: also return every traced ray (\"rays\").");
 }

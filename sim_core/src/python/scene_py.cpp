@@ -2,12 +2,15 @@
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
 #include <nanobind/stl/optional.h>
+#include <nanobind/stl/shared_ptr.h>
 #include <nanobind/stl/string.h>
 #include <nanobind/stl/unique_ptr.h>
+#include <nanobind/stl/vector.h>
 
 #include <memory>
 #include <optional>
 #include <stdexcept>
+#include <vector>
 
 #include "sim_core/scene.h"
 
@@ -29,21 +32,27 @@ std::unique_ptr<Scene> make_scene(Arr2<float, 3> positions, Arr2<std::uint32_t, 
                                   Arr2<float, kMaterialFields> materials, Arr2<float, kLightFields> lights,
                                   Arr1<float> env_color,
                                   std::optional<nb::ndarray<const float, nb::shape<-1, -1, 3>, nb::c_contig,
-                                                            nb::device::cpu>> env_map) {
+                                                            nb::device::cpu>> env_map,
+                                  std::optional<Arr2<float, 2>> uvs,
+                                  std::vector<std::shared_ptr<Texture>> textures, float env_rotation) {
   const std::size_t t = triangles.shape(0);
   if (prim_ids.shape(0) != t || material_ids.shape(0) != t || object_ids.shape(0) != t)
     throw std::invalid_argument("prim_ids, material_ids and object_ids need one entry per triangle");
   if (normals && normals->shape(0) != positions.shape(0))
     throw std::invalid_argument("normals need one entry per vertex");
+  if (uvs && uvs->shape(0) != positions.shape(0))
+    throw std::invalid_argument("uvs need one entry per vertex");
+  std::vector<std::shared_ptr<const Texture>> shared(textures.begin(), textures.end());
   if (env_color.shape(0) != 3) throw std::invalid_argument("environment colour needs 3 components");
   Environment env = env_map
-      ? Environment(env_map->data(), static_cast<int>(env_map->shape(1)), static_cast<int>(env_map->shape(0)))
+      ? Environment(env_map->data(), static_cast<int>(env_map->shape(1)), static_cast<int>(env_map->shape(0)),
+                    env_rotation)
       : Environment(Vec3(env_color(0), env_color(1), env_color(2)));
   nb::gil_scoped_release release;
   return std::make_unique<Scene>(positions.data(), positions.shape(0), triangles.data(), t, prim_ids.data(),
                                  normals ? normals->data() : nullptr, material_ids.data(), object_ids.data(),
                                  materials.data(), materials.shape(0), lights.data(), lights.shape(0),
-                                 std::move(env));
+                                 std::move(env), uvs ? uvs->data() : nullptr, std::move(shared));
 }
 
 // A new 1-D numpy array of n elements owned by Python (freed with its last reference), filled through data().
@@ -81,7 +90,7 @@ void bind_scene(nb::module_& m) {
                     "Native scene (BVH + shading data). Build it through sim_core.Scene, which validates.")
       .def_static("build", &make_scene, "positions"_a, "triangles"_a, "prim_ids"_a, "normals"_a.none(),
                   "material_ids"_a, "object_ids"_a, "materials"_a, "lights"_a, "env_color"_a,
-                  "env_map"_a.none())
+                  "env_map"_a.none(), "uvs"_a.none(), "textures"_a, "env_rotation"_a)
       .def(
           "intersect",
           [](const Scene& s, Arr2<float, 3> origins, Arr2<float, 3> directions, int threads, int bvh_width,
@@ -152,6 +161,9 @@ void bind_scene(nb::module_& m) {
           "What one query per ray reports to the traversal's recorder, summed: node_fetches, node_bytes, "
           "triangle_tests, comparisons (closest-hit distance comparisons), hits.")
       .def_prop_ro("triangle_count", &Scene::triangle_count)
+      .def_prop_ro("has_textures", &Scene::has_textures, "Some material samples a base-colour texture.")
+      .def_prop_ro("has_cutouts", &Scene::has_cutouts,
+                   "Some material can be cut out by its alpha (its hits and shadow rays run alpha tests).")
       .def_prop_ro("bvh_node_count", [](const Scene& s) { return s.bvh().nodes.size(); })
       .def_prop_ro("bvh_depth", [](const Scene& s) { return s.bvh().depth; })
       .def_prop_ro("bvh_leaf_count", [](const Scene& s) { return s.bvh().leaf_count; })

@@ -15,15 +15,17 @@ void bind_stereo(nb::module_& m) {
       "render_stereo",
       [](const Scene& scene, CameraFrame left, CameraFrame right, float vfov, int width, int height,
          const RenderSettings& settings, int threads, const MultirateState* previous, std::uint32_t cache_size,
-         std::uint32_t cache_line, std::uint32_t cache_ways, int bvh_width, bool log_rays) {
+         std::uint32_t cache_line, std::uint32_t cache_ways, std::uint32_t texture_cache_size,
+         std::uint32_t texture_cache_line, std::uint32_t texture_cache_ways, int bvh_width, bool log_rays) {
         const Camera cl = camera_from_frame(left, vfov, width, height);
         const Camera cr = camera_from_frame(right, vfov, width, height);
         const CacheConfig cc{cache_size, cache_line, cache_ways};
+        const CacheConfig tc{texture_cache_size, texture_cache_line, texture_cache_ways};
         const TraceOptions trace = trace_options(bvh_width, log_rays);
         StereoOutput out;
         {
           nb::gil_scoped_release release;
-          out = render_stereo(scene, cl, cr, settings, threads, previous, cc, trace);
+          out = render_stereo(scene, cl, cr, settings, threads, previous, cc, trace, tc);
         }
         nb::dict d;
         d["left"] = render_output_dict(out.left, trace);
@@ -35,7 +37,8 @@ void bind_stereo(nb::module_& m) {
         return d;
       },
       "scene"_a, "left"_a, "right"_a, "vfov"_a, "width"_a, "height"_a, "settings"_a, "threads"_a,
-      "previous"_a.none(), "cache_size"_a, "cache_line"_a, "cache_ways"_a, "bvh_width"_a = 4, "log_rays"_a = false,
+      "previous"_a.none(), "cache_size"_a, "cache_line"_a, "cache_ways"_a, "texture_cache_size"_a,
+      "texture_cache_line"_a, "texture_cache_ways"_a, "bvh_width"_a = 4, "log_rays"_a = false,
       "Renders the left eye, reprojects it into the right eye and traces only the bad pixels.");
 }
 

@@ -1,19 +1,24 @@
 """glTF 2.0 loader (.glb and .gltf) for scenes exported by Blender, decoded with numpy.
 
 What it reads: triangle meshes (indexed or not, strips and fans too) placed by the node hierarchy,
-metallic-roughness materials with KHR_materials_transmission / _ior / _emissive_strength,
-KHR_lights_punctual lights and perspective cameras. Textures, skins, morph targets and animation are
-ignored, except that a base-colour texture contributes its mean linear colour (the simulator shades one
-flat albedo per material): the simulator prices ray work, and those do not change what a ray hits.
+metallic-roughness materials with KHR_materials_transmission / _ior / _emissive_strength, alpha modes
+(MASK -> clip, BLEND -> hashed), base-colour textures with their texture coordinates (TEXCOORD_n,
+KHR_texture_transform baked into the UVs, sampler wrap modes; one decoded image per texture and sampler,
+shared by every material using it), KHR_lights_punctual lights and perspective cameras. Other textures
+(normal, metallic-roughness, emission maps), skins, morph targets and animation are ignored. glTF's UVs
+have v pointing down from the image's top; the loader flips them to Blender's convention (v up).
 
 Frames: glTF is Y-up, the project's world is Blender's Z-up. The conversion happens here, once, in
 :data:`GLTF_TO_BLENDER` (``(x, y, z)_gltf -> (x, -z, y)``), applied to every node's world matrix.
 
 Light units: Blender's exporter (lighting mode 'SPEC', its default) writes point and spot lights as
-``W / (4 pi) * 683`` candela and sun lights as ``W/m^2 * 683`` lux. The simulator works in radiometric
-units (W/sr for point and spot, W/m^2 for sun), so both become ``intensity / 683``
-(:data:`LUMENS_PER_WATT`): a 1000 W Blender point light loads as 1000 / (4 pi) = 79.6 W/sr.
-A spot's ``spot_angle`` is glTF's outer cone half-angle (Blender's spot_size / 2).
+``W / (4 pi) * 683`` candela and sun lights as ``W/m^2 * 683`` lux. The loader turns them back into
+Blender's watts and W/m^2 (``/ 683``, :data:`LUMENS_PER_WATT`, times 4 pi for point and spot) and builds
+the light with ``Light.from_blender``, the one conversion to the simulator's units (checked against
+Cycles): a 1000 W Blender point light loads as 1000 / (4 pi) = 79.6 W/sr. A spot's cone is glTF's outer
+cone (Blender's spot_size / 2) and its blend comes back from the inner cone, which the exporter writes as
+outer * (1 - spot_blend). Area lights cannot travel in glTF (the exporter drops them with a warning); a
+scene translated from Blender's depsgraph carries them.
 
 Two scene facts glTF cannot carry travel as extras (custom properties Blender exports with
 ``export_extras=True``): the environment (:data:`ENVIRONMENT_EXTRAS_KEY` on the scene: an EXR file name
@@ -33,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from ..scene_data import CameraData, Light, Material, SceneData
+from ..scene_data import CameraData, Light, Material, SceneData, Texture
 
 #: glTF (Y-up) to Blender (Z-up) world frame: (x, y, z) -> (x, -z, y).
 GLTF_TO_BLENDER = np.array(
@@ -78,6 +83,10 @@ ENVIRONMENT_EXTRAS_KEY = "render_budget_environment"
 #: Light extras key for the emitter size glTF cannot express: radius in metres for point and spot lights,
 #: angular radius in radians for sun lights (Blender's shadow_soft_size, and half its sun angle).
 LIGHT_RADIUS_EXTRAS_KEY = "render_budget_radius"
+#: Largest texture side the loader keeps; bigger images are downscaled (with a warning) when decoded.
+MAX_LOADED_TEXTURE_SIDE = 8192
+_WRAPS = {10497: "repeat", 33071: "clamp", 33648: "mirror"}
+_ALPHA_MODES = {"OPAQUE": "opaque", "MASK": "clip", "BLEND": "hashed"}
 
 
 @dataclass
@@ -373,10 +382,6 @@ def _vertex_normals(positions: np.ndarray, tris: np.ndarray) -> np.ndarray:
     return np.where(length > 0, normals / np.where(length > 0, length, 1.0), fallback)
 
 
-def _srgb_to_linear(c: np.ndarray) -> np.ndarray:
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
-
-
 def _image_bytes(doc: _Document, image_index: int) -> bytes:
     images = doc.gltf.get("images", [])
     if not 0 <= image_index < len(images):
@@ -399,59 +404,132 @@ def _image_bytes(doc: _Document, image_index: int) -> bytes:
     return file.read_bytes()
 
 
-def _texture_mean(doc: _Document, texture_index: int, cache: dict[int, np.ndarray]) -> np.ndarray:
-    """Mean linear RGB of a base-colour texture: the simulator shades flat colours per material, so a
-    textured material gets its average albedo (baseColorFactor times this)."""
-    from PIL import Image
+@dataclass
+class _BaseColorTexture:
+    """How a material samples its base-colour texture: which SceneData texture, which TEXCOORD set, and
+    the KHR_texture_transform (3x3, in glTF's UV space) applied to those coordinates."""
 
-    textures = doc.gltf.get("textures", [])
-    if not 0 <= texture_index < len(textures):
-        raise ValueError(f"{doc.path}: texture {texture_index} does not exist")
-    tex = textures[texture_index]
-    source = tex.get("source")
-    extensions = tex.get("extensions", {})
-    if "EXT_texture_webp" in extensions:  # Pillow decodes WebP
-        source = extensions["EXT_texture_webp"].get("source", source)
-    if source is None:
-        if extensions:  # GPU-compressed only (KTX2/basisu, DDS): no decoder here, keep the factor alone
-            return np.ones(3)
-        raise ValueError(f"{doc.path}: texture {texture_index} has no image source")
-    source = int(source)
-    if source not in cache:
+    texture: int
+    texcoord: int
+    transform: np.ndarray | None
+
+
+class _TextureTable:
+    """Base-colour textures of a document: each image decoded once, one Texture per (image, wrap modes)."""
+
+    def __init__(self, doc: _Document) -> None:
+        self.doc = doc
+        self.textures: list[Texture] = []
+        self._index: dict[tuple[int, str, str], int] = {}
+        self._images: dict[int, np.ndarray] = {}
+
+    def texture(self, texture_index: int) -> int | None:
+        """SceneData texture index of glTF texture ``texture_index`` (None: no decodable source)."""
+        doc = self.doc
+        textures = doc.gltf.get("textures", [])
+        if not 0 <= texture_index < len(textures):
+            raise ValueError(f"{doc.path}: texture {texture_index} does not exist")
+        tex = textures[texture_index]
+        source = tex.get("source")
+        extensions = tex.get("extensions", {})
+        if "EXT_texture_webp" in extensions:  # Pillow decodes WebP
+            source = extensions["EXT_texture_webp"].get("source", source)
+        if source is None:
+            if extensions:  # GPU-compressed only (KTX2/basisu, DDS): no decoder here, keep the factor alone
+                return None
+            raise ValueError(f"{doc.path}: texture {texture_index} has no image source")
+        sampler: dict[str, Any] = {}
+        if "sampler" in tex:
+            samplers = doc.gltf.get("samplers", [])
+            si = int(tex["sampler"])
+            if not 0 <= si < len(samplers):
+                raise ValueError(f"{doc.path}: texture {texture_index} refers to missing sampler {si}")
+            sampler = samplers[si]
+        wrap_u = _WRAPS.get(int(sampler.get("wrapS", 10497)), "repeat")
+        wrap_v = _WRAPS.get(int(sampler.get("wrapT", 10497)), "repeat")
+        key = (int(source), wrap_u, wrap_v)
+        if key not in self._index:
+            image = self._image(int(source))
+            name = str(doc.gltf.get("images", [])[int(source)].get("name", f"image_{source}"))
+            self._index[key] = len(self.textures)
+            self.textures.append(Texture(image, colorspace="srgb", wrap_u=wrap_u, wrap_v=wrap_v, name=name))
+        return self._index[key]
+
+    def _image(self, source: int) -> np.ndarray:
+        """(H, W, 3|4) uint8, sRGB-encoded (what glTF base-colour images are), row 0 at the top."""
+        if source in self._images:
+            return self._images[source]
         import io
         import warnings
 
+        from PIL import Image
+
+        doc = self.doc
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("error", Image.DecompressionBombWarning)
                 with Image.open(io.BytesIO(_image_bytes(doc, source))) as im:
-                    im.draft("RGB", (256, 256))  # JPEG: decode at reduced size
-                    im.thumbnail((256, 256))
-                    rgb = np.asarray(im.convert("RGB"), dtype=np.float64) / 255.0
+                    alpha = im.mode in ("RGBA", "LA", "PA", "RGBa", "La") or "transparency" in im.info
+                    rgb = im.convert("RGBA" if alpha else "RGB")
+                    if max(rgb.size) > MAX_LOADED_TEXTURE_SIDE:
+                        warnings.simplefilter("default")
+                        size = f"{rgb.size[0]}x{rgb.size[1]}"
+                        warnings.warn(f"{doc.path}: image {source} ({size}) downscaled to at most "
+                                      f"{MAX_LOADED_TEXTURE_SIDE} texels a side", stacklevel=2)
+                        rgb.thumbnail((MAX_LOADED_TEXTURE_SIDE, MAX_LOADED_TEXTURE_SIDE))
+                    pixels = np.asarray(rgb, dtype=np.uint8)
         except (OSError, ValueError, Image.DecompressionBombWarning, Image.DecompressionBombError) as exc:
             raise ValueError(f"{doc.path}: texture image {source} cannot be decoded ({exc})") from None
-        cache[source] = _srgb_to_linear(rgb).reshape(-1, 3).mean(axis=0)
-    return cache[source]
+        self._images[source] = pixels
+        return pixels
 
 
-def _material(doc: _Document, index: int, texture_cache: dict[int, np.ndarray] | None = None) -> Material:
+def _uv_transform(info: dict[str, Any]) -> tuple[int, np.ndarray | None]:
+    """(TEXCOORD set, KHR_texture_transform matrix or None) of a textureInfo."""
+    texcoord = int(info.get("texCoord", 0))
+    ext = info.get("extensions", {}).get("KHR_texture_transform")
+    if not isinstance(ext, dict):
+        return texcoord, None
+    texcoord = int(ext.get("texCoord", texcoord))
+    ox, oy = (float(c) for c in ext.get("offset", [0.0, 0.0]))
+    sx, sy = (float(c) for c in ext.get("scale", [1.0, 1.0]))
+    r = float(ext.get("rotation", 0.0))
+    c, s = math.cos(r), math.sin(r)
+    translation = np.array([[1, 0, ox], [0, 1, oy], [0, 0, 1]])
+    rotation = np.array([[c, s, 0], [-s, c, 0], [0, 0, 1]])
+    m = translation @ rotation @ np.diag([sx, sy, 1.0])
+    if not np.all(np.isfinite(m)):
+        raise ValueError(f"KHR_texture_transform must be finite, got {ext!r}")
+    return texcoord, m
+
+
+def _material(doc: _Document, index: int, table: _TextureTable) -> tuple[Material, _BaseColorTexture | None]:
     mats = doc.gltf.get("materials", [])
     if not 0 <= index < len(mats):
         raise ValueError(f"{doc.path}: material {index} does not exist")
     m = mats[index]
     pbr = m.get("pbrMetallicRoughness", {})
     ext = m.get("extensions", {})
-    base = np.asarray(list(pbr.get("baseColorFactor", [1.0, 1.0, 1.0, 1.0]))[:3], dtype=np.float64)
+    factor = list(pbr.get("baseColorFactor", [1.0, 1.0, 1.0, 1.0]))
+    base = np.asarray(factor[:3], dtype=np.float64)
+    alpha = float(factor[3]) if len(factor) > 3 else 1.0
+    sampling = None
     if "baseColorTexture" in pbr:
-        base = base * _texture_mean(doc, int(pbr["baseColorTexture"]["index"]),
-                                    {} if texture_cache is None else texture_cache)
+        info = pbr["baseColorTexture"]
+        texture = table.texture(int(info["index"]))
+        if texture is not None:
+            texcoord, transform = _uv_transform(info)
+            sampling = _BaseColorTexture(texture, texcoord, transform)
     emissive = np.asarray(m.get("emissiveFactor", [0.0, 0.0, 0.0]), dtype=np.float64)
     emissive = emissive * float(ext.get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0))
     transmission = float(ext.get("KHR_materials_transmission", {}).get("transmissionFactor", 0.0))
     ior = float(ext.get("KHR_materials_ior", {}).get("ior", 1.5))
     if ior == 0.0:  # KHR_materials_ior: 0 means "no refraction info"; keep the default
         ior = 1.5
-    return Material(
+    mode = str(m.get("alphaMode", "OPAQUE"))
+    if mode not in _ALPHA_MODES:
+        raise ValueError(f"{doc.path}: material {index} has unknown alphaMode {mode!r}")
+    material = Material(
         base_color=tuple(float(np.clip(c, 0.0, 1.0)) for c in base),
         metallic=float(np.clip(pbr.get("metallicFactor", 1.0), 0.0, 1.0)),
         roughness=float(np.clip(pbr.get("roughnessFactor", 1.0), 0.0, 1.0)),
@@ -459,7 +537,29 @@ def _material(doc: _Document, index: int, texture_cache: dict[int, np.ndarray] |
         ior=float(np.clip(ior, 1.0, 4.0)),
         emission=tuple(float(c) for c in emissive),
         name=str(m.get("name", f"material_{index}")),
+        alpha=float(np.clip(alpha, 0.0, 1.0)),
+        alpha_mode=_ALPHA_MODES[mode],  # type: ignore[arg-type]
+        alpha_cutoff=float(np.clip(m.get("alphaCutoff", 0.5), 0.0, 1.0)),
+        base_color_texture=None if sampling is None else sampling.texture,
     )
+    return material, sampling
+
+
+def _primitive_uvs(doc: _Document, attrs: dict[str, Any], sampling: _BaseColorTexture, count: int,
+                   what: str) -> np.ndarray:
+    """Blender-convention UVs (v up) of a primitive's vertices for its material's base-colour texture;
+    zeros when the primitive lacks that TEXCOORD set."""
+    key = f"TEXCOORD_{sampling.texcoord}"
+    if key not in attrs:
+        return np.zeros((count, 2))
+    uv = _read_accessor(doc, int(attrs[key])).astype(np.float64)
+    if uv.shape != (count, 2):
+        raise ValueError(f"{what}: {key} must be VEC2 with one entry per vertex, got {uv.shape}")
+    if not np.all(np.isfinite(uv)):
+        raise ValueError(f"{what}: {key} contains NaN or Inf")
+    if sampling.transform is not None:
+        uv = uv @ sampling.transform[:2, :2].T + sampling.transform[:2, 2]
+    return np.stack([uv[:, 0], 1.0 - uv[:, 1]], axis=1)
 
 
 def _light(doc: _Document, index: int, world_b: np.ndarray, name: str) -> Light:
@@ -468,23 +568,26 @@ def _light(doc: _Document, index: int, world_b: np.ndarray, name: str) -> Light:
         raise ValueError(f"{doc.path}: light {index} does not exist")
     src = lights[index]
     gtype = src.get("type")
-    kinds = {"point": "point", "spot": "spot", "directional": "sun"}
+    kinds = {"point": "POINT", "spot": "SPOT", "directional": "SUN"}
     if gtype not in kinds:
         raise ValueError(f"{doc.path}: light {index} has unknown type {gtype!r}")
-    direction = world_b[:3, :3] @ np.array([0.0, 0.0, -1.0])  # lights shine down their local -Z
-    norm = float(np.linalg.norm(direction))
-    direction = direction / norm if norm > 0 else np.array([0.0, 0.0, -1.0])
     spot = src.get("spot", {})
     extras = src.get("extras") if isinstance(src.get("extras"), dict) else {}
     radius = float(extras.get(LIGHT_RADIUS_EXTRAS_KEY, 0.0))
-    return Light(
-        kind=kinds[gtype],  # type: ignore[arg-type]
-        position=tuple(world_b[:3, 3]),
-        direction=tuple(direction),
-        color=tuple(float(c) for c in src.get("color", [1.0, 1.0, 1.0])),
-        intensity=float(src.get("intensity", 1.0)) / LUMENS_PER_WATT,
-        spot_angle=float(spot.get("outerConeAngle", math.pi / 4)),
-        radius=radius,
+    intensity = float(src.get("intensity", 1.0)) / LUMENS_PER_WATT  # W/sr (point, spot) or W/m^2 (sun)
+    outer = float(spot.get("outerConeAngle", math.pi / 4))
+    inner = float(spot.get("innerConeAngle", 0.0))
+    blend = float(np.clip(1.0 - inner / outer, 0.0, 1.0)) if outer > 0 else 0.0
+    # Lights shine down their local -Z in glTF and in Blender alike; from_blender reads that off world_b.
+    return Light.from_blender(
+        kinds[gtype],
+        world_b,
+        intensity if gtype == "directional" else intensity * 4.0 * math.pi,
+        tuple(float(c) for c in src.get("color", [1.0, 1.0, 1.0])),
+        shadow_soft_size=radius if gtype != "directional" else 0.0,
+        angle=2.0 * radius if gtype == "directional" else 0.0,
+        spot_size=2.0 * outer,
+        spot_blend=blend,
         name=str(src.get("name", name)),
     )
 
@@ -561,11 +664,14 @@ def _load(p: Path) -> SceneData:
     nodes = gltf.get("nodes", [])
     meshes = gltf.get("meshes", [])
 
-    texture_cache: dict[int, np.ndarray] = {}
-    materials = [_material(doc, i, texture_cache) for i in range(len(gltf.get("materials", [])))]
+    table = _TextureTable(doc)
+    decoded_materials = [_material(doc, i, table) for i in range(len(gltf.get("materials", [])))]
+    materials = [m for m, _ in decoded_materials]
+    samplings = [t for _, t in decoded_materials]
     default_material: int | None = None
     pos_parts: list[np.ndarray] = []
     nrm_parts: list[np.ndarray | None] = []
+    uv_parts: list[np.ndarray | None] = []
     tri_parts: list[np.ndarray] = []
     mat_parts: list[np.ndarray] = []
     obj_parts: list[np.ndarray] = []
@@ -663,8 +769,11 @@ def _load(p: Path) -> SceneData:
                         default_material = len(materials)
                         materials.append(Material(name="default"))
                     mat = default_material
+                sampling = samplings[mat] if mat < len(samplings) else None
                 pos_parts.append(world_pos)
                 nrm_parts.append(wn)
+                uv_parts.append(None if sampling is None
+                                else _primitive_uvs(doc, attrs, sampling, world_pos.shape[0], what))
                 tri_parts.append(tris + vbase)
                 mat_parts.append(np.full(tris.shape[0], mat, dtype=np.uint32))
                 obj_parts.append(np.full(tris.shape[0], object_id, dtype=np.uint32))
@@ -682,6 +791,10 @@ def _load(p: Path) -> SceneData:
         for part_pos, part_nrm, part_tri, start in zip(pos_parts, nrm_parts, tri_parts, starts, strict=True):
             filled.append(part_nrm if part_nrm is not None else _vertex_normals(part_pos, part_tri - start))
         normals = np.concatenate(filled).astype(np.float32)
+    uvs: np.ndarray | None = None
+    if any(u is not None for u in uv_parts):  # UVs only when some textured material is drawn
+        uvs = np.concatenate([u if u is not None else np.zeros((part.shape[0], 2))
+                              for u, part in zip(uv_parts, pos_parts, strict=True)]).astype(np.float32)
     if positions.shape[0] > np.iinfo(np.uint32).max:
         raise ValueError(f"{doc.path}: too many vertices for 32-bit indices")
     return SceneData(
@@ -696,4 +809,6 @@ def _load(p: Path) -> SceneData:
         environment=_environment(doc),
         source=str(p),
         object_names=object_names,
+        uvs=uvs,
+        textures=table.textures,
     )
