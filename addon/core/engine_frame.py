@@ -7,13 +7,12 @@ camera plane, :data:`BACKGROUND_DEPTH` where nothing was hit), Normal (world-spa
 IndexOB (the hit object's pass index), Sample Kind (0 traced, 1 interpolated, 2 reused from a neighbour)
 and Power.
 
-The Power pass shows where the frame's dynamic power goes, tile by tile. The tracer reports, per tile,
-the activity that drives each block of the energy model (samples traced and interpolated, rays, BVH node
-and triangle fetches, similarity checks, cache misses); the energy model prices the frame's counters
-block by block, and each block's energy is shared among the tiles in proportion to the tile's share of
-that block's driving activity (:data:`BLOCK_ACTIVITY`). A pixel holds its tile's power at the scene's
-frame rate spread evenly over the tile's pixels, in microwatts, so the pass sums to the frame's dynamic
-power (static power is the same everywhere and left out).
+The Power pass shows where the frame's dynamic power goes, tile by tile: the tracer reports every tile's
+own activity counters and closest-hit comparisons (they sum to the frame's), the energy model prices
+each tile's activity (``sim_core.price``; its energy is linear in them, so the tiles' energies sum to the
+frame's), and a pixel holds its tile's power at the scene's frame rate spread evenly over the tile's
+pixels, in microwatts: the pass sums to the frame's dynamic power (static power is the same everywhere
+and left out).
 """
 
 from __future__ import annotations
@@ -25,6 +24,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -41,24 +41,6 @@ PASSES: tuple[tuple[str, int, str], ...] = (
     ("Sample Kind", 1, "X"),
     ("Power", 1, "X"),
 )
-#: The tile activity that drives each block of the energy model (``sim_core.energy.BLOCKS``); "pixels"
-#: is the tile's area.
-BLOCK_ACTIVITY: dict[str, tuple[str, ...]] = {
-    "raygen": ("samples_traced",),
-    "shading": ("rays_total",),
-    "similarity": ("similarity_checks",),
-    "interpolation": ("samples_interpolated",),
-    "reprojection": ("samples_reused",),
-    "env_filter": ("rays_total",),
-    "traversal": ("bvh_node_visits",),
-    "intersection": ("triangle_tests",),
-    "comparator": ("triangle_tests",),
-    "cache": ("bvh_node_visits", "triangle_tests"),
-    "tile_buffer": ("samples_traced", "samples_interpolated"),
-    "dram": ("cache_misses",),
-    "framebuffer_dma": ("pixels",),
-    "gbuffer_prefetch": ("samples_reused",),
-}
 META_PREFIX = "render_budget."
 
 
@@ -153,32 +135,17 @@ class FrameOutput:
         return {META_PREFIX + k: v for k, v in meta.items()}
 
 
-def tile_energy(tile_stats: Sequence[Mapping[str, Any]], block_energy_j: Mapping[str, float]) -> np.ndarray:
-    """Dynamic energy (J) of each tile: every block's energy shared by the tiles' driving activity
-    (:data:`BLOCK_ACTIVITY`); a block whose activity the tiles do not show is shared by area. Sums to
-    the blocks' total."""
-    n = len(tile_stats)
-    out = np.zeros(n, dtype=np.float64)
-    if n == 0:
-        return out
-    area = np.array([float(t["width"]) * float(t["height"]) for t in tile_stats])
+def tile_energy(tile_stats: Sequence[Mapping[str, Any]], profile: Any, fps: float, settings: Any = None,
+                scene: Any = None) -> np.ndarray:
+    """Dynamic energy (J) of each tile: its counters and comparator histogram priced by the energy model
+    as a frame's are (same profile, frame rate, settings and scene)."""
+    import sim_core
 
-    def activity(key: str) -> np.ndarray:
-        if key == "pixels":
-            return area
-        return np.array([float(t.get(key, 0)) for t in tile_stats])
-
-    for block, energy in block_energy_j.items():
-        if block == "static" or energy == 0.0:
-            continue
-        keys = BLOCK_ACTIVITY.get(block)
-        if keys is None:
-            raise ValueError(f"energy block {block!r} has no tile activity to share it by")
-        weight = sum(activity(k) for k in keys)
-        total = float(weight.sum())
-        if total <= 0.0:
-            weight, total = area, float(area.sum())
-        out += energy * weight / total
+    out = np.empty(len(tile_stats), dtype=np.float64)
+    for i, t in enumerate(tile_stats):
+        activity = SimpleNamespace(counters=t["counters"], comparator_histogram=t["comparator_histogram"],
+                                   settings=settings)
+        out[i] = sim_core.price(activity, profile, fps, scene=scene).dynamic_energy_j
     return out
 
 
@@ -270,7 +237,7 @@ def render_frame(scene: Any, view: CameraView, frame_settings: FrameSettings, *,
         known = np.asarray(object_pass_index, dtype=np.float32)[:n_ids]
         lookup[: known.size] = known
     index = np.where(hit, lookup[np.maximum(object_id, 0)], 0.0)
-    energy = tile_energy(result.tile_stats, {b: e for b, e in report.energy_j.items() if b != "static"})
+    energy = tile_energy(result.tile_stats, prof, float(fps), settings, scene)
     normal = np.where(hit[..., None], _nearest(np.asarray(aovs["normal"]), h, w), 0.0)
     power = power_pass(result.tile_stats, energy, float(fps), result.render_resolution, (w, h))
     passes = {
