@@ -180,16 +180,18 @@ def _nearest(aov: np.ndarray, h: int, w: int) -> np.ndarray:
     return aov[ys][:, xs]
 
 
-def _render(scene: Any, camera: Any, settings: Any, cache: Any, threads: int | None,
+def _render(scene: Any, camera: Any, settings: Any, prof: Any, threads: int | None,
             on_band: Callable[[int, int], None]) -> Any:
+    """The frame on the profile's caches (node/triangle and texture cache)."""
     import sim_core
 
     tiled = getattr(sim_core, "render_tiled", None)
     if tiled is None:  # older core: one native call for the whole frame
-        result = sim_core.render(scene, camera, settings, threads=threads, cache=cache)
+        result = sim_core.render(scene, camera, settings, threads=threads, cache=prof.cache,
+                                 texture_cache=prof.texture_cache)
         on_band(1, 1)
         return result
-    return tiled(scene, camera, settings, threads=threads, cache=cache, progress=on_band)
+    return tiled(scene, camera, settings, threads=threads, cache=prof.cache, progress=on_band)
 
 
 def render_frame(scene: Any, view: CameraView, frame_settings: FrameSettings, *, profile: str, fps: float,
@@ -217,7 +219,7 @@ def render_frame(scene: Any, view: CameraView, frame_settings: FrameSettings, *,
             progress(done / total)
 
     t0 = time.perf_counter()
-    result = _render(scene, camera, settings, prof.cache, threads, on_band)
+    result = _render(scene, camera, settings, prof, threads, on_band)
     render_s = time.perf_counter() - t0
     report = sim_core.price(result, prof, float(fps), scene=scene)
 
