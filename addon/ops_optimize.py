@@ -1,4 +1,5 @@
-"""Optimize power: export the scene (.glb) and the camera path, run a job on the service, keep the store.
+"""Optimize power: send the scene (as the render engine renders it: the depsgraph translator at render level,
+written as a render-budget scene file) and the camera path, run a job on the service, keep the store.
 
 GUI (invoke): the export happens on the main thread, a worker thread does HTTP only, and a timer on the
 main thread drains a queue into the WindowManager progress properties. Background/batch (execute): the
@@ -23,9 +24,11 @@ from .camera_path import load_path, sample_animation, store_path
 from .core.client import ServiceClient
 from .core.job_runner import JobOutcome, JobRequest, JobUpdate, run_job
 from .core.playback_logic import predicted_path_summary, summary_text, validate_budget
+from .core.scene_translation import notes_text
 from .core.vendored import camera_path as path_format
 from .core.vendored import pareto_store
 from .properties import option_values
+from .translate import translate_for_render
 
 log = logging.getLogger(__name__)
 STORE_TEXT_PREFIX = "render_budget_store"
@@ -62,18 +65,23 @@ def _default_profile() -> str:
         return "mobile"
 
 
-def export_glb(scene: bpy.types.Scene, directory: str | Path) -> Path:
-    """The scene as glTF binary: modifiers applied, lights and cameras included, Y up (glTF's frame)."""
-    path = Path(directory) / "scene.glb"
+def export_scene(scene: bpy.types.Scene, directory: str | Path) -> Path:
+    """The scene as a final render sees it (modifiers at render level, render visibility, materials, lights,
+    world, camera at the current frame), translated from a render depsgraph and written as a render-budget
+    scene file: exactly what the render engine renders. What the translation approximated is kept in
+    ``scene.render_budget.scene_notes`` (the panel shows it) and travels inside the file to the job."""
+    from sim_core.loaders.scene_file import SUFFIX, write_scene_file
+
     window = bpy.context.window
     with bpy.context.temp_override(scene=scene, **({"window": window} if window else {})):
         if bpy.context.object is not None and bpy.context.object.mode != "OBJECT":
-            bpy.ops.object.mode_set(mode="OBJECT")
-        bpy.ops.export_scene.gltf(filepath=str(path), export_format="GLB", export_apply=True,
-                                  export_lights=True, export_cameras=True, export_yup=True,
-                                  use_active_scene=True)
-    if not path.is_file():
-        raise RuntimeError("glTF export produced no file")
+            bpy.ops.object.mode_set(mode="OBJECT")  # edits in edit mode reach the depsgraph on leaving it
+    translation = translate_for_render(scene)
+    path = Path(directory) / f"scene{SUFFIX}"
+    write_scene_file(path, translation.scene_data, translation.notes)
+    scene.render_budget.scene_notes = notes_text(translation.notes, limit=len(translation.notes))
+    for note in translation.warnings:
+        log.warning("scene translation: %s", note)
     return path
 
 
@@ -89,7 +97,7 @@ def ensure_path(scene: bpy.types.Scene) -> path_format.CameraPath:
 @dataclass
 class Prepared:
     scene_name: str
-    glb: Path
+    scene_file: Path
     path: path_format.CameraPath
     request: JobRequest
     tmpdir: tempfile.TemporaryDirectory = field(repr=False)
@@ -104,11 +112,11 @@ def prepare(scene: bpy.types.Scene) -> Prepared:
     path = ensure_path(scene)
     tmp = tempfile.TemporaryDirectory(prefix="render-budget-export-")
     try:
-        glb = export_glb(scene, tmp.name)
+        scene_file = export_scene(scene, tmp.name)
     except Exception:
         tmp.cleanup()
         raise
-    return Prepared(scene.name, glb, path, request, tmp)
+    return Prepared(scene.name, scene_file, path, request, tmp)
 
 
 def apply_outcome(scene: bpy.types.Scene, outcome: JobOutcome, path: path_format.CameraPath) -> str:
@@ -156,7 +164,7 @@ def run_sync(scene: bpy.types.Scene, client: ServiceClient,
     """The whole optimisation on the calling (main) thread: for background mode, batch and tests."""
     prep = prepare(scene)
     try:
-        outcome = run_job(client, prep.glb, prep.path.to_dict(), prep.request, progress=progress,
+        outcome = run_job(client, prep.scene_file, prep.path.to_dict(), prep.request, progress=progress,
                           timeout_s=timeout_s)
     finally:
         prep.tmpdir.cleanup()
@@ -182,7 +190,7 @@ def job_running() -> bool:
 def _worker(job: _ActiveJob, client: ServiceClient) -> None:
     """HTTP only: never touches bpy. Posts ('progress'|'done'|'error', payload) messages."""
     try:
-        outcome = run_job(client, job.prep.glb, job.prep.path.to_dict(), job.prep.request,
+        outcome = run_job(client, job.prep.scene_file, job.prep.path.to_dict(), job.prep.request,
                           progress=lambda u: job.messages.put(("progress", u)),
                           should_cancel=job.cancel.is_set)
         job.messages.put(("done", outcome))

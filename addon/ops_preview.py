@@ -13,7 +13,7 @@ from . import service_process
 from .camera_path import camera_vfov, render_resolution
 from .core.client import ServiceClient
 from .core.vendored import pareto_store
-from .ops_optimize import check_scene, export_glb
+from .ops_optimize import check_scene, export_scene
 
 IMAGE_NAME = "Power Budget Preview"
 
@@ -36,7 +36,7 @@ def upload_scene(scene: bpy.types.Scene, client: ServiceClient) -> str:
 def upload_scene_info(scene: bpy.types.Scene, client: ServiceClient) -> dict[str, Any]:
     """Export and upload; returns the service's answer (id, statistics, inert parameters)."""
     with tempfile.TemporaryDirectory(prefix="render-budget-upload-") as tmp:
-        info = client.upload_scene(export_glb(scene, tmp))
+        info = client.upload_scene(export_scene(scene, tmp))
     scene.render_budget.scene_id = str(info["id"])
     return info
 

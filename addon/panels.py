@@ -72,6 +72,12 @@ class VIEW3D_PT_render_budget(bpy.types.Panel):
             row.operator("render_budget.cancel_job", text="", icon="CANCEL")
         if rt.job_running or rt.job_status:
             layout.progress(factor=rt.job_progress, type="BAR", text=rt.job_status or "")
+        if props.scene_notes:
+            box = layout.box()
+            box.label(text="The simulated scene differs:", icon="ERROR")
+            for line in props.scene_notes.splitlines():
+                for chunk in _wrap(line, 48):
+                    box.label(text=chunk)
 
         if props.store_text is not None:
             box = layout.box()

@@ -70,6 +70,10 @@ class RENDER_BUDGET_PG_scene(bpy.types.PropertyGroup):
     store_revision: IntProperty(name="Store revision",  # type: ignore
                                 description="Bumped whenever the store text is replaced")
     summary: StringProperty(name="Summary")  # type: ignore
+    scene_notes: StringProperty(  # type: ignore
+        name="Scene notes",
+        description="What the simulated scene approximates or leaves out of the scene as Blender renders it "
+                    "(written when the scene is last sent to the simulator)")
 
     playback_enabled: BoolProperty(name="Drive settings on frame change", default=True)  # type: ignore
     hud_enabled: BoolProperty(name="Show HUD", default=True)  # type: ignore

@@ -1,10 +1,13 @@
 """Build the test scenes: ``python -m blend_scenes.build [--scene NAME ...] [--out DIR] [--force]``.
 
-For each scene it writes ``<out>/<name>/{scene.blend, scene.glb, path.json, stats.json}`` (plus any extra
-file such as the valley's environment EXR). Builds are cached: a scene is rebuilt only when the hash of its
-generator, the shared helpers, this driver and the bundled models it names changes (stored in stats.json,
-which is written last, so an interrupted build is redone). Statistics are measured on the exported .glb
-through sim_core's own loader, so they describe exactly what the simulator will see.
+For each scene it writes ``<out>/<name>/{scene.blend, scene.glb, scene.rbscene, path.json, stats.json}``
+(plus any extra file such as the valley's environment EXR). ``scene.rbscene`` is the add-on's depsgraph
+translation at render level (what the add-on's jobs optimise and the render engine renders; summarised as
+``translated`` in stats.json); ``scene.glb`` is what a REST user would upload. Builds are cached: a scene
+is rebuilt only when the hash of its generator, the shared helpers, this driver, the translator, the scene
+file format and the bundled models it names changes (stored in stats.json, which is written last, so an
+interrupted build is redone). The other statistics are measured on the exported .glb through sim_core's own
+loader.
 """
 
 from __future__ import annotations
@@ -24,7 +27,11 @@ from typing import Any
 PACKAGE_DIR = Path(__file__).resolve().parent
 REPO_ROOT = PACKAGE_DIR.parent
 DEFAULT_OUT = PACKAGE_DIR / "build"
-SCENE_FILES = ("scene.blend", "scene.glb", "path.json", "stats.json")
+#: What scene.rbscene depends on besides the generator: the depsgraph translator and the file format.
+TRANSLATOR_SOURCES = (REPO_ROOT / "addon" / "translate.py",
+                      REPO_ROOT / "addon" / "core" / "scene_translation.py",
+                      REPO_ROOT / "sim_core" / "python" / "sim_core" / "loaders" / "scene_file.py")
+SCENE_FILES = ("scene.blend", "scene.glb", "scene.rbscene", "path.json", "stats.json")
 
 
 def _scene_names() -> tuple[str, ...]:
@@ -37,7 +44,7 @@ def generator_hash(name: str) -> str:
     """Hash of everything that determines a scene's content (sources and the models it loads)."""
     h = hashlib.sha256()
     gen = PACKAGE_DIR / "scenes" / f"{name}.py"
-    sources = [gen, PACKAGE_DIR / "common.py", PACKAGE_DIR / "build.py"]
+    sources = [gen, PACKAGE_DIR / "common.py", PACKAGE_DIR / "build.py", *TRANSLATOR_SOURCES]
     text = gen.read_text()
     models = sorted(set(re.findall(r"[\"']([\w-]+\.obj)[\"']", text)))  # quoted model file names
     sources += [REPO_ROOT / "assets" / "models" / m for m in models]
@@ -147,6 +154,7 @@ def build_scene(name: str, out_dir: Path) -> dict[str, Any]:
     path_doc = common.sample_camera_path(spec.camera)
     common.write_camera_path(path_doc, scene_dir / "path.json")
     common.export_glb(scene_dir / "scene.glb")
+    translated = common.export_scene_file(scene_dir / "scene.rbscene")
     bpy.ops.wm.save_as_mainfile(filepath=str(scene_dir / "scene.blend"), compress=True, check_existing=False)
     stats = {"name": name, "description": spec.description, **scene_statistics(scene_dir / "scene.glb")}
     stats.update({
@@ -155,6 +163,7 @@ def build_scene(name: str, out_dir: Path) -> dict[str, Any]:
         "duration_s": path_doc["frames"][-1]["time"],
         "resolution": path_doc["frames"][0]["resolution"],
         "extra_files": [p.name for p in spec.extra_files],
+        "translated": translated,
         "camera_min_clearance_m": round(clearance, 3),
         "blender_version": bpy.app.version_string,
         "build_seconds": round(time.perf_counter() - start, 2),

@@ -270,8 +270,9 @@ def write_exr(path: Path, rgb: np.ndarray) -> None:
         f.write(str(path))
 
 
-def world_exr(path: Path, strength: float = 1.0) -> None:
-    """Equirectangular environment: Blender world node tree + scene extra naming the file (relative)."""
+def world_exr(path: Path, strength: float = 1.0, rotation_z: float = 0.0) -> bpy.types.Image:
+    """Equirectangular environment: Blender world node tree (Environment Texture, turned by a Mapping node's
+    Z rotation when ``rotation_z`` is not 0) + scene extra naming the file (relative); returns the image."""
     world = bpy.data.worlds.new("World")
     bpy.context.scene.world = world
     if not world.node_tree:
@@ -282,7 +283,14 @@ def world_exr(path: Path, strength: float = 1.0) -> None:
     bg = nodes["Background"]
     bg.inputs["Strength"].default_value = strength
     links.new(env.outputs["Color"], bg.inputs["Color"])
+    if rotation_z:
+        coords = nodes.new("ShaderNodeTexCoord")
+        mapping = nodes.new("ShaderNodeMapping")
+        mapping.inputs["Rotation"].default_value = (0.0, 0.0, rotation_z)
+        links.new(coords.outputs["Generated"], mapping.inputs["Vector"])
+        links.new(mapping.outputs["Vector"], env.inputs["Vector"])
     bpy.context.scene[ENVIRONMENT_KEY] = path.name
+    return env.image
 
 
 # --------------------------------------------------------------------------------------------------
@@ -391,6 +399,27 @@ def export_glb(path: Path) -> None:
     bpy.ops.export_scene.gltf(filepath=str(path), export_format="GLB", export_apply=True, export_lights=True,
                               export_cameras=True, export_yup=True, export_extras=True,
                               export_animations=False)
+
+
+def export_scene_file(path: Path) -> dict:
+    """The scene as the add-on sends it to jobs (and the render engine renders it): the depsgraph translator
+    at render level, written as a render-budget scene file. Returns a summary for stats.json."""
+    from sim_core.loaders.scene_file import write_scene_file
+
+    from addon.translate import translate_for_render
+
+    translation = translate_for_render(bpy.context.scene)
+    scene_id = write_scene_file(path, translation.scene_data, translation.notes)
+    data = translation.scene_data
+    return {
+        "scene_id": scene_id,
+        "triangles": int(data.triangles.shape[0]),
+        "instances": len(data.object_names),
+        "unique_meshes": translation.stats["unique_meshes"],
+        "light_kinds": sorted({lt.kind for lt in data.lights}),
+        "environment": translation.stats["environment"],
+        "notes": [str(n) for n in translation.notes],
+    }
 
 
 def smooth_path(points: Sequence[Sequence[float]], duration_s: float) -> Callable[[float], np.ndarray]:

@@ -45,7 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True)
 
     o = sub.add_parser("optimize", help="build a Pareto store for a scene and a camera path")
-    o.add_argument("scene", type=Path, help="scene file (.glb, .gltf or .obj)")
+    o.add_argument("scene", type=Path, help="scene file (.rbscene from the add-on, .glb, .gltf or .obj)")
     o.add_argument("--path", type=Path, required=True, help="camera-path JSON")
     o.add_argument("--out", type=Path, required=True, help="where to write the store (JSON)")
     o.add_argument("--profile", default="mobile", help="hardware profile name or file (default: mobile)")

@@ -181,8 +181,6 @@ class SceneHandle:
 
 
 def _load_scene(path: str, data: bytes | None) -> Any:
-    import sim_core
-
     p = Path(path)
     if data is not None and not p.exists():
         import tempfile
@@ -190,11 +188,24 @@ def _load_scene(path: str, data: bytes | None) -> Any:
         tmp = Path(tempfile.mkdtemp(prefix="render-budget-scene-")) / p.name
         tmp.write_bytes(data)
         p = tmp
+    return read_scene(p)
+
+
+def read_scene(path: str | Path) -> Any:
+    """A ``sim_core.Scene`` from a file: a render-budget scene file (known by its content, whatever its
+    name: what the add-on sends), ``.glb``/``.gltf`` or ``.obj``."""
+    from sim_core.loaders.scene_file import SUFFIX, is_scene_file
+
+    import sim_core
+
+    p = Path(path)
+    if is_scene_file(p):
+        return sim_core.Scene.from_scene_file(p)
     if p.suffix.lower() in (".glb", ".gltf"):
         return sim_core.Scene.from_gltf(str(p))
     if p.suffix.lower() == ".obj":
         return sim_core.Scene.from_obj(str(p))
-    raise ValueError(f"unsupported scene file {p.name!r} (use .glb, .gltf or .obj)")
+    raise ValueError(f"unsupported scene file {p.name!r} (use a {SUFFIX} scene file, .glb, .gltf or .obj)")
 
 
 def load_scene(path: str | Path, *, ship_bytes: bool = False) -> SceneHandle:

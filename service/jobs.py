@@ -54,9 +54,9 @@ class SceneCache:
             with self._lock:
                 if scene_id in self._scenes:
                     return self._scenes[scene_id]
-            import sim_core
+            from service.evaluation import read_scene
 
-            scene = sim_core.Scene.from_gltf(str(self._storage.scene_path(scene_id)))
+            scene = read_scene(self._storage.scene_path(scene_id))
             with self._lock:
                 self._scenes[scene_id] = scene
                 while len(self._scenes) > self._capacity:

@@ -2,7 +2,8 @@
 
 Everything lives under one data directory so a restart (or a SIGKILL) loses nothing that was committed:
 
-- ``scenes/<sha256>.glb``: uploaded scenes, named by the hash of their bytes (never by a client name);
+- ``scenes/<sha256>.glb`` or ``.rbscene``: uploaded scenes (glTF binaries or render-budget scene files),
+  named by the hash of their bytes (never by a client name);
 - ``service.sqlite3``: tables ``scenes``, ``jobs``, ``job_events`` (the ordered progress stream served
   as server-sent events) and ``stores`` (Pareto stores, keyed by the hash of their JSON);
 - ``eval_cache.sqlite3``: the optimiser's evaluation cache (its own file, so its writes never wait on
@@ -33,6 +34,8 @@ SCHEMA_VERSION = 1
 DB_NAME = "service.sqlite3"
 EVAL_CACHE_NAME = "eval_cache.sqlite3"
 
+#: Stored scene files: glTF binaries and render-budget scene files (sim_core.loaders.scene_file).
+SCENE_SUFFIXES = (".glb", ".rbscene")
 JOB_STATES = ("queued", "running", "done", "failed", "cancelled")
 TERMINAL_STATES = frozenset({"done", "failed", "cancelled"})
 
@@ -217,13 +220,20 @@ class Storage:
         return self.tmp_dir / f"{uuid.uuid4().hex}{suffix}"
 
     def scene_path(self, scene_id: str) -> Path:
+        """The stored file of a scene (``.glb`` unless a scene file with that id is stored)."""
         if not is_hex_id(scene_id, 64):
             raise ValueError(f"scene id must be 64 lowercase hex characters, got {scene_id!r}")
-        return self.scenes_dir / f"{scene_id}.glb"
+        for suffix in SCENE_SUFFIXES[1:]:
+            path = self.scenes_dir / f"{scene_id}{suffix}"
+            if path.exists():
+                return path
+        return self.scenes_dir / f"{scene_id}{SCENE_SUFFIXES[0]}"
 
-    def adopt_scene_file(self, *, temp_path: Path, scene_id: str) -> Path:
+    def adopt_scene_file(self, *, temp_path: Path, scene_id: str, suffix: str = ".glb") -> Path:
         """Move a verified upload to its content address (a no-op if the same bytes are already there)."""
-        target = self.scene_path(scene_id)
+        if suffix not in SCENE_SUFFIXES:
+            raise ValueError(f"scene file suffix must be one of {SCENE_SUFFIXES}, got {suffix!r}")
+        target = self.scene_path(scene_id).with_suffix(suffix)  # scene_path validates the id
         if target.exists():
             temp_path.unlink(missing_ok=True)
         else:

@@ -108,20 +108,36 @@ def _cycles_scene(size_x: int, size_y: int, samples: int) -> Any:
 
     bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
     sc = bpy.context.scene
-    sc.render.engine = "CYCLES"
-    sc.cycles.device = "CPU"
-    sc.cycles.samples = samples
-    sc.cycles.use_denoising = False
-    sc.cycles.diffuse_bounces = 0
-    sc.cycles.max_bounces = 1
-    sc.cycles.seed = 1
-    sc.render.resolution_x, sc.render.resolution_y = size_x, size_y
-    sc.render.resolution_percentage = 100
-    sc.view_settings.view_transform = "Standard"
+    cycles_settings(sc, size_x, size_y, samples)
     return sc
 
 
-def _cycles_render(sc: Any) -> np.ndarray:
+def cycles_settings(sc: Any, size_x: int, size_y: int, samples: int, *, depth: int = 1,
+                    denoise: bool = False) -> None:
+    """Make ``sc`` render as the reference: Cycles on the CPU, ``diffuse_bounces = 0`` (the simulated GPU
+    traces no diffuse inter-reflection), glossy and transmission bounces (and the total) = ``depth``, a
+    fixed seed, the Standard view transform, no compositing."""
+    sc.render.engine = "CYCLES"
+    sc.cycles.device = "CPU"
+    sc.cycles.samples = samples
+    sc.cycles.use_adaptive_sampling = False
+    sc.cycles.use_denoising = denoise
+    if denoise:
+        sc.cycles.denoiser = "OPENIMAGEDENOISE"
+    sc.cycles.diffuse_bounces = 0
+    sc.cycles.glossy_bounces = sc.cycles.transmission_bounces = depth
+    sc.cycles.max_bounces = depth
+    sc.cycles.seed = 1
+    sc.render.resolution_x, sc.render.resolution_y = size_x, size_y
+    sc.render.resolution_percentage = 100
+    sc.render.use_compositing = sc.render.use_sequencer = False
+    sc.view_settings.view_transform = "Standard"
+    sc.view_settings.look = "None"
+    sc.view_settings.exposure = 0.0
+    sc.view_settings.gamma = 1.0
+
+
+def cycles_render(sc: Any) -> np.ndarray:
     """Render the scene to a float EXR and read it back (linear RGB, row 0 at the top)."""
     import bpy
     import OpenEXR
@@ -197,7 +213,7 @@ def cycles_mean(name: str, size: int = 48, samples: int = 64) -> tuple[float, np
     bpy.context.view_layer.update()
     # The matrix the simulator uses must be Blender's own.
     assert np.allclose(np.array(light.matrix_world), blender_light_matrix(case), atol=1e-5)
-    image = _cycles_render(sc)
+    image = cycles_render(sc)
     return float(image.mean()), image
 
 
@@ -237,7 +253,7 @@ def cycles_world(strength: float, rotation_z: float, size: tuple[int, int] = (64
     background.inputs["Strength"].default_value = strength
     sc.world = world
     _camera(sc, _look_at_matrix(*WORLD_VIEW), WORLD_FOV)
-    return _cycles_render(sc)
+    return cycles_render(sc)
 
 
 def simulator_world(strength: float, rotation_z: float, size: tuple[int, int] = (64, 32)) -> np.ndarray:
@@ -395,7 +411,7 @@ def cycles_artist(size: tuple[int, int] = (320, 180), samples: int = 128, denois
     sc.camera = cam
     bpy.context.view_layer.update()
     assert np.allclose(np.array(cam.matrix_world), _artist_camera_matrix(), atol=1e-5)
-    return _cycles_render(sc)
+    return cycles_render(sc)
 
 
 def simulator_artist(size: tuple[int, int] = (320, 180), settings: Any = None) -> Any:
@@ -437,17 +453,18 @@ def simulator_artist(size: tuple[int, int] = (320, 180), settings: Any = None) -
     return render(scene, cam, settings or RenderSettings.max_quality())
 
 
-def display(linear: np.ndarray) -> np.ndarray:
-    """Blender's Standard view transform: clip to [0, 1] and sRGB-encode."""
-    x = np.clip(linear, 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+def display_luminance(linear: np.ndarray) -> float:
+    """Mean Rec. 709 luma of the display image (the project's display transform, Blender's Standard view)."""
+    from service.evaluation import tone_map
+
+    return float((tone_map(linear) @ np.array([0.2126, 0.7152, 0.0722])).mean())
 
 
 def fidelity(cycles: np.ndarray, simulated: np.ndarray) -> tuple[float, float]:
-    """(mean display luminance ratio simulated / Cycles, 1 - SSIM of the display images)."""
-    from skimage.metrics import structural_similarity
+    """(mean display luminance ratio simulated / Cycles, 1 - SSIM of the display images), through the
+    project's error pipeline (``service.evaluation.tone_map``, ``service.metrics.ssim``)."""
+    from service.evaluation import tone_map
+    from service.metrics import ssim
 
-    lum = np.array([0.2126, 0.7152, 0.0722])
-    a, b = display(cycles), display(simulated)
-    ratio = float((b @ lum).mean() / (a @ lum).mean())
-    return ratio, 1.0 - float(structural_similarity(a, b, channel_axis=2, data_range=1.0))
+    ratio = display_luminance(simulated) / display_luminance(cycles)
+    return ratio, 1.0 - ssim(tone_map(cycles), tone_map(simulated), data_range=1.0)

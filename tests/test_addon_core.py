@@ -129,10 +129,10 @@ def test_client_reports_http_errors_with_the_service_message() -> None:
     assert info.value.status == 404 and "not found" in info.value.message
 
 
-def test_upload_refuses_non_glb(tmp_path) -> None:
+def test_upload_refuses_what_is_not_a_scene(tmp_path) -> None:
     f = tmp_path / "x.glb"
     f.write_bytes(b"not a glb")
-    with pytest.raises(ValueError, match="not a binary glTF"):
+    with pytest.raises(ValueError, match="neither a render-budget scene file nor a binary glTF"):
         client_mod.ServiceClient("http://127.0.0.1:9").upload_scene(f)
 
 

@@ -130,6 +130,8 @@ def test_optimize_end_to_end_store_in_blend_and_playback_matches_query(optimized
     store = ParetoStore.from_json(text)
     assert props.store_id and props.job_id and "views" in props.summary
     assert json.loads(text) == json.loads(ServiceClient(service.url).store_text(props.store_id))
+    # the job optimised the depsgraph translation (a scene file), not a glTF export
+    assert ServiceClient(service.url).scene(props.scene_id)["stats"]["format"] == "scene"
     assert [p.name for p in store.parameters if len(p.values) > 1]  # something was searched
     from service.camera_path import CameraPath
 

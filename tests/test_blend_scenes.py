@@ -3,6 +3,7 @@ its statistics, camera path and cache behaviour."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from pathlib import Path
@@ -95,8 +96,54 @@ def test_build_is_deterministic(teapot_build: tuple[Path, dict], tmp_path: Path)
 
     out, _ = teapot_build
     build(["teapot"], tmp_path, force=True)
-    for name in ("scene.glb", "path.json"):
+    for name in ("scene.glb", "scene.rbscene", "path.json"):
         assert (tmp_path / "teapot" / name).read_bytes() == (out / "teapot" / name).read_bytes(), name
+
+
+@pytest.mark.parametrize("name", ["teapot", "chess"])
+def test_scene_file_carries_what_the_glb_does(teapot_build: tuple[Path, dict], name: str) -> None:
+    """The depsgraph translation (scene.rbscene) and Blender's glTF export agree where both can say it:
+    geometry, materials, point / spot / sun lights, camera."""
+    from sim_core.loaders import load_gltf
+    from sim_core.loaders.scene_file import read_scene_file
+
+    import sim_core
+
+    out, _ = teapot_build
+    stats = json.loads((out / name / "stats.json").read_text())
+    content = read_scene_file(out / name / "scene.rbscene")
+    data, glb = content.data, load_gltf(out / name / "scene.glb")
+    blob = (out / name / "scene.rbscene").read_bytes()
+    assert stats["translated"]["scene_id"] == hashlib.sha256(blob).hexdigest()
+    assert data.triangles.shape == glb.triangles.shape == (stats["triangles"], 3)
+    assert sorted(data.object_names) == sorted(glb.object_names)
+    assert np.allclose(data.positions.min(axis=0), glb.positions.min(axis=0), atol=1e-5)
+    assert np.allclose(data.positions.max(axis=0), glb.positions.max(axis=0), atol=1e-5)
+
+    def area(d) -> float:
+        p = d.positions.astype(np.float64)[d.triangles]
+        return float(np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1).sum())
+
+    assert area(data) == pytest.approx(area(glb), rel=1e-5)
+    by_name = {m.name: m for m in glb.materials}
+    for m in data.materials:
+        g = by_name[m.name]
+        assert m.base_color == pytest.approx(g.base_color, abs=1e-6)
+        assert (m.metallic, m.roughness, m.transmission, m.ior) == pytest.approx(
+            (g.metallic, g.roughness, g.transmission, g.ior), abs=1e-6)
+    lights = {lt.name: lt for lt in glb.lights}
+    for lt in data.lights:
+        g = lights[lt.name]
+        assert (lt.kind, lt.intensity, lt.radius) == (g.kind, pytest.approx(g.intensity, rel=1e-5),
+                                                      pytest.approx(g.radius, rel=1e-5))
+        assert lt.position == pytest.approx(g.position, abs=1e-5)
+        if lt.kind != "point":
+            assert lt.direction == pytest.approx(g.direction, abs=1e-5)
+    assert np.allclose(data.cameras[0].matrix_world, glb.cameras[0].matrix_world, atol=1e-5)
+    assert data.cameras[0].vfov == pytest.approx(glb.cameras[0].vfov, rel=1e-5)
+    assert data.environment == pytest.approx(glb.environment, rel=1e-5)
+    assert sim_core.Scene.from_scene_file(out / name / "scene.rbscene").stats["triangles"] == \
+        sim_core.Scene.from_scene_data(glb).stats["triangles"]
 
 
 def test_chess_glass_and_mirror_pieces_face_outwards(teapot_build: tuple[Path, dict]) -> None:

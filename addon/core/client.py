@@ -123,12 +123,20 @@ class ServiceClient:
     def health(self, timeout_s: float | None = None) -> dict[str, Any]:
         return self._json("GET", "/health", timeout_s=timeout_s)
 
-    def upload_scene(self, glb_path: str | Path) -> dict[str, Any]:
-        """POST /scenes with the .glb bytes; returns id, statistics and inert parameters."""
-        data = Path(glb_path).read_bytes()
-        if data[:4] != b"glTF":
-            raise ValueError(f"{glb_path} is not a binary glTF (.glb) file")
-        raw, _ = self._request("POST", "/scenes", body=data, content_type="model/gltf-binary")
+    def upload_scene(self, scene_path: str | Path) -> dict[str, Any]:
+        """POST /scenes with a render-budget scene file (what the add-on sends) or a .glb; returns id,
+        statistics (with the translation ``notes`` of a scene file) and inert parameters."""
+        data = Path(scene_path).read_bytes()
+        if data[:4] == b"glTF":
+            content_type = "model/gltf-binary"
+        else:
+            from sim_core.loaders.scene_file import MEDIA_TYPE, is_scene_file
+
+            if not is_scene_file(data[:64]):
+                raise ValueError(f"{scene_path} is neither a render-budget scene file nor a binary glTF "
+                                 "(.glb)")
+            content_type = MEDIA_TYPE
+        raw, _ = self._request("POST", "/scenes", body=data, content_type=content_type)
         return json.loads(raw.decode("utf-8"))
 
     def scene(self, scene_id: str) -> dict[str, Any]:

@@ -97,7 +97,7 @@ def describe(job: dict[str, Any], evals_per_view: int | None = None) -> JobUpdat
     return JobUpdate(state, frac, text)
 
 
-def run_job(client: ServiceClient, glb_path: str | Path, path_doc: dict[str, Any], request: JobRequest, *,
+def run_job(client: ServiceClient, scene_path: str | Path, path_doc: dict[str, Any], request: JobRequest, *,
             progress: Callable[[JobUpdate], None] | None = None,
             should_cancel: Callable[[], bool] | None = None,
             on_submitted: Callable[[str, str], None] | None = None,
@@ -106,7 +106,7 @@ def run_job(client: ServiceClient, glb_path: str | Path, path_doc: dict[str, Any
     report = progress or (lambda _u: None)
     cancelled = should_cancel or (lambda: False)
     report(JobUpdate("uploading", 0.0, "uploading scene"))
-    scene = client.upload_scene(glb_path)
+    scene = client.upload_scene(scene_path)
     scene_id = str(scene["id"])
     if cancelled():
         raise JobCancelled("cancelled before submission")

@@ -1,3 +1,3 @@
 """One module per scene; each exposes ``build(out_dir) -> SceneSpec`` (bpy, deterministic)."""
 
-SCENES = ("teapot", "chess", "lab", "hall", "valley", "village")
+SCENES = ("teapot", "chess", "lab", "hall", "valley", "village", "artist")

@@ -1,7 +1,9 @@
-"""POST /scenes (streamed, size-limited .glb upload) and GET /scenes/{id}."""
+"""POST /scenes (streamed, size-limited upload of a .glb or a render-budget scene file) and
+GET /scenes/{id}."""
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import logging
 import struct
@@ -22,10 +24,14 @@ log = logging.getLogger("render_budget.api")
 router = APIRouter(prefix="/scenes", tags=["scenes"])
 
 GLB_MAGIC = b"glTF"
-ACCEPTED_TYPES = ("model/gltf-binary", "application/octet-stream")
+SCENE_FILE_TYPE = "application/vnd.render-budget.scene+zip"
+ACCEPTED_TYPES = ("model/gltf-binary", SCENE_FILE_TYPE, "application/octet-stream")
+
+SUFFIXES = {"glb": ".glb", "scene": ".rbscene"}  # storage.SCENE_SUFFIXES
 
 _ERRORS: dict[int | str, dict[str, Any]] = {
-    400: {"model": ErrorResponse, "description": "not a glTF binary, truncated, or unreadable"},
+    400: {"model": ErrorResponse, "description": "neither a glTF binary nor a scene file, truncated, or "
+                                                 "unreadable"},
     413: {"model": ErrorResponse, "description": "upload larger than the configured limit"},
     415: {"model": ErrorResponse, "description": "wrong Content-Type"},
     422: {"model": ErrorResponse, "description": "geometry the simulator rejects (NaN, bad indices, empty)"},
@@ -64,15 +70,47 @@ def default_space_mapping() -> dict[str, list[Any]]:
     return default_space().as_render_space()
 
 
-def analyse_scene(path: Path) -> tuple[Any, dict[str, Any], dict[str, str]]:
-    """Load with the real loader (the only judge of validity) and ask the simulator what is inert."""
+def upload_kind(path: Path, size: int, content_type: str) -> str:
+    """"glb" or "scene" (a render-budget scene file): what the Content-Type declares, or for
+    application/octet-stream what the first bytes say; 400 when the bytes are not what was declared."""
+    from sim_core.loaders.scene_file import is_scene_file
+
+    with open(path, "rb") as f:
+        head = f.read(64)
+    if content_type == SCENE_FILE_TYPE or (content_type not in ACCEPTED_TYPES[:1] and is_scene_file(head)):
+        if not is_scene_file(head):
+            raise ApiError(400, f"not a render-budget scene file: it must be a ZIP archive whose first entry "
+                                f"is manifest.json (starts with {head[:4]!r})")
+        return "scene"
+    if content_type == ACCEPTED_TYPES[0] or head.startswith(GLB_MAGIC):
+        check_glb_header(path, size)
+        return "glb"
+    raise ApiError(400, f"neither a glTF binary (.glb) nor a render-budget scene file: magic is "
+                        f"{head[:4]!r}")
+
+
+def analyse_scene(path: Path, kind: str = "glb", max_bytes: int | None = None
+                  ) -> tuple[Any, dict[str, Any], dict[str, str]]:
+    """Load with the real loader (the only judge of validity) and ask the simulator what is inert.
+    A scene file's translation notes (what was approximated) join its statistics as ``notes``."""
     import sim_core
 
     def private(exc: BaseException) -> str:  # the server's file names are nobody's business
-        return str(exc).replace(str(path), "upload.glb").replace(path.name, "upload.glb")
+        shown = "upload" + SUFFIXES[kind]
+        return str(exc).replace(str(path), shown).replace(path.name, shown)
 
+    notes: list[dict[str, str]] = []
     try:
-        scene = sim_core.Scene.from_gltf(str(path))
+        if kind == "scene":
+            from sim_core.loaders.scene_file import DEFAULT_LIMITS, read_scene_file
+
+            limits = DEFAULT_LIMITS if max_bytes is None else dataclasses.replace(DEFAULT_LIMITS,
+                                                                                 max_bytes=max_bytes)
+            content = read_scene_file(path, limits=limits)
+            notes = content.notes
+            scene = sim_core.Scene.from_scene_data(content.data)
+        else:
+            scene = sim_core.Scene.from_gltf(str(path))
     except ValueError as exc:
         raise ApiError(422, f"scene rejected: {private(exc)}") from exc
     except MemoryError as exc:
@@ -81,6 +119,9 @@ def analyse_scene(path: Path) -> tuple[Any, dict[str, Any], dict[str, str]]:
         raise ApiError(400, f"could not read glTF: {type(exc).__name__}: {private(exc)}") from exc
     stats = {k: (v if isinstance(v, int | float | str | bool | list | dict) else str(v))
              for k, v in dict(scene.stats).items()}
+    stats["format"] = "scene" if kind == "scene" else "glb"
+    if notes:
+        stats["notes"] = notes
     inert = {str(k): str(v) for k, v in sim_core.inert_parameters(scene, default_space_mapping()).items()}
     return scene, stats, inert
 
@@ -121,19 +162,20 @@ async def receive_upload(request: Request, storage: Storage, limit: int) -> tupl
 )
 async def upload_scene(request: Request, storage: StorageDep, scenes: ScenesDep,
                        settings: SettingsDep) -> ScenePublic:
-    """Upload a .glb as the raw request body; its SHA-256 becomes the scene id."""
+    """Upload a .glb or a render-budget scene file (what the add-on's depsgraph translator writes) as the
+    raw request body; its SHA-256 becomes the scene id."""
     ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
     if ctype not in ACCEPTED_TYPES:
-        raise ApiError(415, f"send the .glb as the raw body with Content-Type {ACCEPTED_TYPES[0]} "
-                            f"(got {ctype or 'none'!r})")
+        raise ApiError(415, f"send the .glb or scene file as the raw body with Content-Type "
+                            f"{ACCEPTED_TYPES[0]} or {SCENE_FILE_TYPE} (got {ctype or 'none'!r})")
     tmp, scene_id, size = await receive_upload(request, storage, settings.max_upload_bytes)
     try:
         existing = storage.get_scene(scene_id=scene_id)
         if existing is not None:
             return public(existing)
-        check_glb_header(tmp, size)
-        scene, stats, inert = await run_in_threadpool(analyse_scene, tmp)
-        storage.adopt_scene_file(temp_path=tmp, scene_id=scene_id)
+        kind = upload_kind(tmp, size, ctype)
+        scene, stats, inert = await run_in_threadpool(analyse_scene, tmp, kind, settings.max_upload_bytes)
+        storage.adopt_scene_file(temp_path=tmp, scene_id=scene_id, suffix=SUFFIXES[kind])
         record = storage.add_scene(scene_id=scene_id, size=size, content_hash=str(scene.content_hash),
                                    stats=stats, inert=inert, cameras=len(scene.cameras))
         scenes.put(scene_id, scene)

@@ -376,6 +376,14 @@ class Scene:
         )
 
     @classmethod
+    def from_scene_file(cls, path: str | os.PathLike[str], **limits: Any) -> Scene:
+        """A render-budget scene file (what the add-on's depsgraph translator writes; ``limits``: fields of
+        ``sim_core.loaders.scene_file.Limits``)."""
+        from .loaders.scene_file import Limits, load_scene_file
+
+        return cls.from_scene_data(load_scene_file(path, limits=Limits(**limits)))
+
+    @classmethod
     def from_obj(cls, path: str | os.PathLike[str]) -> Scene:
         """Wavefront OBJ (Y-up files are converted to the Z-up world frame by the loader)."""
         from .loaders.obj import load_obj

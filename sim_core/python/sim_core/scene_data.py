@@ -183,7 +183,12 @@ def _unit(value: object, name: str) -> tuple[float, float, float]:
     n = float(np.linalg.norm(d))
     if n == 0.0:
         raise ValueError(f"{name} must be non-zero")
+    if abs(n - 1.0) <= _UNIT_TOLERANCE:  # already unit: kept bit for bit (a scene file reads back the same)
+        return tuple(float(c) for c in d)  # type: ignore[return-value]
     return tuple(float(c) for c in d / n)  # type: ignore[return-value]
+
+
+_UNIT_TOLERANCE = 1e-12
 
 
 @dataclass(frozen=True)
@@ -244,10 +249,13 @@ class Light:
                     "surface; use a point light for a point emitter"
                 )
             d = np.asarray(self.direction)
-            ortho = tangent - d * float(tangent @ d)
-            if float(np.linalg.norm(ortho)) <= 1e-6 * max(float(np.linalg.norm(tangent)), 1e-30):
-                raise ValueError(f"{label}: tangent must be non-zero and not parallel to its direction")
-            tangent = ortho / np.linalg.norm(ortho)
+            unit_orthogonal = abs(float(tangent @ d)) <= _UNIT_TOLERANCE and \
+                abs(float(np.linalg.norm(tangent)) - 1.0) <= _UNIT_TOLERANCE
+            if not unit_orthogonal:  # (a unit tangent already orthogonal is kept bit for bit)
+                ortho = tangent - d * float(tangent @ d)
+                if float(np.linalg.norm(ortho)) <= 1e-6 * max(float(np.linalg.norm(tangent)), 1e-30):
+                    raise ValueError(f"{label}: tangent must be non-zero and not parallel to its direction")
+                tangent = ortho / np.linalg.norm(ortho)
         object.__setattr__(self, "tangent", tuple(float(c) for c in tangent))
 
     @property
