@@ -180,6 +180,22 @@ def test_a_frame_renders_with_every_pass_and_its_metadata(scene, tmp_path) -> No
     assert "no store" in info["render_budget.note"]
 
 
+def test_an_approximated_material_is_reported_with_the_frame(scene, tmp_path) -> None:
+    """A procedural texture the simulator cannot shade: the frame renders, and its metadata (and the
+    Last Render panel's record) say what the translation approximated."""
+    from PIL import Image
+
+    mat = bpy.data.materials.new("Marble")
+    nodes = mat.node_tree.nodes
+    noise = nodes.new("ShaderNodeTexNoise")
+    mat.node_tree.links.new(noise.outputs["Color"], nodes["Principled BSDF"].inputs["Base Color"])
+    bpy.data.objects["Cube"].data.materials.append(mat)
+    render_still(scene, tmp_path / "marble.png")
+    out = ext_module("engine.render").last_frame.output
+    assert "Marble" in out.scene_notes
+    assert "Marble" in Image.open(tmp_path / "marble.png").info["render_budget.scene_notes"]
+
+
 def test_exr_header_and_transparent_film(scene, tmp_path) -> None:
     import OpenEXR
 

@@ -87,7 +87,8 @@ class FrameOutput:
     render_resolution: tuple[int, int]
     render_s: float
     counters: dict[str, int] = field(default_factory=dict)
-    notes: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()  # how this frame differs from what was asked (render region, lens shift)
+    scene_notes: str = ""  # what the scene translation approximated
 
     def window(self, x0: int, y0: int, width: int, height: int) -> FrameOutput:
         """The ``width`` x ``height`` part at (``x0``, ``y0``) of this frame: how an off-centre camera
@@ -132,6 +133,8 @@ class FrameOutput:
         notes = [n for n in (s.note, *self.notes) if n]
         if notes:
             meta["note"] = "; ".join(notes)
+        if self.scene_notes:
+            meta["scene_notes"] = self.scene_notes
         return {META_PREFIX + k: v for k, v in meta.items()}
 
 

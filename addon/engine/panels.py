@@ -138,6 +138,10 @@ class RENDER_PT_render_budget_last(_EnginePanel, bpy.types.Panel):
         col.label(text=f"{s.source.capitalize()} settings: {s.text()}")
         if last.csv_path is not None:
             col.label(text=f"Per-frame CSV: {last.csv_path}")
+        if out.scene_notes:
+            col.label(text="The simulated scene differs from Blender's:", icon="ERROR")
+            for line in out.scene_notes.split("; "):
+                col.label(text=line)
 
 
 classes = (RENDER_PT_render_budget_settings, RENDER_PT_render_budget_quality, RENDER_PT_render_budget_budget,

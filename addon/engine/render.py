@@ -27,13 +27,13 @@ from bpy.app.handlers import persistent
 from ..camera_path import camera_vfov, render_resolution, scene_fps
 from ..core.engine_frame import PASSES, AnimationLog, CameraView, FrameOutput, RenderCancelled, render_frame
 from ..core.engine_frame import animation_csv_path as csv_path_of
-from ..core.engine_scene import SceneCache, needs_translation
+from ..core.engine_scene import SceneCache, Update, needs_translation
 from ..core.engine_settings import Budget, FrameSettings, SettingsChooser, indices_of_values, manual_indices
 from ..core.vendored import camera as camera_maths
 from ..core.viewport import ViewportRenderer
 from ..handlers import add_handler, remove_handler
 from ..playback import scene_time, store_of
-from . import scene as scene_source
+from ..translate import translate
 from .properties import manual_identifiers
 
 ENGINE_ID = "RENDER_BUDGET"
@@ -212,10 +212,10 @@ class RenderBudgetEngine(bpy.types.RenderEngine):
         trace_vfov, full_w, full_h, x0, y0 = camera_maths.projection_window(projection, w, h)
         notes = ["render region ignored (the whole frame is rendered)"] if r.use_border else []
         self.update_stats("", f"{ENGINE_LABEL} | translating the scene")
-        data, pass_index = scene_source.translate(depsgraph)
+        translation = translate(depsgraph, camera=False)
         if self.test_break():
             raise RenderCancelled
-        sim_scene = _final_scenes.scene_for(data)
+        sim_scene = _final_scenes.scene_for(translation.scene_data)
         session = _session(scene) if self.is_animation else None
         chooser = session.chooser if session is not None else chooser_for(scene)
         t = scene_time(scene)
@@ -224,12 +224,16 @@ class RenderBudgetEngine(bpy.types.RenderEngine):
         profile = profile_of(scene, chooser.store)
         self.update_stats("", f"{ENGINE_LABEL} | {settings.source} settings | tracing {w}x{h}")
         out = render_frame(sim_scene, CameraView(cam.matrix_world, trace_vfov, full_w, full_h), settings,
-                           profile=profile, fps=fps, object_pass_index=pass_index,
+                           profile=profile, fps=fps, object_pass_index=translation.pass_indices,
                            transparent=r.film_transparent, threads=_threads(scene),
                            progress=self.update_progress, should_cancel=self.test_break)
         if (full_w, full_h) != (w, h):  # lens shift: the camera's window of a larger centred frame
             out = out.window(x0, y0, w, h)
         out.notes = (*out.notes, *notes)
+        out.scene_notes = translation.notes_text(limit=6).replace("\n", "; ")
+        if translation.warnings and (session is None or session.log.rows == 0):  # once per job
+            self.report({"WARNING"}, f"{ENGINE_LABEL}: the simulated scene differs from Blender's: "
+                                     f"{translation.notes_text(limit=3)}")
         layer_passes = self._write_result(out, depsgraph.view_layer.name)
         if session is not None:
             session.log.add(scene.frame_current, t, out)
@@ -285,9 +289,9 @@ class RenderBudgetEngine(bpy.types.RenderEngine):
             return
         vp = self._viewport_renderer(depsgraph.scene)
         try:
-            if vp.scene is None or needs_translation(scene_source.updates(depsgraph)):
-                data, pass_index = scene_source.translate(depsgraph)
-                vp.set_scene(data, pass_index)
+            if vp.scene is None or needs_translation(updates(depsgraph)):
+                translation = translate(depsgraph, camera=False)
+                vp.set_scene(translation.scene_data, translation.pass_indices)
             self._viewport_error = None
         except Exception as exc:  # shown in the viewport's status; the last good scene stays
             self._viewport_error = str(exc)
@@ -330,6 +334,16 @@ class RenderBudgetEngine(bpy.types.RenderEngine):
         draw_texture_2d(self._texture, (0, 0), width, height)
         self.unbind_display_space_shader()
         gpu.state.blend_set("NONE")
+
+
+def updates(depsgraph: bpy.types.Depsgraph) -> list[Update]:
+    """The depsgraph's updates as :func:`addon.core.engine_scene.needs_translation` reads them."""
+    out = []
+    for u in depsgraph.updates:
+        idb = u.id
+        out.append(Update(idb.id_type, getattr(idb, "type", "") if idb.id_type == "OBJECT" else "",
+                          u.is_updated_geometry, u.is_updated_transform, u.is_updated_shading))
+    return out
 
 
 def _blender_rows(image: np.ndarray) -> np.ndarray:
