@@ -29,6 +29,8 @@ from typing import Any
 
 import numpy as np
 
+import sim_core
+
 from .engine_settings import FrameSettings, space
 
 #: Blender's depth of background pixels (Cycles and EEVEE write the same).
@@ -58,8 +60,6 @@ class CameraView:
     height: int
 
     def camera(self) -> Any:
-        import sim_core
-
         m = np.array(self.matrix_world, dtype=np.float64)
         if m.shape != (4, 4) or not np.all(np.isfinite(m)):
             raise ValueError("camera matrix must be a finite 4x4 matrix")
@@ -142,8 +142,6 @@ def tile_energy(tile_stats: Sequence[Mapping[str, Any]], profile: Any, fps: floa
                 scene: Any = None) -> np.ndarray:
     """Dynamic energy (J) of each tile: its counters and comparator histogram priced by the energy model
     as a frame's are (same profile, frame rate, settings and scene)."""
-    import sim_core
-
     out = np.empty(len(tile_stats), dtype=np.float64)
     for i, t in enumerate(tile_stats):
         activity = SimpleNamespace(counters=t["counters"], comparator_histogram=t["comparator_histogram"],
@@ -186,8 +184,6 @@ def _nearest(aov: np.ndarray, h: int, w: int) -> np.ndarray:
 def _render(scene: Any, camera: Any, settings: Any, prof: Any, threads: int | None,
             on_band: Callable[[int, int], None]) -> Any:
     """The frame on the profile's caches (node/triangle and texture cache)."""
-    import sim_core
-
     tiled = getattr(sim_core, "render_tiled", None)
     if tiled is None:  # older core: one native call for the whole frame
         result = sim_core.render(scene, camera, settings, threads=threads, cache=prof.cache,
@@ -207,8 +203,6 @@ def render_frame(scene: Any, view: CameraView, frame_settings: FrameSettings, *,
     (cancelling raises :class:`RenderCancelled`). ``object_pass_index[object_id]`` is the pass index
     of each scene object (default 0 for every object).
     """
-    import sim_core
-
     if not (isinstance(fps, int | float) and math.isfinite(fps) and fps > 0):
         raise ValueError(f"fps must be a positive number, got {fps!r}")
     camera = view.camera()

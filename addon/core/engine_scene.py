@@ -19,6 +19,8 @@ from typing import Any
 
 import numpy as np
 
+import sim_core
+
 # ID types whose change never alters what the simulator sees (the scene's own ID changes on every frame
 # change; actions change through the transforms they drive, which arrive as object updates).
 _IGNORED_ID_TYPES = frozenset({"SCENE", "ACTION", "TEXT", "WINDOWMANAGER", "WORKSPACE", "SCREEN", "BRUSH",
@@ -106,8 +108,6 @@ class SceneCache:
 
     def scene_for(self, scene_data: Any, key: str | None = None) -> Any:
         """The built scene of ``scene_data`` (``key``: its fingerprint, when the caller has it)."""
-        import sim_core
-
         key = key or fingerprint(scene_data)
         with self._lock:
             if key == self._key:

@@ -24,6 +24,7 @@ import bpy
 import numpy as np
 from bpy.app.handlers import persistent
 
+from .. import preferences
 from ..camera_path import camera_vfov, render_resolution, scene_fps
 from ..core.engine_frame import PASSES, AnimationLog, CameraView, FrameOutput, RenderCancelled, render_frame
 from ..core.engine_frame import animation_csv_path as csv_path_of
@@ -80,8 +81,6 @@ def profile_of(scene: bpy.types.Scene, store: Any) -> str:
     if store is not None:
         return store.profile
     try:
-        from .. import preferences
-
         return preferences.get().default_profile or "mobile"
     except RuntimeError:
         return "mobile"
@@ -321,6 +320,7 @@ class RenderBudgetEngine(bpy.types.RenderEngine):
         self.update_stats("", _viewport_status(frame, vp.error, render_resolution(scene)))
 
     def _draw(self, frame: Any, width: int, height: int, scene: bpy.types.Scene) -> None:
+        # lazy: Blender's GPU modules work only with a GPU context (never in background mode)
         import gpu
         from gpu_extras.presets import draw_texture_2d
 
