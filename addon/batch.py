@@ -12,6 +12,7 @@ import argparse
 import csv
 import importlib
 import importlib.util
+import shutil
 import sys
 import tempfile
 import time
@@ -19,6 +20,8 @@ from pathlib import Path
 from types import ModuleType
 
 EXT_ID = "render_budget"
+STAGED_REPO = "render_budget_batch"
+_staged: list[Path] = []  # extension copies this run staged in the temp dir (removed at its end)
 
 
 # -- text progress -------------------------------------------------------------------------------------
@@ -71,13 +74,28 @@ def ensure_extension(bpy: ModuleType) -> str:
     finally:
         sys.path.remove(str(tools))
     stage_dir = Path(tempfile.mkdtemp(prefix="render-budget-batch-"))
+    _staged.append(stage_dir)
     build_extension.stage(stage_dir)
     repos = bpy.context.preferences.extensions.repos
-    repos.new(name="render_budget_batch", module="render_budget_batch", custom_directory=str(stage_dir),
-              source="USER")
-    name = f"bl_ext.render_budget_batch.{EXT_ID}"
+    repos.new(name=STAGED_REPO, module=STAGED_REPO, custom_directory=str(stage_dir), source="USER")
+    name = f"bl_ext.{STAGED_REPO}.{EXT_ID}"
     addon_utils.enable(name, default_set=True, handle_error=_raise)
     return name
+
+
+def remove_staged_extension(bpy: ModuleType) -> None:
+    """Undo :func:`ensure_extension`'s staging: disable the copy, drop its repository, delete the folder
+    (a batch run leaves nothing in the temp dir)."""
+    if not _staged:
+        return
+    import addon_utils
+
+    addon_utils.disable(f"bl_ext.{STAGED_REPO}.{EXT_ID}", default_set=True)
+    repos = bpy.context.preferences.extensions.repos
+    for repo in [r for r in repos if r.module == STAGED_REPO]:
+        repos.remove(repo)
+    while _staged:
+        shutil.rmtree(_staged.pop(), ignore_errors=True)
 
 
 def _raise(exc: BaseException) -> None:
@@ -290,6 +308,7 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         if ext:
             importlib.import_module(f"{ext}.service_process").stop_local()
+        remove_staged_extension(bpy)
 
 
 if __name__ == "__main__":

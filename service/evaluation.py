@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import tempfile
 import threading
 import time
 from collections import OrderedDict
@@ -32,9 +33,11 @@ import numpy as np
 
 from service.eval_cache import CacheKey, EvalCache, Evaluation
 from service.executors import Executor, InProcessExecutor
+from service.images import linear_to_srgb
 from service.metrics import flip, ssim
 from service.options import METRICS
 from service.params import Indices, ParameterSpace
+from service.store.camera import check_fov
 
 #: Bumped whenever the pipeline that turns renders into errors changes (part of every cache key).
 PIPELINE_VERSION = "v1"
@@ -45,8 +48,7 @@ __all__ = ["METRICS", "CameraSpec", "Evaluation", "Evaluator", "SceneHandle", "e
 
 def tone_map(image: np.ndarray) -> np.ndarray:
     """Fixed display transform: clamp linear RGB to [0, 1], apply the sRGB OETF; float64 out."""
-    x = np.clip(np.asarray(image, dtype=np.float64), 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
+    return linear_to_srgb(image)
 
 
 def upsample_bilinear(image: np.ndarray, height: int, width: int) -> np.ndarray:
@@ -94,8 +96,7 @@ class CameraSpec:
             raise ValueError("camera forward must be non-zero")
         if np.linalg.norm(np.cross(self.forward, self.up)) < 1e-9:
             raise ValueError("camera up must not be parallel to forward")
-        if not (math.isfinite(self.vfov) and 0 < self.vfov < math.pi):
-            raise ValueError("vfov must be in (0, pi)")
+        check_fov(self.vfov, "vfov")  # the limits every layer shares
         if int(self.width) < 8 or int(self.height) < 8:
             raise ValueError("evaluation images need at least 8x8 pixels")
         object.__setattr__(self, "width", int(self.width))
@@ -132,10 +133,11 @@ class SceneHandle:
     ``loader`` callable that rebuilds the scene, and loads the scene once per worker process."""
 
     def __init__(self, scene: Any = None, path: str | Path | None = None, *,
-                 ship_bytes: bool = False, loader: Any = None) -> None:
+                 ship_bytes: bool = False, loader: Any = None, self_contained: bool = False) -> None:
         if scene is None and path is None and loader is None:
             raise ValueError("a scene handle needs a scene, a path or a loader")
         self.loader = loader
+        self.self_contained = self_contained  # an upload: workers read nothing but the file itself
         if scene is None and path is None:
             scene = loader()
         if path is None and scene is not None:
@@ -144,7 +146,7 @@ class SceneHandle:
         self.path = None if path is None else str(path)
         self._data: bytes | None = Path(path).read_bytes() if (ship_bytes and path is not None) else None
         if scene is None:
-            scene = _load_scene(self.path, None)  # type: ignore[arg-type]
+            scene = _load_scene(self.path, None, self.self_contained)  # type: ignore[arg-type]
         self.content_hash = str(scene.content_hash)
         _remember_scene(self.content_hash, scene)
         self._scene = scene
@@ -155,7 +157,7 @@ class SceneHandle:
                 s = _SCENES.get(self.content_hash)
                 if s is None:
                     if self.path is not None:
-                        s = _load_scene(self.path, self._data)
+                        s = _load_scene(self.path, self._data, self.self_contained)
                     elif self.loader is not None:
                         s = self.loader()
                     else:
@@ -170,30 +172,33 @@ class SceneHandle:
         if self.path is None and self.loader is None:
             raise RuntimeError("a scene without a source file or loader can only be evaluated in-process")
         return {"path": self.path, "data": self._data, "content_hash": self.content_hash,
-                "loader": self.loader}
+                "loader": self.loader, "self_contained": self.self_contained}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.path = state["path"]
         self._data = state["data"]
         self.loader = state["loader"]
         self.content_hash = state["content_hash"]
+        self.self_contained = state["self_contained"]
         self._scene = _SCENES.get(self.content_hash)
 
 
-def _load_scene(path: str, data: bytes | None) -> Any:
+def _load_scene(path: str, data: bytes | None, self_contained: bool) -> Any:
+    """Load a scene file; a worker without the file loads the shipped bytes from a private folder that
+    is removed as soon as the scene is in memory (only the file travels, so it must be self-contained)."""
     p = Path(path)
     if data is not None and not p.exists():
-        import tempfile
+        with tempfile.TemporaryDirectory(prefix="render-budget-scene-") as tmp:
+            copy = Path(tmp) / p.name
+            copy.write_bytes(data)
+            return read_scene(copy, self_contained=True)
+    return read_scene(p, self_contained=self_contained)
 
-        tmp = Path(tempfile.mkdtemp(prefix="render-budget-scene-")) / p.name
-        tmp.write_bytes(data)
-        p = tmp
-    return read_scene(p)
 
-
-def read_scene(path: str | Path) -> Any:
+def read_scene(path: str | Path, *, self_contained: bool = False) -> Any:
     """A ``sim_core.Scene`` from a file: a render-budget scene file (known by its content, whatever its
-    name: what the add-on sends), ``.glb``/``.gltf`` or ``.obj``."""
+    name: what the add-on sends), ``.glb``/``.gltf`` or ``.obj``. ``self_contained``: a glTF may refer to
+    nothing outside itself (uploads; see ``sim_core.loaders.gltf.load_gltf``)."""
     from sim_core.loaders.scene_file import SUFFIX, is_scene_file
 
     import sim_core
@@ -202,7 +207,7 @@ def read_scene(path: str | Path) -> Any:
     if is_scene_file(p):
         return sim_core.Scene.from_scene_file(p)
     if p.suffix.lower() in (".glb", ".gltf"):
-        return sim_core.Scene.from_gltf(str(p))
+        return sim_core.Scene.from_gltf(str(p), self_contained=self_contained)
     if p.suffix.lower() == ".obj":
         return sim_core.Scene.from_obj(str(p))
     raise ValueError(f"unsupported scene file {p.name!r} (use a {SUFFIX} scene file, .glb, .gltf or .obj)")

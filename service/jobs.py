@@ -19,7 +19,7 @@ from collections import OrderedDict
 from collections.abc import Callable
 from typing import Any
 
-from .storage import TERMINAL_STATES, JobRecord, Storage
+from .storage import JobRecord, Storage
 
 log = logging.getLogger("render_budget.jobs")
 
@@ -38,6 +38,11 @@ class SceneCache:
         self._lock = threading.Lock()
         self._loading: dict[str, threading.Lock] = {}
 
+    def drop(self, scene_id: str) -> None:
+        """Forget a deleted scene."""
+        with self._lock:
+            self._scenes.pop(scene_id, None)
+
     def put(self, scene_id: str, scene: Any) -> None:
         with self._lock:
             self._scenes[scene_id] = scene
@@ -45,6 +50,7 @@ class SceneCache:
                 self._scenes.popitem(last=False)
 
     def get(self, scene_id: str) -> Any:
+        """The loaded scene; FileNotFoundError if its file is gone (deleted meanwhile)."""
         with self._lock:
             if scene_id in self._scenes:
                 self._scenes.move_to_end(scene_id)
@@ -56,7 +62,8 @@ class SceneCache:
                     return self._scenes[scene_id]
             from service.evaluation import read_scene
 
-            scene = read_scene(self._storage.scene_path(scene_id))
+            # Uploads were checked self-contained; loading them the same way keeps that true.
+            scene = read_scene(self._storage.scene_path(scene_id), self_contained=True)
             with self._lock:
                 self._scenes[scene_id] = scene
                 while len(self._scenes) > self._capacity:
@@ -108,6 +115,7 @@ class JobManager:
     def __init__(
         self, storage: Storage, scenes: SceneCache, *, workers: int = 2, dask_scheduler: str | None = None,
         render_threads: int | None = None, ship_scenes: bool = True, eval_workers: int = 1,
+        eval_cache_max_bytes: int | None = None,
     ) -> None:
         self.storage = storage
         self.scenes = scenes
@@ -116,6 +124,7 @@ class JobManager:
         self.render_threads = render_threads
         self.eval_workers = eval_workers
         self.ship_scenes = ship_scenes
+        self.eval_cache_max_bytes = eval_cache_max_bytes
         self._queue: queue.Queue[str | None] = queue.Queue()
         self._threads: list[threading.Thread] = []
         self._cancel: dict[str, threading.Event] = {}
@@ -153,23 +162,25 @@ class JobManager:
             self._threads.append(t)
 
     def stop(self, timeout: float = 30.0) -> None:
+        """Stop at once: running jobs are interrupted (left queued, to resume at the next start) and the
+        evaluation workers stopped before anything waits on them, so no process outlives the service."""
         self._stopping.set()
         with self._cancel_lock:
             for ev in self._cancel.values():
                 ev.set()
         for _ in self._threads:
             self._queue.put(None)
+        with self._executor_lock:
+            if self._executor is not None:
+                try:
+                    self._executor.close()  # a job waiting on the pool sees it break and stops
+                except Exception:  # closing a remote client must not block shutdown
+                    log.exception("closing the executor failed")
+            self._executor = None
         deadline = time.monotonic() + timeout
         for t in self._threads:
             t.join(max(0.0, deadline - time.monotonic()))
         self._threads.clear()
-        with self._executor_lock:
-            if self._executor is not None and hasattr(self._executor, "close"):
-                try:
-                    self._executor.close()
-                except Exception:  # closing a remote client must not block shutdown
-                    log.exception("closing the executor failed")
-            self._executor = None
         with self._cache_lock:
             if self._cache is not None and hasattr(self._cache, "close"):
                 self._cache.close()
@@ -180,19 +191,26 @@ class JobManager:
             self.version += 1
             self._version_cond.notify_all()
 
-    def wait_change(self, seen: int, timeout: float) -> int:
-        """Block up to ``timeout`` seconds for any job event after ``seen``; returns the new version."""
-        with self._version_cond:
-            if self.version == seen:
-                self._version_cond.wait(timeout)
-            return self.version
-
     # -- requests from the API -----------------------------------------------------------------------
     def submit(self, *, scene_id: str, spec: dict[str, Any]) -> JobRecord:
         job = self.storage.create_job(scene_id=scene_id, spec=spec)
         self._queue.put(job.id)
         self._bump()
         return job
+
+    def delete_scene(self, *, scene_id: str) -> bool:
+        """Delete a scene with its finished jobs (Conflict while it has queued or running ones)."""
+        deleted = self.storage.delete_scene(scene_id=scene_id)
+        self.scenes.drop(scene_id)
+        if deleted:
+            self._bump()
+        return deleted
+
+    def delete_job(self, *, job_id: str) -> bool:
+        deleted = self.storage.delete_job(job_id=job_id)
+        if deleted:
+            self._bump()
+        return deleted
 
     def cancel(self, *, job_id: str) -> JobRecord | None:
         job = self.storage.request_cancel(job_id=job_id)
@@ -208,6 +226,8 @@ class JobManager:
     def executor(self) -> Any:
         """One executor for the whole service (a Dask client is expensive to make)."""
         with self._executor_lock:
+            if self._stopping.is_set():
+                raise JobCancelled  # never start workers for a service that is stopping
             if self._executor is None:
                 from service import executors
 
@@ -219,7 +239,8 @@ class JobManager:
             if self._cache is None:
                 from service.eval_cache import EvalCache
 
-                self._cache = EvalCache(self.storage.eval_cache_path)
+                self._cache = EvalCache(self.storage.eval_cache_path, max_bytes=self.eval_cache_max_bytes,
+                                        protected=self.storage.active_scene_hashes)
             return self._cache
 
     # -- the worker ----------------------------------------------------------------------------------
@@ -278,7 +299,8 @@ class JobManager:
             # Workers get the scene file (its bytes too, for Dask workers without a shared disk) and load
             # it once each; in-process the handle holds the loaded scene.
             handle = SceneHandle(self.scenes.get(job.scene_id), path=self.storage.scene_path(job.scene_id),
-                                 ship_bytes=bool(self.dask_scheduler) and self.ship_scenes)
+                                 ship_bytes=bool(self.dask_scheduler) and self.ship_scenes,
+                                 self_contained=True)
             store = run_optimisation(
                 job.spec, scene=handle, cache=self.eval_cache(), executor=self.executor(),
                 progress=on_progress, should_cancel=should_cancel, threads=self.render_threads,
@@ -289,6 +311,9 @@ class JobManager:
             self._after_stop(job.id, elapsed())
             return
         except Exception as exc:
+            if should_cancel():  # e.g. the workers were stopped under it: an interruption, not a failure
+                self._after_stop(job.id, elapsed())
+                return
             log.exception("job %s failed", job.id)
             self._finish(job.id, "failed", error=f"{type(exc).__name__}: {exc}", elapsed_s=elapsed())
             return
@@ -307,10 +332,6 @@ class JobManager:
             self.storage.update_job(job_id=job_id, state="queued", elapsed_s=elapsed_s,
                                     event=("interrupted", {"state": "queued"}))
             self._bump()
-
-
-def is_terminal(state: str) -> bool:
-    return state in TERMINAL_STATES
 
 
 # -- the bridge to the optimiser (service.optimize and friends) ------------------------------------------

@@ -237,9 +237,14 @@ def test_preview_renders_into_an_image(ext, fmt: str) -> None:
 
 
 def _batch(args: list[str], tmp: Path) -> subprocess.CompletedProcess:
-    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp / "user"))
-    return subprocess.run([sys.executable, "-m", "addon.batch", *args], cwd=REPO_ROOT, capture_output=True,
+    """A batch run with its own temp dir, which it must leave without render-budget folders."""
+    system_tmp = tmp / "system-tmp"
+    system_tmp.mkdir(exist_ok=True)
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp / "user"), TMPDIR=str(system_tmp))
+    proc = subprocess.run([sys.executable, "-m", "addon.batch", *args], cwd=REPO_ROOT, capture_output=True,
                           text=True, env=env, timeout=900, check=False)
+    assert list(system_tmp.glob("render-budget-*")) == [], proc.stdout + proc.stderr
+    return proc
 
 
 def test_batch_evaluate_and_playback_write_reports(optimized, service, tmp_path) -> None:

@@ -139,3 +139,32 @@ def test_nsga_reaches_exact_hypervolume_on_real_space(scene) -> None:
         assert len(arch) <= 0.3 * sp.size
         fr = np.array([(e, p) for _, e, p in arch.frontier()])
         assert nsga.hypervolume_2d((fr - lo) / (hi - lo), (1.0, 1.0)) >= 0.98 * hv_exact
+
+
+def test_a_worker_without_the_scene_file_loads_the_shipped_bytes_and_keeps_no_copy(tmp_path,
+                                                                                   monkeypatch) -> None:
+    """Dask workers without a shared disk get the file's bytes: loaded from a private folder that is gone
+    once the scene is in memory; only a self-contained scene can travel that way."""
+    import pickle
+    import tempfile
+
+    from api_support import box_scene_glb
+
+    from service import evaluation
+
+    system_tmp = tmp_path / "system-tmp"
+    system_tmp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(system_tmp))
+    glb = tmp_path / "scene.glb"
+    glb.write_bytes(box_scene_glb())
+    handle = SceneHandle(path=glb, ship_bytes=True)
+    travelled = pickle.loads(pickle.dumps(handle))
+    glb.unlink()  # the worker's machine has no such file
+    monkeypatch.setattr(evaluation, "_SCENES", {})
+    travelled._scene = None
+    assert str(travelled.get().content_hash) == handle.content_hash
+    assert list(system_tmp.iterdir()) == []
+    external = b'{"asset": {"version": "2.0"}, "buffers": [{"byteLength": 4, "uri": "x.bin"}]}'
+    with pytest.raises(ValueError, match="self-contained"):
+        evaluation._load_scene(str(tmp_path / "gone.gltf"), external, False)
+    assert list(system_tmp.iterdir()) == []

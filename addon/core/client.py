@@ -149,7 +149,7 @@ class ServiceClient:
         return self._json("GET", f"/jobs/{_segment(job_id)}")
 
     def cancel_job(self, job_id: str) -> dict[str, Any] | None:
-        return self._json("DELETE", f"/jobs/{_segment(job_id)}")
+        return self._json("POST", f"/jobs/{_segment(job_id)}/cancel")
 
     def store_text(self, store_id: str) -> str:
         """GET /stores/{id} as the raw JSON text (kept verbatim in the .blend)."""

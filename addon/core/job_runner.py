@@ -141,7 +141,7 @@ def run_job(client: ServiceClient, scene_path: str | Path, path_doc: dict[str, A
 
 
 def cancel_and_wait(client: ServiceClient, job_id: str, wait_s: float = 30.0, poll_s: float = 0.1) -> str:
-    """DELETE the job, then wait (bounded) until the service says it stopped; returns the last state."""
+    """Ask the service to cancel the job, then wait (bounded) until it stopped; returns the last state."""
     try:
         job = client.cancel_job(job_id) or {}
     except ServiceError as err:

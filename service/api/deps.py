@@ -11,6 +11,7 @@ from fastapi import Depends, Request
 
 from service.jobs import JobManager, SceneCache
 from service.storage import Storage, StoreRecord
+from service.store import ParetoStore
 
 from .config import Settings
 from .errors import ApiError
@@ -25,6 +26,11 @@ class StoreCache:
         self._stores: OrderedDict[str, Any] = OrderedDict()
         self._lock = threading.Lock()
 
+    def drop(self, store_id: str) -> None:
+        """Forget a deleted store."""
+        with self._lock:
+            self._stores.pop(store_id, None)
+
     def get(self, store_id: str) -> Any:
         with self._lock:
             store = self._stores.get(store_id)
@@ -34,8 +40,6 @@ class StoreCache:
         record = self._storage.get_store(store_id=store_id)
         if record is None:
             raise ApiError(404, f"store {store_id!r} not found")
-        from service.store import ParetoStore
-
         store = ParetoStore.from_json(record.body)
         with self._lock:
             self._stores[store_id] = store

@@ -391,11 +391,12 @@ class Scene:
         return cls.from_scene_data(load_obj(path))
 
     @classmethod
-    def from_gltf(cls, path: str | os.PathLike[str]) -> Scene:
-        """glTF 2.0 (.glb/.gltf) as Blender exports it: meshes, materials, punctual lights, cameras."""
+    def from_gltf(cls, path: str | os.PathLike[str], *, self_contained: bool = False) -> Scene:
+        """glTF 2.0 (.glb/.gltf) as Blender exports it: meshes, materials, punctual lights, cameras.
+        ``self_contained=True`` reads nothing but the file itself (see :func:`loaders.gltf.load_gltf`)."""
         from .loaders.gltf import load_gltf
 
-        return cls.from_scene_data(load_gltf(path))
+        return cls.from_scene_data(load_gltf(path, self_contained=self_contained))
 
     # ---- queries --------------------------------------------------------------------------------
     def intersect(

@@ -17,6 +17,7 @@ from typing import Literal
 import numpy as np
 
 from ..scene_data import Material, SceneData
+from .confined import confined_path
 
 _Y_TO_Z = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 
@@ -35,7 +36,7 @@ def _parse_mtl(path: Path) -> dict[str, Material]:
     """Materials of an MTL file; Blender's OBJ importer mapping (roughness = 1 - sqrt(Ns / 1000))."""
     out: dict[str, Material] = {}
     if not path.is_file():
-        raise FileNotFoundError(f"material library not found: {path}")
+        raise FileNotFoundError(f"material library {path.name!r} not found next to the OBJ file")
     current: str | None = None
     props: dict[str, object] = {}
 
@@ -208,7 +209,11 @@ def load_obj(path: str | os.PathLike[str], *, up_axis: Literal["Y", "Z"] = "Y") 
             object_names.append(name)
         elif key == "mtllib":
             for lib in parts[1:]:
-                library.update(_parse_mtl(p.parent / lib))
+                try:
+                    mtl = confined_path(p.parent, lib)
+                except ValueError as exc:
+                    raise ValueError(f"{p}:{lineno}: material library {exc}") from None
+                library.update(_parse_mtl(mtl))
         elif key == "usemtl":
             name = " ".join(parts[1:])
             if name not in mat_index:
