@@ -142,7 +142,7 @@ class DaskExecutor:
     name = "dask"
 
     def __init__(self, address: str | None = None, client: Any = None, timeout_s: float = 30.0) -> None:
-        from distributed import Client
+        from distributed import Client  # lazy: dask is heavy and only this executor needs it
 
         if (address is None) == (client is None):
             raise ValueError("give a scheduler address or a client")

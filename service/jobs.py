@@ -15,9 +15,16 @@ import math
 import queue
 import threading
 import time
-from collections import OrderedDict
 from collections.abc import Callable
 from typing import Any
+
+from service import executors, options
+from service.camera_path import CameraPath
+from service.eval_cache import EvalCache
+from service.evaluation import SceneHandle, read_scene
+from service.lru import LRUCache
+from service.optimize import Cancelled, OptimizeConfig, optimize_path
+from service.params import Parameter, ParameterSpace, default_space
 
 from .storage import JobRecord, Storage
 
@@ -33,41 +40,31 @@ class SceneCache:
 
     def __init__(self, storage: Storage, *, capacity: int = 8) -> None:
         self._storage = storage
-        self._capacity = capacity
-        self._scenes: OrderedDict[str, Any] = OrderedDict()
+        self._scenes: LRUCache[str, Any] = LRUCache(capacity)
         self._lock = threading.Lock()
         self._loading: dict[str, threading.Lock] = {}
 
     def drop(self, scene_id: str) -> None:
         """Forget a deleted scene."""
-        with self._lock:
-            self._scenes.pop(scene_id, None)
+        self._scenes.pop(scene_id)
 
     def put(self, scene_id: str, scene: Any) -> None:
-        with self._lock:
-            self._scenes[scene_id] = scene
-            while len(self._scenes) > self._capacity:
-                self._scenes.popitem(last=False)
+        self._scenes.put(scene_id, scene)
 
     def get(self, scene_id: str) -> Any:
         """The loaded scene; FileNotFoundError if its file is gone (deleted meanwhile)."""
+        scene = self._scenes.get(scene_id)
+        if scene is not None:
+            return scene
         with self._lock:
-            if scene_id in self._scenes:
-                self._scenes.move_to_end(scene_id)
-                return self._scenes[scene_id]
             gate = self._loading.setdefault(scene_id, threading.Lock())
         with gate:  # one loader per scene; others wait for it
+            scene = self._scenes.get(scene_id)
+            if scene is None:
+                # Uploads were checked self-contained; loading them the same way keeps that true.
+                scene = read_scene(self._storage.scene_path(scene_id), self_contained=True)
+                self._scenes.put(scene_id, scene)
             with self._lock:
-                if scene_id in self._scenes:
-                    return self._scenes[scene_id]
-            from service.evaluation import read_scene
-
-            # Uploads were checked self-contained; loading them the same way keeps that true.
-            scene = read_scene(self._storage.scene_path(scene_id), self_contained=True)
-            with self._lock:
-                self._scenes[scene_id] = scene
-                while len(self._scenes) > self._capacity:
-                    self._scenes.popitem(last=False)
                 self._loading.pop(scene_id, None)
             return scene
 
@@ -229,16 +226,12 @@ class JobManager:
             if self._stopping.is_set():
                 raise JobCancelled  # never start workers for a service that is stopping
             if self._executor is None:
-                from service import executors
-
                 self._executor = executors.make_executor(self.dask_scheduler, self.eval_workers)
             return self._executor
 
     def eval_cache(self) -> Any:
         with self._cache_lock:
             if self._cache is None:
-                from service.eval_cache import EvalCache
-
                 self._cache = EvalCache(self.storage.eval_cache_path, max_bytes=self.eval_cache_max_bytes,
                                         protected=self.storage.active_scene_hashes)
             return self._cache
@@ -292,9 +285,6 @@ class JobManager:
             self.storage.update_job(job_id=job.id, progress=p, elapsed_s=elapsed(), event=("progress", p))
             self._bump()
 
-        from service.evaluation import SceneHandle
-        from service.optimize import Cancelled
-
         try:
             # Workers get the scene file (its bytes too, for Dask workers without a shared disk) and load
             # it once each; in-process the handle holds the loaded scene.
@@ -339,8 +329,6 @@ def build_space(spec: dict[str, Any]) -> Any:
     """The job's ParameterSpace: the default space, each parameter named in ``space`` cut down to the
     given values (kept in the default order), and only ``parameters`` searched (others fixed at their
     maximum quality). Raises ValueError naming an unknown parameter or value."""
-    from service.params import Parameter, ParameterSpace, default_space
-
     base = default_space()
     wanted = spec.get("space") or {}
     unknown = sorted(set(wanted) - set(base.names))
@@ -372,8 +360,6 @@ def spec_options(spec: dict[str, Any]) -> dict[str, Any]:
     """The optimiser option values of a stored job request (``service.options`` names): requests keep
     every public option in ``options``; those stored by earlier versions kept the thresholds and the
     evaluation resolution apart and ran the options they lack as :data:`LEGACY_SPEC_DEFAULTS` says."""
-    from service import options
-
     values = dict(spec.get("options") or {})
     if "thresholds" in spec or "resolution" in spec:
         thresholds = spec.get("thresholds") or {}
@@ -386,8 +372,6 @@ def spec_options(spec: dict[str, Any]) -> dict[str, Any]:
 
 def validate_job_spec(spec: dict[str, Any]) -> None:
     """Checks that need the optimiser's definitions; raises ValueError naming the problem."""
-    from service.camera_path import CameraPath
-
     CameraPath.from_dict(spec["camera_path"])
     spec_options(spec)
     build_space(spec)
@@ -399,9 +383,6 @@ def run_optimisation(
 ) -> Any:
     """Turn a stored job request into the optimiser's inputs and run it; returns a ParetoStore.
     Raises ``service.optimize.Cancelled`` when ``should_cancel`` turns true."""
-    from service.camera_path import CameraPath
-    from service.optimize import OptimizeConfig, optimize_path
-
     path = CameraPath.from_dict(spec["camera_path"])
     config = OptimizeConfig(**spec_options(spec), profile=spec["profile"], fps=path.fps, threads=threads)
     return optimize_path(scene, path, build_space(spec), config, cache=cache, executor=executor,

@@ -267,6 +267,12 @@ def test_evaluate_reference_and_cheap_settings(client: httpx.Client, scene: dict
                                            "settings": {"sampling": "undersample_4x4", "max_depth": 0,
                                                         "shadow_samples": 0, "ao_samples": 0}}).json()
     assert 0.0 < cheap["error"] < 1.0 and cheap["power_w"] < best["power_w"]
+    # power for a bigger frame (the path's, as stores predict it): static stays, dynamic scales by pixels
+    big = client.post("/evaluate", json={"scene_id": scene["id"], "camera": camera(),
+                                         "power_resolution": [320, 240]}).json()
+    static_w = best["breakdown"]["energy_j.static"] * 30.0
+    assert big["power_w"] - static_w == pytest.approx(100 * (best["power_w"] - static_w), rel=1e-9)
+    assert big["error"] == 0.0 and big["breakdown"]["pixel_ratio"] == 100.0
     r = client.post("/evaluate", json={"scene_id": scene["id"], "camera": camera(),
                                        "settings": {"max_depth": 7}})
     assert r.status_code == 422 and "max_depth" in r.json()["error"]["message"]

@@ -5,13 +5,15 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from sim_core.image import linear_to_srgb, upsample_bilinear
 from tracer_scenes import teapot_scene
 
 import sim_core
 from service import nsga
 from service.eval_cache import EvalCache
-from service.evaluation import CameraSpec, Evaluator, SceneHandle, evaluate, tone_map, upsample_bilinear
+from service.evaluation import CameraSpec, Evaluator, SceneHandle, evaluate
 from service.executors import DaskExecutor, InProcessExecutor, ProcessPoolExecutor
+from service.lru import LRUCache
 from service.params import default_space
 
 
@@ -27,9 +29,9 @@ def _cam(w: int = 32, h: int = 24) -> CameraSpec:
 SMALL = ("max_depth", "shadow_samples", "resolution_scale")  # 64 settings
 
 
-def test_tone_map_and_upsample() -> None:
+def test_display_transform_and_upsample() -> None:
     x = np.array([-1.0, 0.0, 0.0031308, 0.5, 1.0, 7.0])
-    y = tone_map(x)
+    y = linear_to_srgb(x)
     assert y[0] == 0.0 and y[-1] == pytest.approx(1.0) and y[-2] == pytest.approx(1.0)
     assert np.all(np.diff(y[1:]) >= 0) and y[3] == pytest.approx(0.7353569, abs=1e-6)
     img = np.arange(12, dtype=float).reshape(3, 4)
@@ -160,7 +162,7 @@ def test_a_worker_without_the_scene_file_loads_the_shipped_bytes_and_keeps_no_co
     handle = SceneHandle(path=glb, ship_bytes=True)
     travelled = pickle.loads(pickle.dumps(handle))
     glb.unlink()  # the worker's machine has no such file
-    monkeypatch.setattr(evaluation, "_SCENES", {})
+    monkeypatch.setattr(evaluation, "_SCENES", LRUCache(8))
     travelled._scene = None
     assert str(travelled.get().content_hash) == handle.content_hash
     assert list(system_tmp.iterdir()) == []

@@ -391,12 +391,19 @@ class RenderResponse(BaseModel):
     render_time_s: float
 
 
+PixelCount = Annotated[int, Field(ge=1, le=16384)]
+
+
 class EvaluateRequest(StrictModel):
     scene_id: SceneId
     camera: CameraIn
     settings: Annotated[dict[str, Scalar], Field(json_schema_extra=SETTINGS_SCHEMA)] | None = None
     profile: ProfileName = "mobile"
     fps: Fps = 30.0
+    power_resolution: tuple[PixelCount, PixelCount] | None = (
+        Field(default=None, description="[width, height] to report power and frame time for (static power "
+                                        "plus dynamic power scaled by the pixel count, as a store predicts "
+                                        "it); default: the camera's own size"))
 
 
 class EvaluateResponse(BaseModel):

@@ -9,7 +9,7 @@ from typing import Any
 
 import uvicorn
 
-from service.cli import add_serve_arguments, serve_overrides
+from service.serve_options import add_serve_arguments, serve_overrides
 
 from .app import create_app
 from .config import load_settings

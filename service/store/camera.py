@@ -322,29 +322,28 @@ def frustum_face(rotation: np.ndarray, rays: np.ndarray, weights: np.ndarray) ->
     return SIGNED_TO_VIEW[int(np.bincount(face, weights=weights, minlength=6).argmax())]
 
 
-def vertical_fov(lens_mm: float, sensor_width_mm: float, sensor_height_mm: float, sensor_fit: str,
-                 width: int, height: int, pixel_aspect_x: float = 1.0, pixel_aspect_y: float = 1.0) -> float:
+def vertical_fov(angle_x: float, angle_y: float, sensor_fit: str, width: int, height: int,
+                 pixel_aspect_x: float = 1.0, pixel_aspect_y: float = 1.0) -> float:
     """Vertical field of view (radians) of a perspective Blender camera for a render size.
 
-    Follows Blender's sensor-fit rule: AUTO fits the sensor width to the larger image side,
-    HORIZONTAL fits the width to the image width, VERTICAL fits the sensor height to the image height.
+    ``angle_x`` / ``angle_y`` are the camera's own lens angles over the sensor width / height (Blender's
+    ``Camera.angle_x`` / ``angle_y``: the lens and sensor converted once, by Blender). Follows Blender's
+    sensor-fit rule: AUTO fits the sensor width to the larger image side, HORIZONTAL fits the width to
+    the image width, VERTICAL fits the sensor height to the image height.
     """
-    if lens_mm <= 0 or not math.isfinite(lens_mm):
-        raise ValueError(f"lens must be a positive focal length in mm, got {lens_mm}")
+    for name, angle in (("angle_x", angle_x), ("angle_y", angle_y)):
+        if not (math.isfinite(angle) and 0.0 < angle < math.pi):
+            raise ValueError(f"{name} must be a lens angle in (0, pi) radians, got {angle}")
     if width <= 0 or height <= 0:
         raise ValueError(f"resolution must be positive, got {width}x{height}")
-    aspect = (width * pixel_aspect_x) / (height * pixel_aspect_y)  # display width / height
-    if sensor_fit == "AUTO":
-        if aspect >= 1.0:
-            half_w = math.atan(sensor_width_mm / (2.0 * lens_mm))
-            return 2.0 * math.atan(math.tan(half_w) / aspect)
-        return 2.0 * math.atan(sensor_width_mm / (2.0 * lens_mm))
-    if sensor_fit == "HORIZONTAL":
-        half_w = math.atan(sensor_width_mm / (2.0 * lens_mm))
-        return 2.0 * math.atan(math.tan(half_w) / aspect)
+    shown_w, shown_h = width * pixel_aspect_x, height * pixel_aspect_y  # the displayed image's shape
     if sensor_fit == "VERTICAL":
-        return 2.0 * math.atan(sensor_height_mm / (2.0 * lens_mm))
-    raise ValueError(f"unknown sensor_fit {sensor_fit!r}")
+        return float(angle_y)
+    if sensor_fit not in ("AUTO", "HORIZONTAL"):
+        raise ValueError(f"unknown sensor_fit {sensor_fit!r}")
+    if sensor_fit == "HORIZONTAL" or shown_w >= shown_h:
+        return 2.0 * math.atan(math.tan(angle_x / 2.0) * shown_h / shown_w)
+    return float(angle_x)  # AUTO, portrait: the sensor width spans the image height
 
 
 def camera_lens_from_viewport(viewport_lens_mm: float, sensor_width_mm: float) -> float:

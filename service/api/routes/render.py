@@ -10,10 +10,10 @@ from typing import Any
 
 import numpy as np
 from fastapi import APIRouter
+from sim_core.image import encode_exr, encode_png
 
 import sim_core
 from service.evaluation import CameraSpec, evaluate
-from service.images import encode_exr, encode_png
 from service.params import ParameterSpace, default_space
 from service.store.camera import normalised_camera_matrix
 
@@ -109,8 +109,9 @@ def evaluate_settings(body: EvaluateRequest, storage: StorageDep, scenes: Scenes
     try:
         spec = CameraSpec(eye=tuple(m[:3, 3]), forward=tuple(-m[:3, 2]), up=tuple(m[:3, 1]), vfov=cam.vfov,
                           width=cam.width, height=cam.height)
+        pixels = None if body.power_resolution is None else math.prod(body.power_resolution)
         ev = evaluate(scene, spec, indices, space, profile=body.profile, fps=body.fps,
-                      threads=settings.render_threads)
+                      threads=settings.render_threads, target_pixels=pixels)
     except ValueError as exc:
         raise ApiError(422, f"evaluate: {exc}") from exc
     return EvaluateResponse(error=float(ev.error), power_w=float(ev.power_w),

@@ -11,9 +11,12 @@ from pathlib import Path
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Query, Request, Response, status
+from sim_core.loaders.scene_file import DEFAULT_LIMITS, is_scene_file, read_scene_file
 from starlette.concurrency import run_in_threadpool
 from starlette.requests import ClientDisconnect
 
+import sim_core
+from service.params import default_space
 from service.storage import SceneRecord, Storage
 
 from ..checks import deleted
@@ -65,16 +68,12 @@ def check_glb_header(path: Path, size: int) -> None:
 
 def default_space_mapping() -> dict[str, list[Any]]:
     """RenderSettings field -> candidate values of the default parameter space (for inert parameters)."""
-    from service.params import default_space
-
     return default_space().as_render_space()
 
 
 def upload_kind(path: Path, size: int, content_type: str) -> str:
     """"glb" or "scene" (a render-budget scene file): what the Content-Type declares, or for
     application/octet-stream what the first bytes say; 400 when the bytes are not what was declared."""
-    from sim_core.loaders.scene_file import is_scene_file
-
     with open(path, "rb") as f:
         head = f.read(64)
     if content_type == SCENE_FILE_TYPE or (content_type not in ACCEPTED_TYPES[:1] and is_scene_file(head)):
@@ -93,8 +92,6 @@ def analyse_scene(path: Path, kind: str = "glb", max_bytes: int | None = None
                   ) -> tuple[Any, dict[str, Any], dict[str, str]]:
     """Load with the real loader (the only judge of validity) and ask the simulator what is inert.
     A scene file's translation notes (what was approximated) join its statistics as ``notes``."""
-    import sim_core
-
     def private(exc: BaseException) -> str:  # the server's file names are nobody's business
         shown = "upload" + SUFFIXES[kind]
         return str(exc).replace(str(path), shown).replace(path.name, shown)
@@ -102,8 +99,6 @@ def analyse_scene(path: Path, kind: str = "glb", max_bytes: int | None = None
     notes: list[dict[str, str]] = []
     try:
         if kind == "scene":
-            from sim_core.loaders.scene_file import DEFAULT_LIMITS, read_scene_file
-
             limits = DEFAULT_LIMITS if max_bytes is None else dataclasses.replace(DEFAULT_LIMITS,
                                                                                  max_bytes=max_bytes)
             content = read_scene_file(path, limits=limits)

@@ -35,18 +35,23 @@ wrote it, never a resolved path or the bytes of another file.
 from __future__ import annotations
 
 import base64
+import io
 import json
 import math
 import os
 import re
 import struct
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 from urllib.parse import unquote, unquote_to_bytes
 
 import numpy as np
+from PIL import Image
 
+from ..geometry import smooth_normals
+from ..image import load_exr
 from ..scene_data import CameraData, Light, Material, SceneData, Texture
 from .confined import confined_path, shown
 
@@ -427,18 +432,6 @@ def _primitive_triangles(doc: _Document, prim: dict[str, Any], vcount: int, what
     return np.stack([np.full(k.size, idx[0]), idx[k + 1], idx[k + 2]], axis=1)  # fan
 
 
-def _vertex_normals(positions: np.ndarray, tris: np.ndarray) -> np.ndarray:
-    """Area-weighted vertex normals for primitives that carry none."""
-    p0 = positions[tris[:, 0]]
-    face = np.cross(positions[tris[:, 1]] - p0, positions[tris[:, 2]] - p0)
-    normals = np.zeros_like(positions)
-    for k in range(3):
-        np.add.at(normals, tris[:, k], face)
-    length = np.linalg.norm(normals, axis=1, keepdims=True)
-    fallback = np.array([0.0, 0.0, 1.0])
-    return np.where(length > 0, normals / np.where(length > 0, length, 1.0), fallback)
-
-
 def _image_bytes(doc: _Document, image_index: int) -> bytes:
     images = doc.gltf.get("images", [])
     if not 0 <= image_index < len(images):
@@ -507,11 +500,6 @@ class _TextureTable:
         """(H, W, 3|4) uint8, sRGB-encoded (what glTF base-colour images are), row 0 at the top."""
         if source in self._images:
             return self._images[source]
-        import io
-        import warnings
-
-        from PIL import Image
-
         doc = self.doc
         try:
             with warnings.catch_warnings():
@@ -660,8 +648,6 @@ def _environment(doc: _Document) -> np.ndarray | tuple[float, float, float] | No
         if not exr.is_file():
             raise FileNotFoundError(f"{doc.path}: environment map {shown(value)} not found next to the "
                                     "scene")
-        from ..scene import load_exr  # the one EXR reader (late: scene.py imports the loaders)
-
         return load_exr(exr)
     rgb = np.asarray(value, dtype=np.float64).reshape(-1)
     if rgb.shape != (3,) or not np.all(np.isfinite(rgb)):
@@ -718,6 +704,8 @@ def load_gltf(path: str | os.PathLike[str], *, self_contained: bool = False) -> 
         raise ValueError(f"{p}: glTF too large or too deeply nested to load ({type(exc).__name__})") from exc
 
 
+# Long: one walk over the node hierarchy filling per-primitive parts (positions, normals, ids) that are
+# concatenated at the end; the module (over 500 lines) is the one glTF reader, helpers included.
 def _load(p: Path, self_contained: bool) -> SceneData:
     doc = _read_document(p, self_contained=self_contained)
     gltf = doc.gltf
@@ -849,7 +837,7 @@ def _load(p: Path, self_contained: bool) -> SceneData:
         filled = []
         starts = np.cumsum([0] + [part.shape[0] for part in pos_parts[:-1]])
         for part_pos, part_nrm, part_tri, start in zip(pos_parts, nrm_parts, tri_parts, starts, strict=True):
-            filled.append(part_nrm if part_nrm is not None else _vertex_normals(part_pos, part_tri - start))
+            filled.append(part_nrm if part_nrm is not None else smooth_normals(part_pos, part_tri - start))
         normals = np.concatenate(filled).astype(np.float32)
     uvs: np.ndarray | None = None
     if any(u is not None for u in uv_parts):  # UVs only when some textured material is drawn

@@ -16,6 +16,7 @@ from typing import Literal
 
 import numpy as np
 
+from ..geometry import smooth_normals
 from ..scene_data import Material, SceneData
 from .confined import confined_path
 
@@ -102,6 +103,8 @@ def _parse_simple(lines: list[str]) -> tuple[np.ndarray, np.ndarray] | None:
     return verts.reshape(-1, 3), idx.reshape(-1, 3) - 1
 
 
+# Long: one pass over the file's lines whose face, object and material state (a dozen running lists) is
+# local to that pass; split into parts it would only be handed around.
 def load_obj(path: str | os.PathLike[str], *, up_axis: Literal["Y", "Z"] = "Y") -> SceneData:
     """Load an OBJ into flat arrays in the project's Z-up world frame.
 
@@ -243,9 +246,7 @@ def load_obj(path: str | os.PathLike[str], *, up_axis: Literal["Y", "Z"] = "Y") 
         out_nrm[has_n] = nrm[uniq[has_n, 1]]
         tris = inverse.reshape(-1, 3)
         if not has_n.all():  # corners without a normal: area-weighted normals of their faces
-            from .gltf import _vertex_normals
-
-            out_nrm[~has_n] = _vertex_normals(out_pos, tris)[~has_n]
+            out_nrm[~has_n] = smooth_normals(out_pos, tris)[~has_n]
         length = np.linalg.norm(out_nrm, axis=1, keepdims=True)
         out_nrm = np.where(length > 0, out_nrm / np.where(length > 0, length, 1.0), 0.0)
         positions, normals = out_pos, out_nrm
