@@ -272,6 +272,7 @@ def test_an_animation_follows_the_store_under_the_budget(scene, tmp_path) -> Non
     load_store(tmp_path)
     props = sc.render_budget
     props.budget_mode, props.power_budget, props.filter_period = "POWER", 3.3, 0.1
+    sc.render_budget_engine.measure_error = True
     render = ext_module("engine.render")
     render._final_scenes.clear()
     builds = render._final_scenes.builds
@@ -295,6 +296,7 @@ def test_an_animation_follows_the_store_under_the_budget(scene, tmp_path) -> Non
         assert {k: row[k] for k in want} == {k: str(v) for k, v in want.items()}
         assert float(row["predicted_power_w"]) == pytest.approx(frame.predicted_power_w, rel=1e-5)
         assert float(row["simulated_power_w"]) > 0
+        assert 0.0 < float(row["measured_error"]) < 0.5  # the store's settings are never the reference's
         info = Image.open(tmp_path / "frames" / f"shot_{f:04d}.png").info
         assert info["render_budget.source"] == "store"
         assert float(info["render_budget.predicted_power_w"]) == pytest.approx(frame.predicted_power_w,

@@ -195,6 +195,30 @@ def test_a_window_of_a_frame_keeps_its_share(scene: sim_core.Scene) -> None:
         out.window(60, 0, 50, 10)
 
 
+def test_measured_error_is_the_optimisers(scene: sim_core.Scene) -> None:
+    """Measure Error renders the maximum-quality frame and measures this frame against it exactly as the
+    optimiser's evaluation does (same renders, same metric pipeline)."""
+    from service.evaluation import CameraSpec, evaluate
+
+    idx = engine_settings.manual_indices({"sampling": "undersample_4x4", "shadow_samples": "1",
+                                          "ao_samples": "0", "max_depth": "1"})
+    bands: list[float] = []
+    out = render_frame(scene, VIEW, FrameSettings("manual", idx), profile="mobile", fps=30.0,
+                       measure_error="ssim", progress=bands.append)
+    cam = VIEW.camera()
+    spec = CameraSpec(tuple(cam.position), tuple(cam.forward), tuple(cam.up), VIEW.vfov, VIEW.width,
+                      VIEW.height)
+    want = evaluate(scene, spec, idx, default_space(), profile="mobile", fps=30.0, metric="ssim")
+    assert 0 < out.measured_error == pytest.approx(want.error, abs=1e-12)
+    assert out.metadata()["render_budget.measured_error"] == f"{out.measured_error:.6g}"
+    assert bands == sorted(bands) and bands[-1] == 1.0 and any(0.45 < b <= 0.5 for b in bands)
+    top = render_frame(scene, VIEW, FrameSettings("manual", default_space().max_quality_indices()),
+                       profile="mobile", fps=30.0, measure_error="ssim")
+    assert top.measured_error == 0.0
+    plain = render_frame(scene, VIEW, FrameSettings("manual", idx), profile="mobile", fps=30.0)
+    assert plain.measured_error is None
+
+
 def test_cancel_between_bands(scene: sim_core.Scene) -> None:
     with pytest.raises(RenderCancelled):
         render_frame(scene, VIEW, FrameSettings("manual", CHEAP), profile="mobile", fps=30.0,

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 import sim_core
+from service.evaluation import image_error
 
 from .engine_settings import FrameSettings, space
 
@@ -89,6 +90,7 @@ class FrameOutput:
     counters: dict[str, int] = field(default_factory=dict)
     notes: tuple[str, ...] = ()  # how this frame differs from what was asked (render region, lens shift)
     scene_notes: str = ""  # what the scene translation approximated
+    measured_error: float | None = None  # against the maximum-quality frame, when asked for
 
     def window(self, x0: int, y0: int, width: int, height: int) -> FrameOutput:
         """The ``width`` x ``height`` part at (``x0``, ``y0``) of this frame: how an off-centre camera
@@ -130,6 +132,8 @@ class FrameOutput:
             meta["predicted_power_w"] = f"{s.predicted_power_w:.6g}"
         if s.predicted_error is not None:
             meta["predicted_error"] = f"{s.predicted_error:.6g}"
+        if self.measured_error is not None:
+            meta["measured_error"] = f"{self.measured_error:.6g}"
         notes = [n for n in (s.note, *self.notes) if n]
         if notes:
             meta["note"] = "; ".join(notes)
@@ -196,29 +200,42 @@ def _render(scene: Any, camera: Any, settings: Any, prof: Any, threads: int | No
 def render_frame(scene: Any, view: CameraView, frame_settings: FrameSettings, *, profile: str, fps: float,
                  object_pass_index: Sequence[int] | np.ndarray | None = None, transparent: bool = False,
                  threads: int | None = None, progress: Callable[[float], None] | None = None,
-                 should_cancel: Callable[[], bool] | None = None) -> FrameOutput:
+                 should_cancel: Callable[[], bool] | None = None,
+                 measure_error: str | None = None) -> FrameOutput:
     """Render, price and split into passes one frame of ``scene`` (a ``sim_core.Scene``).
 
     ``progress(fraction)`` and ``should_cancel()`` are called between bands on the calling thread
     (cancelling raises :class:`RenderCancelled`). ``object_pass_index[object_id]`` is the pass index
-    of each scene object (default 0 for every object).
+    of each scene object (default 0 for every object). ``measure_error`` (a metric of the optimiser,
+    "ssim"): also render the maximum-quality frame and measure this frame's error against it, as the
+    optimiser measured the errors a store predicts.
     """
     if not (isinstance(fps, int | float) and math.isfinite(fps) and fps > 0):
         raise ValueError(f"fps must be a positive number, got {fps!r}")
     camera = view.camera()
     settings = frame_settings.render_settings()
     prof = sim_core.load_profile(profile)
+    spc = space()
+    reference_needed = measure_error is not None and frame_settings.indices != spc.max_quality_indices()
+    share = 0.5 if reference_needed else 1.0  # of the progress bar, for the frame itself
 
-    def on_band(done: int, total: int) -> None:
+    def on_band(done: int, total: int, start: float = 0.0) -> None:
         if should_cancel is not None and should_cancel():
             raise RenderCancelled
         if progress is not None:
-            progress(done / total)
+            progress(start + share * done / total)
 
     t0 = time.perf_counter()
     result = _render(scene, camera, settings, prof, threads, on_band)
     render_s = time.perf_counter() - t0
     report = sim_core.price(result, prof, float(fps), scene=scene)
+    measured = None
+    if measure_error is not None:
+        measured = 0.0
+        if reference_needed:
+            reference = _render(scene, camera, spc.to_settings(spc.max_quality_indices()), prof, threads,
+                                lambda d, t: on_band(d, t, 0.5))
+            measured = image_error(measure_error, reference.image, result.image)
 
     h, w = view.height, view.width
     aovs = result.aovs
@@ -250,11 +267,12 @@ def render_frame(scene: Any, view: CameraView, frame_settings: FrameSettings, *,
     return FrameOutput(combined, passes, frame_settings, prof.name, float(fps), float(report.power_w),
                        dynamic_w, float(report.frame_time_s), bool(report.deadline_met),
                        tuple(result.render_resolution), render_s,
-                       {k: int(v) for k, v in result.counters.items()})
+                       {k: int(v) for k, v in result.counters.items()}, measured_error=measured)
 
 
 CSV_COLUMNS_BEFORE = ("frame", "time_s", "source")
-CSV_COLUMNS_AFTER = ("predicted_power_w", "simulated_power_w", "predicted_error", "frame_time_ms",
+CSV_COLUMNS_AFTER = ("predicted_power_w", "simulated_power_w", "predicted_error", "measured_error",
+                     "frame_time_ms",
                      "deadline_met", "in_transition", "clamped", "infeasible", "render_s")
 
 
@@ -280,6 +298,7 @@ class AnimationLog:
             "predicted_power_w": "" if s.predicted_power_w is None else f"{s.predicted_power_w:.6g}",
             "simulated_power_w": f"{out.power_w:.6g}",
             "predicted_error": "" if s.predicted_error is None else f"{s.predicted_error:.6g}",
+            "measured_error": "" if out.measured_error is None else f"{out.measured_error:.6g}",
             "frame_time_ms": f"{1e3 * out.frame_time_s:.4g}",
             "deadline_met": int(out.deadline_met),
             "in_transition": int(s.in_transition),

@@ -43,6 +43,7 @@ class RENDER_PT_render_budget_settings(_EnginePanel, bpy.types.Panel):
         layout = self.layout
         eng, props = context.scene.render_budget_engine, context.scene.render_budget
         layout.row().prop(eng, "settings_source", expand=True)
+        layout.prop(eng, "measure_error")
         if eng.settings_source == "STORE":
             if props.store_text is None:
                 layout.label(text="No store yet: Optimize Power in the sidebar; manual settings apply",
@@ -133,6 +134,8 @@ class RENDER_PT_render_budget_last(_EnginePanel, bpy.types.Panel):
         s = out.settings
         if s.predicted_power_w is not None:
             col.label(text=f"Store predicted {s.predicted_power_w:.3f} W, error {s.predicted_error:.4f}")
+        if out.measured_error is not None:
+            col.label(text=f"Measured error {out.measured_error:.4f} (against maximum quality)")
         col.label(text=f"Frame time {1e3 * out.frame_time_s:.2f} ms "
                        f"({'meets' if out.deadline_met else 'misses'} the frame rate)")
         col.label(text=f"{s.source.capitalize()} settings: {s.text()}")

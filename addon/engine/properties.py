@@ -8,7 +8,7 @@ from __future__ import annotations
 from typing import Any
 
 import bpy
-from bpy.props import EnumProperty, FloatProperty, IntProperty, PointerProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty
 
 from ..core.engine_settings import quality_properties
 
@@ -27,6 +27,11 @@ class RENDER_BUDGET_PG_engine(bpy.types.PropertyGroup):
         name="Viewport Resolution", default=0.5, min=0.05, max=1.0, subtype="FACTOR",
         description="Fraction of the viewport's pixels the Rendered shading traces at its finest level "
                     "(it starts at a quarter of that and refines)")
+    measure_error: BoolProperty(  # type: ignore[valid-type]
+        name="Measure Error", default=False,
+        description="Also render each frame at maximum quality and write the error measured against it "
+                    "(1 - SSIM, as the optimiser measures) into the metadata and the CSV, beside the "
+                    "store's prediction. Renders take about twice as long or more")
     threads: IntProperty(  # type: ignore[valid-type]
         name="Threads", default=0, min=0, max=1024,
         description="Tracer threads (0: one per processor)")

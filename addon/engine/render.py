@@ -162,6 +162,11 @@ _HANDLERS = ((bpy.app.handlers.render_init, on_render_init),
              (bpy.app.handlers.render_cancel, on_render_done))
 
 
+def _metric(store: Any) -> str:
+    """The error metric a measurement uses: the store's (what its predictions mean), else SSIM."""
+    return str((store.meta or {}).get("metric") or "ssim") if store is not None else "ssim"
+
+
 def _threads(scene: bpy.types.Scene) -> int | None:
     return scene.render_budget_engine.threads or None
 
@@ -203,6 +208,7 @@ class RenderBudgetEngine(bpy.types.RenderEngine):
         cam = self.camera_override or scene.camera
         if cam is None or cam.type != "CAMERA":
             raise ValueError("the scene has no active camera")
+        eng = scene.render_budget_engine
         w, h = render_resolution(scene)
         vfov = camera_vfov(cam, scene)  # what the store is looked up with; ValueError unless perspective
         r = scene.render
@@ -225,7 +231,8 @@ class RenderBudgetEngine(bpy.types.RenderEngine):
         out = render_frame(sim_scene, CameraView(cam.matrix_world, trace_vfov, full_w, full_h), settings,
                            profile=profile, fps=fps, object_pass_index=translation.pass_indices,
                            transparent=r.film_transparent, threads=_threads(scene),
-                           progress=self.update_progress, should_cancel=self.test_break)
+                           progress=self.update_progress, should_cancel=self.test_break,
+                           measure_error=_metric(chooser.store) if eng.measure_error else None)
         if (full_w, full_h) != (w, h):  # lens shift: the camera's window of a larger centred frame
             out = out.window(x0, y0, w, h)
         out.notes = (*out.notes, *notes)
