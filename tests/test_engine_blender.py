@@ -263,7 +263,6 @@ def test_an_orthographic_camera_is_refused_with_a_message(scene, tmp_path) -> No
 def test_an_animation_follows_the_store_under_the_budget(scene, tmp_path) -> None:
     from PIL import Image
 
-    from addon.core.engine_settings import indices_of_values
     from addon.core.playback_logic import PlaybackDriver
     from service.params import default_space
 
@@ -291,7 +290,7 @@ def test_an_animation_follows_the_store_under_the_budget(scene, tmp_path) -> Non
         sc.frame_set(f)
         frame = drv.step(np.array(sc.camera.matrix_world), camera_vfov(sc.camera, sc), 64 / 36, (f - 1) / 24,
                          "POWER", 3.3)
-        want = space.values_of(indices_of_values(frame.active_settings))
+        want = space.values_of(space.indices_of(frame.active_settings))
         assert row["source"] == "store"
         assert {k: row[k] for k in want} == {k: str(v) for k, v in want.items()}
         assert float(row["predicted_power_w"]) == pytest.approx(frame.predicted_power_w, rel=1e-5)

@@ -77,17 +77,6 @@ def test_quality_properties_are_the_optimisers_space() -> None:
         engine_settings.manual_indices({"max_depth": "9"})
 
 
-def test_store_values_map_onto_the_engines_space() -> None:
-    space = default_space()
-    idx = engine_settings.indices_of_values({"max_depth": 1, "multirate": True})
-    assert space.values_of(idx)["max_depth"] == 1 and space.values_of(idx)["multirate"] is True
-    assert space.values_of(idx)["shadow_samples"] == 16  # not in the store: maximum quality
-    with pytest.raises(ValueError, match="does not know"):
-        engine_settings.indices_of_values({"bounces": 2})
-    with pytest.raises(ValueError, match="not a value"):
-        engine_settings.indices_of_values({"max_depth": 7})
-
-
 def orbit(n: int, radius: float = 6.0) -> list[list[list[float]]]:
     out = []
     for k in range(n):
@@ -107,7 +96,7 @@ def test_store_chooser_steps_like_playback_and_manual_without_a_store() -> None:
         got = chooser.choose(m, 0.69, 16 / 9, t)
         want = reference.step(m, 0.69, 16 / 9, t, "POWER", 3.3)
         assert got.source == "store"
-        assert got.indices == engine_settings.indices_of_values(want.active_settings)
+        assert got.indices == default_space().indices_of(want.active_settings)
         assert got.predicted_power_w == want.predicted_power_w and got.predicted_error == want.predicted_error
         assert got.in_transition == want.in_transition
         seen.add(got.indices)
@@ -475,7 +464,7 @@ def test_viewport_playback_follows_the_store() -> None:
         shown = []
         for k, m in enumerate(orbit(12)):
             frame = playback.step(m, 0.69, 16 / 9, k / 24.0, "POWER", 3.3)
-            fs = FrameSettings("store", engine_settings.indices_of_values(frame.active_settings),
+            fs = FrameSettings("store", default_space().indices_of(frame.active_settings),
                                frame.predicted_power_w, frame.predicted_error)
             vp.show(m, region_projection(32, 18, 0.69), 32, 18, fs, profile="mobile", fps=24)
             assert vp.driver.wait_idle(60)  # as if playback waited for each frame

@@ -187,14 +187,9 @@ def _nearest(aov: np.ndarray, h: int, w: int) -> np.ndarray:
 
 def _render(scene: Any, camera: Any, settings: Any, prof: Any, threads: int | None,
             on_band: Callable[[int, int], None]) -> Any:
-    """The frame on the profile's caches (node/triangle and texture cache)."""
-    tiled = getattr(sim_core, "render_tiled", None)
-    if tiled is None:  # older core: one native call for the whole frame
-        result = sim_core.render(scene, camera, settings, threads=threads, cache=prof.cache,
-                                 texture_cache=prof.texture_cache)
-        on_band(1, 1)
-        return result
-    return tiled(scene, camera, settings, threads=threads, cache=prof.cache, progress=on_band)
+    """The frame band by band (progress and cancel between bands) on the profile's caches."""
+    return sim_core.render_tiled(scene, camera, settings, threads=threads, cache=prof.cache,
+                                 texture_cache=prof.texture_cache, progress=on_band)
 
 
 def render_frame(scene: Any, view: CameraView, frame_settings: FrameSettings, *, profile: str, fps: float,

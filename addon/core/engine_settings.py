@@ -14,10 +14,10 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from service import store as pareto_store
 from service.params import Indices, ParameterSpace, default_space
 
 from .playback_logic import PlaybackDriver, validate_budget
-from .vendored import pareto_store
 
 # Labels and tooltips of the search space's parameters (their values come from the space itself).
 _TEXT: dict[str, tuple[str, str]] = {
@@ -98,19 +98,6 @@ def manual_indices(identifiers: Mapping[str, str], spc: ParameterSpace | None = 
     return tuple(out)
 
 
-def indices_of_values(values: Mapping[str, Any], spc: ParameterSpace | None = None) -> Indices:
-    """Indices of ``{parameter: value}`` (what a store lookup returns); parameters the store does not
-    hold stay at maximum quality, as the optimiser evaluated them."""
-    spc = spc or space()
-    out = list(spc.max_quality_indices())
-    for name, value in values.items():
-        if name not in spc.names:
-            raise ValueError(f"the store holds parameter {name!r}, which the engine does not know; "
-                             f"known: {list(spc.names)}")
-        out[spc.names.index(name)] = spc.index_of(name, value)
-    return tuple(out)
-
-
 @dataclass(frozen=True)
 class FrameSettings:
     """The settings of one frame and where they came from."""
@@ -187,9 +174,9 @@ class SettingsChooser:
             raise ValueError(f"camera fov/aspect must be finite and positive, got {vfov}, {aspect}")
         frame = self.driver.step(matrix_world, vfov, aspect, time_s, self.budget.mode, self.budget.value)
         store = self.driver.store
-        target = indices_of_values(store.settings_of(frame.target_indices), self.space)
+        target = self.space.indices_of(store.settings_of(frame.target_indices))
         flags = [text for text, on in (("camera outside the store's space", frame.clamped),
                                        ("budget cannot be met here", frame.infeasible)) if on]
-        return FrameSettings("store", indices_of_values(frame.active_settings, self.space),
+        return FrameSettings("store", self.space.indices_of(frame.active_settings),
                              frame.predicted_power_w, frame.predicted_error, target, frame.clamped,
                              frame.infeasible, "; ".join(flags))

@@ -18,11 +18,12 @@ from typing import Any
 
 import numpy as np
 
+from service.store import camera as camera_maths
+
 from .engine_frame import CameraView, render_frame
 from .engine_scene import SceneCache, fingerprint
 from .engine_settings import FrameSettings
 from .progressive import ProgressiveDriver, ViewFrame, ViewRequest
-from .vendored import camera as camera_maths
 
 Matrix = tuple[tuple[float, ...], ...]
 

@@ -24,13 +24,14 @@ import bpy
 import numpy as np
 from bpy.app.handlers import persistent
 
+from service.store import camera as camera_maths
+
 from .. import preferences
 from ..camera_path import camera_vfov, render_resolution, scene_fps
 from ..core.engine_frame import PASSES, AnimationLog, CameraView, FrameOutput, RenderCancelled, render_frame
 from ..core.engine_frame import animation_csv_path as csv_path_of
 from ..core.engine_scene import SceneCache, Update, needs_translation
-from ..core.engine_settings import Budget, FrameSettings, SettingsChooser, indices_of_values, manual_indices
-from ..core.vendored import camera as camera_maths
+from ..core.engine_settings import Budget, FrameSettings, SettingsChooser, manual_indices, space
 from ..core.viewport import ViewportRenderer
 from ..handlers import add_handler, remove_handler
 from ..playback import scene_time, store_of
@@ -117,8 +118,9 @@ def viewport_settings(scene: bpy.types.Scene) -> tuple[FrameSettings, Any]:
     if store is None:
         return chooser.manual_settings(), None
     if props.playback_enabled and props.active_indices and not props.playback_status.startswith("error"):
-        active = indices_of_values(store.settings_of(_indices(props.active_indices)))
-        target = indices_of_values(store.settings_of(_indices(props.target_indices or props.active_indices)))
+        spc = space()
+        active = spc.indices_of(store.settings_of(_indices(props.active_indices)))
+        target = spc.indices_of(store.settings_of(_indices(props.target_indices or props.active_indices)))
         return FrameSettings("store", active, props.predicted_power, props.predicted_error, target,
                              props.clamped, props.infeasible), store
     if cam is None or cam.type != "CAMERA" or cam.data.type != "PERSP":
