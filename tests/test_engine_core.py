@@ -184,6 +184,20 @@ def test_a_window_of_a_frame_keeps_its_share(scene: sim_core.Scene) -> None:
         out.window(60, 0, 50, 10)
 
 
+def test_without_passes_the_image_and_power_are_the_same(scene: sim_core.Scene) -> None:
+    """The viewport skips the passes (no per-tile pricing): the same image and frame power, and a window
+    (which needs the Power pass for its share) is refused rather than guessed."""
+    fs = FrameSettings("manual", CHEAP)
+    full = render_frame(scene, VIEW, fs, profile="mobile", fps=30.0)
+    bare = render_frame(scene, VIEW, fs, profile="mobile", fps=30.0, passes=False)
+    assert bare.passes == {}
+    np.testing.assert_array_equal(bare.combined, full.combined)
+    assert (bare.power_w, bare.dynamic_power_w, bare.frame_time_s) == (
+        full.power_w, full.dynamic_power_w, full.frame_time_s)
+    with pytest.raises(ValueError, match="Power pass"):
+        bare.window(10, 4, 50, 40)
+
+
 def test_measured_error_is_the_optimisers(scene: sim_core.Scene) -> None:
     """Measure Error renders the maximum-quality frame and measures this frame against it exactly as the
     optimiser's evaluation does (same renders, same metric pipeline)."""
@@ -442,6 +456,14 @@ def test_viewport_renders_progressively_and_restarts_on_scene_updates() -> None:
         assert vp.driver.wait_idle(60)
         assert len(frames) == 4 and not np.array_equal(frames[-1].image, first.image)
         assert vp.scenes.builds == 2
+        # a camera view with lens shift: the window of a larger centred frame, priced as its share
+        sy = 1 / math.tan(0.4)
+        shift = perspective(sy * 48 / 80, sy, 0.5, 0.0)
+        assert vp.show(look((1, -4, 2)), shift, 80, 48, fs, profile="mobile", fps=30)
+        assert vp.driver.wait_idle(60) and vp.error is None
+        shifted = frames[-1]
+        assert shifted.image.shape == (48, 80, 4) and shifted.final and len(frames) == 6
+        assert 0 < shifted.info.dynamic_power_w
         # an orthographic view is refused before anything is queued
         with pytest.raises(ValueError, match="orthographic"):
             vp.show(look((1, -4, 2)), [[0.1, 0, 0, 0], [0, 0.1, 0, 0], [0, 0, -0.01, 0], [0, 0, 0, 1]],

@@ -101,6 +101,8 @@ class FrameOutput:
         if not (0 <= x0 and 0 <= y0 and x0 + width <= full_w and y0 + height <= full_h):
             raise ValueError(f"window {width}x{height} at ({x0}, {y0}) is outside the "
                              f"{full_w}x{full_h} frame")
+        if "Power" not in self.passes:
+            raise ValueError("a window of a frame needs its Power pass (render it with passes)")
         rows, cols = slice(y0, y0 + height), slice(x0, x0 + width)
         passes = {k: np.ascontiguousarray(v[rows, cols]) for k, v in self.passes.items()}
         dynamic = float(passes["Power"].sum(dtype=np.float64)) * 1e-6
@@ -196,14 +198,15 @@ def render_frame(scene: Any, view: CameraView, frame_settings: FrameSettings, *,
                  object_pass_index: Sequence[int] | np.ndarray | None = None, transparent: bool = False,
                  threads: int | None = None, progress: Callable[[float], None] | None = None,
                  should_cancel: Callable[[], bool] | None = None,
-                 measure_error: str | None = None) -> FrameOutput:
+                 measure_error: str | None = None, passes: bool = True) -> FrameOutput:
     """Render, price and split into passes one frame of ``scene`` (a ``sim_core.Scene``).
 
     ``progress(fraction)`` and ``should_cancel()`` are called between bands on the calling thread
     (cancelling raises :class:`RenderCancelled`). ``object_pass_index[object_id]`` is the pass index
     of each scene object (default 0 for every object). ``measure_error`` (a metric of the optimiser,
     "ssim"): also render the maximum-quality frame and measure this frame's error against it, as the
-    optimiser measured the errors a store predicts.
+    optimiser measured the errors a store predicts. ``passes=False``: the Combined image and the frame's
+    power only (the viewport: no per-tile pricing holding the GIL while the interface waits for it).
     """
     if not (isinstance(fps, int | float) and math.isfinite(fps) and fps > 0):
         raise ValueError(f"fps must be a positive number, got {fps!r}")
@@ -241,6 +244,12 @@ def render_frame(scene: Any, view: CameraView, frame_settings: FrameSettings, *,
     combined[..., 3] = np.where(hit, 1.0, 0.0) if transparent else 1.0
     if transparent:
         combined[..., :3] *= combined[..., 3:]  # Blender's render results are premultiplied
+    dynamic_w = float(report.dynamic_energy_j) * float(fps)
+    out = FrameOutput(combined, {}, frame_settings, prof.name, float(fps), float(report.power_w), dynamic_w,
+                      float(report.frame_time_s), bool(report.deadline_met), tuple(result.render_resolution),
+                      render_s, {k: int(v) for k, v in result.counters.items()}, measured_error=measured)
+    if not passes:
+        return out
     depth = np.where(hit, _nearest(np.asarray(aovs["depth"]), h, w), BACKGROUND_DEPTH)
     n_ids = int(object_id.max()) + 1 if hit.any() else 1
     lookup = np.zeros(n_ids, dtype=np.float32)
@@ -251,18 +260,14 @@ def render_frame(scene: Any, view: CameraView, frame_settings: FrameSettings, *,
     energy = tile_energy(result.tile_stats, prof, float(fps), settings, scene)
     normal = np.where(hit[..., None], _nearest(np.asarray(aovs["normal"]), h, w), 0.0)
     power = power_pass(result.tile_stats, energy, float(fps), result.render_resolution, (w, h))
-    passes = {
+    out.passes = {
         "Depth": depth.astype(np.float32)[..., None],
         "Normal": normal.astype(np.float32),
         "IndexOB": index.astype(np.float32)[..., None],
         "Sample Kind": _nearest(np.asarray(aovs["sample_kind"]), h, w).astype(np.float32)[..., None],
         "Power": power[..., None],
     }
-    dynamic_w = float(report.dynamic_energy_j) * float(fps)
-    return FrameOutput(combined, passes, frame_settings, prof.name, float(fps), float(report.power_w),
-                       dynamic_w, float(report.frame_time_s), bool(report.deadline_met),
-                       tuple(result.render_resolution), render_s,
-                       {k: int(v) for k, v in result.counters.items()}, measured_error=measured)
+    return out
 
 
 CSV_COLUMNS_BEFORE = ("frame", "time_s", "source")

@@ -119,11 +119,13 @@ class ViewportRenderer:
                 should_stop: Callable[[], bool]) -> tuple[np.ndarray, ViewInfo]:
         scene = self.scenes.scene_for(payload.scene.data, payload.scene.key)
         vfov, full_w, full_h, x0, y0 = camera_maths.projection_window(payload.projection, width, height)
+        windowed = (full_w, full_h) != (width, height)  # a window's power is its Power pass's share
         out = render_frame(scene, CameraView(payload.matrix_world, vfov, full_w, full_h), payload.settings,
                            profile=payload.profile, fps=payload.fps,
                            object_pass_index=payload.scene.object_pass_index or None,
-                           transparent=payload.transparent, threads=self.threads, should_cancel=should_stop)
-        if (full_w, full_h) != (width, height):
+                           transparent=payload.transparent, threads=self.threads, should_cancel=should_stop,
+                           passes=windowed)
+        if windowed:
             out = out.window(x0, y0, width, height)
         s = payload.settings
         info = ViewInfo(s.text(), s.source, out.power_w - out.dynamic_power_w, out.dynamic_power_w,
