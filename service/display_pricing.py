@@ -61,8 +61,8 @@ from service.evaluation import (  # the evaluator's own error and pricing, so bo
     CameraSpec,
     Evaluator,
     SceneHandle,
-    _error,
     _price,
+    image_error,
     space_fingerprint,
 )
 from service.lru import LRUCache
@@ -480,7 +480,7 @@ def price_camera(scene: Any, camera: CameraSpec, settings: Sequence[Indices], sp
         out = []
         for idx in settings:
             r = ref if tuple(idx) == mq else renderer.frame(camera.to_camera(), space.to_settings(idx))
-            err = 0.0 if tuple(idx) == mq else _error(metric, ref.image, r.image)
+            err = 0.0 if tuple(idx) == mq else image_error(metric, ref.image, r.image)
             power, frame_time, breakdown = _price(r, profile, fps)
             breakdown.update(_labels(camera, r.render_resolution, fraction=1.0))
             out.append(Evaluation(err, power, frame_time, breakdown))

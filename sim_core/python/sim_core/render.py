@@ -94,9 +94,8 @@ class RenderResult:
       (-1 on miss), sample_kind (0 traced, 1 interpolated, 2 reused), all at the render resolution.
     counters: activity counts (COUNTER_NAMES). tile_stats: one dict per tile. comparator_histogram:
       closest-hit comparisons by compute-chain length (0..24). multirate_state: pass as `previous=`.
-    tile_counters: (tiles, len(COUNTER_NAMES)) uint64, every tile's own counters in tile order (columns in
-      COUNTER_NAMES order; each tile's caches start cold, so the rows sum to `counters` exactly);
-      tile_histograms: (tiles, 25) uint64, every tile's comparator histogram (rows sum to the frame's).
+    Every tile's own counters and histogram are in its ``tile_stats`` entry (``counters``,
+    ``comparator_histogram``); ``tile_counters`` / ``tile_histograms`` give them as arrays.
     """
 
     image: np.ndarray
@@ -110,8 +109,20 @@ class RenderResult:
     render_resolution: tuple[int, int]  # (width, height) actually traced
     extra: dict[str, Any] = field(default_factory=dict)
     rays: TracedRays | None = None  # with render(..., log_rays=True)
-    tile_counters: np.ndarray | None = None
-    tile_histograms: np.ndarray | None = None
+
+    @property
+    def tile_counters(self) -> np.ndarray:
+        """(tiles, len(COUNTER_NAMES)) uint64: every tile's own counters in tile order (each tile's caches
+        start cold, so the rows sum to ``counters`` exactly: a sample of tiles prices a sample of the
+        frame)."""
+        return np.asarray([[t["counters"][k] for k in COUNTER_NAMES] for t in self.tile_stats],
+                          dtype=np.uint64).reshape(len(self.tile_stats), len(COUNTER_NAMES))
+
+    @property
+    def tile_histograms(self) -> np.ndarray:
+        """(tiles, 25) uint64: every tile's comparator histogram (rows sum to the frame's)."""
+        return np.asarray([t["comparator_histogram"] for t in self.tile_stats],
+                          dtype=np.uint64).reshape(len(self.tile_stats), -1)
 
 
 @dataclass
@@ -199,8 +210,6 @@ def _result(
         camera=camera,
         render_resolution=size,
         rays=rays,
-        tile_counters=np.asarray(d["tile_counters"], dtype=np.uint64),
-        tile_histograms=np.asarray(d["tile_histograms"], dtype=np.uint64),
     )
 
 
@@ -285,8 +294,6 @@ def render_tiled(
         settings=settings,
         camera=camera,
         render_resolution=(w, h),
-        tile_counters=np.concatenate([p.tile_counters for p in parts], axis=0),
-        tile_histograms=np.concatenate([p.tile_histograms for p in parts], axis=0),
     )
 
 
@@ -350,8 +357,6 @@ def render_window(
         camera=camera,
         render_resolution=(w, h),
         extra={"window": (x, y, ww, wh)},
-        tile_counters=np.asarray(d["tile_counters"], dtype=np.uint64),
-        tile_histograms=np.asarray(d["tile_histograms"], dtype=np.uint64),
     )
 
 

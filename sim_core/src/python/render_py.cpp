@@ -77,20 +77,14 @@ nb::dict render_output_dict(const RenderOutput& o, const TraceOptions& trace) {
     td["bvh_node_visits"] = t.bvh_node_visits;
     td["triangle_tests"] = t.triangle_tests;
     td["cache_misses"] = t.cache_misses;
+    nb::dict tile_counters;
+    t.counters.for_each([&](const char* name, std::uint64_t v) { tile_counters[name] = v; });
+    td["counters"] = tile_counters;
+    std::vector<std::uint64_t> tile_hist(t.histogram.begin(), t.histogram.end());
+    td["comparator_histogram"] = to_numpy(tile_hist, {tile_hist.size()});
     tiles.append(td);
   }
   d["tile_stats"] = tiles;
-  // Per-tile counters (tiles x counters, the counters in SIM_CORE_COUNTERS order) and histograms.
-  std::size_t n_counters = 0;
-  Counters{}.for_each([&](const char*, std::uint64_t) { ++n_counters; });
-  std::vector<std::uint64_t> tile_counters;
-  tile_counters.reserve(o.tile_counters.size() * n_counters);
-  for (const Counters& c : o.tile_counters) c.for_each([&](const char*, std::uint64_t v) { tile_counters.push_back(v); });
-  d["tile_counters"] = to_numpy(tile_counters, {o.tile_counters.size(), n_counters});
-  std::vector<std::uint64_t> tile_hist;
-  tile_hist.reserve(o.tile_histograms.size() * o.histogram.size());
-  for (const ComparatorHistogram& h : o.tile_histograms) tile_hist.insert(tile_hist.end(), h.begin(), h.end());
-  d["tile_histograms"] = to_numpy(tile_hist, {o.tile_histograms.size(), o.histogram.size()});
   d["multirate_state"] = nb::cast(o.multirate);
   if (trace.log_rays) {
     const std::size_t n = o.rays.size();
