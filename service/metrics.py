@@ -198,20 +198,9 @@ def ssim_numpy(reference: Any, test: Any, data_range: float = 1.0, gaussian_weig
     channel_axis=-1)`` on float64 input (and with ``gaussian_weights=True, sigma=1.5,
     use_sample_covariance=False`` for the Gaussian option) to ~1e-12. Constant images give finite
     values (1 for identical ones); NaN or Inf input raises ``ValueError``."""
-    x, y = _check_pair(reference, test)
-    if not (math.isfinite(data_range) and data_range > 0):
-        raise ValueError(f"data_range must be positive and finite, got {data_range}")
-    win = _GAUSS.size if gaussian_weights else UNIFORM_WIN
-    if min(x.shape[0], x.shape[1]) < win:
-        raise ValueError(f"images must be at least {win}x{win} pixels for SSIM, got {x.shape[:2]}")
-    if x.ndim == 2:
-        x, y = x[..., None], y[..., None]
-    x = np.ascontiguousarray(x)
-    y = np.ascontiguousarray(y)
+    x, y, win, ranges = _ssim_setup(reference, test, data_range, gaussian_weights)
     h, w, c = x.shape
     ho = h - win + 1
-    strip = max(4, min(ho, _STRIP_ELEMENTS // (w * c)))
-    ranges = [(r0, min(r0 + strip, ho)) for r0 in range(0, ho, strip)]
     if x.size >= _PARALLEL_ELEMENTS and len(ranges) >= 4:
         global _pool
         if _pool is None:
@@ -231,6 +220,15 @@ def ssim_map(reference: Any, test: Any, data_range: float = 1.0, gaussian_weight
     ((H - win + 1) x (W - win + 1), the value of the window centred on each pixel at least half a
     window from the border), averaged over channels. For a map of where an image differs (the tile
     estimator's auxiliary images); numpy, float64."""
+    x, y, win, ranges = _ssim_setup(reference, test, data_range, gaussian_weights)
+    out = np.empty((x.shape[0] - win + 1, x.shape[1] - win + 1))
+    _ssim_rows(x, y, ranges, data_range, gaussian_weights, out)
+    return out
+
+
+def _ssim_setup(reference: Any, test: Any, data_range: float, gaussian_weights: bool
+                ) -> tuple[np.ndarray, np.ndarray, int, list[tuple[int, int]]]:
+    """Checked (H, W, C) float64 contiguous images, the window size and the output row strips."""
     x, y = _check_pair(reference, test)
     if not (math.isfinite(data_range) and data_range > 0):
         raise ValueError(f"data_range must be positive and finite, got {data_range}")
@@ -243,10 +241,7 @@ def ssim_map(reference: Any, test: Any, data_range: float = 1.0, gaussian_weight
     h, w, c = x.shape
     ho = h - win + 1
     strip = max(4, min(ho, _STRIP_ELEMENTS // (w * c)))
-    out = np.empty((ho, w - win + 1))
-    _ssim_rows(x, y, [(r0, min(r0 + strip, ho)) for r0 in range(0, ho, strip)], data_range, gaussian_weights,
-               out)
-    return out
+    return x, y, win, [(r0, min(r0 + strip, ho)) for r0 in range(0, ho, strip)]
 
 
 def psnr(reference: Any, test: Any, data_range: float = 1.0) -> float:
