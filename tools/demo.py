@@ -4,8 +4,9 @@
 
 1. builds the scene with Blender's bpy module (``python -m blend_scenes.build --scene NAME``, cached);
 2. starts ``render-budget serve`` on 127.0.0.1 (a free port, data and SQLite caches in ``var/service``);
-3. uploads the scene and optimises its camera path as a service job (the optimiser options of
-   ``service.options`` given on the command line, the service's defaults for the rest;
+3. uploads the scene (its render-budget scene file, as the add-on sends it) and optimises its camera
+   path as a service job (the optimiser options of ``service.options`` given on the command line, the
+   service's defaults for the rest;
    ``addon.core.job_runner`` follows and cancels it);
 4. runs the evaluation campaign (``addon.core.campaign``: the same code as the Blender add-on's
    *Evaluate Path*): the paper's four presets, the store under a power budget and under an error budget,
@@ -129,7 +130,7 @@ def build_scene(name: str, skip: bool) -> tuple[Path, dict[str, Any]]:
         if proc.returncode != 0:
             raise RuntimeError(f"scene build failed ({' '.join(cmd)} exited with {proc.returncode})")
     scene_dir = SCENES_DIR / name
-    for f in (scene_dir / "scene.glb", scene_dir / "path.json"):
+    for f in (scene_dir / "scene.rbscene", scene_dir / "path.json"):
         if not f.is_file():
             raise FileNotFoundError(f"{f} is missing (build the scene: python -m blend_scenes.build "
                                     f"--scene {name})")
@@ -145,7 +146,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     scene_dir, stats = build_scene(args.scene, args.skip_build)
     path_doc = json.loads((scene_dir / "path.json").read_text())
     path = CameraPath.from_dict(path_doc)
-    say(f"  {stats.get('summary', scene_dir / 'scene.glb')}")
+    say(f"  {stats.get('summary', scene_dir / 'scene.rbscene')}")
     clock.stop("scene", t)
 
     request = job_request(args)
@@ -160,7 +161,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         health = client.health()
         say(f"  up: version {health['version']}, executor {health['executor']}, "
             f"profiles {', '.join(health['profiles'])}")
-        info = client.upload_scene(scene_dir / "scene.glb")
+        # the scene file the add-on sends: self-contained (the valley's HDRI travels inside it, where the
+        # .glb only names the EXR next to it and an upload cannot carry that)
+        info = client.upload_scene(scene_dir / "scene.rbscene")
         say(f"  scene {info['id'][:12]}: {info['stats'].get('triangles')} triangles; inert: "
             + (", ".join(info.get("inert_parameters") or {}) or "none"))
 
