@@ -1,8 +1,11 @@
 """Evaluate Path: the evaluation campaign of ``make demo`` (``core.campaign``) on the scene's store, path
-and budgets; writes the same report folder (Table 3, per-frame CSV, plots, sample frames, store, summary)."""
+and budgets; writes the same report folder (Table 3, per-frame CSV, plots, sample frames, store, summary).
+Verify Store: the store's predictions against renders of sampled path frames at the path's resolution
+(``service.verify``), verify.md and verify.json."""
 
 from __future__ import annotations
 
+import json
 import logging
 import shutil
 import subprocess
@@ -73,6 +76,72 @@ def evaluate_scene(scene: bpy.types.Scene, client: ServiceClient | LocalClient, 
     return written
 
 
+def verify_scene(scene: bpy.types.Scene, client: ServiceClient | LocalClient, out_dir: str | Path, *,
+                 frames: int = 8) -> dict:
+    """The store's predictions against renders of ``frames`` path frames at the path's resolution, under
+    the scene's active budget (``service.verify``: on this computer, or POST /stores/{id}/verify on the
+    remote service); writes verify.md and verify.json to ``out_dir`` and returns the report."""
+    props = scene.render_budget
+    if props.store_text is None:
+        raise ValueError("no Pareto store in this .blend: run Optimize Power first")
+    path = load_path(scene)
+    if path is None:
+        raise ValueError("no camera path recorded")
+    mode = props.budget_mode
+    value = validate_budget(mode, props.power_budget if mode == "POWER" else props.error_budget)
+    payload: dict = {"camera_path": path.to_dict(), "frames": int(frames),
+                     ("power_budget_w" if mode == "POWER" else "error_budget"): value}
+    if isinstance(client, LocalClient):
+        payload["scene_id"] = str(upload_scene_info(scene, client)["id"])
+        doc = client.verify_text(props.store_text.as_string(), payload)
+    else:
+        if not props.store_id:
+            raise ValueError("this store did not come from the service: verify it on this computer")
+        doc = client.verify(props.store_id, payload, timeout_s=3600.0)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "verify.json").write_text(json.dumps(doc, indent=1), encoding="utf-8")
+    s = doc["summary"]
+    w, h = doc["resolution"]
+    lines = [f"# Verify: the store's predictions against renders at {w}x{h}", "",
+             "| frame | error predicted | error measured | power predicted W | power measured W "
+             "| within budget |", "|---|---|---|---|---|---|"]
+    lines += [f"| {f['frame']} | {f['predicted_error']:.4f} | {f['measured_error']:.4f} | "
+              f"{f['predicted_power_w']:.3f} | {f['measured_power_w']:.3f} | "
+              f"{'yes' if f['within_budget'] else 'NO'} |" for f in doc["frames"]]
+    lines += ["", f"Within budget: {s['within_budget']}/{s['frames']}; mean |measured - predicted| error "
+              f"{s['mean_abs_error_difference']:.4f}; measured / predicted power median "
+              f"{s['median_power_ratio']:.3f}."]
+    (out / "verify.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return doc
+
+
+class RENDER_BUDGET_OT_verify_store(bpy.types.Operator):
+    """Render sampled path frames at the path's resolution with the store's settings and compare the
+    measured error and power with its predictions"""
+
+    bl_idname = "render_budget.verify_store"
+    bl_label = "Verify Store"
+
+    directory: bpy.props.StringProperty(subtype="DIR_PATH")  # type: ignore[valid-type]
+    frames: bpy.props.IntProperty(name="Frames", default=8, min=1, max=32)  # type: ignore[valid-type]
+
+    def execute(self, context: bpy.types.Context) -> set[str]:
+        out = bpy.path.abspath(self.directory) if self.directory else \
+            bpy.utils.extension_path_user(__package__, path="reports", create=True)
+        try:
+            doc = verify_scene(context.scene, service_process.client_for(context), out, frames=self.frames)
+        except Exception as err:  # report, the .blend is untouched
+            self.report({"ERROR"}, f"Verify store failed: {service_process.explain(err)}")
+            return {"CANCELLED"}
+        s = doc["summary"]
+        self.report({"INFO"}, f"{s['within_budget']}/{s['frames']} frames within budget at "
+                              f"{doc['resolution'][0]}x{doc['resolution'][1]}; mean error difference "
+                              f"{s['mean_abs_error_difference']:.4f}, power measured/predicted "
+                              f"{s['median_power_ratio']:.2f} (verify.md in {out})")
+        return {"FINISHED"}
+
+
 class RENDER_BUDGET_OT_evaluate_path(bpy.types.Operator):
     """Measure the path with the presets and the store under both budgets; write a report folder"""
 
@@ -108,5 +177,5 @@ class RENDER_BUDGET_OT_evaluate_path(bpy.types.Operator):
         return {"RUNNING_MODAL"}
 
 
-classes = (RENDER_BUDGET_OT_evaluate_path,)
+classes = (RENDER_BUDGET_OT_evaluate_path, RENDER_BUDGET_OT_verify_store)
 register, unregister = bpy.utils.register_classes_factory(classes)

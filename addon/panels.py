@@ -109,6 +109,7 @@ class VIEW3D_PT_render_budget(bpy.types.Panel):
         row = layout.row(align=True)
         row.operator("render_budget.preview", icon="RENDER_STILL")
         row.operator("render_budget.evaluate_path", icon="GRAPH")
+        row.operator("render_budget.verify_store", icon="CHECKMARK")
         layout.prop(props, "report_frame_step")
         layout.operator("render_budget.load_store", icon="FILE")
 

@@ -87,7 +87,7 @@ class DisplayPricing:
     None: about :data:`BLOCKS` blocks a frame (64 pixels at 1280x720, 32 at 640x360)."""
 
     estimator: str = "tiles"
-    fraction: float = 0.1
+    fraction: float = 0.25
     block: int | None = None
     aux_divisor: int = 4
     seed: int = 0

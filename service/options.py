@@ -155,7 +155,7 @@ OPTIONS: tuple[Option, ...] = (
            choices=DISPLAY_ESTIMATORS,
            choice_labels=("Tile estimator", "Whole frames", "Preview resolution only"),
            group="Evaluation"),
-    Option("display_fraction", float, 0.1, "Traced share",
+    Option("display_fraction", float, 0.25, "Traced share",
            "tile estimator: share of the frame's blocks traced at the path's resolution",
            minimum=0.01, maximum=1.0, metavar="F", group="Evaluation", precision=2),
     Option("display_points", int, 8, "Points priced",

@@ -89,6 +89,15 @@ def test_optimize_and_evaluate_run_here_by_default_and_leave_no_process(ext, tmp
     assert {r["mode"] for r in rows} == {"max", "max_mid", "mid_min", "min", "ours_power", "ours_error"}
     assert (out / "report.md").is_file() and (out / "summary.json").is_file()
     assert len(list((out / "frames").glob("*.png"))) >= 4 and list((out / "frames").glob("*.exr"))
+    # Verify Store: sampled path frames at the path's 96x54 with the store's settings, measured here
+    props.budget_mode, props.error_budget = "ERROR", 0.02
+    assert bpy.ops.render_budget.verify_store(directory=str(out), frames=3) == {"FINISHED"}
+    doc = json.loads((out / "verify.json").read_text())
+    assert doc["resolution"] == [96, 54] and len(doc["frames"]) == 3 and doc["budget_mode"] == "error"
+    assert doc["store_figures_resolution"] == [96, 54]  # the store was priced at the path's size
+    assert doc["summary"]["within_budget"] == sum(f["measured_error"] <= 0.02 for f in doc["frames"])
+    assert "within budget" in (out / "verify.md").read_text()
+    assert job_processes() == []
 
 
 def test_gui_path_follows_the_local_job_to_the_store(ext) -> None:

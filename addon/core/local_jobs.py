@@ -32,7 +32,8 @@ from typing import IO, Any
 import numpy as np
 
 import service
-from service.store import camera
+from service.camera_path import CameraPath
+from service.store import ParetoStore, camera
 
 from . import preview
 from .client import RenderedImage, ServiceError
@@ -280,6 +281,18 @@ class LocalClient:
                       target_pixels=_pixel_count(payload.get("power_resolution")))
         return {"error": float(ev.error), "power_w": float(ev.power_w),
                 "frame_time_s": float(ev.frame_time_s), "breakdown": dict(ev.breakdown)}
+
+    def verify_text(self, store_text: str, payload: dict[str, Any]) -> dict[str, Any]:
+        """What POST /stores/{id}/verify answers, here, for the store given as its JSON text (a local
+        job's store lives in the .blend, not in a service) and ``payload["scene_id"]``'s scene."""
+        from service.verify import verify_store  # lazy: loads the native core (above)
+
+        report = verify_store(self._scene(str(payload["scene_id"])), ParetoStore.from_json(store_text),
+                              CameraPath.from_dict(payload["camera_path"]),
+                              error_budget=payload.get("error_budget"),
+                              power_budget=payload.get("power_budget_w"),
+                              frames=int(payload.get("frames", 8)), resolution=payload.get("resolution"))
+        return report.to_dict()
 
     def render(self, payload: dict[str, Any], timeout_s: float | None = None) -> RenderedImage:
         """What POST /render answers: the frame as PNG or EXR with its counters and energy report, here."""
