@@ -77,12 +77,13 @@ def resolve_space(scene: Any, space: ParameterSpace, path: CameraPath, threads: 
 
 def display_resolution(path: CameraPath, height: int | None = None) -> tuple[int, int]:
     """The resolution the path is shown at: its frames' most common one (the first of the most common),
-    or ``height`` pixels high with that one's aspect."""
+    or ``height`` pixels high with that one's aspect; each side at least 8 pixels (what an error can be
+    measured on: a path of 1x1 frames is priced at 8x8)."""
     sizes = [tuple(f.resolution) for f in path.frames]
     w, h = max(dict.fromkeys(sizes), key=sizes.count)
-    if height is None or height == h:
-        return int(w), int(h)
-    return max(16, round(height * w / h)), int(height)
+    if height is not None and height != h:
+        w, h = round(height * w / h), height
+    return max(8, int(w)), max(8, int(h))
 
 
 def path_targets(scene: Any, path: CameraPath) -> tuple[np.ndarray, np.ndarray]:

@@ -251,7 +251,8 @@ def test_zip_in_a_bpy_only_environment_optimises_plays_back_and_leaves_nothing_r
         assert frame["status"] in ("on target", "blending"), frame
         assert frame["settings"] and not frame["infeasible"]
         if frame["status"] == "on target":
-            assert frame["power"] <= budget + 1e-9, frame
+            # (predicted_power is a Blender float property: float32, 6e-8 relative)
+            assert frame["power"] <= budget * (1 + 1e-6), frame
     assert len({f["settings"] for f in step["frames"]}) >= 1
 
     step = out["render_engine"]  # the engine renders in-process on the zip's core, under the store
