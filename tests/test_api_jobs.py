@@ -198,7 +198,7 @@ def test_two_concurrent_jobs_and_queries_during_them(client: httpx.Client, scene
 
 
 def test_cancel_mid_job(client: httpx.Client, scene: dict[str, Any]) -> None:
-    spec = tiny_job(scene["id"], resolution=(40, 30), depth_values=(0, 1, 2))
+    spec = tiny_job(scene["id"], resolution=(160, 120), depth_values=(0, 1, 2))
     # the paper's view cubes split twice: far more work than this 3-frame path's few path samples, so
     # the job is still running when the cancel arrives
     spec["options"].update(max_depth=2, view_sampling="aimed")
