@@ -55,8 +55,8 @@ def budget_kept(mode: str, value: float, power_w: float, error: float) -> bool:
 def evaluate_path(client: ServiceClient, store: pareto_store.ParetoStore, path: camera_path.CameraPath,
                   spec: EvalSpec, *, progress: Callable[[int, int], None] | None = None,
                   concurrency: int = 4) -> list[FrameRow]:
-    """Rows for every (sampled frame, mode); errors and power measured by the service, not predicted.
-    A row's ``frame`` is the index into the path.
+    """Rows for every (sampled frame, mode); errors, power and the frame rate reached measured by the
+    service, not predicted. A row's ``frame`` is the index into the path.
 
     The settings of every frame are decided first (the budget-driven mode runs the temporal filter over
     the path in order, exactly as playback does); the evaluations then go out `concurrency` at a time.
@@ -90,7 +90,9 @@ def evaluate_path(client: ServiceClient, store: pareto_store.ParetoStore, path: 
         p, e = float(res["power_w"]), float(res["error"])
         kept = budget_kept(spec.budget_mode, spec.budget_value, p, e) if mode == "ours" else None
         pp, pe = predicted or (None, None)
-        return FrameRow(number, f.time, mode, p, e, _settings_text(settings), kept, pp, pe)
+        fps, met = res.get("fps"), res.get("deadline_met")  # a service before frame rates lacks them
+        return FrameRow(number, f.time, mode, p, e, _settings_text(settings), kept, pp, pe,
+                        None if fps is None else float(fps), None if met is None else bool(met))
 
     rows: list[FrameRow] = []
     with ThreadPoolExecutor(max_workers=max(1, concurrency)) as pool:
