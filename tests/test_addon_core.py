@@ -13,7 +13,13 @@ from addon.core import client as client_mod
 from addon.core.job_runner import JobRequest, describe
 from addon.core.local_service import free_port, serve_command
 from addon.core.path_sampling import build_path, frame_times
-from addon.core.playback_logic import PlaybackDriver, StoreCache, predicted_path_summary, validate_budget
+from addon.core.playback_logic import (
+    PlaybackDriver,
+    StoreCache,
+    predicted_path_summary,
+    summary_text,
+    validate_budget,
+)
 from addon.core.report import (
     FrameRow,
     plot_over_time,
@@ -264,6 +270,24 @@ def test_predicted_summary_reports_savings() -> None:
     assert 0.0 < s["predicted_saving"] < 1.0
     assert s["mean_power_w"] < s["mean_max_quality_power_w"]
     assert predicted_path_summary(store, frames, "ERROR", 0.0)["predicted_saving"] == pytest.approx(0.0)
+    assert s["mean_fps"] is None and "frame rate unknown" in summary_text(s)
+
+
+def test_playback_and_summary_carry_the_frame_rate() -> None:
+    """With frame times (format 4) the playback frame and the panel's summary say the frame rate the
+    store's choice reaches; the max-quality setting, too slow for 24 fps, is never chosen."""
+    from service.camera_path import CameraFrame
+
+    store = synthetic_store(timed=True)
+    m = _look((1.0, 0.2, 0.1), (0.0, 0.0, 0.0))
+    pf = PlaybackDriver(store, 0.0).step(m, 0.69, 16 / 9, 0.0, "ERROR", 0.0)
+    assert pf.meets_fps is True and pf.predicted_fps == 24.0
+    assert pf.infeasible and pf.predicted_error > 0.0  # error 0 only at max quality, which cannot keep up
+    frames = [CameraFrame(i / 24, _look((math.cos(i / 5), math.sin(i / 5), 0), (i * 0.1, 0, 0)), 0.69,
+                          (64, 36)) for i in range(10)]
+    s = predicted_path_summary(store, frames, "POWER", 3.0)
+    assert s["mean_fps"] == 24.0 and s["slow_frames"] == 0 and s["fps_target"] == 24.0
+    assert summary_text(s).endswith("24.0 of 24 fps")
 
 
 # -- report data ------------------------------------------------------------------------------------------

@@ -40,6 +40,8 @@ class PlaybackFrame:
     predicted_error: float
     clamped: bool
     infeasible: bool
+    predicted_fps: float | None = None  # the frame rate the target settings reach (None: store predates it)
+    meets_fps: bool | None = None  # they keep up with the store's frame rate (False: no setting does)
 
     @property
     def in_transition(self) -> bool:
@@ -93,7 +95,7 @@ class PlaybackDriver:
         active = self.filter.update(hit.indices, now_s)
         settings = hit.settings if active == hit.indices else self.store.settings_of(active)
         return PlaybackFrame(active, tuple(hit.indices), settings, hit.power_w, hit.error, hit.clamped,
-                             hit.infeasible)
+                             hit.infeasible, hit.fps, hit.meets_fps)
 
 
 class StoreCache:
@@ -117,15 +119,17 @@ class StoreCache:
 
 def predicted_path_summary(store: pareto_store.ParetoStore, frames: Sequence[Any], budget_mode: str,
                            budget_value: float) -> dict[str, Any]:
-    """Store size and the power the store predicts along a path under a budget, against the
-    maximum-quality (least-error) point of the same frontiers: what the panel's summary shows.
+    """Store size and the power (and frame rate) the store predicts along a path under a budget, against
+    the least-error point of the same frontiers (the most accurate setting that keeps up with the
+    store's frame rate, where frame times are known): what the panel's summary shows.
 
     `frames` are camera_path.CameraFrame objects (matrix_world, vfov, aspect).
     """
     validate_budget(budget_mode, budget_value)
     kwargs = {"power_budget": budget_value} if budget_mode == "POWER" else {"error_budget": budget_value}
     chosen = best = 0.0
-    infeasible = 0
+    infeasible = slow = 0
+    rates: list[float] = []
     for f in frames:
         pos = f.matrix_world[:3, 3]
         hit = store.lookup(pos, matrix=f.matrix_world, fov=f.vfov, aspect=f.aspect, **kwargs)
@@ -133,6 +137,9 @@ def predicted_path_summary(store: pareto_store.ParetoStore, frames: Sequence[Any
         chosen += hit.power_w
         best += top.power_w
         infeasible += int(hit.infeasible)
+        slow += int(hit.meets_fps is False)
+        if hit.fps is not None:
+            rates.append(hit.fps)
     stats = store.stats()
     n = max(1, len(frames))
     return {
@@ -145,11 +152,18 @@ def predicted_path_summary(store: pareto_store.ParetoStore, frames: Sequence[Any
         "predicted_saving": (1.0 - chosen / best) if best > 0 else 0.0,
         "infeasible_frames": infeasible,
         "frames": len(frames),
+        "fps_target": store.fps,
+        "mean_fps": sum(rates) / len(rates) if rates else None,  # None: the store predates frame times
+        "slow_frames": slow,  # frames where no setting of the store keeps up with fps_target
     }
 
 
 def summary_text(summary: dict[str, Any]) -> str:
+    fps = summary.get("mean_fps")
+    rate = ("frame rate unknown (store before frame times)" if fps is None else
+            f"{fps:.1f} of {summary['fps_target']:g} fps" + (
+                f", {summary['slow_frames']} frames slower" if summary.get("slow_frames") else ""))
     return (f"{summary['views']} views, {summary['corners']} corners, depth {summary['depth']}, "
             f"{summary['size_bytes'] / 1024:.1f} KB; predicted {summary['mean_power_w']:.3f} W vs "
-            f"{summary['mean_max_quality_power_w']:.3f} W at max quality "
-            f"({100 * summary['predicted_saving']:.1f} % saved)")
+            f"{summary['mean_max_quality_power_w']:.3f} W at the most accurate setting "
+            f"({100 * summary['predicted_saving']:.1f} % saved), {rate}")
