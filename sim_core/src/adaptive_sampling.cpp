@@ -80,7 +80,9 @@ class TileSampler {
 };
 
 void TileSampler::trace_at(int i, int j) {
-  const std::uint32_t sx = static_cast<std::uint32_t>(x0_ * k_ + i), sy = static_cast<std::uint32_t>(y0_ * k_ + j);
+  // Seeds by position in the full frame: a window of it (Camera::crop_x/y) samples like the whole.
+  const std::uint32_t sx = static_cast<std::uint32_t>((ctx_.camera.crop_x + x0_) * k_ + i),
+                      sy = static_cast<std::uint32_t>((ctx_.camera.crop_y + y0_) * k_ + j);
   const std::uint32_t key = sample_key(sx, sy, static_cast<std::uint32_t>(k_));
   const float px = static_cast<float>(x0_) + (static_cast<float>(i) + 0.5f) * inv_k_;
   const float py = static_cast<float>(y0_) + (static_cast<float>(j) + 0.5f) * inv_k_;

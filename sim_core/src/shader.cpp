@@ -802,7 +802,9 @@ TileContext::TileContext(const Scene& s, const RenderSettings& st, const Camera&
   trace.validate();
   cos_threshold = st.normal_threshold_deg < 0.f ? 2.f : std::cos(st.normal_threshold_deg * kPi / 180.f);
   ao_distance = st.ao_distance > 0.f ? st.ao_distance : 0.1f * s.diagonal();
-  pixel_spread = 2.f * c.tan_half() / static_cast<float>(std::max(1, c.height)) / static_cast<float>(st.subgrid());
+  // Per pixel of the whole frame (a window of it, Camera::crop_*, has the frame's pixels).
+  pixel_spread =
+      2.f * c.tan_half() / static_cast<float>(std::max(1, c.frame_height())) / static_cast<float>(st.subgrid());
 }
 
 void TileContext::finish() {
@@ -826,8 +828,10 @@ SampleResult trace_sample(TileContext& ctx, float px, float py, std::uint32_t ke
   const float c = dot(ray.dir, ctx.camera.forward);
   const RayCone cone{0.f, ctx.pixel_spread * c * c};
   const int k = ctx.settings.subgrid();
-  const auto sx = static_cast<std::uint32_t>(std::floor(px * static_cast<float>(k)));
-  const auto sy = static_cast<std::uint32_t>(std::floor(py * static_cast<float>(k)));
+  // Sample position in the whole frame (a window of it samples like the whole).
+  const float fk = static_cast<float>(k);
+  const auto sx = static_cast<std::uint32_t>(std::floor((px + static_cast<float>(ctx.camera.crop_x)) * fk));
+  const auto sy = static_cast<std::uint32_t>(std::floor((py + static_cast<float>(ctx.camera.crop_y)) * fk));
   const Branch root{key, 1u, 0, (sx & 1u) + 2u * (sy & 1u)};
   out.color = shader.trace(ray, RayKind::kPrimary, root, cone, nullptr, &info, &out.geom);
   out.geom.object = info.object;
