@@ -356,6 +356,13 @@ def test_predictions_round_trip_and_are_compared_in_the_report(tmp_path) -> None
     assert read_csv(write_csv(tmp_path / "p.csv", rows)) == rows
     notes = prediction_notes(rows)
     assert len(notes) == 1 and "predicted mean error 0.0200" in notes[0] and "0.0500" in notes[0]
+    assert "frame rate" not in notes[0]  # a store before frame times predicts none
+    timed = [FrameRow(12, 1.2, "ours", 0.5, 0.01, "", True, 0.5, 0.01, 30.0, True, 30.0),
+             FrameRow(13, 1.3, "ours", 0.7, 0.01, "", True, 0.6, 0.01, 20.0, False, 30.0)]
+    assert read_csv(write_csv(tmp_path / "t.csv", timed)) == timed
+    (note,) = prediction_notes(timed)
+    assert note.endswith("frame rate predicted 30 fps, reached 25 fps (equal on 1 of 2)")
+    assert "(2 frames on target; power within 10 % on 1, mean |error predicted - measured| 0.0000)" in note
     text = (write_report(tmp_path / "r", rows, title="t", budget=("ERROR", 0.02), plot=False)["report"]
             ).read_text()
     assert "store predicted" in text

@@ -137,3 +137,5 @@ def test_reports_show_fps_per_mode_and_which_presets_are_real_time(tmp_path: Pat
     assert "Avg. fps" not in report.table3_markdown(report.summarise([row]))
     with pytest.raises(ValueError, match="frame rate"):
         report.FrameRow(0, 0.0, "max", 1.0, 0.0, fps=0.0)
+    with pytest.raises(ValueError, match="frame rate"):
+        report.FrameRow(0, 0.0, "ours_power", 1.0, 0.0, predicted_fps=math.inf)

@@ -26,7 +26,7 @@ MODE_LABELS: dict[str, str] = {
     "min": "Min",
 }
 CSV_FIELDS = ("frame", "time_s", "mode", "power_w", "error", "settings", "budget_kept", "predicted_power_w",
-              "predicted_error", "fps", "deadline_met")
+              "predicted_error", "fps", "deadline_met", "predicted_fps")
 
 
 @dataclass(frozen=True)
@@ -45,12 +45,15 @@ class FrameRow:
     predicted_error: float | None = None
     fps: float | None = None  # the frame rate reached (None: not measured, e.g. an older CSV)
     deadline_met: bool | None = None  # the frame keeps up with the path's frame rate
+    predicted_fps: float | None = None  # the store's (budget-driven modes on target, stores with frame times)
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.power_w) and math.isfinite(self.error)):
             raise ValueError(f"non-finite power/error at frame {self.frame} ({self.mode})")
-        if self.fps is not None and not (math.isfinite(self.fps) and self.fps > 0):
-            raise ValueError(f"frame rate must be finite and positive at frame {self.frame} ({self.mode})")
+        for rate in (self.fps, self.predicted_fps):
+            if rate is not None and not (math.isfinite(rate) and rate > 0):
+                raise ValueError(f"frame rates must be finite and positive at frame {self.frame} "
+                                 f"({self.mode})")
 
 
 @dataclass(frozen=True)
@@ -156,7 +159,7 @@ def write_csv(path: str | Path, rows: Iterable[FrameRow]) -> Path:
             met = "" if r.deadline_met is None else int(r.deadline_met)
             w.writerow([r.frame, f"{r.time_s:.6f}", r.mode, f"{r.power_w:.6g}", f"{r.error:.6g}",
                         r.settings, kept, _opt(r.predicted_power_w), _opt(r.predicted_error), _opt(r.fps),
-                        met])
+                        met, _opt(r.predicted_fps)])
     return path
 
 
@@ -196,9 +199,20 @@ def prediction_notes(rows: Sequence[FrameRow]) -> list[str]:
         pp = sum(r.predicted_power_w or 0.0 for r in rs) / len(rs)
         me = sum(r.error for r in rs) / len(rs)
         mp = sum(r.power_w for r in rs) / len(rs)
+        timed = [r for r in rs if r.predicted_fps is not None and r.fps is not None]
+        rate = ""
+        if timed:  # the frame rate the store predicted against the one reached (stores with frame times)
+            pf = sum(r.predicted_fps or 0.0 for r in timed) / len(timed)
+            mf = sum(r.fps or 0.0 for r in timed) / len(timed)
+            agree = sum(math.isclose(r.predicted_fps or 0.0, r.fps or 0.0, rel_tol=1e-6) for r in timed)
+            rate = (f"; frame rate predicted {pf:.3g} fps, reached {mf:.3g} fps (equal on {agree} of "
+                    f"{len(timed)})")
+        close = sum(abs((r.predicted_power_w or 0.0) - r.power_w) <= 0.1 * r.power_w for r in rs)
+        gap = sum(abs((r.predicted_error or 0.0) - r.error) for r in rs) / len(rs)
         notes.append(f"{MODE_LABELS.get(mode, mode)}: the store predicted mean error {pe:.4f} and power "
                      f"{pp:.3f} W; measured at the path's cameras: {me:.4f} and {mp:.3f} W "
-                     f"({len(rs)} frames on target)")
+                     f"({len(rs)} frames on target; power within 10 % on {close}, mean |error predicted - "
+                     f"measured| {gap:.4f}){rate}")
     return notes
 
 
@@ -208,12 +222,13 @@ def read_csv(path: str | Path) -> list[FrameRow]:
         for rec in csv.DictReader(fh):  # columns a CSV of an earlier version lacks are None
             kept, met = rec.get("budget_kept") or "", rec.get("deadline_met") or ""
             pp, pe = rec.get("predicted_power_w") or "", rec.get("predicted_error") or ""
-            fps = rec.get("fps") or ""
+            fps, pf = rec.get("fps") or "", rec.get("predicted_fps") or ""
             rows.append(FrameRow(int(rec["frame"]), float(rec["time_s"]), rec["mode"], float(rec["power_w"]),
                                  float(rec["error"]), rec.get("settings", ""),
                                  None if kept == "" else bool(int(kept)),
                                  None if pp == "" else float(pp), None if pe == "" else float(pe),
-                                 None if fps == "" else float(fps), None if met == "" else bool(int(met))))
+                                 None if fps == "" else float(fps), None if met == "" else bool(int(met)),
+                                 None if pf == "" else float(pf)))
     return rows
 
 
