@@ -85,9 +85,10 @@ class CameraSampling(Protocol):
         (its sample first; a frontier keeps each point's worst figures over them)."""
 
 
-def spread_points(points: list[tuple[Indices, float, float]], k: int) -> list[tuple[Indices, float, float]]:
-    """At most ``k`` (0: all) of a frontier's points, spread along it by error: both ends (the least
-    error, where the maximum-quality setting sits, and the cheapest) and evenly between them."""
+def spread_points(points: list[tuple[Any, ...]], k: int) -> list[tuple[Any, ...]]:
+    """At most ``k`` (0: all) of a frontier's points ((indices, error, power, ...)), spread along it by
+    error: both ends (the least error, where the maximum-quality setting sits, and the cheapest) and
+    evenly between them."""
     if k <= 0 or len(points) <= k:
         return list(points)
     order = sorted(range(len(points)), key=lambda i: (points[i][1], -points[i][2]))
@@ -140,8 +141,9 @@ class OctreeBuilder:
 
     def _price_at_display(self) -> None:
         """Every measured frontier's points priced again at the path's resolution at the frontier's
-        cameras (its sample, and for path samples its guards), keeping each point's worst figures
-        there: the store's figures are the display resolution's, the search's only chose the points."""
+        cameras (its sample, and for path samples its guards), keeping each point's worst error, power
+        and frame time there: the store's figures are the display resolution's, the search's only chose
+        the points."""
         assert self.pricer is not None and self.cfg.display is not None
         width, height = self.cfg.display
         search, lat = self.search, self.lattice
@@ -150,7 +152,7 @@ class OctreeBuilder:
             keep = spread_points(lat.frontiers[fid].points, self.cfg.display_points)
             lat.frontiers[fid].points = keep
             jobs.append((fid, [dataclasses.replace(c, width=width, height=height) for c in cams],
-                         [x for x, _, _ in keep]))
+                         [pt[0] for pt in keep]))
         requests = [(cam, xs) for _, cams, xs in jobs for cam in cams]
         # a camera priced at display resolution costs about this many search steps (ETA only)
         weight = max(1, round(0.3 * width * height / (self.cfg.width * self.cfg.height)
@@ -168,13 +170,14 @@ class OctreeBuilder:
             search.report("price at display resolution")
         res = iter(results)
         for fid, cams, xs in jobs:
-            err = np.zeros(len(xs))
-            pw = np.zeros(len(xs))
+            err, pw, ft = np.zeros(len(xs)), np.zeros(len(xs)), np.zeros(len(xs))
             for _ in cams:
                 evs = next(res)
                 err = np.maximum(err, [e.error for e in evs])
                 pw = np.maximum(pw, [e.power_w for e in evs])
-            lat.frontiers[fid].points = [(x, float(e), float(p)) for x, e, p in zip(xs, err, pw, strict=True)]
+                ft = np.maximum(ft, [e.frame_time_s for e in evs])
+            lat.frontiers[fid].points = [(x, float(e), float(p), float(t))
+                                         for x, e, p, t in zip(xs, err, pw, ft, strict=True)]
             self.display_points += len(xs)
         self.display_cameras = len(requests)
 
