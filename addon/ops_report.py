@@ -40,17 +40,23 @@ def _plot_elsewhere(csv_path: Path, out_dir: Path) -> str | None:
     return None
 
 
-def evaluate_scene(scene: bpy.types.Scene, client: ServiceClient | LocalClient, out_dir: str | Path, *,
-                   progress: Callable[[int, int], None] | None = None, frame_step: int | None = None,
-                   samples: bool = True) -> dict:
-    """Run the evaluation campaign (the same as ``make demo``'s) for a scene with a store and a path,
-    under the scene's power and error budgets; return the written files."""
+def _store_and_path(scene: bpy.types.Scene) -> tuple:
+    """The scene's render-budget properties and camera path, or a ValueError saying what is missing."""
     props = scene.render_budget
     if props.store_text is None:
         raise ValueError("no Pareto store in this .blend: run Optimize Power first")
     path = load_path(scene)
     if path is None:
         raise ValueError("no camera path recorded")
+    return props, path
+
+
+def evaluate_scene(scene: bpy.types.Scene, client: ServiceClient | LocalClient, out_dir: str | Path, *,
+                   progress: Callable[[int, int], None] | None = None, frame_step: int | None = None,
+                   samples: bool = True) -> dict:
+    """Run the evaluation campaign (the same as ``make demo``'s) for a scene with a store and a path,
+    under the scene's power and error budgets; return the written files."""
+    props, path = _store_and_path(scene)
     budgets = validate_budget("ERROR", props.error_budget), validate_budget("POWER", props.power_budget)
     info = upload_scene_info(scene, client)
     spec = campaign.CampaignSpec(
@@ -81,12 +87,7 @@ def verify_scene(scene: bpy.types.Scene, client: ServiceClient | LocalClient, ou
     """The store's predictions against renders of ``frames`` path frames at the path's resolution, under
     the scene's active budget (``service.verify``: on this computer, or POST /stores/{id}/verify on the
     remote service); writes verify.md and verify.json to ``out_dir`` and returns the report."""
-    props = scene.render_budget
-    if props.store_text is None:
-        raise ValueError("no Pareto store in this .blend: run Optimize Power first")
-    path = load_path(scene)
-    if path is None:
-        raise ValueError("no camera path recorded")
+    props, path = _store_and_path(scene)
     mode = props.budget_mode
     value = validate_budget(mode, props.power_budget if mode == "POWER" else props.error_budget)
     payload: dict = {"camera_path": path.to_dict(), "frames": int(frames),
@@ -101,18 +102,9 @@ def verify_scene(scene: bpy.types.Scene, client: ServiceClient | LocalClient, ou
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     (out / "verify.json").write_text(json.dumps(doc, indent=1), encoding="utf-8")
-    s = doc["summary"]
-    w, h = doc["resolution"]
-    lines = [f"# Verify: the store's predictions against renders at {w}x{h}", "",
-             "| frame | error predicted | error measured | power predicted W | power measured W "
-             "| within budget |", "|---|---|---|---|---|---|"]
-    lines += [f"| {f['frame']} | {f['predicted_error']:.4f} | {f['measured_error']:.4f} | "
-              f"{f['predicted_power_w']:.3f} | {f['measured_power_w']:.3f} | "
-              f"{'yes' if f['within_budget'] else 'NO'} |" for f in doc["frames"]]
-    lines += ["", f"Within budget: {s['within_budget']}/{s['frames']}; mean |measured - predicted| error "
-              f"{s['mean_abs_error_difference']:.4f}; measured / predicted power median "
-              f"{s['median_power_ratio']:.3f}."]
-    (out / "verify.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    from service.verify import markdown  # lazy: service.verify loads the native core
+
+    (out / "verify.md").write_text(markdown(doc) + "\n", encoding="utf-8")
     return doc
 
 

@@ -96,27 +96,37 @@ class VerifyReport:
                 "summary": self.summary(), "frames": [asdict(f) for f in self.frames]}
 
     def table(self) -> str:
-        """A Markdown table of the frames, then the summary."""
-        w, h = self.resolution
-        lines = [f"verified at {w}x{h}, {self.budget_mode} budget {self.budget_value:g}, "
-                 f"profile {self.profile} at {self.fps:g} fps",
-                 "| frame | time s | error predicted | error measured | power predicted W | power measured W "
-                 "| measured / predicted | within budget |",
-                 "|---|---|---|---|---|---|---|---|"]
-        for f in self.frames:
-            note = " (infeasible)" if f.infeasible else ""
-            lines.append(f"| {f.frame} | {f.time:.2f} | {f.predicted_error:.4f} | {f.measured_error:.4f} | "
-                         f"{f.predicted_power_w:.3f} | {f.measured_power_w:.3f} | {f.power_ratio:.2f} | "
-                         f"{'yes' if f.within_budget else 'NO'}{note} |")
-        s = self.summary()
-        share = 100 * s["share_within_budget"]
-        lines += ["", f"within budget: {s['within_budget']}/{s['frames']} ({share:.0f} %)",
-                  f"mean |measured - predicted| error: {s['mean_abs_error_difference']:.4f} "
-                  f"(max {s['max_abs_error_difference']:.4f})",
-                  f"measured / predicted power: median {s['median_power_ratio']:.3f}, "
-                  f"{100 * s['share_power_within_10pct']:.0f} % of frames within 10 %",
-                  f"worst frames: {', '.join(str(i) for i in s['worst_frames'])}"]
-        return "\n".join(lines)
+        """A Markdown table of the frames, then the summary (:func:`markdown`)."""
+        return markdown(self.to_dict())
+
+
+def markdown(doc: dict[str, Any]) -> str:
+    """A verify report (``VerifyReport.to_dict()``, the REST answer) as a Markdown table of the frames,
+    then the summary: what the CLI prints and the demo and the add-on write to verify.md."""
+    w, h = doc["resolution"]
+    figures = doc.get("store_figures_resolution")
+    lines = [f"verified at {w}x{h} (store figures for "
+             f"{'x'.join(str(v) for v in figures) if figures else 'an unstated size'}), {doc['budget_mode']} "
+             f"budget {doc['budget_value']:g}, profile {doc['profile']} at {doc['fps']:g} fps", "",
+             "| frame | time s | error predicted | error measured | power predicted W | power measured W "
+             "| measured / predicted | within budget |",
+             "|---|---|---|---|---|---|---|---|"]
+    for f in doc["frames"]:
+        ratio = f["measured_power_w"] / f["predicted_power_w"] if f["predicted_power_w"] > 0 else math.inf
+        note = " (infeasible)" if f["infeasible"] else ""
+        lines.append(f"| {f['frame']} | {f['time']:.2f} | {f['predicted_error']:.4f} | "
+                     f"{f['measured_error']:.4f} | {f['predicted_power_w']:.3f} | "
+                     f"{f['measured_power_w']:.3f} | {ratio:.2f} | "
+                     f"{'yes' if f['within_budget'] else 'NO'}{note} |")
+    s = doc["summary"]
+    share = 100 * s["share_within_budget"]
+    lines += ["", f"within budget: {s['within_budget']}/{s['frames']} ({share:.0f} %)",
+              f"mean |measured - predicted| error: {s['mean_abs_error_difference']:.4f} "
+              f"(max {s['max_abs_error_difference']:.4f})",
+              f"measured / predicted power: median {s['median_power_ratio']:.3f}, "
+              f"{100 * s['share_power_within_10pct']:.0f} % of frames within 10 %",
+              f"worst frames: {', '.join(str(i) for i in s['worst_frames'])}"]
+    return "\n".join(lines)
 
 
 def sample_frames(n: int, count: int) -> list[int]:

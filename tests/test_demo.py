@@ -120,8 +120,8 @@ def test_demo_end_to_end_tiny(tmp_path: Path) -> None:
     verify = json.loads((out / "verify.json").read_text())
     assert verify["resolution"] == [64, 36] and len(verify["frames"]) == 2
     assert verify["summary"]["within_budget"] == sum(f["measured_error"] <= eb for f in verify["frames"])
-    assert "Verify: the store's predictions against renders at 64x36" in (out / "verify.md").read_text()
-    assert "Within budget:" in proc.stdout
+    assert "verified at 64x36 (store figures for 64x36)" in (out / "verify.md").read_text()
+    assert "within budget:" in proc.stdout
 
 
 @pytest.mark.slow

@@ -101,7 +101,7 @@ def test_cli_verify_prints_the_table_and_writes_json(setup, capsys) -> None:
                      "--json", str(out)])
     assert code == 0
     text = capsys.readouterr().out
-    assert "verified at 64x48, power budget" in text and "within budget:" in text
+    assert "verified at 64x48 (store figures for 96x72), power budget" in text and "within budget:" in text
     doc = json.loads(out.read_text())
     assert doc["resolution"] == [64, 48] and len(doc["frames"]) == 3 and doc["budget_mode"] == "power"
     assert doc["summary"]["within_budget"] == sum(f["measured_power_w"] <= budget for f in doc["frames"])

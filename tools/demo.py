@@ -38,6 +38,7 @@ from addon.core.job_runner import JobRequest, follow_job
 from addon.core.local_service import LocalService, free_port
 from service import options as option_schema
 from service.camera_path import CameraPath
+from service.verify import markdown
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 SCENES_DIR = REPO_ROOT / "blend_scenes" / "build"
@@ -229,26 +230,12 @@ def verify(client: Any, store_id: str, path_doc: dict[str, Any], meta: dict[str,
                                    "frames": args.verify_frames, "resolution": [int(v) for v in size]},
                         timeout_s=3600.0)
     spent = clock.stop("verify", t)
-    s = doc["summary"]
-    lines = [f"# Verify: the store's predictions against renders at {size[0]}x{size[1]}", "",
-             f"Store figures priced by: {meta.get('display_pricing_label', 'preview resolution')} at "
-             f"{'x'.join(str(v) for v in meta.get('figures_resolution') or size)}; path resolution "
-             f"{'x'.join(str(v) for v in path_doc['frames'][0]['resolution'])}; error budget "
-             f"{args.error_budget}; {s['frames']} frames spread over the path, each looked up on its own.",
-             "",
-             "| frame | error predicted | error measured | power predicted W | power measured W "
-             "| within budget |",
-             "|---|---|---|---|---|---|"]
-    lines += [f"| {f['frame']} | {f['predicted_error']:.4f} | {f['measured_error']:.4f} | "
-              f"{f['predicted_power_w']:.3f} | {f['measured_power_w']:.3f} | "
-              f"{'yes' if f['within_budget'] else 'NO'} |" for f in doc["frames"]]
-    lines += ["", f"Within budget: {s['within_budget']}/{s['frames']}; mean |measured - predicted| error "
-              f"{s['mean_abs_error_difference']:.4f}; measured / predicted power median "
-              f"{s['median_power_ratio']:.3f}, {100 * s['share_power_within_10pct']:.0f} % of frames within "
-              f"10 %; {spent['wall_s']:.0f} s wall."]
-    (out / "verify.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    text = markdown(doc)
+    (out / "verify.md").write_text(f"# Verify: the store's predictions against renders\n\nStore figures "
+                                   f"priced by: {meta.get('display_pricing_label', 'preview resolution')}; "
+                                   f"{spent['wall_s']:.0f} s wall.\n\n{text}\n", encoding="utf-8")
     (out / "verify.json").write_text(json.dumps(doc, indent=1), encoding="utf-8")
-    for line in lines[5:]:
+    for line in text.splitlines():
         say(f"  {line}")
 
 
