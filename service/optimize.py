@@ -140,7 +140,9 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, config: O
     )
     pricing = pricer = None
     if config.display_estimator != "preview":
-        pricing = DisplayPricing(config.display_estimator, config.display_fraction, seed=config.seed)
+        small = display[0] * display[1] < config.display_tiles_min_pixels
+        estimator = "full" if small else config.display_estimator
+        pricing = DisplayPricing(estimator, config.display_fraction, seed=config.seed)
         pricer = DisplayPricer(evaluator, pricing)
     forwards = targets = None
     if config.view_sampling in ("aimed", "path"):

@@ -176,6 +176,11 @@ OPTIONS: tuple[Option, ...] = (
            public=False),
     Option("skip_inert", bool, True, "Skip inert", "leave out the parameters the simulator reports "
            "cannot change this scene", public=False),
+    Option("display_tiles_min_pixels", int, 640 * 360, "Tile estimator from",
+           "the tile estimator prices display sizes of at least this many pixels; smaller ones are priced "
+           "as whole frames (below 640x360 the blocks' SSIM margins and whole adaptive tiles make a "
+           "quarter of the blocks cost about as much as the frame: bench/RESULTS.md)", minimum=0,
+           public=False),
     Option("power_at_path_resolution", bool, True, "Search power at path resolution",
            "the search compares the evaluation images' power scaled to the path's pixel count (static "
            "power would hide every difference at a few hundred pixels); a search figure, never a "

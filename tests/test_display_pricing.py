@@ -244,9 +244,13 @@ def test_store_figures_are_whole_frames_at_the_paths_resolution(scene) -> None:
 def test_tile_estimated_store_keeps_a_few_points_per_frontier(scene) -> None:
     path = _orbit_path(6, (128, 96))
     store = optimize_path(scene, path, SUBSPACE, _options(display_estimator="tiles", display_fraction=0.3,
-                                                          display_points=3),
+                                                          display_points=3, display_tiles_min_pixels=0),
                           cache=EvalCache(), executor=InProcessExecutor())
     assert store.meta["display_pricing"].startswith("tiles") and store.meta["figures_resolution"] == [128, 96]
+    # a display this small is priced as whole frames unless told otherwise (the tiles would cost as much)
+    small = optimize_path(scene, path, SUBSPACE, _options(display_estimator="tiles", display_points=3),
+                          cache=EvalCache(), executor=InProcessExecutor())
+    assert small.meta["display_pricing"].startswith("full")
     assert "tile estimator" in store.meta["display_pricing_label"]
     for fr in store.frontiers:
         assert 1 <= len(fr.packed) <= 3 and float(fr.error.min()) == 0.0  # max quality always kept

@@ -85,17 +85,21 @@ def parser() -> argparse.ArgumentParser:
     return ap
 
 
-#: The demo prices its store at this display height (width from the path's aspect) unless
-#: --display-height says otherwise: a stated smaller size than the paths' 1280x720, so that ``make demo``
-#: stays within its time budget on two cores (full size: ``--display-height 720``).
+#: The demo prices its store at this display height (width from the path's aspect; whole frames at this
+#: size) and keeps this many points a frontier, unless --display-height / --display-points say otherwise:
+#: a stated smaller size than the paths' 1280x720, so that ``make demo`` stays near its time budget on two
+#: cores (full size: ``--display-height 720``).
 DEMO_DISPLAY_HEIGHT = 180
+DEMO_DISPLAY_POINTS = 4
 
 
 def job_request(args: argparse.Namespace) -> JobRequest:
-    """The optimisation job: the options given on the command line (the display height defaulting to
-    :data:`DEMO_DISPLAY_HEIGHT`); the service fills in the rest."""
+    """The optimisation job: the options given on the command line (the display height and points
+    defaulting to :data:`DEMO_DISPLAY_HEIGHT`, :data:`DEMO_DISPLAY_POINTS`); the service fills in the
+    rest."""
     given = option_schema.from_arguments(args)
     given.setdefault("display_height", DEMO_DISPLAY_HEIGHT)
+    given.setdefault("display_points", DEMO_DISPLAY_POINTS)
     if args.resolution is not None:
         given["eval_width"], given["eval_height"] = args.resolution
     return JobRequest(profile="mobile", options=given)
