@@ -7,7 +7,7 @@
 
 namespace sim_core {
 
-void FrameBuffers::allocate(int w, int h) {
+void FrameBuffers::allocate(int w, int h, int k, bool ambient) {
   width = w;
   height = h;
   const std::size_t n = static_cast<std::size_t>(w) * h;
@@ -17,6 +17,8 @@ void FrameBuffers::allocate(int w, int h) {
   position.assign(n * 3, 0.f);
   object.assign(n, -1);
   kind.assign(n, 0);
+  if (k > 1 || ambient) samples.allocate(w, h, k, ambient);
+  else samples = SampleBuffer{};
 }
 
 void FrameBuffers::store(std::size_t p, Vec3 c, const SampleGeometry& g, SampleKind sample_kind) {
@@ -83,10 +85,12 @@ RenderOutput render_frame(const Scene& scene, const Camera& camera, const Render
   texture_cache.validate();
   RenderOutput out;
   const TileGrid grid(camera.width, camera.height, settings.tile_size);
-  out.fb.allocate(camera.width, camera.height);
+  const int k = settings.subgrid();
+  // AO rays are traced only under a world that gives light.
+  const bool ambient = settings.ao_samples > 0 && max_component(scene.environment().mean()) > 0.f;
+  out.fb.allocate(camera.width, camera.height, k, ambient);
   const bool use_prev = settings.multirate && settings.adaptive() && previous &&
                         previous->matches(grid.tiles_x, grid.tiles_y, grid.tile_size, camera.width, camera.height);
-  const int k = settings.subgrid();
   render_tiles(scene, camera, settings, cache, grid, threads, trace, &out, [&](TileContext& ctx, TileStat& stat, std::size_t t) {
     int spacing = 1;
     if (settings.adaptive()) {
@@ -95,6 +99,9 @@ RenderOutput render_frame(const Scene& scene, const Camera& camera, const Render
     }
     render_tile(ctx, out.fb, stat.x0, stat.y0, stat.width, stat.height, k, spacing, &stat);
   }, texture_cache);
+  if (!out.fb.samples.empty())
+    resolve_pixels(out.fb.samples, out.fb.width, out.fb.height, camera.position, out.fb.color.data(), &out.counters,
+                   threads);
   const std::size_t ntiles = out.tiles.size();
   MultirateState& ms = out.multirate;
   ms.tiles_x = grid.tiles_x; ms.tiles_y = grid.tiles_y; ms.tile_size = grid.tile_size;

@@ -11,6 +11,7 @@
 #include "sim_core/camera.h"
 #include "sim_core/comparator.h"
 #include "sim_core/counters.h"
+#include "sim_core/resolve.h"
 #include "sim_core/scene.h"
 #include "sim_core/settings.h"
 #include "sim_core/shader.h"
@@ -50,7 +51,9 @@ struct FrameBuffers {
   std::vector<float> position;      // H*W*3 primary hit point (world), 0 on miss
   std::vector<std::int32_t> object; // H*W, -1 on miss
   std::vector<std::uint8_t> kind;   // H*W SampleKind
-  void allocate(int w, int h);
+  SampleBuffer samples;             // what the resolve pass reads (empty: pixels are final as stored)
+  // With k > 1 sub-samples per pixel edge or AO (`ambient`), also the sample buffer the resolve reads.
+  void allocate(int w, int h, int k = 1, bool ambient = false);
   // Writes pixel p: its colour and the geometry of its (centre) sample; the normal stays 0 on a miss.
   void store(std::size_t p, Vec3 color, const SampleGeometry& g, SampleKind sample_kind);
 };
@@ -84,7 +87,8 @@ void render_tiles(const Scene& scene, const Camera& camera, const RenderSettings
                   const TileRenderer& render, const CacheConfig& texture_cache = kDefaultTextureCache);
 
 // Renders `camera` (already at render resolution) with `settings`. `previous` may be null. `cache` is the
-// T&I unit's node/triangle cache, `texture_cache` the shading cores' texture cache.
+// T&I unit's node/triangle cache, `texture_cache` the shading cores' texture cache. Sub-samples and AO go
+// through the resolve pass (resolve.h).
 RenderOutput render_frame(const Scene& scene, const Camera& camera, const RenderSettings& settings, int threads,
                           const MultirateState* previous, const CacheConfig& cache,
                           const TraceOptions& trace = {}, const CacheConfig& texture_cache = kDefaultTextureCache);

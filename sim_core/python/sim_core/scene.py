@@ -320,8 +320,10 @@ class Scene:
             else:
                 h.update(str(arr.shape).encode())
                 h.update(np.ascontiguousarray(arr).tobytes())
+        # The environment map's suns, lit like sun lamps (Environment::lights in the native core).
+        env_lights = len(native.environment_lights)
         effects = []
-        if lts:
+        if lts or env_lights:
             effects.append("direct_light")
         if any(m.is_reflective for m in mats):
             effects.append("reflection")
@@ -331,7 +333,7 @@ class Scene:
             effects.append("refraction")
         if any(max(m.emission) > 0 for m in mats):
             effects.append("emission")
-        if any(light.radius > 0 or light.kind == "area" for light in lts):
+        if any(light.radius > 0 or light.kind == "area" for light in lts) or env_lights:
             effects.append("soft_shadows")
         if any(light.kind == "area" for light in lts):
             effects.append("area_lights")
@@ -346,6 +348,7 @@ class Scene:
             "degenerate_dropped": dropped,
             "materials": len(mats),
             "lights": len(lts),
+            "environment_lights": env_lights,
             "objects": int(np.unique(oid[keep]).size),
             "effects": effects,
         }
@@ -436,7 +439,8 @@ class Scene:
 
     @property
     def stats(self) -> dict[str, Any]:
-        """triangles, degenerate_dropped, materials, lights, objects, effects."""
+        """triangles, degenerate_dropped, materials, lights, environment_lights (the map's suns, lit as sun
+        lights), objects, effects."""
         return dict(self._stats)
 
     @property
