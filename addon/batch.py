@@ -1,9 +1,13 @@
 """Headless batch runs of the add-on: optimize, evaluate, playback.
 
-    blender -b scene.blend --python-exit-code 1 -P addon/batch.py -- optimize --url http://127.0.0.1:8765
-    python -m addon.batch --blend scene.blend optimize --serve          # the same through the bpy module
+    blender -b scene.blend --python-exit-code 1 -P addon/batch.py -- --url http://127.0.0.1:8765 optimize
+    python -m addon.batch --blend scene.blend --serve optimize          # the same through the bpy module
+    python -m addon.batch --blend scene.blend --serve evaluate --out report/
 
-Prints a text progress bar; exits non-zero (with the reason on stderr) on any failure.
+The service options (--url, --token, --serve, --python, --data-dir, --timeout) come before the command;
+each command's own options after it (`python -m addon.batch optimize --help`). ``evaluate`` runs the
+evaluation campaign of ``make demo`` under the scene's power and error budgets and writes the same report
+folder. Prints a text progress bar; exits non-zero (with the reason on stderr) on any failure.
 """
 
 from __future__ import annotations
@@ -12,6 +16,7 @@ import argparse
 import csv
 import importlib
 import importlib.util
+import shutil
 import sys
 import tempfile
 import time
@@ -19,6 +24,8 @@ from pathlib import Path
 from types import ModuleType
 
 EXT_ID = "render_budget"
+STAGED_REPO = "render_budget_batch"
+_staged: list[Path] = []  # extension copies this run staged in the temp dir (removed at its end)
 
 
 # -- text progress -------------------------------------------------------------------------------------
@@ -54,7 +61,7 @@ def ensure_extension(bpy: ModuleType) -> str:
     for name in bpy.context.preferences.addons.keys():
         if name.endswith("." + EXT_ID):
             return name
-    import addon_utils
+    import addon_utils  # lazy: a Blender module, like bpy (this script is handed bpy by main)
 
     for mod in addon_utils.modules(refresh=False):
         if mod.__name__.endswith("." + EXT_ID):
@@ -71,13 +78,28 @@ def ensure_extension(bpy: ModuleType) -> str:
     finally:
         sys.path.remove(str(tools))
     stage_dir = Path(tempfile.mkdtemp(prefix="render-budget-batch-"))
+    _staged.append(stage_dir)
     build_extension.stage(stage_dir)
     repos = bpy.context.preferences.extensions.repos
-    repos.new(name="render_budget_batch", module="render_budget_batch", custom_directory=str(stage_dir),
-              source="USER")
-    name = f"bl_ext.render_budget_batch.{EXT_ID}"
+    repos.new(name=STAGED_REPO, module=STAGED_REPO, custom_directory=str(stage_dir), source="USER")
+    name = f"bl_ext.{STAGED_REPO}.{EXT_ID}"
     addon_utils.enable(name, default_set=True, handle_error=_raise)
     return name
+
+
+def remove_staged_extension(bpy: ModuleType) -> None:
+    """Undo :func:`ensure_extension`'s staging: disable the copy, drop its repository, delete the folder
+    (a batch run leaves nothing in the temp dir)."""
+    if not _staged:
+        return
+    import addon_utils  # lazy: a Blender module, like bpy
+
+    addon_utils.disable(f"bl_ext.{STAGED_REPO}.{EXT_ID}", default_set=True)
+    repos = bpy.context.preferences.extensions.repos
+    for repo in [r for r in repos if r.module == STAGED_REPO]:
+        repos.remove(repo)
+    while _staged:
+        shutil.rmtree(_staged.pop(), ignore_errors=True)
 
 
 def _raise(exc: BaseException) -> None:
@@ -88,7 +110,7 @@ def _raise(exc: BaseException) -> None:
 def _option_schema() -> ModuleType:
     """The optimiser's option schema (service/options.py, stdlib only): from the source tree or an
     installed project, else the copy inside a staged extension next to this file."""
-    try:
+    try:  # lazy, with a fallback: a script inside Blender may not see the project's packages
         from service import options
     except ImportError:
         here = Path(__file__).resolve().parent
@@ -164,10 +186,8 @@ def _apply_scene_options(ext: str, props, args: argparse.Namespace) -> None:
             setattr(props, name, value)
     set_option = importlib.import_module(f"{ext}.properties").set_option
     if getattr(args, "resolution", None):
-        try:
-            args.eval_width, args.eval_height = (int(v) for v in args.resolution.lower().split("x"))
-        except ValueError:
-            raise ValueError(f"--resolution must look like 64x36, got {args.resolution!r}") from None
+        parse_size = importlib.import_module(f"{ext}.core.campaign").parse_size
+        args.eval_width, args.eval_height = parse_size(args.resolution)
     for opt in _option_schema().PUBLIC:  # each checked here; together when the job is built
         value = getattr(args, opt.name, None)
         if value is not None:
@@ -274,7 +294,7 @@ def main(argv: list[str] | None = None) -> int:
     if argv is None:
         argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:]
     args = parser().parse_args(argv)
-    import bpy
+    import bpy  # lazy: --help and argument errors need no Blender
 
     ext = ""
     try:
@@ -290,6 +310,7 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         if ext:
             importlib.import_module(f"{ext}.service_process").stop_local()
+        remove_staged_extension(bpy)
 
 
 if __name__ == "__main__":

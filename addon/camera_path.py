@@ -29,8 +29,8 @@ def camera_vfov(cam_obj: bpy.types.Object, scene: bpy.types.Scene) -> float:
                          "only perspective cameras are supported")
     w, h = render_resolution(scene)
     r = scene.render
-    return camera.vertical_fov(cam.lens, cam.sensor_width, cam.sensor_height, cam.sensor_fit, w, h,
-                        r.pixel_aspect_x, r.pixel_aspect_y)
+    return camera.vertical_fov(cam.angle_x, cam.angle_y, cam.sensor_fit, w, h, r.pixel_aspect_x,
+                               r.pixel_aspect_y)
 
 
 def scene_fps(scene: bpy.types.Scene) -> float:

@@ -38,6 +38,7 @@ def hud_lines(scene: bpy.types.Scene) -> list[tuple[str, tuple[float, float, flo
 def draw_hud() -> None:
     if bpy.app.background:  # never draw without a GPU context
         return
+    # lazy: Blender's drawing modules, only usable with a GPU context (never in background mode)
     import blf
     import gpu
     from gpu_extras.batch import batch_for_shader

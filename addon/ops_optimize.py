@@ -19,7 +19,7 @@ from pathlib import Path
 
 import bpy
 
-from . import playback, service_process
+from . import playback, preferences, service_process
 from .camera_path import load_path, sample_animation, store_path
 from .core.client import ServiceClient
 from .core.job_runner import JobOutcome, JobRequest, JobUpdate, run_job
@@ -58,8 +58,6 @@ def job_request(scene: bpy.types.Scene) -> JobRequest:
 
 def _default_profile() -> str:
     try:
-        from . import preferences
-
         return preferences.get().default_profile or "mobile"
     except RuntimeError:
         return "mobile"
@@ -70,7 +68,7 @@ def export_scene(scene: bpy.types.Scene, directory: str | Path) -> Path:
     world, camera at the current frame), translated from a render depsgraph and written as a render-budget
     scene file: exactly what the render engine renders. What the translation approximated is kept in
     ``scene.render_budget.scene_notes`` (the panel shows it) and travels inside the file to the job."""
-    from sim_core.loaders.scene_file import SUFFIX, write_scene_file
+    from sim_core.loaders.scene_file import SUFFIX, write_scene_file  # lazy: optional, not in a stock Blender
 
     window = bpy.context.window
     with bpy.context.temp_override(scene=scene, **({"window": window} if window else {})):

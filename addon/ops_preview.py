@@ -13,7 +13,7 @@ from . import service_process
 from .camera_path import camera_vfov, render_resolution
 from .core.client import ServiceClient
 from .core.vendored import pareto_store
-from .ops_optimize import check_scene, export_scene
+from .ops_optimize import check_scene, export_scene, fill_parameters
 
 IMAGE_NAME = "Power Budget Preview"
 
@@ -104,8 +104,6 @@ class RENDER_BUDGET_OT_analyze_scene(bpy.types.Operator):
     bl_label = "Analyse Scene"
 
     def execute(self, context: bpy.types.Context) -> set[str]:
-        from .ops_optimize import fill_parameters
-
         scene = context.scene
         try:
             check_scene(scene)

@@ -1,9 +1,8 @@
-"""Evaluate path: every frame with the fixed presets and with the optimised settings, measured by the
-service, written as a report folder (Table 3, per-frame CSV, plots, sample frames)."""
+"""Evaluate Path: the evaluation campaign of ``make demo`` (``core.campaign``) on the scene's store, path
+and budgets; writes the same report folder (Table 3, per-frame CSV, plots, sample frames, store, summary)."""
 
 from __future__ import annotations
 
-import base64
 import logging
 import shutil
 import subprocess
@@ -14,13 +13,12 @@ import bpy
 
 from . import preferences, service_process
 from .camera_path import load_path
+from .core import campaign
 from .core import report as report_data
 from .core.client import ServiceClient
-from .core.evaluate_path import EvalSpec, camera_payload, evaluate_path, preset_settings
-from .core.playback_logic import PlaybackDriver, validate_budget
+from .core.playback_logic import validate_budget
 from .core.vendored import options as option_schema
-from .core.vendored import pareto_store
-from .ops_preview import upload_scene
+from .ops_preview import upload_scene_info
 
 log = logging.getLogger(__name__)
 
@@ -44,71 +42,44 @@ def _plot_elsewhere(csv_path: Path, out_dir: Path) -> str | None:
     return None
 
 
-def sample_frames(client: ServiceClient, store: pareto_store.ParetoStore, path, spec: EvalSpec,
-                  out_dir: Path, count: int = 3) -> list[Path]:
-    """A few frames (first, middle, last) rendered with the optimised and the maximum settings, as PNG."""
-    out_dir.mkdir(parents=True, exist_ok=True)
-    picks = sorted({0, len(path) // 2, len(path) - 1})[:count]
-    driver = PlaybackDriver(store, 0.0)  # unfiltered target at each picked frame
-    written = []
-    for i in picks:
-        f = path.frames[i]
-        ours = driver.step(f.matrix_world, f.vfov, f.aspect, f.time, spec.budget_mode, spec.budget_value)
-        for label, settings in (("ours", ours.active_settings), ("max", preset_settings(store)["max"])):
-            img = client.render({"scene_id": spec.scene_id, "camera": camera_payload(f, spec.resolution),
-                                 "settings": settings, "profile": spec.profile, "fps": path.fps,
-                                 "format": "png"})
-            target = out_dir / f"frame{i:05d}_{label}.png"
-            target.write_bytes(img.data if isinstance(img.data, bytes) else base64.b64decode(img.data))
-            written.append(target)
-    return written
-
-
 def evaluate_scene(scene: bpy.types.Scene, client: ServiceClient, out_dir: str | Path, *,
                    progress: Callable[[int, int], None] | None = None, frame_step: int | None = None,
                    samples: bool = True) -> dict:
-    """Run the whole evaluation for a scene with a store and a path; return the written files."""
+    """Run the evaluation campaign (the same as ``make demo``'s) for a scene with a store and a path,
+    under the scene's power and error budgets; return the written files."""
     props = scene.render_budget
     if props.store_text is None:
         raise ValueError("no Pareto store in this .blend: run Optimize Power first")
     path = load_path(scene)
     if path is None:
         raise ValueError("no camera path recorded")
-    mode = props.budget_mode
-    value = validate_budget(mode, props.power_budget if mode == "POWER" else props.error_budget)
-    store = pareto_store.ParetoStore.from_json(props.store_text.as_string())
-    scene_id = upload_scene(scene, client)
-    step = frame_step or props.report_frame_step
-    spec = EvalSpec(scene_id=scene_id, profile=props.profile or store.profile,
-                    resolution=option_schema.eval_resolution(props.eval_width or None, props.eval_height,
-                                                             path.frames[0].aspect),
-                    budget_mode=mode, budget_value=value,
-                    filter_period_s=props.filter_period, frame_step=step,
-                    power_resolution=path.frames[0].resolution)
-    frames = [scene.frame_start + round(path.frames[i].time * path.fps) for i in range(0, len(path), step)]
-    rows = evaluate_path(client, store, path, spec, progress=progress, frames=frames)
-    out = Path(out_dir)
-    written = report_data.write_report(out, rows, title=f"{Path(bpy.data.filepath).stem or 'untitled'} / "
-                                       f"{scene.name}", budget=(mode, value),
-                                       notes=[f"store: {props.summary}", f"frames evaluated: {len(frames)}",
-                                              f"evaluation resolution: {spec.resolution[0]}x"
-                                              f"{spec.resolution[1]}; power at the path's resolution "
-                                              f"{path.frames[0].resolution[0]}x{path.frames[0].resolution[1]}"
-                                              " (dynamic power scaled by the pixel count, as the store "
-                                              "predicts it)"])
+    budgets = validate_budget("ERROR", props.error_budget), validate_budget("POWER", props.power_budget)
+    info = upload_scene_info(scene, client)
+    spec = campaign.CampaignSpec(
+        scene_id=str(info["id"]), profile=props.profile or None,
+        resolution=option_schema.eval_resolution(props.eval_width or None, props.eval_height,
+                                                 path.frames[0].aspect),
+        power_resolution=path.frames[0].resolution,
+        frame_step=frame_step or props.report_frame_step, filter_period_s=props.filter_period,
+        error_budget=budgets[0], power_budget=budgets[1], samples=3 if samples else 0)
+    name = Path(bpy.data.filepath).stem or "untitled"
+    pre = campaign.Preprocessing(f"{name} / {scene.name}", (info.get("stats") or {}).get("triangles"))
+    outcome = campaign.run(client, props.store_text.as_string(), path, spec, out_dir, title=pre.name, pre=pre,
+                           progress=None if progress is None else lambda _label, d, t: progress(d, t),
+                           say=log.info)
+    written = dict(outcome.written)
     if "plots_skipped" in written:
-        python = _plot_elsewhere(Path(written["csv"]), out)
+        python = _plot_elsewhere(Path(written["csv"]), Path(out_dir))
         if python:
             written.pop("plots_skipped")
             written["plotted_with"] = python
-    (out / "store.json").write_text(props.store_text.as_string(), encoding="utf-8")
-    if samples:
-        written["frames"] = sample_frames(client, store, path, spec, out / "frames")
+    written["frames"] = outcome.samples
+    written["summary"] = Path(out_dir) / "summary.json"
     return written
 
 
 class RENDER_BUDGET_OT_evaluate_path(bpy.types.Operator):
-    """Render every path frame with the presets and the optimised settings; write a report folder"""
+    """Measure the path with the presets and the store under both budgets; write a report folder"""
 
     bl_idname = "render_budget.evaluate_path"
     bl_label = "Evaluate Path"

@@ -25,6 +25,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from sim_core.image import linear_to_srgb
 
 from sim_core import Camera, RenderSettings, Scene, load_profile, price, render
 
@@ -33,14 +34,8 @@ LOW_FREQUENCY = {"teapot", "hall"}  # large smooth surfaces (the seed's Teapot/B
 DEFAULT_SCENES = Path(__file__).resolve().parent.parent / "blend_scenes" / "build"
 
 
-def display(img: np.ndarray) -> np.ndarray:
-    x = np.clip(img, 0.0, None)
-    x = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
-    return np.clip(x, 0.0, 1.0)
-
-
 def psnr(a: np.ndarray, b: np.ndarray) -> float:
-    mse = float(np.mean((display(a) - display(b)) ** 2))
+    mse = float(np.mean((linear_to_srgb(a) - linear_to_srgb(b)) ** 2))
     return math.inf if mse == 0 else 10 * math.log10(1.0 / mse)
 
 

@@ -148,7 +148,7 @@ def load(port: int, requests: list[bytes], clients: int, seconds: float) -> dict
 async def _asgi_post(app: Any, path: str, body: bytes) -> int:
     scope = {"type": "http", "asgi": {"version": "3.0"}, "http_version": "1.1", "method": "POST",
              "scheme": "http", "path": path, "raw_path": path.encode(), "query_string": b"", "root_path": "",
-             "headers": [(b"content-type", b"application/json"),
+             "headers": [(b"host", b"127.0.0.1"), (b"content-type", b"application/json"),
                          (b"content-length", str(len(body)).encode())],
              "client": ("127.0.0.1", 1), "server": ("127.0.0.1", 80), "state": {}}
     messages = [{"type": "http.request", "body": body, "more_body": False}]
@@ -167,41 +167,57 @@ async def _asgi_post(app: Any, path: str, body: bytes) -> int:
 
 
 def asgi_costs(data_dir: Path, store_id: str, bodies: list[dict[str, Any]],
-               repeat: int = 5) -> dict[str, float]:
-    """Microseconds per query inside the server process: the fast path, the FastAPI route, the lookup."""
+               repeat: int = 10) -> dict[str, float]:
+    """CPU microseconds per query inside the server process (best of ``repeat`` rounds): the service's
+    query route (a lean route, see service.api.lean_route), the same endpoint as a generic FastAPI route,
+    and the lookup alone."""
     import asyncio
 
+    from fastapi import Request
+
     from service.api import Settings, create_app
-    from service.api.routes.stores import answer_query
-    from service.api.schemas import StoreQuery
+    from service.api.routes.stores import answer_query, query_store
+    from service.api.schemas import QueryResult, StoreQuery
     from service.storage import Storage
     from service.store import ParetoStore
 
     raw = [json.dumps(b).encode() for b in bodies]
     out: dict[str, float] = {}
 
-    async def run(fast: bool) -> float:
-        app = create_app(Settings(data_dir=data_dir, query_fast_path=fast, job_workers=1))
+    async def generic(store_id, body, request):  # type: ignore[no-untyped-def]
+        return await query_store(store_id, body, request)
+
+    # real classes, not this module's postponed strings (they are imported in this function)
+    generic.__annotations__ = {"store_id": str, "body": StoreQuery, "request": Request, "return": QueryResult}
+
+    async def run(prefix: str) -> float:
+        app = create_app(Settings(data_dir=data_dir, job_workers=1))
+        app.add_api_route("/generic/{store_id}/query", generic, methods=["POST"], response_model=QueryResult)
+        app.router.routes.insert(0, app.router.routes.pop())  # matched first, like the real route
         async with app.router.lifespan_context(app):
             for b in raw:
-                assert await _asgi_post(app, f"/stores/{store_id}/query", b) == 200
-            t0 = time.perf_counter()
-            for _ in range(repeat):
+                assert await _asgi_post(app, f"{prefix}/{store_id}/query", b) == 200
+            best = float("inf")
+            for _ in range(repeat):  # CPU time, best round: other work on the machine does not count
+                t0 = time.process_time()
                 for b in raw:
-                    await _asgi_post(app, f"/stores/{store_id}/query", b)
-            return (time.perf_counter() - t0) / (repeat * len(raw)) * 1e6
+                    await _asgi_post(app, f"{prefix}/{store_id}/query", b)
+                best = min(best, time.process_time() - t0)
+            return best / len(raw) * 1e6
 
-    out["fast path"] = asyncio.run(run(True))
-    out["FastAPI route"] = asyncio.run(run(False))
+    out["POST /stores/{id}/query (the service's lean route)"] = asyncio.run(run("/stores"))
+    out["the same endpoint as a generic FastAPI route"] = asyncio.run(run("/generic"))
     storage = Storage(data_dir)
     store = ParetoStore.from_json(storage.get_store(store_id=store_id).body)
     storage.close()
     queries = [StoreQuery.model_validate(b) for b in bodies]
-    t0 = time.perf_counter()
+    best = float("inf")
     for _ in range(repeat):
+        t0 = time.process_time()
         for q in queries:
             answer_query(store, q)
-    out["lookup + filter only"] = (time.perf_counter() - t0) / (repeat * len(queries)) * 1e6
+        best = min(best, time.process_time() - t0)
+    out["lookup + filter only"] = best / len(queries) * 1e6
     return out
 
 

@@ -5,7 +5,7 @@ depsgraph translation at render level (``addon.translate.translate_for_render``:
 renders and the jobs optimise) with ``RenderSettings.max_quality()``. Cycles renders the same .blend as
 the reference: CPU, Standard view transform, ``diffuse_bounces = 0`` (the simulated GPU traces no diffuse
 inter-reflection), glossy and transmission bounces = the simulator's max depth, ``--samples`` samples
-plus OpenImageDenoise. Both images go through the project's error pipeline (``service.evaluation.tone_map``:
+plus OpenImageDenoise. Both images go through the project's error pipeline (``sim_core.image.linear_to_srgb``:
 clamp and sRGB, then ``service.metrics.ssim``). Prints per scene: mean display luminance (Rec. 709 luma
 of the display image) of both, their ratio (simulator / Cycles), 1-SSIM, the render times and the
 translation's warnings. Target: ratio within 10 % and 1-SSIM <= 0.10.
@@ -24,6 +24,8 @@ import time
 from pathlib import Path
 
 import numpy as np
+from PIL import Image
+from sim_core.image import linear_to_srgb
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
@@ -67,11 +69,7 @@ def cycles(scene, width: int, height: int, samples: int, depth: int) -> tuple[np
 
 def save_pair(out: Path, name: str, simulated: np.ndarray, reference: np.ndarray) -> None:
     """simulator | Cycles, display-transformed, as one PNG."""
-    from PIL import Image
-
-    from service.evaluation import tone_map
-
-    pair = np.concatenate([tone_map(simulated), tone_map(reference)], axis=1)
+    pair = np.concatenate([linear_to_srgb(simulated), linear_to_srgb(reference)], axis=1)
     out.mkdir(parents=True, exist_ok=True)
     Image.fromarray(np.round(pair * 255).astype(np.uint8)).save(out / f"{name}.png")
 

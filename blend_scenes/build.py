@@ -18,11 +18,20 @@ import importlib
 import json
 import os
 import re
+import struct
 import sys
 import tempfile
 import time
 from pathlib import Path
 from typing import Any
+
+import numpy as np
+from sim_core.loaders import load_gltf
+
+import sim_core
+from service.camera_path import CameraPath
+
+from .scenes import SCENES
 
 PACKAGE_DIR = Path(__file__).resolve().parent
 REPO_ROOT = PACKAGE_DIR.parent
@@ -32,19 +41,16 @@ TRANSLATOR_SOURCES = (REPO_ROOT / "addon" / "translate.py",
                       REPO_ROOT / "addon" / "core" / "scene_translation.py",
                       REPO_ROOT / "sim_core" / "python" / "sim_core" / "loaders" / "scene_file.py")
 SCENE_FILES = ("scene.blend", "scene.glb", "scene.rbscene", "path.json", "stats.json")
-
-
-def _scene_names() -> tuple[str, ...]:
-    from .scenes import SCENES
-
-    return SCENES
+#: The add-on's helpers the build uses (path sampling, fov, glTF export): part of every scene's hash.
+ADDON_SOURCES = tuple(REPO_ROOT / f for f in ("addon/camera_path.py", "addon/scene_export.py",
+                                              "addon/core/path_sampling.py", "service/store/camera.py"))
 
 
 def generator_hash(name: str) -> str:
     """Hash of everything that determines a scene's content (sources and the models it loads)."""
     h = hashlib.sha256()
     gen = PACKAGE_DIR / "scenes" / f"{name}.py"
-    sources = [gen, PACKAGE_DIR / "common.py", PACKAGE_DIR / "build.py", *TRANSLATOR_SOURCES]
+    sources = [gen, PACKAGE_DIR / "common.py", PACKAGE_DIR / "build.py", *TRANSLATOR_SOURCES, *ADDON_SOURCES]
     text = gen.read_text()
     models = sorted(set(re.findall(r"[\"']([\w-]+\.obj)[\"']", text)))  # quoted model file names
     sources += [REPO_ROOT / "assets" / "models" / m for m in models]
@@ -70,11 +76,6 @@ def is_cached(name: str, out_dir: Path) -> bool:
 
 def scene_statistics(glb: Path) -> dict[str, Any]:
     """Counts and effects of the exported scene, as sim_core's loader reads it."""
-    import numpy as np
-    from sim_core.loaders import load_gltf
-
-    import sim_core
-
     sd = load_gltf(glb)
     simulated = sim_core.Scene.from_scene_data(sd)  # the scene must load in the simulator, BVH and all
     raw = _glb_json(glb)
@@ -121,11 +122,19 @@ def scene_statistics(glb: Path) -> dict[str, Any]:
 
 
 def _glb_json(glb: Path) -> dict[str, Any]:
-    import struct
-
     data = glb.read_bytes()
     (length,) = struct.unpack_from("<I", data, 12)
     return json.loads(data[20 : 20 + length])
+
+
+def compact(path: CameraPath) -> CameraPath:
+    """The path as the scene files keep it: times to the microsecond, matrices to 7 decimals (small files
+    that stay byte-stable across platforms)."""
+    doc = path.to_dict()
+    for frame in doc["frames"]:
+        frame["time"] = round(frame["time"], 6)
+        frame["matrix_world"] = [[round(v, 7) for v in row] for row in frame["matrix_world"]]
+    return CameraPath.from_dict(doc)
 
 
 def stats_line(name: str, stats: dict[str, Any]) -> str:
@@ -136,12 +145,17 @@ def stats_line(name: str, stats: dict[str, Any]) -> str:
 
 def build_scene(name: str, out_dir: Path) -> dict[str, Any]:
     """Run one generator in this process's bpy and write its files; returns the statistics."""
+    # lazy: bpy (and what imports it) only after build() has kept Blender's user configuration out of
+    # the home directory
     import bpy
+
+    from addon.camera_path import sample_animation
+    from addon.scene_export import export_glb
 
     from . import common
 
-    if name not in _scene_names():
-        raise ValueError(f"unknown scene {name!r}; choose from {', '.join(_scene_names())}")
+    if name not in SCENES:
+        raise ValueError(f"unknown scene {name!r}; choose from {', '.join(SCENES)}")
     scene_dir = out_dir / name
     scene_dir.mkdir(parents=True, exist_ok=True)
     (scene_dir / "stats.json").unlink(missing_ok=True)
@@ -151,17 +165,17 @@ def build_scene(name: str, out_dir: Path) -> dict[str, Any]:
     clearance, problems = common.camera_clearance(spec.camera)
     if problems:
         raise RuntimeError(f"{name}: camera path clips geometry: {'; '.join(problems[:6])}")
-    path_doc = common.sample_camera_path(spec.camera)
-    common.write_camera_path(path_doc, scene_dir / "path.json")
-    common.export_glb(scene_dir / "scene.glb")
+    path = compact(sample_animation(bpy.context.scene, spec.camera))
+    path.save(scene_dir / "path.json")
+    export_glb(bpy.context.scene, scene_dir / "scene.glb")
     translated = common.export_scene_file(scene_dir / "scene.rbscene")
     bpy.ops.wm.save_as_mainfile(filepath=str(scene_dir / "scene.blend"), compress=True, check_existing=False)
     stats = {"name": name, "description": spec.description, **scene_statistics(scene_dir / "scene.glb")}
     stats.update({
-        "frames": len(path_doc["frames"]),
-        "fps": path_doc["fps"],
-        "duration_s": path_doc["frames"][-1]["time"],
-        "resolution": path_doc["frames"][0]["resolution"],
+        "frames": len(path),
+        "fps": path.fps,
+        "duration_s": path.frames[-1].time,
+        "resolution": list(path.frames[0].resolution),
         "extra_files": [p.name for p in spec.extra_files],
         "translated": translated,
         "camera_min_clearance_m": round(clearance, 3),
@@ -179,9 +193,9 @@ def build(names: list[str] | None = None, out_dir: Path = DEFAULT_OUT, force: bo
     if "bpy" not in sys.modules:  # keep Blender's user config out of the home directory
         os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp(prefix="blend-scenes-"))
     results = []
-    for name in names or list(_scene_names()):
-        if name not in _scene_names():
-            raise ValueError(f"unknown scene {name!r}; choose from {', '.join(_scene_names())}")
+    for name in names or list(SCENES):
+        if name not in SCENES:
+            raise ValueError(f"unknown scene {name!r}; choose from {', '.join(SCENES)}")
         if not force and is_cached(name, out_dir):
             stats = json.loads((out_dir / name / "stats.json").read_text())
             print(f"[cached] {stats['summary']}", flush=True)

@@ -1,4 +1,5 @@
-"""Shared bpy helpers for the scene generators: materials, meshes, lights, camera paths, export.
+"""Shared bpy helpers for the scene generators: materials, meshes, lights, animated cameras. Sampling the
+camera path and the glTF export are the add-on's own (``addon.camera_path``, ``addon.scene_export``).
 
 Everything here is deterministic: geometry comes from closed-form functions or seeded numpy generators,
 never from Blender's random operators. Generators import this module, so changing it rebuilds every scene
@@ -15,6 +16,9 @@ from pathlib import Path
 import bpy
 import numpy as np
 from mathutils import Euler, Matrix, Vector
+from sim_core.loaders.scene_file import write_scene_file
+
+from addon.translate import translate_for_render
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 MODELS_DIR = REPO_ROOT / "assets" / "models"
@@ -260,16 +264,6 @@ def world_color(rgb: Vec3) -> None:
     bpy.context.scene[ENVIRONMENT_KEY] = list(rgb)
 
 
-def write_exr(path: Path, rgb: np.ndarray) -> None:
-    """(H, W, 3) float32 RGB to an OpenEXR file (ZIP-compressed half would lose the sun's range: float)."""
-    import OpenEXR
-
-    data = np.ascontiguousarray(rgb, dtype=np.float32)
-    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    with OpenEXR.File(header, {"RGB": data}) as f:
-        f.write(str(path))
-
-
 def world_exr(path: Path, strength: float = 1.0, rotation_z: float = 0.0) -> bpy.types.Image:
     """Equirectangular environment: Blender world node tree (Environment Texture, turned by a Mapping node's
     Z rotation when ``rotation_z`` is not 0) + scene extra naming the file (relative); returns the image."""
@@ -327,33 +321,6 @@ def animated_camera(eye: Callable[[float], Sequence[float]], target: Callable[[f
     return cam
 
 
-def vertical_fov(cam_data: bpy.types.Camera, width: int, height: int) -> float:
-    """Vertical field of view in radians (Blender's `angle` spans the sensor-fit axis)."""
-    fit = cam_data.sensor_fit
-    horizontal = fit == "HORIZONTAL" or (fit == "AUTO" and width >= height)
-    if horizontal:
-        return 2.0 * math.atan(math.tan(cam_data.angle / 2.0) * height / width)
-    return float(cam_data.angle)
-
-
-def sample_camera_path(cam: bpy.types.Object) -> dict:
-    """The camera-path JSON document (ARCHITECTURE.md): one entry per frame, Blender's own matrices."""
-    scene = bpy.context.scene
-    w, h = scene.render.resolution_x, scene.render.resolution_y
-    frames = []
-    for f in range(scene.frame_start, scene.frame_end + 1):
-        scene.frame_set(f)
-        m: Matrix = cam.matrix_world
-        frames.append({
-            "time": round((f - scene.frame_start) / FPS, 6),
-            "matrix_world": [[round(float(m[r][c]), 7) for c in range(4)] for r in range(4)],
-            "vfov": vertical_fov(cam.data, w, h),
-            "resolution": [w, h],
-        })
-    scene.frame_set(scene.frame_start)
-    return {"version": 1, "fps": float(FPS), "frames": frames}
-
-
 def camera_clearance(cam: bpy.types.Object, every: int = 10) -> tuple[float, list[str]]:
     """Check a camera path against the scene: the smallest distance from the camera to any surface (rays
     in 26 directions) and the frames where the camera is inside a solid (most directions first hit a back
@@ -388,26 +355,9 @@ def camera_clearance(cam: bpy.types.Object, every: int = 10) -> tuple[float, lis
     return nearest, ([*inside, f"nearest surface {nearest:.3f} m at {nearest_at}"] if clipping else [])
 
 
-def write_camera_path(doc: dict, path: Path) -> None:
-    """Validate and write the path JSON through the service's own reader/writer (service.camera_path)."""
-    from service.camera_path import CameraPath
-
-    CameraPath.from_dict(doc).save(path)
-
-
-def export_glb(path: Path) -> None:
-    bpy.ops.export_scene.gltf(filepath=str(path), export_format="GLB", export_apply=True, export_lights=True,
-                              export_cameras=True, export_yup=True, export_extras=True,
-                              export_animations=False)
-
-
 def export_scene_file(path: Path) -> dict:
     """The scene as the add-on sends it to jobs (and the render engine renders it): the depsgraph translator
     at render level, written as a render-budget scene file. Returns a summary for stats.json."""
-    from sim_core.loaders.scene_file import write_scene_file
-
-    from addon.translate import translate_for_render
-
     translation = translate_for_render(bpy.context.scene)
     scene_id = write_scene_file(path, translation.scene_data, translation.notes)
     data = translation.scene_data

@@ -14,18 +14,20 @@ import sys
 import tempfile
 from pathlib import Path
 
+import numpy as np
+from sim_core.loaders import load_gltf
+
+import sim_core
+
 from .build import DEFAULT_OUT
 
 
 def pixel_agreement(scene_dir: Path, frame_indices: list[int] | None = None, width: int = 48,
                     height: int = 27) -> list[tuple[int, float]]:
     """(frame index, fraction of pixels whose hit object agrees) for the given or four spread frames."""
+    # lazy: bpy only after main() has kept Blender's user configuration out of the home directory
     import bpy
-    import numpy as np
     from mathutils import Vector
-    from sim_core.loaders import load_gltf
-
-    import sim_core
 
     data = load_gltf(scene_dir / "scene.glb")
     scene = sim_core.Scene.from_scene_data(data)

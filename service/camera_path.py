@@ -11,8 +11,9 @@ Format (version 1; written by the add-on and the scene generators)::
 +Y up), ``vfov`` the vertical field of view in radians, ``time`` in seconds (non-decreasing). Instead of
 ``matrix_world`` a frame may give ``position`` plus either ``rotation_quaternion`` ([w, x, y, z], Blender's
 order) or ``direction`` (and optional ``up``, default world +Z); the reader turns those into a matrix and
-the writer always writes ``matrix_world``. Camera maths comes from :mod:`service.store.camera`. Pure
-stdlib + numpy: the add-on bundles this module (with the store package).
+the writer always writes ``matrix_world``. Camera maths and the camera limits every layer shares come
+from :mod:`service.store.camera`. Pure stdlib + numpy: the add-on bundles this module (with the store
+package).
 """
 
 from __future__ import annotations
@@ -30,6 +31,9 @@ import numpy as np
 from .store import camera
 
 PATH_VERSION = 1
+#: Frame rates a path may have (frames per second).
+FPS_MIN = 0.01
+FPS_MAX = 1000.0
 
 
 def _finite(a: np.ndarray, what: str) -> np.ndarray:
@@ -52,16 +56,22 @@ class CameraFrame:
         if m.shape != (4, 4):
             raise ValueError(f"matrix_world must be 4x4, got shape {m.shape}")
         _finite(m, "matrix_world")
-        if np.linalg.norm(m[:3, :3], axis=0).min() < 1e-9:
-            raise ValueError("matrix_world has a degenerate rotation")
+        axes = camera.check_axes(m)
+        camera.check_position(m[:3, 3], "matrix_world position")
+        with np.errstate(over="ignore", under="ignore"):  # 1e300-long axes: inf, i.e. not unit
+            unit = np.abs(np.linalg.norm(m[:3, :3], axis=0) - 1.0).max() <= 1e-6
+        if not unit:
+            # A camera's scale means nothing: scaled (or hugely or tinily scaled) axes are stored with unit
+            # length, so every later use is safe; unit axes stay exactly as given.
+            m = m.copy()
+            m[:3, :3] = axes
         object.__setattr__(self, "matrix_world", m)
         if not math.isfinite(self.time):
             raise ValueError("time must be finite")
         camera.check_fov(self.vfov, "vfov")
-        w, h = (int(v) for v in self.resolution)
-        if (w, h) != tuple(self.resolution) or w <= 0 or h <= 0:
-            raise ValueError(f"resolution must be two positive integers, got {self.resolution!r}")
-        object.__setattr__(self, "resolution", (w, h))
+        if len(self.resolution) != 2:
+            raise ValueError(f"resolution must be two integers, got {self.resolution!r}")
+        object.__setattr__(self, "resolution", camera.check_resolution(*self.resolution))
 
     @property
     def position(self) -> np.ndarray:
@@ -120,8 +130,8 @@ class CameraPath:
         frames = tuple(self.frames)
         if not frames:
             raise ValueError("a camera path needs at least one frame")
-        if not (math.isfinite(self.fps) and self.fps > 0):
-            raise ValueError("fps must be positive")
+        if not (math.isfinite(self.fps) and FPS_MIN <= self.fps <= FPS_MAX):
+            raise ValueError(f"fps must be in [{FPS_MIN}, {FPS_MAX}]")
         times = [f.time for f in frames]
         if any(b < a for a, b in itertools.pairwise(times)):
             raise ValueError("frame times must be non-decreasing")

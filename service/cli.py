@@ -1,8 +1,10 @@
-"""Command line: ``render-budget optimize | query | serve``.
+"""Command line: ``render-budget optimize | query | serve | cache``.
 
 ``optimize`` builds a Pareto store for a scene and a camera path (progress bar on stderr, resumable:
 evaluations persist in an SQLite cache). ``query`` looks a camera up in a store under a power or error
-budget. ``serve`` starts the REST service. Camera-path JSON: see :mod:`service.camera_path`.
+budget. ``serve`` starts the REST service. ``cache stats | prune`` shows or shrinks an evaluation cache
+(the command line's own, or a service's with ``--data-dir``). Camera-path JSON: see
+:mod:`service.camera_path`.
 """
 
 from __future__ import annotations
@@ -18,6 +20,15 @@ from pathlib import Path
 from typing import Any
 
 from service import options
+from service.camera_path import CameraPath
+from service.eval_cache import DEFAULT_MAX_BYTES, EvalCache
+from service.evaluation import load_scene
+from service.executors import make_executor
+from service.optimize import OptimizeConfig, optimize_path
+from service.params import default_space
+from service.serve_options import add_serve_arguments, serve_overrides
+from service.storage import EVAL_CACHE_NAME, read_active_scene_hashes
+from service.store import ParetoStore
 
 
 def _default_cache() -> Path:
@@ -30,6 +41,22 @@ def _positive(text: str) -> float:
     if not (math.isfinite(v) and v > 0):
         raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
     return v
+
+
+_SIZE_UNITS = {"": 1, "k": 1024, "m": 1024**2, "g": 1024**3, "t": 1024**4}
+
+
+def byte_size(text: str) -> int:
+    """``2G``, ``500M``, ``1.5GiB``, ``4096``: a size in bytes (binary units)."""
+    t = text.strip().lower().removesuffix("b").removesuffix("i")
+    unit = t[-1:] if t[-1:] in _SIZE_UNITS and not t[-1:].isdigit() else ""
+    try:
+        value = float(t[: len(t) - len(unit)]) * _SIZE_UNITS[unit]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a size: {text!r} (e.g. 2G, 500M, 4096)") from None
+    if not (math.isfinite(value) and value >= 1):
+        raise argparse.ArgumentTypeError(f"size must be at least 1 byte, got {text!r}")
+    return int(value)
 
 
 def _finite(text: str) -> float:
@@ -53,6 +80,8 @@ def build_parser() -> argparse.ArgumentParser:
     options.add_arguments(o)
     o.add_argument("--parameters", default=None, help="comma-separated parameters to search (default: all)")
     o.add_argument("--cache", type=Path, default=None, help=f"evaluation cache (default {_default_cache()})")
+    o.add_argument("--cache-max-bytes", type=byte_size, default=DEFAULT_MAX_BYTES, metavar="SIZE",
+                   help="evaluation cache cap; least recently used cameras are evicted past it (default 2G)")
     o.add_argument("--dask-scheduler", default=None, metavar="ADDR", help="evaluate on a Dask cluster")
     o.add_argument("--workers", type=int, default=1, help="local worker processes (default 1: in-process)")
     o.add_argument("--threads", type=int, default=None, help="tracer threads per render")
@@ -71,24 +100,27 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--json", action="store_true", help="print JSON")
 
     add_serve_arguments(sub.add_parser("serve", help="run the REST service"))
+
+    c = sub.add_parser("cache", help="size of an evaluation cache, or shrink it")
+    c_sub = c.add_subparsers(dest="cache_command", required=True)
+    for name, what in (("stats", "entries, scenes, cameras, bytes in use and on disk"),
+                       ("prune", "evict least recently used cameras down to --max-bytes, then VACUUM")):
+        cp = c_sub.add_parser(name, help=what)
+        where = cp.add_mutually_exclusive_group()
+        where.add_argument("--cache", type=Path, default=None,
+                           help=f"cache file (default {_default_cache()})")
+        where.add_argument("--data-dir", type=Path, default=None,
+                           help="a service's data directory (its running jobs' evaluations are kept)")
+        if name == "prune":
+            cp.add_argument("--max-bytes", type=byte_size, default=DEFAULT_MAX_BYTES, metavar="SIZE",
+                            help="size to prune to (default 2G)")
+        else:
+            cp.add_argument("--json", action="store_true", help="print JSON")
     return p
 
 
-def add_serve_arguments(parser: argparse.ArgumentParser) -> None:
-    """The serve options of ``render-budget serve`` and ``python -m service.api.server`` (kept here, in
-    a module without web dependencies, so the other commands start fast)."""
-    parser.add_argument("--host", default="127.0.0.1", help="bind address (default 127.0.0.1)")
-    parser.add_argument("--port", type=int, default=8765)
-    parser.add_argument("--data-dir", type=Path, default=None,
-                        help="database and scene files (default: var/service)")
-    parser.add_argument("--dask-scheduler", default=None, metavar="ADDR",
-                        help="fan evaluations out to this Dask scheduler")
-    parser.add_argument("--token", default=None, help="bearer token (required for a non-loopback bind)")
-    parser.add_argument("--log-level", default="info")
-    parser.add_argument("--eval-workers", type=int, default=None, metavar="N",
-                        help="local processes rendering a job's evaluations (default 1; ignored with Dask)")
-
-
+#: Serve options that are settings of the service (``service.api.config.Settings``); each may also come
+#: from its RENDER_BUDGET_* environment variable, which an option given on the command line overrides.
 class _Bar:
     """A one-line progress bar on stderr."""
 
@@ -115,22 +147,16 @@ class _Bar:
 
 
 def _optimize(args: argparse.Namespace) -> int:
-    from service.camera_path import CameraPath
-    from service.eval_cache import EvalCache
-    from service.evaluation import load_scene
-    from service.executors import make_executor
-    from service.optimize import OptimizeConfig, optimize_path
-    from service.params import default_space
-
     path = CameraPath.load(args.path)
+    handle = load_scene(args.scene, ship_bytes=bool(args.dask_scheduler))
     space = default_space()
     if args.parameters:
         space = space.subset([n.strip() for n in args.parameters.split(",") if n.strip()])
     config = OptimizeConfig(**options.from_arguments(args), profile=args.profile, fps=args.fps,
                             threads=args.threads)
-    handle = load_scene(args.scene, ship_bytes=bool(args.dask_scheduler))
     bar = _Bar(not args.no_progress)
-    with EvalCache(args.cache or _default_cache()) as cache:
+    with EvalCache(args.cache or _default_cache(), max_bytes=args.cache_max_bytes,
+                   protected=lambda: [handle.content_hash]) as cache:
         executor = make_executor(args.dask_scheduler, args.workers)
         try:
             store = optimize_path(handle, path, space, config, cache=cache, executor=executor, progress=bar)
@@ -152,8 +178,6 @@ def _optimize(args: argparse.Namespace) -> int:
 
 
 def _query(args: argparse.Namespace) -> int:
-    from service.store import ParetoStore
-
     store = ParetoStore.from_json(args.store.read_bytes())
     matrix = None
     if args.matrix is not None:
@@ -178,11 +202,41 @@ def _query(args: argparse.Namespace) -> int:
     return 0
 
 
-def _serve(args: argparse.Namespace) -> int:
-    from service.api.server import run
+def _cache(args: argparse.Namespace) -> int:
 
-    run(args.host, args.port, args.data_dir, args.dask_scheduler, args.token, log_level=args.log_level,
-        eval_workers=args.eval_workers)
+    if args.data_dir is not None:
+        path = args.data_dir / EVAL_CACHE_NAME
+        protected = read_active_scene_hashes(args.data_dir)
+    else:
+        path, protected = args.cache or _default_cache(), []
+    if not path.is_file():
+        raise FileNotFoundError(f"no evaluation cache at {path}")
+    with EvalCache(path, max_bytes=None, protected=lambda: protected) as cache:
+        before = cache.stats()
+        if args.cache_command == "stats":
+            if args.json:
+                print(json.dumps(before))
+            else:
+                print(f"{path}: {before['entries']} evaluations of {before['cameras']} cameras in "
+                      f"{before['scenes']} scenes; {_mib(before['size_bytes'])} in use, "
+                      f"{_mib(before['file_bytes'])} on disk")
+            return 0
+        deleted = cache.prune(args.max_bytes)
+        after = cache.stats()
+    print(f"{path}: evicted {deleted} evaluations; {_mib(before['file_bytes'])} -> "
+          f"{_mib(after['file_bytes'])} on disk, {after['entries']} evaluations left"
+          + (f" ({len(protected)} scenes of running jobs kept)" if protected else ""))
+    return 0
+
+
+def _mib(n: int | None) -> str:
+    return "?" if n is None else f"{n / 1024**2:.1f} MiB"
+
+
+def _serve(args: argparse.Namespace) -> int:
+    from service.api.server import run  # lazy: the web stack is heavy and only `serve` needs it
+
+    run(serve_overrides(args), log_level=args.log_level)
     return 0
 
 
@@ -193,6 +247,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _optimize(args)
         if args.command == "query":
             return _query(args)
+        if args.command == "cache":
+            return _cache(args)
         return _serve(args)
     except (ValueError, FileNotFoundError, IsADirectoryError) as exc:
         print(f"render-budget {args.command}: error: {exc}", file=sys.stderr)

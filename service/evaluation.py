@@ -20,57 +20,31 @@ from __future__ import annotations
 
 import hashlib
 import math
+import tempfile
 import threading
 import time
-from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from sim_core.image import linear_to_srgb, upsample_bilinear
+from sim_core.loaders.scene_file import SUFFIX, is_scene_file
 
+import sim_core
 from service.eval_cache import CacheKey, EvalCache, Evaluation
 from service.executors import Executor, InProcessExecutor
+from service.lru import LRUCache
 from service.metrics import flip, ssim
 from service.options import METRICS
 from service.params import Indices, ParameterSpace
+from service.store.camera import check_fov
 
 #: Bumped whenever the pipeline that turns renders into errors changes (part of every cache key).
 PIPELINE_VERSION = "v1"
 
-__all__ = ["METRICS", "CameraSpec", "Evaluation", "Evaluator", "SceneHandle", "evaluate", "tone_map",
-           "upsample_bilinear"]
-
-
-def tone_map(image: np.ndarray) -> np.ndarray:
-    """Fixed display transform: clamp linear RGB to [0, 1], apply the sRGB OETF; float64 out."""
-    x = np.clip(np.asarray(image, dtype=np.float64), 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
-
-
-def upsample_bilinear(image: np.ndarray, height: int, width: int) -> np.ndarray:
-    """Bilinear resize of an (h, w[, c]) image to (height, width), pixel centres aligned."""
-    img = np.asarray(image, dtype=np.float64)
-    h, w = img.shape[:2]
-    if (h, w) == (height, width):
-        return img
-
-    def coords(n_out: int, n_in: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        x = (np.arange(n_out) + 0.5) * (n_in / n_out) - 0.5
-        x = np.clip(x, 0, n_in - 1)
-        x0 = np.floor(x).astype(np.int64)
-        x1 = np.minimum(x0 + 1, n_in - 1)
-        return x0, x1, x - x0
-
-    y0, y1, fy = coords(height, h)
-    x0, x1, fx = coords(width, w)
-    extra = (None,) * (img.ndim - 2)
-    fy = fy[(slice(None), None, *extra)]
-    fx = fx[(None, slice(None), *extra)]
-    top = img[y0][:, x0] * (1 - fx) + img[y0][:, x1] * fx
-    bot = img[y1][:, x0] * (1 - fx) + img[y1][:, x1] * fx
-    return top * (1 - fy) + bot * fy
+__all__ = ["METRICS", "CameraSpec", "Evaluation", "Evaluator", "SceneHandle", "evaluate"]
 
 
 @dataclass(frozen=True)
@@ -94,8 +68,7 @@ class CameraSpec:
             raise ValueError("camera forward must be non-zero")
         if np.linalg.norm(np.cross(self.forward, self.up)) < 1e-9:
             raise ValueError("camera up must not be parallel to forward")
-        if not (math.isfinite(self.vfov) and 0 < self.vfov < math.pi):
-            raise ValueError("vfov must be in (0, pi)")
+        check_fov(self.vfov, "vfov")  # the limits every layer shares
         if int(self.width) < 8 or int(self.height) < 8:
             raise ValueError("evaluation images need at least 8x8 pixels")
         object.__setattr__(self, "width", int(self.width))
@@ -111,17 +84,13 @@ class CameraSpec:
         """The tracer's camera (built once per process and key)."""
         cam = _CAMERAS.get(self._key)  # type: ignore[attr-defined]
         if cam is None:
-            import sim_core
-
             target = tuple(e + f for e, f in zip(self.eye, self.forward, strict=True))
             cam = sim_core.Camera.look_at(self.eye, target, self.up, self.vfov, self.width, self.height)
-            if len(_CAMERAS) > 4096:
-                _CAMERAS.clear()
-            _CAMERAS[self._key] = cam  # type: ignore[attr-defined]
+            _CAMERAS.put(self._key, cam)  # type: ignore[attr-defined]
         return cam
 
 
-_CAMERAS: dict[str, Any] = {}
+_CAMERAS: LRUCache[str, Any] = LRUCache(4096)
 
 
 class SceneHandle:
@@ -132,10 +101,11 @@ class SceneHandle:
     ``loader`` callable that rebuilds the scene, and loads the scene once per worker process."""
 
     def __init__(self, scene: Any = None, path: str | Path | None = None, *,
-                 ship_bytes: bool = False, loader: Any = None) -> None:
+                 ship_bytes: bool = False, loader: Any = None, self_contained: bool = False) -> None:
         if scene is None and path is None and loader is None:
             raise ValueError("a scene handle needs a scene, a path or a loader")
         self.loader = loader
+        self.self_contained = self_contained  # an upload: workers read nothing but the file itself
         if scene is None and path is None:
             scene = loader()
         if path is None and scene is not None:
@@ -144,9 +114,9 @@ class SceneHandle:
         self.path = None if path is None else str(path)
         self._data: bytes | None = Path(path).read_bytes() if (ship_bytes and path is not None) else None
         if scene is None:
-            scene = _load_scene(self.path, None)  # type: ignore[arg-type]
+            scene = _load_scene(self.path, None, self.self_contained)  # type: ignore[arg-type]
         self.content_hash = str(scene.content_hash)
-        _remember_scene(self.content_hash, scene)
+        _SCENES.put(self.content_hash, scene)
         self._scene = scene
 
     def get(self) -> Any:
@@ -155,14 +125,14 @@ class SceneHandle:
                 s = _SCENES.get(self.content_hash)
                 if s is None:
                     if self.path is not None:
-                        s = _load_scene(self.path, self._data)
+                        s = _load_scene(self.path, self._data, self.self_contained)
                     elif self.loader is not None:
                         s = self.loader()
                     else:
                         raise RuntimeError("this scene has no file or loader for a worker process")
                     if str(s.content_hash) != self.content_hash:
                         raise RuntimeError("the worker loaded a different scene (content hash differs)")
-                    _remember_scene(self.content_hash, s)
+                    _SCENES.put(self.content_hash, s)
             self._scene = s
         return self._scene
 
@@ -170,39 +140,38 @@ class SceneHandle:
         if self.path is None and self.loader is None:
             raise RuntimeError("a scene without a source file or loader can only be evaluated in-process")
         return {"path": self.path, "data": self._data, "content_hash": self.content_hash,
-                "loader": self.loader}
+                "loader": self.loader, "self_contained": self.self_contained}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.path = state["path"]
         self._data = state["data"]
         self.loader = state["loader"]
         self.content_hash = state["content_hash"]
+        self.self_contained = state["self_contained"]
         self._scene = _SCENES.get(self.content_hash)
 
 
-def _load_scene(path: str, data: bytes | None) -> Any:
+def _load_scene(path: str, data: bytes | None, self_contained: bool) -> Any:
+    """Load a scene file; a worker without the file loads the shipped bytes from a private folder that
+    is removed as soon as the scene is in memory (only the file travels, so it must be self-contained)."""
     p = Path(path)
     if data is not None and not p.exists():
-        import tempfile
+        with tempfile.TemporaryDirectory(prefix="render-budget-scene-") as tmp:
+            copy = Path(tmp) / p.name
+            copy.write_bytes(data)
+            return read_scene(copy, self_contained=True)
+    return read_scene(p, self_contained=self_contained)
 
-        tmp = Path(tempfile.mkdtemp(prefix="render-budget-scene-")) / p.name
-        tmp.write_bytes(data)
-        p = tmp
-    return read_scene(p)
 
-
-def read_scene(path: str | Path) -> Any:
+def read_scene(path: str | Path, *, self_contained: bool = False) -> Any:
     """A ``sim_core.Scene`` from a file: a render-budget scene file (known by its content, whatever its
-    name: what the add-on sends), ``.glb``/``.gltf`` or ``.obj``."""
-    from sim_core.loaders.scene_file import SUFFIX, is_scene_file
-
-    import sim_core
-
+    name: what the add-on sends), ``.glb``/``.gltf`` or ``.obj``. ``self_contained``: a glTF may refer to
+    nothing outside itself (uploads; see ``sim_core.loaders.gltf.load_gltf``)."""
     p = Path(path)
     if is_scene_file(p):
         return sim_core.Scene.from_scene_file(p)
     if p.suffix.lower() in (".glb", ".gltf"):
-        return sim_core.Scene.from_gltf(str(p))
+        return sim_core.Scene.from_gltf(str(p), self_contained=self_contained)
     if p.suffix.lower() == ".obj":
         return sim_core.Scene.from_obj(str(p))
     raise ValueError(f"unsupported scene file {p.name!r} (use a {SUFFIX} scene file, .glb, .gltf or .obj)")
@@ -213,26 +182,15 @@ def load_scene(path: str | Path, *, ship_bytes: bool = False) -> SceneHandle:
     return SceneHandle(path=path, ship_bytes=ship_bytes)
 
 
-# worker-process state: scenes by content hash, profiles by name, reference images (LRU)
-_LOCK = threading.Lock()
-_SCENES: dict[str, Any] = {}
+# worker-process state: the few most recent scenes by content hash (a long-lived worker sees many jobs),
+# profiles by name, reference images (64x36 references are ~27 KB: a whole lockstep batch of samples fits)
+_LOCK = threading.Lock()  # one scene load at a time
+_SCENES: LRUCache[str, Any] = LRUCache(8)
 _PROFILES: dict[str, Any] = {}
-_REFS: OrderedDict[tuple[str, ...], np.ndarray] = OrderedDict()
-_REF_CAPACITY = 512  # 64x36 references are ~27 KB: a whole lockstep batch of samples fits
-_SCENE_CAPACITY = 8
-
-
-def _remember_scene(content_hash: str, scene: Any) -> None:
-    """Keep the few most recent scenes of this process (a long-lived worker sees many jobs)."""
-    _SCENES.pop(content_hash, None)
-    _SCENES[content_hash] = scene
-    while len(_SCENES) > _SCENE_CAPACITY:
-        _SCENES.pop(next(iter(_SCENES)))
+_REFS: LRUCache[tuple[str, ...], np.ndarray] = LRUCache(512)
 
 
 def _profile(name: str) -> Any:
-    import sim_core
-
     p = _PROFILES.get(name)
     if p is None:
         p = sim_core.load_profile(name)
@@ -241,8 +199,6 @@ def _profile(name: str) -> Any:
 
 
 def _render(scene: Any, camera: CameraSpec, settings: Any, threads: int | None) -> Any:
-    import sim_core
-
     return sim_core.render(scene, camera.to_camera(), settings, threads=threads)
 
 
@@ -254,8 +210,8 @@ def _image(result: Any) -> np.ndarray:
 
 
 def _error(metric: str, reference: np.ndarray, image: np.ndarray) -> float:
-    ref = tone_map(reference)
-    img = tone_map(upsample_bilinear(image, ref.shape[0], ref.shape[1]))
+    ref = linear_to_srgb(reference)
+    img = linear_to_srgb(upsample_bilinear(image, ref.shape[0], ref.shape[1]))
     if metric == "ssim":
         e = 1.0 - ssim(ref, img, data_range=1.0)
     elif metric == "ssim_gaussian":
@@ -271,8 +227,6 @@ def _price(result: Any, profile: str, fps: float, pixel_ratio: float = 1.0
            ) -> tuple[float, float, dict[str, float]]:
     """Power (W) and frame time at ``pixel_ratio`` times the rendered pixel count, and the breakdown
     (energy per block at the rendered size)."""
-    import sim_core
-
     rep = sim_core.price(result, _profile(profile), fps)
     dynamic = float(rep.dynamic_energy_j)
     static_w = float(rep.power_w) - dynamic * fps
@@ -286,16 +240,10 @@ def _reference(scene: Any, scene_hash: str, camera: CameraSpec, space: Parameter
                threads: int | None) -> np.ndarray:
     mq = space.max_quality_indices()
     key = (scene_hash, camera.key(), repr(sorted(space.fields_of(mq).items())))
-    with _LOCK:
-        ref = _REFS.get(key)
-        if ref is not None:
-            _REFS.move_to_end(key)
-            return ref
-    ref = _image(_render(scene, camera, space.to_settings(mq), threads))
-    with _LOCK:
-        _REFS[key] = ref
-        while len(_REFS) > _REF_CAPACITY:
-            _REFS.popitem(last=False)
+    ref = _REFS.get(key)
+    if ref is None:
+        ref = _image(_render(scene, camera, space.to_settings(mq), threads))
+        _REFS.put(key, ref)
     return ref
 
 

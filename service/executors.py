@@ -12,8 +12,13 @@ Dask: start ``dask scheduler`` on one machine and ``dask worker tcp://HOST:8786`
 from __future__ import annotations
 
 import concurrent.futures as cf
+import ctypes
 import multiprocessing
 import os
+import signal
+import sys
+import threading
+import time
 from collections.abc import Callable, Sequence
 from typing import Any, Protocol, TypeVar
 
@@ -59,8 +64,35 @@ class InProcessExecutor:
         self.close()
 
 
+_PR_SET_PDEATHSIG = 1  # <linux/prctl.h>
+PARENT_POLL_S = 0.25
+
+
+def die_with_parent(parent_pid: int) -> None:
+    """Pool-worker initializer: the worker ends when the process that started it ends, however that
+    ended (a SIGKILLed service must not leave workers rendering its queue). Linux delivers SIGKILL at
+    once (PR_SET_PDEATHSIG; the "parent" is the thread that started the worker, so the pool is made and
+    fed by threads that outlive it); everywhere a daemon thread also watches the parent's pid."""
+    if sys.platform.startswith("linux"):
+        try:
+            ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
+        except (OSError, AttributeError):
+            pass  # no prctl (an unusual libc): the watch thread still works
+    if os.getppid() != parent_pid:  # the parent died before the signal was armed
+        os._exit(1)
+    threading.Thread(target=_exit_when_orphaned, args=(parent_pid,), name="render-budget-parent-watch",
+                     daemon=True).start()
+
+
+def _exit_when_orphaned(parent_pid: int) -> None:
+    while os.getppid() == parent_pid:
+        time.sleep(PARENT_POLL_S)
+    os._exit(1)
+
+
 class ProcessPoolExecutor:
-    """A pool of local worker processes (spawned: safe with threads and native state)."""
+    """A pool of local worker processes (spawned: safe with threads and native state). Workers die with
+    this process (:func:`die_with_parent`) and are stopped, not waited for, by :meth:`close`."""
 
     name = "process-pool"
 
@@ -68,7 +100,8 @@ class ProcessPoolExecutor:
         self.workers = workers or max(1, (os.cpu_count() or 1))
         if self.workers < 1:
             raise ValueError("workers must be >= 1")
-        self._pool = cf.ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn"))
+        self._pool = cf.ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn"),
+                                            initializer=die_with_parent, initargs=(os.getpid(),))
 
     def map(self, fn: Callable[[Any, Any], R], shared: Any, items: Sequence[Any]) -> list[R]:
         if not items:
@@ -79,8 +112,22 @@ class ProcessPoolExecutor:
             out.extend(f.result())
         return out
 
-    def close(self) -> None:
-        self._pool.shutdown(wait=True, cancel_futures=True)
+    def close(self, timeout_s: float = 5.0) -> None:
+        """Cancel queued tasks and stop the workers now (SIGTERM, then SIGKILL after ``timeout_s``): a
+        stopping service must not leave them rendering. A ``map`` still waiting raises BrokenProcessPool."""
+        # The standard pool has no public way to stop busy workers before Python 3.14: take its list.
+        processes = list((getattr(self._pool, "_processes", None) or {}).values())
+        self._pool.shutdown(wait=False, cancel_futures=True)
+        for p in processes:
+            if p.is_alive():
+                p.terminate()
+        deadline = time.monotonic() + timeout_s
+        for p in processes:
+            p.join(max(0.0, deadline - time.monotonic()))
+            if p.is_alive():
+                p.kill()
+                p.join(timeout_s)
+        self._pool.shutdown(wait=True)  # reaps the pool's management thread
 
     def __enter__(self) -> ProcessPoolExecutor:
         return self
@@ -95,7 +142,7 @@ class DaskExecutor:
     name = "dask"
 
     def __init__(self, address: str | None = None, client: Any = None, timeout_s: float = 30.0) -> None:
-        from distributed import Client
+        from distributed import Client  # lazy: dask is heavy and only this executor needs it
 
         if (address is None) == (client is None):
             raise ValueError("give a scheduler address or a client")

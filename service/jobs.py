@@ -15,11 +15,18 @@ import math
 import queue
 import threading
 import time
-from collections import OrderedDict
 from collections.abc import Callable
 from typing import Any
 
-from .storage import TERMINAL_STATES, JobRecord, Storage
+from service import executors, options
+from service.camera_path import CameraPath
+from service.eval_cache import EvalCache
+from service.evaluation import SceneHandle, read_scene
+from service.lru import LRUCache
+from service.optimize import Cancelled, OptimizeConfig, optimize_path
+from service.params import Parameter, ParameterSpace, default_space
+
+from .storage import JobRecord, Storage
 
 log = logging.getLogger("render_budget.jobs")
 
@@ -33,34 +40,31 @@ class SceneCache:
 
     def __init__(self, storage: Storage, *, capacity: int = 8) -> None:
         self._storage = storage
-        self._capacity = capacity
-        self._scenes: OrderedDict[str, Any] = OrderedDict()
+        self._scenes: LRUCache[str, Any] = LRUCache(capacity)
         self._lock = threading.Lock()
         self._loading: dict[str, threading.Lock] = {}
 
+    def drop(self, scene_id: str) -> None:
+        """Forget a deleted scene."""
+        self._scenes.pop(scene_id)
+
     def put(self, scene_id: str, scene: Any) -> None:
-        with self._lock:
-            self._scenes[scene_id] = scene
-            while len(self._scenes) > self._capacity:
-                self._scenes.popitem(last=False)
+        self._scenes.put(scene_id, scene)
 
     def get(self, scene_id: str) -> Any:
+        """The loaded scene; FileNotFoundError if its file is gone (deleted meanwhile)."""
+        scene = self._scenes.get(scene_id)
+        if scene is not None:
+            return scene
         with self._lock:
-            if scene_id in self._scenes:
-                self._scenes.move_to_end(scene_id)
-                return self._scenes[scene_id]
             gate = self._loading.setdefault(scene_id, threading.Lock())
         with gate:  # one loader per scene; others wait for it
+            scene = self._scenes.get(scene_id)
+            if scene is None:
+                # Uploads were checked self-contained; loading them the same way keeps that true.
+                scene = read_scene(self._storage.scene_path(scene_id), self_contained=True)
+                self._scenes.put(scene_id, scene)
             with self._lock:
-                if scene_id in self._scenes:
-                    return self._scenes[scene_id]
-            from service.evaluation import read_scene
-
-            scene = read_scene(self._storage.scene_path(scene_id))
-            with self._lock:
-                self._scenes[scene_id] = scene
-                while len(self._scenes) > self._capacity:
-                    self._scenes.popitem(last=False)
                 self._loading.pop(scene_id, None)
             return scene
 
@@ -108,6 +112,7 @@ class JobManager:
     def __init__(
         self, storage: Storage, scenes: SceneCache, *, workers: int = 2, dask_scheduler: str | None = None,
         render_threads: int | None = None, ship_scenes: bool = True, eval_workers: int = 1,
+        eval_cache_max_bytes: int | None = None,
     ) -> None:
         self.storage = storage
         self.scenes = scenes
@@ -116,6 +121,7 @@ class JobManager:
         self.render_threads = render_threads
         self.eval_workers = eval_workers
         self.ship_scenes = ship_scenes
+        self.eval_cache_max_bytes = eval_cache_max_bytes
         self._queue: queue.Queue[str | None] = queue.Queue()
         self._threads: list[threading.Thread] = []
         self._cancel: dict[str, threading.Event] = {}
@@ -153,23 +159,25 @@ class JobManager:
             self._threads.append(t)
 
     def stop(self, timeout: float = 30.0) -> None:
+        """Stop at once: running jobs are interrupted (left queued, to resume at the next start) and the
+        evaluation workers stopped before anything waits on them, so no process outlives the service."""
         self._stopping.set()
         with self._cancel_lock:
             for ev in self._cancel.values():
                 ev.set()
         for _ in self._threads:
             self._queue.put(None)
+        with self._executor_lock:
+            if self._executor is not None:
+                try:
+                    self._executor.close()  # a job waiting on the pool sees it break and stops
+                except Exception:  # closing a remote client must not block shutdown
+                    log.exception("closing the executor failed")
+            self._executor = None
         deadline = time.monotonic() + timeout
         for t in self._threads:
             t.join(max(0.0, deadline - time.monotonic()))
         self._threads.clear()
-        with self._executor_lock:
-            if self._executor is not None and hasattr(self._executor, "close"):
-                try:
-                    self._executor.close()
-                except Exception:  # closing a remote client must not block shutdown
-                    log.exception("closing the executor failed")
-            self._executor = None
         with self._cache_lock:
             if self._cache is not None and hasattr(self._cache, "close"):
                 self._cache.close()
@@ -180,19 +188,26 @@ class JobManager:
             self.version += 1
             self._version_cond.notify_all()
 
-    def wait_change(self, seen: int, timeout: float) -> int:
-        """Block up to ``timeout`` seconds for any job event after ``seen``; returns the new version."""
-        with self._version_cond:
-            if self.version == seen:
-                self._version_cond.wait(timeout)
-            return self.version
-
     # -- requests from the API -----------------------------------------------------------------------
     def submit(self, *, scene_id: str, spec: dict[str, Any]) -> JobRecord:
         job = self.storage.create_job(scene_id=scene_id, spec=spec)
         self._queue.put(job.id)
         self._bump()
         return job
+
+    def delete_scene(self, *, scene_id: str) -> bool:
+        """Delete a scene with its finished jobs (Conflict while it has queued or running ones)."""
+        deleted = self.storage.delete_scene(scene_id=scene_id)
+        self.scenes.drop(scene_id)
+        if deleted:
+            self._bump()
+        return deleted
+
+    def delete_job(self, *, job_id: str) -> bool:
+        deleted = self.storage.delete_job(job_id=job_id)
+        if deleted:
+            self._bump()
+        return deleted
 
     def cancel(self, *, job_id: str) -> JobRecord | None:
         job = self.storage.request_cancel(job_id=job_id)
@@ -208,18 +223,17 @@ class JobManager:
     def executor(self) -> Any:
         """One executor for the whole service (a Dask client is expensive to make)."""
         with self._executor_lock:
+            if self._stopping.is_set():
+                raise JobCancelled  # never start workers for a service that is stopping
             if self._executor is None:
-                from service import executors
-
                 self._executor = executors.make_executor(self.dask_scheduler, self.eval_workers)
             return self._executor
 
     def eval_cache(self) -> Any:
         with self._cache_lock:
             if self._cache is None:
-                from service.eval_cache import EvalCache
-
-                self._cache = EvalCache(self.storage.eval_cache_path)
+                self._cache = EvalCache(self.storage.eval_cache_path, max_bytes=self.eval_cache_max_bytes,
+                                        protected=self.storage.active_scene_hashes)
             return self._cache
 
     # -- the worker ----------------------------------------------------------------------------------
@@ -271,14 +285,12 @@ class JobManager:
             self.storage.update_job(job_id=job.id, progress=p, elapsed_s=elapsed(), event=("progress", p))
             self._bump()
 
-        from service.evaluation import SceneHandle
-        from service.optimize import Cancelled
-
         try:
             # Workers get the scene file (its bytes too, for Dask workers without a shared disk) and load
             # it once each; in-process the handle holds the loaded scene.
             handle = SceneHandle(self.scenes.get(job.scene_id), path=self.storage.scene_path(job.scene_id),
-                                 ship_bytes=bool(self.dask_scheduler) and self.ship_scenes)
+                                 ship_bytes=bool(self.dask_scheduler) and self.ship_scenes,
+                                 self_contained=True)
             store = run_optimisation(
                 job.spec, scene=handle, cache=self.eval_cache(), executor=self.executor(),
                 progress=on_progress, should_cancel=should_cancel, threads=self.render_threads,
@@ -289,6 +301,9 @@ class JobManager:
             self._after_stop(job.id, elapsed())
             return
         except Exception as exc:
+            if should_cancel():  # e.g. the workers were stopped under it: an interruption, not a failure
+                self._after_stop(job.id, elapsed())
+                return
             log.exception("job %s failed", job.id)
             self._finish(job.id, "failed", error=f"{type(exc).__name__}: {exc}", elapsed_s=elapsed())
             return
@@ -309,17 +324,11 @@ class JobManager:
             self._bump()
 
 
-def is_terminal(state: str) -> bool:
-    return state in TERMINAL_STATES
-
-
 # -- the bridge to the optimiser (service.optimize and friends) ------------------------------------------
 def build_space(spec: dict[str, Any]) -> Any:
     """The job's ParameterSpace: the default space, each parameter named in ``space`` cut down to the
     given values (kept in the default order), and only ``parameters`` searched (others fixed at their
     maximum quality). Raises ValueError naming an unknown parameter or value."""
-    from service.params import Parameter, ParameterSpace, default_space
-
     base = default_space()
     wanted = spec.get("space") or {}
     unknown = sorted(set(wanted) - set(base.names))
@@ -351,8 +360,6 @@ def spec_options(spec: dict[str, Any]) -> dict[str, Any]:
     """The optimiser option values of a stored job request (``service.options`` names): requests keep
     every public option in ``options``; those stored by earlier versions kept the thresholds and the
     evaluation resolution apart and ran the options they lack as :data:`LEGACY_SPEC_DEFAULTS` says."""
-    from service import options
-
     values = dict(spec.get("options") or {})
     if "thresholds" in spec or "resolution" in spec:
         thresholds = spec.get("thresholds") or {}
@@ -365,8 +372,6 @@ def spec_options(spec: dict[str, Any]) -> dict[str, Any]:
 
 def validate_job_spec(spec: dict[str, Any]) -> None:
     """Checks that need the optimiser's definitions; raises ValueError naming the problem."""
-    from service.camera_path import CameraPath
-
     CameraPath.from_dict(spec["camera_path"])
     spec_options(spec)
     build_space(spec)
@@ -378,9 +383,6 @@ def run_optimisation(
 ) -> Any:
     """Turn a stored job request into the optimiser's inputs and run it; returns a ParetoStore.
     Raises ``service.optimize.Cancelled`` when ``should_cancel`` turns true."""
-    from service.camera_path import CameraPath
-    from service.optimize import OptimizeConfig, optimize_path
-
     path = CameraPath.from_dict(spec["camera_path"])
     config = OptimizeConfig(**spec_options(spec), profile=spec["profile"], fps=path.fps, threads=threads)
     return optimize_path(scene, path, build_space(spec), config, cache=cache, executor=executor,

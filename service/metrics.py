@@ -237,7 +237,7 @@ def flip(reference: Any, test: Any, pixels_per_degree: float = 67.0) -> float:
     if x.ndim != 3 or x.shape[2] != 3:
         raise ValueError("FLIP needs H x W x 3 images")
     try:
-        import flip_evaluator
+        import flip_evaluator  # lazy: an optional package (the test extra)
     except ImportError as exc:  # optional metric
         raise RuntimeError("FLIP needs the optional flip-evaluator package") from exc
     ref = np.ascontiguousarray(np.clip(x, 0, 1), dtype=np.float32)

@@ -10,11 +10,12 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import asdict, field, make_dataclass
+from dataclasses import field, make_dataclass
 from typing import Any
 
 import numpy as np
 
+import sim_core
 from service import options
 from service.camera_path import CameraPath
 from service.eval_cache import EvalCache
@@ -60,8 +61,6 @@ def resolve_space(scene: Any, space: ParameterSpace, path: CameraPath, threads: 
     The renders start from the space's maximum, its minimum and a middle setting, so settings that only
     adaptive modes read (similarity threshold, multi-rate) are tried where they can matter; the camera
     is the path's first frame."""
-    import sim_core
-
     mq = space.max_quality_indices()
     low = tuple(0 for _ in space.parameters)
     mid = tuple(len(p.values) // 2 for p in space.parameters)
@@ -154,6 +153,3 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, config: O
     }
     return builder.to_store(profile=config.profile, fps=config.fps, aspect=aspect, meta=meta)
 
-
-def options_dict(config: OptimizeConfig) -> dict[str, Any]:
-    return asdict(config)

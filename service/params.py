@@ -18,6 +18,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+import sim_core
 from service.store import (
     MAX_PARAMS,
     MAX_VALUES_PER_PARAM,
@@ -181,8 +182,6 @@ class ParameterSpace:
 
     def to_settings(self, indices: Sequence[int]) -> Any:
         """``sim_core.RenderSettings`` for a settings vector: max quality with this vector's fields."""
-        import sim_core
-
         base = sim_core.RenderSettings.max_quality()
         names = {f.name for f in dataclasses.fields(base)}
         flds = self.fields_of(indices)

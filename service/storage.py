@@ -10,12 +10,18 @@ Everything lives under one data directory so a restart (or a SIGKILL) loses noth
   the job tables' and vice versa);
 - ``tmp/``: uploads and previews in flight (emptied at start).
 
+Lifecycle: scenes, jobs and stores are listed newest first, a page at a time (:class:`Page`), and
+deleted on request, never while something still needs them (a scene with queued or running jobs, a
+running job: :class:`Conflict`); a finished job keeps only its last progress event.
+
 Connections are per thread (SQLite objects must not cross threads); WAL lets the API read while the job
 runner writes.
 """
 
 from __future__ import annotations
 
+import base64
+import binascii
 import hashlib
 import json
 import os
@@ -28,7 +34,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 SCHEMA_VERSION = 1
 DB_NAME = "service.sqlite3"
@@ -66,6 +72,9 @@ CREATE TABLE IF NOT EXISTS jobs (
     elapsed_s REAL NOT NULL DEFAULT 0
 );
 CREATE INDEX IF NOT EXISTS jobs_state ON jobs(state);
+CREATE INDEX IF NOT EXISTS jobs_scene ON jobs(scene_id);
+CREATE INDEX IF NOT EXISTS jobs_created ON jobs(created, id);
+CREATE INDEX IF NOT EXISTS scenes_created ON scenes(created, id);
 CREATE TABLE IF NOT EXISTS job_events (
     job_id TEXT NOT NULL REFERENCES jobs(id),
     seq INTEGER NOT NULL,
@@ -82,11 +91,38 @@ CREATE TABLE IF NOT EXISTS stores (
     size INTEGER NOT NULL,
     created REAL NOT NULL
 );
+CREATE INDEX IF NOT EXISTS stores_created ON stores(created, id);
 """
 
 
-class UploadTooLarge(Exception):
-    """The streamed body passed the configured size limit."""
+class Conflict(Exception):
+    """The operation would take away something that is still in use (the message says what)."""
+
+
+T = TypeVar("T")
+
+
+@dataclass(frozen=True)
+class Page(Generic[T]):
+    """One page of a listing, newest first; ``next_cursor`` asks for the following page (None: last)."""
+
+    items: list[T]
+    next_cursor: str | None
+
+
+def _encode_cursor(created: float, item_id: str) -> str:
+    return base64.urlsafe_b64encode(json.dumps([created, item_id]).encode()).decode().rstrip("=")
+
+
+def decode_cursor(cursor: str) -> tuple[float, str]:
+    """The position a cursor stands for; ValueError for anything this module did not make."""
+    try:
+        created, item_id = json.loads(base64.urlsafe_b64decode(cursor + "=" * (-len(cursor) % 4)))
+        if isinstance(created, bool) or not isinstance(created, int | float) or not isinstance(item_id, str):
+            raise ValueError
+        return float(created), item_id
+    except (ValueError, TypeError, binascii.Error, UnicodeDecodeError):
+        raise ValueError("invalid cursor (use the next_cursor of a previous page)") from None
 
 
 @dataclass(frozen=True)
@@ -257,18 +293,61 @@ class Storage:
 
     def get_scene(self, *, scene_id: str) -> SceneRecord | None:
         row = self._connection().execute("SELECT * FROM scenes WHERE id = ?", (scene_id,)).fetchone()
-        if row is None:
-            return None
+        return None if row is None else self._scene(row)
+
+    def _page(self, table: str, limit: int, cursor: str | None, where: str = "",
+              args: tuple[Any, ...] = (), columns: str = "*") -> tuple[list[sqlite3.Row], str | None]:
+        """Rows of ``table`` newest first (keyset pagination on created, id: stable while rows come and
+        go); ``where`` and ``args`` filter."""
+        if not 1 <= limit <= 1000:
+            raise ValueError("limit must be in 1..1000")
+        clauses, params = ([where], list(args)) if where else ([], [])
+        if cursor is not None:
+            clauses.append("(created, id) < (?, ?)")
+            params.extend(decode_cursor(cursor))
+        sql = (f"SELECT {columns} FROM {table} {'WHERE ' + ' AND '.join(clauses) if clauses else ''} "
+               "ORDER BY created DESC, id DESC LIMIT ?")
+        rows = self._connection().execute(sql, (*params, limit + 1)).fetchall()
+        more = len(rows) > limit
+        rows = rows[:limit]
+        return rows, (_encode_cursor(rows[-1]["created"], rows[-1]["id"]) if more else None)
+
+    @staticmethod
+    def _scene(row: sqlite3.Row) -> SceneRecord:
         return SceneRecord(
             id=row["id"], size=row["size"], content_hash=row["content_hash"], stats=json.loads(row["stats"]),
             inert=json.loads(row["inert"]), cameras=row["cameras"], created=row["created"],
         )
 
+    def list_scenes(self, *, limit: int = 100, cursor: str | None = None) -> Page[SceneRecord]:
+        rows, nxt = self._page("scenes", limit, cursor)
+        return Page([self._scene(r) for r in rows], nxt)
+
+    def delete_scene(self, *, scene_id: str) -> bool:
+        """Delete a scene, its file and its finished jobs (their stores stay: they are the results).
+        False if there is no such scene; Conflict while one of its jobs is queued or running."""
+        with self._write_lock, self._conn() as conn:
+            if conn.execute("SELECT 1 FROM scenes WHERE id = ?", (scene_id,)).fetchone() is None:
+                return False
+            active = conn.execute("SELECT COUNT(*) FROM jobs WHERE scene_id = ? AND state IN ('queued', "
+                                  "'running')", (scene_id,)).fetchone()[0]
+            if active:
+                raise Conflict(f"scene {scene_id!r} has {active} queued or running job(s); cancel them first")
+            conn.execute("DELETE FROM job_events WHERE job_id IN (SELECT id FROM jobs WHERE scene_id = ?)",
+                         (scene_id,))
+            conn.execute("DELETE FROM jobs WHERE scene_id = ?", (scene_id,))
+            conn.execute("DELETE FROM scenes WHERE id = ?", (scene_id,))
+        self.scene_path(scene_id).unlink(missing_ok=True)  # after the commit: a crash leaves a stray file
+        return True
+
     # -- jobs --------------------------------------------------------------------------------------
     def create_job(self, *, scene_id: str, spec: dict[str, Any]) -> JobRecord:
+        """Queue a job; KeyError if the scene does not exist (or was deleted a moment ago)."""
         job_id = uuid.uuid4().hex
         now = time.time()
         with self._write_lock, self._conn() as conn:
+            if conn.execute("SELECT 1 FROM scenes WHERE id = ?", (scene_id,)).fetchone() is None:
+                raise KeyError(scene_id)
             conn.execute(
                 "INSERT INTO jobs(id, scene_id, spec, state, created) VALUES (?, ?, ?, 'queued', ?)",
                 (job_id, scene_id, _dumps(spec), now),
@@ -300,6 +379,34 @@ class Storage:
             rows = conn.execute(f"SELECT * FROM jobs WHERE state IN ({marks}) ORDER BY created",
                                 states).fetchall()
         return [self._job(r) for r in rows]
+
+    def page_jobs(self, *, limit: int = 100, cursor: str | None = None, state: str | None = None,
+                  scene_id: str | None = None) -> Page[JobRecord]:
+        clauses, args = [], []
+        for column, value in (("state", state), ("scene_id", scene_id)):
+            if value is not None:
+                clauses.append(f"{column} = ?")
+                args.append(value)
+        rows, nxt = self._page("jobs", limit, cursor, " AND ".join(clauses), tuple(args))
+        return Page([self._job(r) for r in rows], nxt)
+
+    def delete_job(self, *, job_id: str) -> bool:
+        """Delete a finished job and its events (its store stays). False if there is no such job;
+        Conflict while it is queued or running."""
+        with self._write_lock, self._conn() as conn:
+            row = conn.execute("SELECT state FROM jobs WHERE id = ?", (job_id,)).fetchone()
+            if row is None:
+                return False
+            if row["state"] not in TERMINAL_STATES:
+                raise Conflict(f"job {job_id!r} is {row['state']}; cancel it first "
+                               "(POST /jobs/{id}/cancel)")
+            conn.execute("DELETE FROM job_events WHERE job_id = ?", (job_id,))
+            conn.execute("DELETE FROM jobs WHERE id = ?", (job_id,))
+        return True
+
+    def active_scene_hashes(self) -> list[str]:
+        """Content hashes of the scenes of queued or running jobs (their evaluations must be kept)."""
+        return [r[0] for r in self._connection().execute(_ACTIVE_SCENE_HASHES).fetchall()]
 
     def count_jobs(self) -> dict[str, int]:
         rows = self._connection().execute("SELECT state, COUNT(*) FROM jobs GROUP BY state").fetchall()
@@ -333,6 +440,8 @@ class Storage:
                 conn.execute(f"UPDATE jobs SET {', '.join(sets)} WHERE id = ?", (*args, job_id))
             if event is not None:
                 self._append_event(conn, job_id=job_id, kind=event[0], data=event[1])
+            if state in TERMINAL_STATES:
+                self._trim_events(conn, job_id)
 
     def claim_job(self, *, job_id: str) -> JobRecord | None:
         """Move a queued job to running (one attempt more) unless someone got there first (a cancel, another
@@ -361,6 +470,7 @@ class Storage:
                     (time.time(), job_id),
                 )
                 self._append_event(conn, job_id=job_id, kind="cancelled", data={"state": "cancelled"})
+                self._trim_events(conn, job_id)
             elif row["state"] == "running":
                 conn.execute("UPDATE jobs SET cancel_requested = 1 WHERE id = ?", (job_id,))
         return self.get_job(job_id=job_id)
@@ -376,6 +486,14 @@ class Storage:
             (job_id, seq, kind, _dumps(data), time.time()),
         )
         return int(seq)
+
+    @staticmethod
+    def _trim_events(conn: sqlite3.Connection, job_id: str) -> None:
+        """A finished job keeps its state changes and its last progress event (the log would otherwise
+        hold one row per progress update forever); sequence numbers stay as they were."""
+        conn.execute(
+            "DELETE FROM job_events WHERE job_id = ? AND kind = 'progress' AND seq < "
+            "(SELECT MAX(seq) FROM job_events WHERE job_id = ? AND kind = 'progress')", (job_id, job_id))
 
     def append_event(self, *, job_id: str, kind: str, data: dict[str, Any]) -> int:
         with self._write_lock, self._conn() as conn:
@@ -404,12 +522,45 @@ class Storage:
             )
         return store_id
 
+    @staticmethod
+    def _store(row: sqlite3.Row) -> StoreRecord:
+        return StoreRecord(id=row["id"], scene_id=row["scene_id"], job_id=row["job_id"],
+                           body=row["body"] if "body" in row.keys() else "", size=row["size"],
+                           created=row["created"])
+
     def get_store(self, *, store_id: str) -> StoreRecord | None:
         row = self._connection().execute("SELECT * FROM stores WHERE id = ?", (store_id,)).fetchone()
-        if row is None:
-            return None
-        return StoreRecord(id=row["id"], scene_id=row["scene_id"], job_id=row["job_id"], body=row["body"],
-                           size=row["size"], created=row["created"])
+        return None if row is None else self._store(row)
+
+    def list_stores(self, *, limit: int = 100, cursor: str | None = None,
+                    scene_id: str | None = None) -> Page[StoreRecord]:
+        """Stores without their bodies (``body`` is empty: fetch one with :meth:`get_store`)."""
+        where, args = ("scene_id = ?", (scene_id,)) if scene_id is not None else ("", ())
+        rows, nxt = self._page("stores", limit, cursor, where, args,
+                               columns="id, scene_id, job_id, size, created")
+        return Page([self._store(r) for r in rows], nxt)
+
+    def delete_store(self, *, store_id: str) -> bool:
+        """Delete a store (jobs that made it keep its id, and answer 404 for it from then on)."""
+        with self._write_lock, self._conn() as conn:
+            return conn.execute("DELETE FROM stores WHERE id = ?", (store_id,)).rowcount == 1
+
+
+_ACTIVE_SCENE_HASHES = ("SELECT DISTINCT s.content_hash FROM jobs j JOIN scenes s ON s.id = j.scene_id "
+                        "WHERE j.state IN ('queued', 'running')")
+
+
+def read_active_scene_hashes(data_dir: Path) -> list[str]:
+    """:meth:`Storage.active_scene_hashes` of a data directory a service may be using right now, read
+    without side effects (opening a :class:`Storage` would empty its tmp/)."""
+    path = Path(data_dir) / DB_NAME
+    if not path.is_file():
+        return []
+    conn = sqlite3.connect(f"file:{path}?mode=ro", uri=True, timeout=30.0)
+    try:
+        return [r[0] for r in conn.execute(_ACTIVE_SCENE_HASHES).fetchall()]
+    finally:
+        conn.close()
 
 
 def is_hex_id(value: str, length: int) -> bool:

@@ -208,7 +208,8 @@ class ServerProcess:
     """Real uvicorn in a child process (``python -m service.api.server``), killable with SIGKILL."""
 
     def __init__(self, data_dir: Path, *, host: str = "127.0.0.1", token: str | None = None,
-                 dask_scheduler: str | None = None, extra_env: dict[str, str] | None = None) -> None:
+                 dask_scheduler: str | None = None, extra_env: dict[str, str] | None = None,
+                 extra_args: list[str] | None = None) -> None:
         self.port = free_port()
         self.host = host
         self.base_url = f"http://127.0.0.1:{self.port}"
@@ -218,6 +219,7 @@ class ServerProcess:
             args += ["--token", token]
         if dask_scheduler:
             args += ["--dask-scheduler", dask_scheduler]
+        args += extra_args or []
         env = {**os.environ, **(extra_env or {})}
         self.proc = subprocess.Popen(args, cwd=REPO_ROOT, env=env, stdout=subprocess.PIPE,
                                      stderr=subprocess.STDOUT)

@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import os
+import sys
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -18,3 +21,19 @@ MODELS_DIR = REPO_ROOT / "assets" / "models"
 @pytest.fixture(scope="session")
 def models_dir() -> Path:
     return MODELS_DIR
+
+
+@pytest.fixture
+def opened_files() -> Iterator[list[str]]:
+    """Every file this process opens while the test runs (Python's ``open`` audit event), resolved; a
+    server started with ``api_support.server_thread`` runs in this process too."""
+    seen: list[str] = []
+    active = [True]
+
+    def hook(event: str, args: tuple[Any, ...]) -> None:
+        if active[0] and event == "open" and isinstance(args[0], str | bytes | os.PathLike):
+            seen.append(os.path.realpath(os.fsdecode(args[0])))
+
+    sys.addaudithook(hook)  # audit hooks cannot be removed: this one is switched off instead
+    yield seen
+    active[0] = False

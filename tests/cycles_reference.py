@@ -18,6 +18,9 @@ import tempfile
 from typing import Any
 
 import numpy as np
+from sim_core.image import linear_to_srgb
+
+from service.metrics import ssim
 
 ALBEDO = 0.8
 CAMERA_LOCATION = (0.0, -6.0, 4.5)
@@ -487,16 +490,11 @@ def simulator_artist(size: tuple[int, int] = (320, 180), settings: Any = None) -
 
 def display_luminance(linear: np.ndarray) -> float:
     """Mean Rec. 709 luma of the display image (the project's display transform, Blender's Standard view)."""
-    from service.evaluation import tone_map
-
-    return float((tone_map(linear) @ np.array([0.2126, 0.7152, 0.0722])).mean())
+    return float((linear_to_srgb(linear) @ np.array([0.2126, 0.7152, 0.0722])).mean())
 
 
 def fidelity(cycles: np.ndarray, simulated: np.ndarray) -> tuple[float, float]:
     """(mean display luminance ratio simulated / Cycles, 1 - SSIM of the display images), through the
-    project's error pipeline (``service.evaluation.tone_map``, ``service.metrics.ssim``)."""
-    from service.evaluation import tone_map
-    from service.metrics import ssim
-
+    project's error pipeline (``sim_core.image.linear_to_srgb``, ``service.metrics.ssim``)."""
     ratio = display_luminance(simulated) / display_luminance(cycles)
-    return ratio, 1.0 - ssim(tone_map(cycles), tone_map(simulated), data_range=1.0)
+    return ratio, 1.0 - ssim(linear_to_srgb(cycles), linear_to_srgb(simulated), data_range=1.0)

@@ -410,3 +410,24 @@ def test_panel_and_preferences_refer_to_existing_properties(ext) -> None:
         if isinstance(node, ast.Call) and getattr(node.func, "attr", "") == "operator":
             idname = node.args[0].value
             getattr(getattr(bpy.ops, idname.split(".")[0]), idname.split(".")[1]).get_rna_type()
+
+
+def test_the_one_export_carries_the_extras_the_simulator_reads(scene, tmp_path) -> None:
+    """The one glTF export (the scene generators' scene.glb) keeps custom properties as glTF extras: the
+    environment colour and a light's radius reach sim_core's loader; the add-on's own settings group,
+    store included, stays out of the file."""
+    from sim_core.loaders import load_gltf
+
+    turning_camera(scene, 6)
+    add_cube(scene)
+    bpy.ops.render_budget.record_path_animation()
+    scene["render_budget_environment"] = [0.2, 0.3, 0.4]
+    lamp = bpy.data.lights.new("Lamp", "POINT")
+    lamp["render_budget_radius"] = 0.25
+    scene.collection.objects.link(bpy.data.objects.new("Lamp", lamp))
+    _load_store(tmp_path)
+    glb = ext_module("scene_export").export_glb(scene, tmp_path / "scene.glb")
+    data = load_gltf(glb)
+    assert np.allclose(data.environment, [0.2, 0.3, 0.4])
+    assert [light.radius for light in data.lights] == [pytest.approx(0.25)]
+    assert b"render_budget_store" not in glb.read_bytes() and b"frontiers" not in glb.read_bytes()

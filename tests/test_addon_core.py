@@ -42,25 +42,30 @@ def test_core_imports_without_bpy() -> None:
 
 
 # -- path maths -------------------------------------------------------------------------------------------
+def _angles(lens: float = 50.0, sensor_w: float = 36.0, sensor_h: float = 24.0) -> tuple[float, float]:
+    return 2 * math.atan(sensor_w / (2 * lens)), 2 * math.atan(sensor_h / (2 * lens))
+
+
 def test_vertical_fov_matches_sensor_geometry() -> None:
     # 50 mm on a 36 mm sensor, 16:9: horizontal fov from the width, vertical from the aspect
-    h = 2 * math.atan(18 / 50)
-    v = vertical_fov(50, 36, 24, "AUTO", 1920, 1080)
-    assert v == pytest.approx(2 * math.atan(math.tan(h / 2) * 1080 / 1920))
+    h, v_sensor = _angles()
+    v = vertical_fov(h, v_sensor, "AUTO", 1920, 1080)
+    assert v == pytest.approx(2 * math.atan(18 / 50 * 1080 / 1920))
     # portrait with AUTO: the sensor width fits the larger (vertical) side
-    assert vertical_fov(50, 36, 24, "AUTO", 1080, 1920) == pytest.approx(h)
-    assert vertical_fov(50, 36, 24, "VERTICAL", 1920, 1080) == pytest.approx(2 * math.atan(12 / 50))
-    assert vertical_fov(50, 36, 24, "HORIZONTAL", 1080, 1920) == pytest.approx(
+    assert vertical_fov(h, v_sensor, "AUTO", 1080, 1920) == pytest.approx(h)
+    assert vertical_fov(h, v_sensor, "VERTICAL", 1920, 1080) == pytest.approx(2 * math.atan(12 / 50))
+    assert vertical_fov(h, v_sensor, "HORIZONTAL", 1080, 1920) == pytest.approx(
         2 * math.atan(math.tan(h / 2) * 1920 / 1080))
     # non-square pixels widen the displayed image
-    square = vertical_fov(50, 36, 24, "AUTO", 1000, 1000)
-    assert vertical_fov(50, 36, 24, "AUTO", 1000, 1000, 2.0, 1.0) < square
+    square = vertical_fov(h, v_sensor, "AUTO", 1000, 1000)
+    assert vertical_fov(h, v_sensor, "AUTO", 1000, 1000, 2.0, 1.0) < square
 
 
-@pytest.mark.parametrize("bad", [dict(lens_mm=0), dict(lens_mm=math.nan), dict(width=0),
-                                 dict(sensor_fit="X")])
+@pytest.mark.parametrize("bad", [dict(angle_x=0.0), dict(angle_x=math.nan), dict(angle_y=math.pi),
+                                 dict(width=0), dict(sensor_fit="X")])
 def test_vertical_fov_rejects_bad_input(bad: dict) -> None:
-    args = dict(lens_mm=50, sensor_width_mm=36, sensor_height_mm=24, sensor_fit="AUTO", width=64, height=48)
+    h, v = _angles()
+    args = dict(angle_x=h, angle_y=v, sensor_fit="AUTO", width=64, height=48)
     args.update(bad)
     with pytest.raises(ValueError):
         vertical_fov(**args)

@@ -5,6 +5,7 @@ thread path and cancel, previews, and headless batch runs writing a report."""
 
 from __future__ import annotations
 
+import csv
 import importlib
 import json
 import math
@@ -237,9 +238,14 @@ def test_preview_renders_into_an_image(ext, fmt: str) -> None:
 
 
 def _batch(args: list[str], tmp: Path) -> subprocess.CompletedProcess:
-    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp / "user"))
-    return subprocess.run([sys.executable, "-m", "addon.batch", *args], cwd=REPO_ROOT, capture_output=True,
+    """A batch run with its own temp dir, which it must leave without render-budget folders."""
+    system_tmp = tmp / "system-tmp"
+    system_tmp.mkdir(exist_ok=True)
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp / "user"), TMPDIR=str(system_tmp))
+    proc = subprocess.run([sys.executable, "-m", "addon.batch", *args], cwd=REPO_ROOT, capture_output=True,
                           text=True, env=env, timeout=900, check=False)
+    assert list(system_tmp.glob("render-budget-*")) == [], proc.stdout + proc.stderr
+    return proc
 
 
 def test_batch_evaluate_and_playback_write_reports(optimized, service, tmp_path) -> None:
@@ -248,11 +254,22 @@ def test_batch_evaluate_and_playback_write_reports(optimized, service, tmp_path)
                    "--frame-step", "4", "--budget-mode", "error", "--budget", "0.05"], tmp_path)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "evaluate [" in proc.stdout and "Avg. Power (W)" in proc.stdout
-    for name in ("report.md", "per_frame.csv", "power_over_time.png", "error_over_time.png", "store.json"):
+    # the same report folder as `make demo` (one campaign module): both budget modes, summary, PNG + EXR
+    for name in ("report.md", "per_frame.csv", "power_over_time.png", "error_over_time.png", "store.json",
+                 "summary.json"):
         assert (out / name).is_file(), name
-    rows = (out / "per_frame.csv").read_text().splitlines()
-    assert len(rows) == 1 + 4 * 5  # 4 frames x (ours + 4 presets)
-    assert len(list((out / "frames").glob("*.png"))) >= 4
+    with (out / "per_frame.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 4 * 6  # 4 frames x (4 presets + ours under the power and under the error budget)
+    assert {r["mode"] for r in rows} == {"max", "max_mid", "mid_min", "min", "ours_power", "ours_error"}
+    assert sorted({int(r["frame"]) for r in rows}) == [0, 4, 8, 12]  # path indices, as in the demo
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["error_budget"] == pytest.approx(0.05) and summary["frames_evaluated"] == 4
+    assert summary["power_budget_w"] == pytest.approx(2.0)  # the scene's power budget (given)
+    samples = sorted(p.name for p in (out / "frames").iterdir())
+    assert samples[:2] == ["frame00000_max.exr", "frame00000_max.png"]
+    assert {p.rsplit(".", 1)[1] for p in samples} == {"png", "exr"} and len(samples) == 3 * 4 * 2
+    assert "Time per phase" in (out / "report.md").read_text()
     csv_out = tmp_path / "play.csv"
     proc = _batch(["--blend", str(optimized), "playback", "--out", str(csv_out)], tmp_path)
     assert proc.returncode == 0, proc.stderr

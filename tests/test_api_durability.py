@@ -4,12 +4,14 @@ each compared with an uninterrupted in-process run of the same request."""
 from __future__ import annotations
 
 import json
+import signal
 import sqlite3
 import time
 from pathlib import Path
 from typing import Any
 
 import httpx
+import psutil
 import pytest
 from api_support import ServerProcess, server_thread, sse_events, teapot_scene_glb, tiny_job
 
@@ -52,17 +54,51 @@ def comparable(store_json: str) -> dict[str, Any]:
     return doc
 
 
-def durable_spec(scene_id: str, sampling: str = "aimed") -> dict[str, Any]:
-    """A job long enough to be killed mid-way: the paper's view cubes (48 root views, then a split) do
-    more work on this 3-frame path than path sampling, which needs only the frames' few samples."""
+def small_spec(scene_id: str, sampling: str = "aimed") -> dict[str, Any]:
+    """The paper's view cubes (48 root views, then a split): more work on this 3-frame path than path
+    sampling, which needs only the frames' few samples."""
     spec = tiny_job(scene_id, resolution=(24, 18), depth_values=(0, 1, 2))
     spec["options"]["max_depth"] = 1
     spec["options"]["view_sampling"] = sampling
     return spec
 
 
+def durable_spec(scene_id: str) -> dict[str, Any]:
+    """A job long enough to be killed mid-way every time: 576 evaluations at 96x72 (a few seconds, many
+    committed batches), where the small job is over in about half a second."""
+    spec = small_spec(scene_id)
+    spec["options"].update(eval_width=96, eval_height=72)
+    spec["space"]["shadow_samples"] = [0, 1]
+    spec["parameters"].append("shadow_samples")
+    return spec
+
+
 def path_spec(scene_id: str) -> dict[str, Any]:
-    return durable_spec(scene_id, "path")
+    return small_spec(scene_id, "path")
+
+
+def descendants(pid: int) -> list[psutil.Process]:
+    return psutil.Process(pid).children(recursive=True)
+
+
+def wait_gone(processes: list[psutil.Process], timeout: float = 15.0) -> list[psutil.Process]:
+    """The processes still alive after ``timeout`` s (zombies count as gone: an orphan's zombie waits
+    for whoever reaps orphans here, it renders nothing and holds no memory)."""
+    deadline = time.monotonic() + timeout
+    alive = processes
+    while alive and time.monotonic() < deadline:
+        time.sleep(0.1)
+        alive = [p for p in alive if p.is_running() and p.status() != psutil.STATUS_ZOMBIE]
+    return alive
+
+
+def wait_for_evaluations(data_dir: Path, at_least: int, srv: ServerProcess, timeout: float = 120.0) -> int:
+    """Poll the evaluation cache file (nothing else in the loop, so the poll keeps up with the job)."""
+    deadline = time.monotonic() + timeout
+    while (n := cached_evaluations(data_dir)) < at_least:
+        assert time.monotonic() < deadline and srv.proc.poll() is None, srv.output()
+        time.sleep(0.005)
+    return n
 
 
 def run_uninterrupted(data_dir: Path, spec_of: Any, **settings: Any) -> tuple[dict[str, Any], str, int]:
@@ -85,11 +121,7 @@ def test_sigkill_mid_job_resumes_without_redoing_work(tmp_path: Path) -> None:
         c = httpx.Client(base_url=srv.base_url, timeout=60)
         scene = c.post("/scenes", content=teapot_scene_glb(), headers=GLB).json()
         job = c.post("/jobs", json=durable_spec(scene["id"])).json()
-        deadline = time.monotonic() + 120
-        while cached_evaluations(crash_dir) < 10:  # some evaluations are committed, the job is not done
-            assert time.monotonic() < deadline, srv.output()
-            assert c.get(f"/jobs/{job['id']}").json()["state"] in ("queued", "running")
-            time.sleep(0.02)
+        wait_for_evaluations(crash_dir, 1, srv)  # the first batch is committed: kill now
     finally:
         srv.kill()
     assert job_state_on_disk(crash_dir, job["id"]) == "running"
@@ -152,3 +184,27 @@ def test_process_pool_service_gives_the_in_process_store(tmp_path: Path) -> None
     doc = json.loads(pool_store)
     assert doc["meta"]["executor"] == "process-pool" and doc["meta"]["view_sampling"] == "path"
     assert "frontier_eyes" in doc and "frontier_dirs" in doc
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("signal_name", ["SIGKILL", "SIGTERM"])
+def test_the_evaluation_workers_die_with_the_service(tmp_path: Path, signal_name: str) -> None:
+    """--eval-workers 2 mid-job: killed (SIGKILL: no chance to clean up) or stopped (SIGTERM), the
+    service leaves no process behind: neither its pool workers nor multiprocessing's resource tracker."""
+    srv = ServerProcess(tmp_path, extra_args=["--eval-workers", "2"]).wait_healthy()
+    try:
+        c = httpx.Client(base_url=srv.base_url, timeout=60)
+        scene = c.post("/scenes", content=teapot_scene_glb(), headers=GLB).json()
+        job = c.post("/jobs", json=durable_spec(scene["id"])).json()
+        wait_for_evaluations(tmp_path, 1, srv)
+        children = descendants(srv.proc.pid)
+        workers = [p for p in children if "multiprocessing" in " ".join(p.cmdline())]
+        assert len(workers) >= 3, [p.cmdline() for p in children]  # 2 workers + the resource tracker
+        srv.proc.send_signal(getattr(signal, signal_name))
+        srv.proc.wait(30)
+    finally:
+        srv.kill()
+    assert wait_gone(children) == []
+    if signal_name == "SIGTERM":  # a clean stop (uvicorn re-raises the signal once it has shut down)
+        assert srv.proc.returncode in (0, -signal.SIGTERM), srv.output()
+        assert job_state_on_disk(tmp_path, job["id"]) == "queued"  # interrupted: resumes at the next start

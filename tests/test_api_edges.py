@@ -169,6 +169,16 @@ def test_wrong_types_are_422(client: httpx.Client) -> None:
     assert any("vfov" in d["loc"] for d in err["details"])
 
 
+def test_booleans_and_texts_are_not_numbers(client: httpx.Client) -> None:
+    """Found by the fuzzer: a lax parser read ``false`` as 0.0 where the schema says number."""
+    for position in ([0, 0, False], [0, 0, "1"]):
+        r = client.post("/stores/" + "f" * 32 + "/query",
+                        json={"position": position, "direction": [0, 1, 0], "error_budget": 0.1})
+        assert_error(r, 422, "position")
+    body = {"scene_id": "a" * 64, "camera_path": camera_path(), "resolution": [True, 32]}
+    assert_error(client.post("/jobs", json=body), 422, "resolution")
+
+
 def test_non_finite_numbers_are_422(client: httpx.Client) -> None:
     # Python's json accepts NaN/Infinity literals; the schemas must not.
     body = b'{"position": [0, NaN, 0], "error_budget": 0.1}'

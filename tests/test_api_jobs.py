@@ -140,9 +140,16 @@ def test_job_end_to_end_events_store_and_query(client: httpx.Client, finished: d
 
 
 def test_events_can_be_replayed_after_the_end(client: httpx.Client, finished: dict[str, Any]) -> None:
+    """A finished job's log keeps its state changes and its last progress event (trimmed at the end)."""
     job = finished["job"]
+    live = finished["events"]
+    last_progress = max(d["seq"] for k, d in live if k == "progress")
+    kept = [(k, d) for k, d in live if k != "progress" or d["seq"] == last_progress]
     again = sse_events(client, f"/jobs/{job['id']}/events")
-    assert [k for k, _ in again] == [k for k, _ in finished["events"]]
+    assert [(k, d["seq"]) for k, d in again] == [(k, d["seq"]) for k, d in kept]
+    assert again[-2][1] == kept[-2][1]  # the last progress, unchanged
+    assert [k for k, _ in again].count("progress") == 1
+    assert again[-1][1]["seq"] > len(again)  # earlier progress events are gone, numbers unchanged
     last_two = finished["events"][-2][1]["seq"]
     tail = []
     with client.stream("GET", f"/jobs/{job['id']}/events", headers={"Last-Event-ID": str(last_two)}) as r:
@@ -191,7 +198,7 @@ def test_two_concurrent_jobs_and_queries_during_them(client: httpx.Client, scene
 
 
 def test_cancel_mid_job(client: httpx.Client, scene: dict[str, Any]) -> None:
-    spec = tiny_job(scene["id"], resolution=(40, 30), depth_values=(0, 1, 2))
+    spec = tiny_job(scene["id"], resolution=(160, 120), depth_values=(0, 1, 2))
     # the paper's view cubes split twice: far more work than this 3-frame path's few path samples, so
     # the job is still running when the cancel arrives
     spec["options"].update(max_depth=2, view_sampling="aimed")
@@ -201,17 +208,18 @@ def test_cancel_mid_job(client: httpx.Client, scene: dict[str, Any]) -> None:
     while client.get(f"/jobs/{job['id']}").json()["progress"]["evaluations"] == 0:
         assert time.monotonic() < deadline
         time.sleep(0.02)
-    r = client.delete(f"/jobs/{job['id']}")
+    assert client.delete(f"/jobs/{job['id']}").status_code == 409  # running: cancel first
+    r = client.post(f"/jobs/{job['id']}/cancel")
     assert r.status_code == 200 and r.json()["cancel_requested"] is True
     events = sse_events(client, f"/jobs/{job['id']}/events")
     assert events[-1][0] == "cancelled"
     final = client.get(f"/jobs/{job['id']}").json()
     assert final["state"] == "cancelled" and final["store_id"] is None
-    assert client.delete(f"/jobs/{job['id']}").status_code == 200  # idempotent
+    assert client.post(f"/jobs/{job['id']}/cancel").status_code == 200  # idempotent
 
 
 def test_cancel_of_a_finished_job_is_409(client: httpx.Client, finished: dict[str, Any]) -> None:
-    r = client.delete(f"/jobs/{finished['job']['id']}")
+    r = client.post(f"/jobs/{finished['job']['id']}/cancel")
     assert r.status_code == 409 and r.json()["error"]["code"] == "conflict"
 
 
@@ -259,6 +267,12 @@ def test_evaluate_reference_and_cheap_settings(client: httpx.Client, scene: dict
                                            "settings": {"sampling": "undersample_4x4", "max_depth": 0,
                                                         "shadow_samples": 0, "ao_samples": 0}}).json()
     assert 0.0 < cheap["error"] < 1.0 and cheap["power_w"] < best["power_w"]
+    # power for a bigger frame (the path's, as stores predict it): static stays, dynamic scales by pixels
+    big = client.post("/evaluate", json={"scene_id": scene["id"], "camera": camera(),
+                                         "power_resolution": [320, 240]}).json()
+    static_w = best["breakdown"]["energy_j.static"] * 30.0
+    assert big["power_w"] - static_w == pytest.approx(100 * (best["power_w"] - static_w), rel=1e-9)
+    assert big["error"] == 0.0 and big["breakdown"]["pixel_ratio"] == 100.0
     r = client.post("/evaluate", json={"scene_id": scene["id"], "camera": camera(),
                                        "settings": {"max_depth": 7}})
     assert r.status_code == 422 and "max_depth" in r.json()["error"]["message"]
@@ -266,44 +280,47 @@ def test_evaluate_reference_and_cheap_settings(client: httpx.Client, scene: dict
     assert r.status_code == 404
 
 
-def test_query_fast_path_matches_the_fastapi_route(client: httpx.Client, finished: dict[str, Any],
-                                                   tmp_path: Path) -> None:
-    from service.storage import Storage
+def test_query_answers_like_the_store_and_fails_like_every_route(client: httpx.Client,
+                                                                  finished: dict[str, Any]) -> None:
+    """The one query route (served without FastAPI's parameter solving) gives the lookup's answers and
+    the validation errors, statuses and shapes of any other route."""
+    from service.api.routes.stores import answer_query
+    from service.api.schemas import StoreQuery
 
     store_id = finished["job"]["store_id"]
-    body = client.get(f"/stores/{store_id}").text
-    storage = Storage(tmp_path)
-    assert storage.put_store(scene_id="0" * 64, job_id="copy", body=body) == store_id
-    storage.close()
+    store = ParetoStore.from_json(client.get(f"/stores/{store_id}").text)
     rng = np.random.default_rng(3)
-    queries: list[Any] = []
     for _ in range(12):
         q: dict[str, Any] = {"position": rng.uniform(-4, 4, 3).tolist(),
                              "direction": rng.normal(size=3).tolist(), "fov": float(rng.uniform(0.3, 1.2))}
-        q["power_budget_w" if rng.random() < 0.5 else "error_budget"] = float(rng.uniform(0, 1))
-        queries.append(q)
-    n = len(ParetoStore.from_json(body).parameters)
-    queries.append({**queries[0], "previous": {"indices": [0] * n, "elapsed_s": 0.7}})
-    queries.append({**queries[0], "previous": {"indices": [15] * n, "elapsed_s": 0.7}})  # out of range
-    queries.append({**queries[0], "error_budget": 0.1, "power_budget_w": 1.0})
-    queries.append({"position": "here", "error_budget": 0.1})
-    raw = [b'{"position": [0, NaN, 0], "error_budget": 0.1}', b'{"position": [0, 0', b"[]"]
-    with server_thread(Settings(data_dir=tmp_path, query_fast_path=False, job_workers=1)) as slow_url, \
-            httpx.Client(base_url=slow_url) as slow:
-        for target in (store_id, "f" * 32):
-            for q in queries:
-                a = client.post(f"/stores/{target}/query", json=q)
-                b = slow.post(f"/stores/{target}/query", json=q)
-                assert a.status_code == b.status_code, (q, a.text, b.text)
-                if a.status_code == 200:
-                    assert a.json() == b.json()
-                else:
-                    assert a.json()["error"]["code"] == b.json()["error"]["code"]
-            for data in raw:
-                headers = {"Content-Type": "application/json"}
-                a = client.post(f"/stores/{target}/query", content=data, headers=headers)
-                b = slow.post(f"/stores/{target}/query", content=data, headers=headers)
-                assert a.status_code == b.status_code == 422, (data, a.text, b.text)
+        q["power_budget_w" if rng.random() < 0.5 else "error_budget"] = float(rng.uniform(0.01, 1))
+        r = client.post(f"/stores/{store_id}/query", json=q)
+        assert r.status_code == 200, r.text
+        assert r.json() == answer_query(store, StoreQuery.model_validate(q)).model_dump(mode="json")
+    n = len(store.parameters)
+    base = {"position": [0, -3, 1.5], "direction": [0, 1, -0.3], "error_budget": 0.1}
+    for body, status, field in (
+            ({**base, "previous": {"indices": [15] * n, "elapsed_s": 0.7}}, 422, None),
+            ({**base, "power_budget_w": 1.0}, 422, None),
+            ({"position": "here", "error_budget": 0.1}, 422, "position"),
+            ({**base, "direction": [0, 0, 0]}, 422, None)):
+        r = client.post(f"/stores/{store_id}/query", json=body)
+        assert r.status_code == status, (body, r.text)
+        err = r.json()["error"]
+        assert err["code"] == "validation_error" and err["message"]
+        if field is not None:
+            assert any(d["loc"][:2] == ["body", field] for d in err["details"]), err
+    valid = b'{"position": [0, 0, 0], "direction": [0, 1, 0], "error_budget": 0.1}'
+    for data, ctype in ((b'{"position": [0, NaN, 0], "error_budget": 0.1}', "application/json"),
+                        (b'{"position": [0, 0', "application/json"), (b"[]", "application/json"),
+                        (valid, "text/plain")):
+        r = client.post(f"/stores/{store_id}/query", content=data, headers={"Content-Type": ctype})
+        assert r.status_code == 422 and set(r.json()["error"]) == {"status", "code", "message", "details"}
+    r = client.post("/stores/" + "f" * 32 + "/query", json=base)
+    assert r.status_code == 404 and r.json()["error"]["code"] == "not_found"
+    paths = client.get("/openapi.json").json()["paths"]
+    assert paths["/stores/{store_id}/query"]["post"]["requestBody"]["content"]["application/json"]["schema"] \
+        == {"$ref": "#/components/schemas/StoreQuery"}
 
 
 def test_extreme_but_finite_orientations_are_answered(client: httpx.Client, finished: dict[str, Any]) -> None:
@@ -319,3 +336,24 @@ def test_extreme_but_finite_orientations_are_answered(client: httpx.Client, fini
     a = client.post(url, json={"position": [0, -3, 1.5], "matrix": m, "power_budget_w": 1.0})
     b = client.post(url, json={"position": [0, -3, 1.5], "matrix": scaled, "power_budget_w": 1.0})
     assert a.status_code == b.status_code == 200 and a.json() == b.json()
+
+
+def test_an_idle_event_stream_sends_keepalives_and_ends_cleanly(tmp_path: Path) -> None:
+    """A queued job's stream stays open with comment lines until the job ends (here: cancelled)."""
+    with server_thread(Settings(data_dir=tmp_path, job_workers=1, sse_keepalive_s=0.2)) as url, \
+            httpx.Client(base_url=url, timeout=60) as c:
+        scene = c.post("/scenes", content=teapot_scene_glb(), headers=GLB).json()["id"]
+        busy = tiny_job(scene, resolution=(96, 72), depth_values=(0, 1, 2))
+        busy["options"].update(max_depth=1, view_sampling="aimed")
+        first = c.post("/jobs", json=busy).json()
+        waiting = c.post("/jobs", json=tiny_job(scene)).json()  # queued behind the first
+        lines: list[str] = []
+        with c.stream("GET", f"/jobs/{waiting['id']}/events") as r:
+            assert r.headers["content-type"].startswith("text/event-stream")
+            for line in r.iter_lines():
+                lines.append(line)
+                if lines.count(": keepalive") == 2:
+                    for job in (waiting, first):
+                        assert c.post(f"/jobs/{job['id']}/cancel").status_code == 200
+        assert lines[:2] == ["id: 1", "event: queued"]
+        assert "event: cancelled" in lines and lines.count(": keepalive") >= 2  # and then the stream ended

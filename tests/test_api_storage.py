@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from service.jobs import JobManager, SceneCache, progress_dict
-from service.storage import Storage, is_hex_id
+from service.storage import Conflict, Storage, is_hex_id
 
 SCENE = "ab" * 32
 
@@ -61,10 +61,14 @@ def test_job_events_are_ordered_and_atomic_with_state(storage: Storage) -> None:
         t.start()
     for t in threads:
         t.join()
-    storage.update_job(job_id=job.id, state="done", store_id="s", event=("done", {"state": "done"}))
     events = storage.events_after(job_id=job.id)
-    assert [e.seq for e in events] == list(range(1, 83))
-    assert events[0].kind == "queued" and events[-1].kind == "done"
+    assert [e.seq for e in events] == list(range(1, 82)) and events[0].kind == "queued"
+    assert sorted(e.data["i"] for e in events[1:] if e.data["writer"] == 2) == list(range(20))
+    storage.update_job(job_id=job.id, state="done", store_id="s", event=("done", {"state": "done"}))
+    # The finished job keeps its state changes and its last progress event, numbers unchanged.
+    assert [(e.seq, e.kind) for e in storage.events_after(job_id=job.id)] == [
+        (1, "queued"), (81, "progress"), (82, "done")]
+    assert storage.events_after(job_id=job.id)[1].data == events[-1].data
     assert [e.seq for e in storage.events_after(job_id=job.id, after_seq=80)] == [81, 82]
     assert storage.get_job(job_id=job.id).state == "done"
     with pytest.raises(ValueError):  # NaN never reaches the database
@@ -133,3 +137,71 @@ def test_claim_is_exclusive_and_loses_to_a_cancel(storage: Storage) -> None:
     storage.request_cancel(job_id=other.id)
     assert storage.claim_job(job_id=other.id) is None
     assert storage.get_job(job_id=other.id).state == "cancelled"
+
+
+def test_listings_are_newest_first_in_stable_pages(storage: Storage) -> None:
+    jobs = [storage.create_job(scene_id=SCENE, spec={"n": i}) for i in range(7)]
+    seen, cursor = [], None
+    while True:
+        page = storage.page_jobs(limit=3, cursor=cursor)
+        seen += [j.id for j in page.items]
+        if page.next_cursor is None:
+            break
+        cursor = page.next_cursor
+        storage.create_job(scene_id=SCENE, spec={"late": True})  # newer rows never shift later pages
+    assert seen == [j.id for j in reversed(jobs)]
+    storage.update_job(job_id=jobs[0].id, state="done")
+    assert [j.id for j in storage.page_jobs(state="done").items] == [jobs[0].id]
+    assert storage.page_jobs(scene_id="cd" * 32).items == []
+    for bad in ("garbage", "W10", "WyJ4IiwgMV0", "W251bGwsICJhIl0"):  # not ours, [], ["x", 1], [null, "a"]
+        with pytest.raises(ValueError, match="cursor"):
+            storage.page_jobs(cursor=bad)
+    with pytest.raises(ValueError):
+        storage.list_scenes(limit=0)
+    assert [s.id for s in storage.list_scenes().items] == [SCENE]
+
+
+def test_deleting_a_scene_waits_for_its_jobs_and_keeps_its_stores(storage: Storage) -> None:
+    path = storage.scene_path(SCENE)
+    path.write_bytes(b"glTF")
+    job = storage.create_job(scene_id=SCENE, spec={})
+    storage.append_event(job_id=job.id, kind="progress", data={})
+    with pytest.raises(Conflict, match="queued or running"):
+        storage.delete_scene(scene_id=SCENE)
+    storage.update_job(job_id=job.id, state="running")
+    with pytest.raises(Conflict):
+        storage.delete_scene(scene_id=SCENE)
+    store = storage.put_store(scene_id=SCENE, job_id=job.id, body="{}")
+    storage.update_job(job_id=job.id, state="done", store_id=store)
+    assert storage.delete_scene(scene_id=SCENE) is True
+    assert storage.get_scene(scene_id=SCENE) is None and not path.exists()
+    assert storage.get_job(job_id=job.id) is None and storage.events_after(job_id=job.id) == []
+    assert storage.get_store(store_id=store).body == "{}"  # the result outlives its scene
+    assert storage.delete_scene(scene_id=SCENE) is False
+    with pytest.raises(KeyError):  # a job for a scene that is gone
+        storage.create_job(scene_id=SCENE, spec={})
+
+
+def test_deleting_jobs_and_stores(storage: Storage) -> None:
+    job = storage.create_job(scene_id=SCENE, spec={})
+    with pytest.raises(Conflict, match="cancel it first"):
+        storage.delete_job(job_id=job.id)
+    storage.request_cancel(job_id=job.id)
+    assert storage.delete_job(job_id=job.id) is True and storage.get_job(job_id=job.id) is None
+    assert storage.delete_job(job_id=job.id) is False
+    store = storage.put_store(scene_id=SCENE, job_id="j", body='{"x": 1}')
+    listed = storage.list_stores().items
+    assert [s.id for s in listed] == [store] and listed[0].body == "" and listed[0].size == 8
+    assert storage.delete_store(store_id=store) is True and storage.get_store(store_id=store) is None
+    assert storage.delete_store(store_id=store) is False
+
+
+def test_active_scene_hashes_name_what_eviction_must_keep(storage: Storage) -> None:
+    other = "ef" * 32
+    storage.add_scene(scene_id=other, size=1, content_hash="d", stats={}, inert={}, cameras=0)
+    a = storage.create_job(scene_id=SCENE, spec={})
+    b = storage.create_job(scene_id=other, spec={})
+    assert sorted(storage.active_scene_hashes()) == ["c", "d"]
+    storage.update_job(job_id=a.id, state="done")
+    storage.update_job(job_id=b.id, state="running")
+    assert storage.active_scene_hashes() == ["d"]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -71,8 +72,48 @@ def test_bad_arguments(argv) -> None:
 
 def test_serve_flags() -> None:
     args = cli.build_parser().parse_args(["serve", "--host", "0.0.0.0", "--port", "9000", "--data-dir", "d",
-                                          "--dask-scheduler", "tcp://h:8786", "--token", "t"])
-    assert (args.host, args.port, str(args.data_dir), args.dask_scheduler, args.token) == (
-        "0.0.0.0", 9000, "d", "tcp://h:8786", "t")
-    d = cli.build_parser().parse_args(["serve"])
-    assert (d.host, d.port, d.token) == ("127.0.0.1", 8765, None)
+                                          "--dask-scheduler", "tcp://h:8786", "--token", "t",
+                                          "--allowed-hosts", "a.example,b.example"])
+    assert cli.serve_overrides(args) == {
+        "host": "0.0.0.0", "port": 9000, "data_dir": Path("d"), "dask_scheduler": "tcp://h:8786",
+        "token": "t", "allowed_hosts": "a.example,b.example"}
+    # Options not given are not settings at all: RENDER_BUDGET_* variables keep their say.
+    assert cli.serve_overrides(cli.build_parser().parse_args(["serve"])) == {}
+
+
+@pytest.mark.parametrize("text,size", [("4096", 4096), ("2G", 2 * 1024**3), ("500M", 500 * 1024**2),
+                                       ("1.5GiB", int(1.5 * 1024**3)), ("64k", 65536), ("3 MB", 3 * 1024**2)])
+def test_byte_sizes(text: str, size: int) -> None:
+    assert cli.byte_size(text) == size
+
+
+@pytest.mark.parametrize("text", ["", "G", "-1M", "lots", "nanG", "0"])
+def test_bad_byte_sizes(text: str) -> None:
+    import argparse
+
+    with pytest.raises(argparse.ArgumentTypeError):
+        cli.byte_size(text)
+
+
+def test_cache_stats_and_prune(tmp_path, capsys) -> None:
+    from service.eval_cache import CacheKey, EvalCache, Evaluation
+    from service.storage import EVAL_CACHE_NAME, Storage
+
+    storage = Storage(tmp_path)
+    storage.add_scene(scene_id="ab" * 32, size=1, content_hash="busy", stats={}, inert={}, cameras=0)
+    storage.create_job(scene_id="ab" * 32, spec={})  # queued: its scene's evaluations must stay
+    storage.close()
+    with EvalCache(tmp_path / EVAL_CACHE_NAME, max_bytes=None) as c:
+        for scene in ("busy", "idle"):
+            for k in range(20):
+                key = CacheKey(scene, f"cam{k}", "ssim-v1", "mobile", 32, 24, 30.0)
+                c.put_many(key, [(p, Evaluation(0.1, 1.0, 0.01, {"pad": "x" * 400})) for p in range(40)])
+    assert cli.main(["cache", "stats", "--data-dir", str(tmp_path), "--json"]) == 0
+    stats = json.loads(capsys.readouterr().out)
+    assert stats["entries"] == 1600 and stats["scenes"] == 2 and stats["cameras"] == 40
+    assert cli.main(["cache", "prune", "--data-dir", str(tmp_path), "--max-bytes", "64k"]) == 0
+    assert "1 scenes of running jobs kept" in capsys.readouterr().out
+    with EvalCache(tmp_path / EVAL_CACHE_NAME) as c:
+        assert c.stats()["scenes"] == 1 and len(c) == 800  # only the busy scene's evaluations are left
+    assert cli.main(["cache", "stats", "--cache", str(tmp_path / "none.sqlite")]) == 1
+    assert "no evaluation cache" in capsys.readouterr().err

@@ -18,7 +18,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from addon.core.evaluate_path import power_at_resolution
 from addon.core.report import budget_list
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
@@ -33,33 +32,6 @@ def _port_closed(url: str) -> bool:
     with socket.socket() as s:
         s.settimeout(1.0)
         return s.connect_ex((host, int(port))) != 0
-
-
-def test_power_scaled_to_the_path_resolution_matches_the_optimisers_prediction() -> None:
-    """The report's power for a 64x36 evaluation scaled to 1280x720 equals what the optimiser predicts
-    for the path (service.evaluation with target_pixels) for the same render."""
-    from service.camera_path import CameraPath
-    from service.evaluation import CameraSpec, evaluate, load_scene
-    from service.params import default_space
-
-    if not (TEAPOT / "scene.glb").is_file():  # a fresh clone: build it (cached afterwards)
-        subprocess.run([sys.executable, "-m", "blend_scenes.build", "--scene", "teapot"], cwd=REPO_ROOT,
-                       check=True, capture_output=True, timeout=300)
-    scene = load_scene(TEAPOT / "scene.glb")
-    f = CameraPath.load(TEAPOT / "path.json").frames[0]
-    m = np.asarray(f.matrix_world)
-    cam = CameraSpec(eye=tuple(m[:3, 3]), forward=tuple(-m[:3, 2]), up=tuple(m[:3, 1]), vfov=f.vfov,
-                     width=32, height=18)
-    space = default_space()
-    idx = space.min_quality_indices()
-    own = evaluate(scene, cam, idx, space, threads=1)
-    predicted = evaluate(scene, cam, idx, space, threads=1, target_pixels=1280 * 720)
-    response = {"power_w": own.power_w, "breakdown": own.breakdown}
-    scaled = power_at_resolution(response, 30.0, (32, 18), (1280, 720))
-    assert scaled == pytest.approx(predicted.power_w, rel=1e-9)
-    assert scaled > own.power_w  # more pixels, more dynamic power
-    with pytest.raises(ValueError, match=r"energy_j\.static"):
-        power_at_resolution({"power_w": 1.0, "breakdown": {}}, 30.0, (32, 18), (64, 36))
 
 
 def test_report_budgets_one_or_several() -> None:

@@ -5,13 +5,15 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from sim_core.image import linear_to_srgb, upsample_bilinear
 from tracer_scenes import teapot_scene
 
 import sim_core
 from service import nsga
 from service.eval_cache import EvalCache
-from service.evaluation import CameraSpec, Evaluator, SceneHandle, evaluate, tone_map, upsample_bilinear
+from service.evaluation import CameraSpec, Evaluator, SceneHandle, evaluate
 from service.executors import DaskExecutor, InProcessExecutor, ProcessPoolExecutor
+from service.lru import LRUCache
 from service.params import default_space
 
 
@@ -27,9 +29,9 @@ def _cam(w: int = 32, h: int = 24) -> CameraSpec:
 SMALL = ("max_depth", "shadow_samples", "resolution_scale")  # 64 settings
 
 
-def test_tone_map_and_upsample() -> None:
+def test_display_transform_and_upsample() -> None:
     x = np.array([-1.0, 0.0, 0.0031308, 0.5, 1.0, 7.0])
-    y = tone_map(x)
+    y = linear_to_srgb(x)
     assert y[0] == 0.0 and y[-1] == pytest.approx(1.0) and y[-2] == pytest.approx(1.0)
     assert np.all(np.diff(y[1:]) >= 0) and y[3] == pytest.approx(0.7353569, abs=1e-6)
     img = np.arange(12, dtype=float).reshape(3, 4)
@@ -139,3 +141,32 @@ def test_nsga_reaches_exact_hypervolume_on_real_space(scene) -> None:
         assert len(arch) <= 0.3 * sp.size
         fr = np.array([(e, p) for _, e, p in arch.frontier()])
         assert nsga.hypervolume_2d((fr - lo) / (hi - lo), (1.0, 1.0)) >= 0.98 * hv_exact
+
+
+def test_a_worker_without_the_scene_file_loads_the_shipped_bytes_and_keeps_no_copy(tmp_path,
+                                                                                   monkeypatch) -> None:
+    """Dask workers without a shared disk get the file's bytes: loaded from a private folder that is gone
+    once the scene is in memory; only a self-contained scene can travel that way."""
+    import pickle
+    import tempfile
+
+    from api_support import box_scene_glb
+
+    from service import evaluation
+
+    system_tmp = tmp_path / "system-tmp"
+    system_tmp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(system_tmp))
+    glb = tmp_path / "scene.glb"
+    glb.write_bytes(box_scene_glb())
+    handle = SceneHandle(path=glb, ship_bytes=True)
+    travelled = pickle.loads(pickle.dumps(handle))
+    glb.unlink()  # the worker's machine has no such file
+    monkeypatch.setattr(evaluation, "_SCENES", LRUCache(8))
+    travelled._scene = None
+    assert str(travelled.get().content_hash) == handle.content_hash
+    assert list(system_tmp.iterdir()) == []
+    external = b'{"asset": {"version": "2.0"}, "buffers": [{"byteLength": 4, "uri": "x.bin"}]}'
+    with pytest.raises(ValueError, match="self-contained"):
+        evaluation._load_scene(str(tmp_path / "gone.gltf"), external, False)
+    assert list(system_tmp.iterdir()) == []

@@ -4,6 +4,7 @@ the real Blender exporter (bpy) for frames, transforms, cameras, lights and mate
 from __future__ import annotations
 
 import base64
+import io
 import json
 import math
 import struct
@@ -13,6 +14,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from PIL import Image
 from sim_core.loaders import GLTF_TO_BLENDER, load_gltf
 from sim_core.loaders.gltf import LIGHT_RADIUS_EXTRAS_KEY, LUMENS_PER_WATT
 
@@ -304,6 +306,115 @@ def test_environment_extras_exr(tmp_path: Path) -> None:
     b.gltf["scenes"][0]["extras"] = {"render_budget_environment": "missing.exr"}
     with pytest.raises(FileNotFoundError, match=r"missing\.exr"):
         load_gltf(b.glb(tmp_path / "env2.glb"))
+
+
+# ----------------------------------- files outside the document ------------------------------------
+
+
+def _external_buffer(b: _Builder, path: Path, uri: str) -> Path:
+    """A .gltf whose only buffer is the file ``uri`` (written next to it as ``geometry.bin``)."""
+    (path.parent / "geometry.bin").write_bytes(bytes(b.blob))
+    gltf = dict(b.gltf)
+    gltf["buffers"] = [{"byteLength": len(b.blob), "uri": uri}]
+    path.write_text(json.dumps(gltf))
+    return path
+
+
+def _scene_folder_beside_a_secret(tmp_path: Path) -> tuple[_Builder, Path, Path]:
+    """A one-triangle document, a file outside the scene's folder holding its geometry, and the folder."""
+    b = _Builder()
+    _one_triangle(b)
+    secret = tmp_path / "secret.bin"
+    secret.write_bytes(bytes(b.blob))
+    scene_dir = tmp_path / "scene"
+    scene_dir.mkdir()
+    return b, secret, scene_dir
+
+
+def test_external_buffer_in_the_scene_folder(tmp_path: Path) -> None:
+    b = _Builder()
+    _one_triangle(b)
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "geometry.bin").write_bytes(bytes(b.blob))
+    sd = load_gltf(_external_buffer(b, tmp_path / "t.gltf", "geometry.bin"))
+    assert np.allclose(sd.positions, _to_blender(TRI))
+    assert load_gltf(_external_buffer(b, tmp_path / "u.gltf", "sub/geometry.bin")).positions.shape == (3, 3)
+    assert load_gltf(_external_buffer(b, tmp_path / "v.gltf", "sub%2Fgeometry.bin")).positions.shape == (3, 3)
+
+
+@pytest.mark.parametrize("uri", ["../secret.bin", "%2e%2e/secret.bin", "%2E%2E%2Fsecret.bin",
+                                 "sub/../../secret.bin", "SECRET_ABSOLUTE", "link.bin"])
+def test_external_files_stay_inside_the_scene_folder(tmp_path: Path, uri: str,
+                                                     opened_files: list[str]) -> None:
+    """Relative references are resolved (``..``, percent-encoding, symbolic links) and must stay in the
+    scene's folder; the message names the reference, not where it leads, and nothing outside is read."""
+    b, secret, scene_dir = _scene_folder_beside_a_secret(tmp_path)
+    (scene_dir / "link.bin").symlink_to(secret)
+    uri = uri.replace("SECRET_ABSOLUTE", str(secret))
+    path = _external_buffer(b, scene_dir / "t.gltf", uri)
+    opened_files.clear()
+    with pytest.raises(ValueError, match="outside the scene's folder") as info:
+        load_gltf(path)
+    assert str(secret) not in str(info.value).replace(uri, "")
+    assert str(secret.resolve()) not in opened_files
+
+
+@pytest.mark.parametrize("uri", ["file:///etc/passwd", "http://example.com/x.bin", "C:/x.bin"])
+def test_urls_are_not_files(tmp_path: Path, uri: str) -> None:
+    b = _Builder()
+    _one_triangle(b)
+    with pytest.raises(ValueError, match="not a relative file reference"):
+        load_gltf(_external_buffer(b, tmp_path / "t.gltf", uri))
+
+
+def test_missing_external_buffer_names_the_reference_only(tmp_path: Path) -> None:
+    b = _Builder()
+    _one_triangle(b)
+    with pytest.raises(FileNotFoundError, match=r"'nope\.bin' not found") as info:
+        load_gltf(_external_buffer(b, tmp_path / "t.gltf", "nope.bin"))
+    assert str(tmp_path / "nope.bin") not in str(info.value)
+
+
+@pytest.mark.parametrize("what", ["buffer", "image", "environment"])
+@pytest.mark.parametrize("reference", ["geometry.bin", "ABSOLUTE", "../secret.bin", "%2e%2e/secret.bin"])
+def test_self_contained_refuses_every_external_reference_before_reading(
+        tmp_path: Path, what: str, reference: str, opened_files: list[str]) -> None:
+    """Uploads (``self_contained=True``): only the binary chunk and data: URIs. Any other reference, be
+    it next to the file or not, is refused before any file but the scene itself is opened."""
+    b, outside, scene_dir = _scene_folder_beside_a_secret(tmp_path)
+    (scene_dir / "geometry.bin").write_bytes(bytes(b.blob))
+    reference = reference.replace("ABSOLUTE", str(outside))
+    if what == "buffer":
+        path = _external_buffer(b, scene_dir / "t.gltf", reference)
+        (scene_dir / "geometry.bin").write_bytes(bytes(b.blob))
+    elif what == "image":
+        b.gltf["images"] = [{"uri": reference}]
+        b.gltf["textures"] = [{"source": 0}]
+        b.gltf["materials"] = [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}]
+        b.gltf["meshes"][0]["primitives"][0]["material"] = 0
+        path = b.glb(scene_dir / "t.glb")
+    else:
+        b.gltf["scenes"][0]["extras"] = {"render_budget_environment": reference}
+        path = b.glb(scene_dir / "t.glb")
+    opened_files.clear()
+    with pytest.raises(ValueError, match="self-contained") as info:
+        load_gltf(path, self_contained=True)
+    assert opened_files == [str(path.resolve())]
+    assert str(tmp_path) not in str(info.value).replace(reference, "").replace(str(path), "")
+
+
+def test_self_contained_accepts_the_binary_chunk_and_data_uris(tmp_path: Path) -> None:
+    b = _Builder()
+    _one_triangle(b)
+    png = io.BytesIO()
+    Image.new("RGB", (2, 2), (255, 0, 0)).save(png, format="PNG")
+    b.gltf["images"] = [{"uri": "data:image/png;base64," + base64.b64encode(png.getvalue()).decode()}]
+    b.gltf["textures"] = [{"source": 0}]
+    b.gltf["materials"] = [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}]
+    b.gltf["meshes"][0]["primitives"][0]["material"] = 0
+    assert load_gltf(b.glb(tmp_path / "t.glb"), self_contained=True).materials[0].base_color[0] > 0.99
+    sd = load_gltf(b.gltf_data_uri(tmp_path / "t.gltf"), self_contained=True)
+    assert np.allclose(sd.positions, _to_blender(TRI))
 
 
 # ----------------------------------- bad inputs ----------------------------------------------------

@@ -80,6 +80,19 @@ def test_missing_material_library(tmp_path: Path) -> None:
         load_obj(_write(tmp_path, QUAD))
 
 
+@pytest.mark.parametrize("library", ["../outside.mtl", "ABSOLUTE", "link.mtl"])
+def test_material_library_stays_inside_the_obj_folder(tmp_path: Path, library: str) -> None:
+    outside = tmp_path / "outside.mtl"
+    outside.write_text("newmtl red\nKd 1 0 0\n")
+    folder = tmp_path / "model"
+    folder.mkdir()
+    (folder / "link.mtl").symlink_to(outside)
+    library = library.replace("ABSOLUTE", str(outside))
+    text = QUAD.replace("mtllib scene.mtl", f"mtllib {library}")
+    with pytest.raises(ValueError, match="outside the scene's folder"):
+        load_obj(_write(folder, text))
+
+
 @pytest.mark.parametrize(
     "text,match",
     [

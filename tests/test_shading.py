@@ -10,6 +10,7 @@ import warnings
 
 import numpy as np
 import pytest
+from sim_core.image import srgb_to_linear
 
 import sim_core
 from sim_core import Camera, Light, Material, RenderSettings, Scene, Texture, price, render
@@ -97,7 +98,7 @@ def test_native_texture_matches_numpy_bilinear_mips_and_srgb() -> None:
     row = np.stack([b, b, b, np.full(256, 255, np.uint8)], axis=1)[None]
     srgb = sim_core._core.NativeTexture.from_rgba8(np.ascontiguousarray(row), True, 1, 1)
     c = b / 255.0
-    expected = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+    expected = srgb_to_linear(c)
     got = [srgb.texel(0, i, 0)[0] for i in range(256)]
     assert np.allclose(got, expected, atol=2e-7)
 
@@ -118,7 +119,7 @@ def test_textured_quad_renders_its_texels_and_counts_fetches() -> None:
     cam = _top_camera(4, height=2.0, fov=2 * math.atan(0.5))
     r = render(scene, cam, RenderSettings(shadow_samples=0, max_depth=0), threads=2)
     c = tex.image / 255.0
-    expected = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)  # sRGB bytes, decoded
+    expected = srgb_to_linear(c)  # sRGB bytes, decoded
     assert np.allclose(r.image, expected, atol=2e-4)
     cnt = r.counters
     assert cnt["texture_fetches"] == cnt["shading_evals"] == 16

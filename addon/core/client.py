@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import base64
 import json
 import math
 import urllib.error
@@ -130,7 +131,10 @@ class ServiceClient:
         if data[:4] == b"glTF":
             content_type = "model/gltf-binary"
         else:
-            from sim_core.loaders.scene_file import MEDIA_TYPE, is_scene_file
+            from sim_core.loaders.scene_file import (  # lazy: optional, not in a stock Blender
+                MEDIA_TYPE,
+                is_scene_file,
+            )
 
             if not is_scene_file(data[:64]):
                 raise ValueError(f"{scene_path} is neither a render-budget scene file nor a binary glTF "
@@ -149,7 +153,7 @@ class ServiceClient:
         return self._json("GET", f"/jobs/{_segment(job_id)}")
 
     def cancel_job(self, job_id: str) -> dict[str, Any] | None:
-        return self._json("DELETE", f"/jobs/{_segment(job_id)}")
+        return self._json("POST", f"/jobs/{_segment(job_id)}/cancel")
 
     def store_text(self, store_id: str) -> str:
         """GET /stores/{id} as the raw JSON text (kept verbatim in the .blend)."""
@@ -184,8 +188,6 @@ class ServiceClient:
 
 
 def _image_from_json(doc: dict[str, Any]) -> RenderedImage:
-    import base64
-
     for key in ("image_base64", "image", "data"):
         if isinstance(doc.get(key), str):
             data = base64.b64decode(doc[key])

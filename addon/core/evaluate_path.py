@@ -3,7 +3,7 @@ min) and with the store's budget-driven settings (temporal filter included), as 
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
@@ -28,7 +28,8 @@ class EvalSpec:
     modes: tuple[str, ...] = ("ours", "max", "max_mid", "mid_min", "min")
     #: Report power for this resolution (the path's) instead of the evaluation image's: the store's
     #: predictions are for the path's pixel count, and at a few hundred pixels static power hides
-    #: every difference between settings. None keeps the service's figure as measured.
+    #: every difference between settings. The service scales it (POST /evaluate power_resolution), the
+    #: way the optimiser predicts it. None keeps the figure for the evaluation image.
     power_resolution: tuple[int, int] | None = None
 
 
@@ -47,32 +48,15 @@ def camera_payload(frame: camera_path.CameraFrame, resolution: tuple[int, int]) 
             "width": int(resolution[0]), "height": int(resolution[1])}
 
 
-def power_at_resolution(response: dict[str, Any], fps: float, rendered: tuple[int, int],
-                        target: tuple[int, int]) -> float:
-    """Power of an /evaluate answer scaled from the rendered to the target pixel count, the way the
-    optimiser predicts it (service.evaluation): static power stays, dynamic power scales with pixels.
-
-    The static share comes from the breakdown's ``energy_j.static`` (static energy per frame)."""
-    power = float(response["power_w"])
-    breakdown = response.get("breakdown") or {}
-    if "energy_j.static" not in breakdown:
-        raise ValueError("the service's /evaluate answer has no energy_j.static in its breakdown")
-    static_w = float(breakdown["energy_j.static"]) * float(fps)
-    ratio = (target[0] * target[1]) / float(rendered[0] * rendered[1])
-    out = static_w + (power - static_w) * ratio
-    if not (np.isfinite(out) and out > 0.0):
-        raise ValueError(f"non-finite or non-positive power after scaling: {out}")
-    return float(out)
-
-
 def budget_kept(mode: str, value: float, power_w: float, error: float) -> bool:
     return power_w <= value if mode == "POWER" else error <= value
 
 
 def evaluate_path(client: ServiceClient, store: pareto_store.ParetoStore, path: camera_path.CameraPath,
                   spec: EvalSpec, *, progress: Callable[[int, int], None] | None = None,
-                  frames: Sequence[int] | None = None, concurrency: int = 4) -> list[FrameRow]:
+                  concurrency: int = 4) -> list[FrameRow]:
     """Rows for every (sampled frame, mode); errors and power measured by the service, not predicted.
+    A row's ``frame`` is the index into the path.
 
     The settings of every frame are decided first (the budget-driven mode runs the temporal filter over
     the path in order, exactly as playback does); the evaluations then go out `concurrency` at a time.
@@ -80,14 +64,10 @@ def evaluate_path(client: ServiceClient, store: pareto_store.ParetoStore, path: 
     validate_budget(spec.budget_mode, spec.budget_value)
     presets = preset_settings(store)
     driver = PlaybackDriver(store, spec.filter_period_s)
-    picked = list(range(0, len(path), max(1, spec.frame_step)))
-    numbers = list(frames) if frames is not None else picked
-    if len(numbers) != len(picked):
-        raise ValueError("frames must give one frame number per sampled path frame")
     Job = tuple[int, camera_path.CameraFrame, str, dict[str, Any], tuple[float, float] | None]
     jobs: list[Job] = []
-    for number, i in zip(numbers, picked, strict=True):
-        f = path.frames[i]
+    for number in range(0, len(path), max(1, spec.frame_step)):
+        f = path.frames[number]
         for mode in spec.modes:
             predicted = None
             if mode == "ours":
@@ -102,11 +82,12 @@ def evaluate_path(client: ServiceClient, store: pareto_store.ParetoStore, path: 
 
     def run(job: Job) -> FrameRow:
         number, f, mode, settings, predicted = job
-        res = client.evaluate({"scene_id": spec.scene_id, "camera": camera_payload(f, spec.resolution),
-                               "settings": settings, "profile": spec.profile, "fps": path.fps})
-        p, e = float(res["power_w"]), float(res["error"])
+        body = {"scene_id": spec.scene_id, "camera": camera_payload(f, spec.resolution), "settings": settings,
+                "profile": spec.profile, "fps": path.fps}
         if spec.power_resolution is not None:
-            p = power_at_resolution(res, path.fps, spec.resolution, spec.power_resolution)
+            body["power_resolution"] = [int(v) for v in spec.power_resolution]
+        res = client.evaluate(body)
+        p, e = float(res["power_w"]), float(res["error"])
         kept = budget_kept(spec.budget_mode, spec.budget_value, p, e) if mode == "ours" else None
         pp, pe = predicted or (None, None)
         return FrameRow(number, f.time, mode, p, e, _settings_text(settings), kept, pp, pe)

@@ -111,37 +111,58 @@ def run_job(client: ServiceClient, scene_path: str | Path, path_doc: dict[str, A
     if cancelled():
         raise JobCancelled("cancelled before submission")
     job = client.submit_job(request.payload(scene_id, path_doc))
-    job_id = str(job["id"])
     if on_submitted:
-        on_submitted(scene_id, job_id)
-    deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        on_submitted(scene_id, str(job["id"]))
     per_view = request.option("population") * request.option("generations")
-    while True:
-        update = describe(job, per_view)
-        report(update)
-        if update.state == "done":
-            store_id = str(job["store_id"])
-            return JobOutcome(job_id, scene_id, store_id, client.store_text(store_id), scene, job)
-        if update.state == "failed":
-            raise JobFailed(f"job {job_id} failed: {job.get('error') or 'no message'}")
-        if update.state == "cancelled":
-            raise JobCancelled(f"job {job_id} was cancelled")
-        if deadline is not None and time.monotonic() > deadline:
-            state = cancel_and_wait(client, job_id)
-            raise TimeoutError(f"job {job_id} did not finish within {timeout_s} s ({state})")
-        # sleep in small steps so a cancel request is honoured quickly
-        wake = time.monotonic() + poll_s
-        while time.monotonic() < wake:
-            if cancelled():
-                report(JobUpdate("cancelling", update.fraction, "cancelling"))
+    job = follow_job(client, job, evals_per_view=per_view, progress=report,
+                     should_cancel=cancelled, poll_s=poll_s, timeout_s=timeout_s)
+    store_id = str(job["store_id"])
+    return JobOutcome(str(job["id"]), scene_id, store_id, client.store_text(store_id), scene, job)
+
+
+def follow_job(client: ServiceClient, job: dict[str, Any], *, evals_per_view: int | None = None,
+               progress: Callable[[JobUpdate], None] | None = None,
+               should_cancel: Callable[[], bool] | None = None, poll_s: float = 0.5,
+               timeout_s: float | None = None) -> dict[str, Any]:
+    """Poll a submitted job until it is done and return its last GET /jobs/{id} body. Raises JobFailed,
+    JobCancelled, or TimeoutError; a cancel request, the timeout and Ctrl-C (KeyboardInterrupt) cancel the
+    job on the service first."""
+    report = progress or (lambda _u: None)
+    cancelled = should_cancel or (lambda: False)
+    job_id = str(job["id"])
+    deadline = None if timeout_s is None else time.monotonic() + timeout_s
+    try:
+        while True:
+            update = describe(job, evals_per_view)
+            report(update)
+            if update.state == "done":
+                return job
+            if update.state == "failed":
+                raise JobFailed(f"job {job_id} failed: {job.get('error') or 'no message'}")
+            if update.state == "cancelled":
+                raise JobCancelled(f"job {job_id} was cancelled")
+            if deadline is not None and time.monotonic() > deadline:
                 state = cancel_and_wait(client, job_id)
-                raise JobCancelled(f"job {job_id} cancelled (service state: {state})")
-            time.sleep(min(0.05, poll_s))
-        job = client.job(job_id)
+                raise TimeoutError(f"job {job_id} did not finish within {timeout_s} s ({state})")
+            # sleep in small steps so a cancel request is honoured quickly
+            wake = time.monotonic() + poll_s
+            while time.monotonic() < wake:
+                if cancelled():
+                    report(JobUpdate("cancelling", update.fraction, "cancelling"))
+                    state = cancel_and_wait(client, job_id)
+                    raise JobCancelled(f"job {job_id} cancelled (service state: {state})")
+                time.sleep(min(0.05, poll_s))
+            job = client.job(job_id)
+    except KeyboardInterrupt:  # the caller is leaving: do not leave the job running on the service
+        try:
+            cancel_and_wait(client, job_id, wait_s=10.0)
+        except Exception:  # the service may already be gone; we are leaving anyway
+            pass
+        raise
 
 
 def cancel_and_wait(client: ServiceClient, job_id: str, wait_s: float = 30.0, poll_s: float = 0.1) -> str:
-    """DELETE the job, then wait (bounded) until the service says it stopped; returns the last state."""
+    """Ask the service to cancel the job, then wait (bounded) until it stopped; returns the last state."""
     try:
         job = client.cancel_job(job_id) or {}
     except ServiceError as err:

@@ -32,10 +32,3 @@ def build_path(samples: Sequence[tuple[float, Sequence[Sequence[float]], float, 
                    for t, m, v, r in samples)
     return camera_path.CameraPath(frames, float(fps))
 
-
-def max_matrix_deviation(a: camera_path.CameraPath, b: camera_path.CameraPath) -> float:
-    """Largest absolute element difference between two equally long paths' matrices."""
-    if len(a) != len(b):
-        raise ValueError(f"paths differ in length: {len(a)} vs {len(b)}")
-    return max(float(np.abs(fa.matrix_world - fb.matrix_world).max())
-               for fa, fb in zip(a.frames, b.frames, strict=True))

@@ -49,6 +49,14 @@ class FrameRow:
 
 
 @dataclass(frozen=True)
+class Section:
+    """A titled part of report.md after Table 3 and the notes (lines are Markdown)."""
+
+    heading: str
+    lines: Sequence[str]
+
+
+@dataclass(frozen=True)
 class ModeSummary:
     mode: str
     frames: int
@@ -175,10 +183,10 @@ def budget_list(budget: Budget | Sequence[Budget] | None) -> list[Budget]:
 def plot_over_time(rows: Sequence[FrameRow], out_dir: str | Path,
                    budget: Budget | Sequence[Budget] | None = None) -> list[Path]:
     """Power and error over time per mode (the paper's Figures 9-11) as PNGs. Needs matplotlib."""
-    import matplotlib
+    import matplotlib  # lazy: optional (a stock Blender lacks it), ImportError tells the caller
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # lazy: after choosing the non-GUI backend
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -217,14 +225,12 @@ def main(argv: Sequence[str]) -> int:
     return 0
 
 
-if __name__ == "__main__":
-    raise SystemExit(main(sys.argv[1:]))
-
 
 def write_report(out_dir: str | Path, rows: Sequence[FrameRow], *, title: str,
-                 budget: Budget | Sequence[Budget], notes: Sequence[str] = (), plot: bool = True
-                 ) -> dict[str, Path | str]:
-    """Write report.md (Table 3 layout), per_frame.csv and, when matplotlib is importable, the plots.
+                 budget: Budget | Sequence[Budget], notes: Sequence[str] = (),
+                 sections: Sequence[Section] = (), plot: bool = True) -> dict[str, Path | str]:
+    """Write report.md (Table 3 layout, the notes, then ``sections``), per_frame.csv and, when matplotlib
+    is importable, the plots. report.md is written once, whole.
 
     Returns the written paths, plus 'plots_skipped' with the reason when plotting was not possible here.
     """
@@ -247,9 +253,15 @@ def write_report(out_dir: str | Path, rows: Sequence[FrameRow], *, title: str,
              "render of the same frame; power is the simulator's at the path's frame rate.", "",
              table3_markdown(summaries), "",
              "Files: `per_frame.csv` (every frame and mode), `power_over_time.png`, `error_over_time.png`, "
-             "`frames/` (sample frames).", ""]
+             "`frames/` (sample frames), `store.json`, `summary.json`.", ""]
     lines += [f"- {n}" for n in [*notes, *prediction_notes(rows)]]
+    for section in sections:
+        lines += ["", f"## {section.heading}", "", *section.lines]
     report = out_dir / "report.md"
     report.write_text("\n".join(lines) + "\n", encoding="utf-8")
     written["report"] = report
     return written
+
+
+if __name__ == "__main__":
+    raise SystemExit(main(sys.argv[1:]))

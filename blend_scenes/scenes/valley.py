@@ -7,7 +7,9 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import bpy
 import numpy as np
+from sim_core.image import write_exr
 
 from .. import common as c
 
@@ -87,8 +89,7 @@ def build(out_dir: Path) -> c.SceneSpec:
     c.box("Water", (SIZE, SIZE, 0.2), (0.0, 0.0, WATER_LEVEL - 0.1), water)
 
     rng = np.random.default_rng(11)
-    import bpy  # bmesh-free icosphere through the primitive operator, then shared by all boulders
-
+    # bmesh-free icosphere through the primitive operator, then shared by all boulders
     bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=3, radius=1.0)
     ico = bpy.context.active_object
     boulder = ico.data
@@ -106,7 +107,7 @@ def build(out_dir: Path) -> c.SceneSpec:
 
     c.sun_light("Sun", tuple(SUN_DIRECTION), strength=3.0, angle_deg=1.0)
     env_path = out_dir / "environment.exr"
-    c.write_exr(env_path, sky(*ENV_SIZE))
+    write_exr(env_path, sky(*ENV_SIZE))
     c.world_exr(env_path)
 
     def eye(t: float) -> np.ndarray:  # fly down the valley, following the river, 20-35 m above it

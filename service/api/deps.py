@@ -2,15 +2,15 @@
 
 from __future__ import annotations
 
-import threading
-from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Annotated, Any
 
 from fastapi import Depends, Request
 
 from service.jobs import JobManager, SceneCache
+from service.lru import LRUCache
 from service.storage import Storage, StoreRecord
+from service.store import ParetoStore
 
 from .config import Settings
 from .errors import ApiError
@@ -21,26 +21,20 @@ class StoreCache:
 
     def __init__(self, storage: Storage, *, capacity: int = 64) -> None:
         self._storage = storage
-        self._capacity = capacity
-        self._stores: OrderedDict[str, Any] = OrderedDict()
-        self._lock = threading.Lock()
+        self._stores: LRUCache[str, Any] = LRUCache(capacity)
+
+    def drop(self, store_id: str) -> None:
+        """Forget a deleted store."""
+        self._stores.pop(store_id)
 
     def get(self, store_id: str) -> Any:
-        with self._lock:
-            store = self._stores.get(store_id)
-            if store is not None:
-                self._stores.move_to_end(store_id)
-                return store
-        record = self._storage.get_store(store_id=store_id)
-        if record is None:
-            raise ApiError(404, f"store {store_id!r} not found")
-        from service.store import ParetoStore
-
-        store = ParetoStore.from_json(record.body)
-        with self._lock:
-            self._stores[store_id] = store
-            while len(self._stores) > self._capacity:
-                self._stores.popitem(last=False)
+        store = self._stores.get(store_id)
+        if store is None:
+            record = self._storage.get_store(store_id=store_id)
+            if record is None:
+                raise ApiError(404, f"store {store_id!r} not found")
+            store = ParetoStore.from_json(record.body)
+            self._stores.put(store_id, store)
         return store
 
 

@@ -10,6 +10,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import Match
 
 log = logging.getLogger("render_budget.api")
 
@@ -19,6 +20,7 @@ _CODES = {
     403: "forbidden",
     404: "not_found",
     405: "method_not_allowed",
+    408: "request_timeout",
     409: "conflict",
     413: "payload_too_large",
     415: "unsupported_media_type",
@@ -26,6 +28,17 @@ _CODES = {
     500: "internal_error",
     503: "unavailable",
 }
+_DESCRIPTIONS = {
+    400: "Host header not allowed, invalid Content-Length, or an unreadable body",
+    401: "missing or invalid bearer token",
+    404: "unknown id",
+    408: "the request body stopped arriving",
+    409: "conflict with the resource's state",
+    413: "request body larger than the configured limit",
+    415: "wrong Content-Type",
+    422: "invalid request: the details name the fields",
+}
+_METHODS = ("GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS")
 
 
 class ErrorBody(BaseModel):
@@ -54,6 +67,18 @@ class ApiError(Exception):
         self.headers = headers
 
 
+def error_responses(*statuses: int, **descriptions: str) -> dict[int | str, dict[str, Any]]:
+    """OpenAPI ``responses`` for error statuses, all with the one error shape; ``descriptions`` override
+    the generic text per status (``e404="unknown store"``)."""
+    return {s: {"model": ErrorResponse, "description": descriptions.get(f"e{s}", _DESCRIPTIONS[s])}
+            for s in statuses}
+
+
+def common_error_responses(*, token: bool) -> dict[int | str, dict[str, Any]]:
+    """What any route may answer before it runs: a refused Host, and with a token a 401."""
+    return error_responses(400, 401) if token else error_responses(400)
+
+
 def error_response(status: int, message: str, *, code: str | None = None,
                    details: list[dict[str, Any]] | None = None,
                    headers: dict[str, str] | None = None) -> JSONResponse:
@@ -80,6 +105,12 @@ def summarise(details: list[dict[str, Any]]) -> str:
     return "; ".join(parts) + more if parts else "invalid request"
 
 
+def allowed_methods(app: FastAPI, scope: dict[str, Any]) -> list[str]:
+    """Every method some route of ``app`` answers at the request's path."""
+    return [m for m in _METHODS
+            if any(route.matches({**scope, "method": m})[0] == Match.FULL for route in app.router.routes)]
+
+
 def install_error_handlers(app: FastAPI) -> None:
     """Route every exception type to the one shape; unknown exceptions become a logged 500."""
 
@@ -88,10 +119,13 @@ def install_error_handlers(app: FastAPI) -> None:
         return error_response(exc.status, exc.message, code=exc.code, details=exc.details,
                               headers=exc.headers)
 
-    async def http_error(_: Request, exc: Exception) -> JSONResponse:
+    async def http_error(request: Request, exc: Exception) -> JSONResponse:
         assert isinstance(exc, StarletteHTTPException)
         message = exc.detail if isinstance(exc.detail, str) else str(exc.detail)
-        return error_response(exc.status_code, message, headers=getattr(exc, "headers", None))
+        headers = getattr(exc, "headers", None)
+        if exc.status_code == 405:  # the router names one route's methods; the path may have several
+            headers = {**(headers or {}), "Allow": ", ".join(allowed_methods(request.app, request.scope))}
+        return error_response(exc.status_code, message, headers=headers)
 
     async def validation_error(_: Request, exc: Exception) -> JSONResponse:
         assert isinstance(exc, RequestValidationError)

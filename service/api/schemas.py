@@ -1,36 +1,117 @@
 """Request and response models, one family per resource (SceneXxx, JobXxx, StoreXxx, RenderXxx).
 
 All inputs are strict at the edge: unknown fields are rejected, numbers must be finite, vectors have fixed
-lengths, budgets and sizes are range-checked, so a bad request is a 422 that names the field.
+lengths, budgets and sizes are range-checked, so a bad request is a 422 that names the field. Camera
+limits come from :mod:`service.store.camera`, the same the camera paths and the renderer use; what JSON
+Schema can say (ranges, enums, exactly one of several fields, non-zero vectors) is in the OpenAPI
+document too.
 """
 
 from __future__ import annotations
 
 import itertools
-import math
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, StringConstraints, create_model, model_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    StringConstraints,
+    create_model,
+    model_validator,
+)
 
+import sim_core
 from service import options
-from service.store.camera import check_affine
+from service.camera_path import FPS_MAX, FPS_MIN
+from service.params import default_space
+from service.store.camera import (
+    MAX_ASPECT,
+    MAX_COORDINATE,
+    MAX_RESOLUTION,
+    VFOV_MAX,
+    VFOV_MIN,
+    check_affine,
+    check_resolution,
+)
 
-Finite = Annotated[float, Field(allow_inf_nan=False)]
-Vec3 = tuple[Finite, Finite, Finite]
-Row4 = tuple[Finite, Finite, Finite, Finite]
-Zero = Annotated[float, Field(ge=0.0, le=0.0)]
-One = Annotated[float, Field(ge=1.0, le=1.0)]
+Finite = Annotated[float, Field(strict=True, allow_inf_nan=False)]
+Coordinate = Annotated[float, Field(strict=True, ge=-MAX_COORDINATE, le=MAX_COORDINATE,
+                                    allow_inf_nan=False)]
+Position = tuple[Coordinate, Coordinate, Coordinate]
+_NOT_ZERO = {"not": {"items": {"const": 0}}}
+NonZeroVec3 = Annotated[tuple[Finite, Finite, Finite], Field(json_schema_extra=_NOT_ZERO)]
+Quaternion = Annotated[tuple[Finite, Finite, Finite, Finite], Field(json_schema_extra=_NOT_ZERO)]
+Row4 = tuple[Finite, Finite, Finite, Coordinate]
+Zero = Annotated[float, Field(strict=True, ge=0.0, le=0.0)]
+One = Annotated[float, Field(strict=True, ge=1.0, le=1.0)]
 Matrix4 = tuple[Row4, Row4, Row4, tuple[Zero, Zero, Zero, One]]  # affine: last row [0, 0, 0, 1]
 SceneId = Annotated[str, StringConstraints(pattern=r"^[0-9a-f]{64}$")]
 Name = Annotated[str, StringConstraints(pattern=r"^[A-Za-z0-9_.-]{1,64}$")]
 Scalar = bool | int | Finite | Annotated[str, StringConstraints(max_length=64)]
-Vfov = Annotated[float, Field(gt=0.0, lt=math.pi, allow_inf_nan=False,
+Vfov = Annotated[float, Field(strict=True, ge=VFOV_MIN, lt=VFOV_MAX, allow_inf_nan=False,
                               description="vertical field of view, radians")]
-Pixels = Annotated[int, Field(ge=1, le=8192)]
+Pixels = Annotated[int, Field(strict=True, ge=1, le=MAX_RESOLUTION)]
+Fps = Annotated[float, Field(strict=True, ge=FPS_MIN, le=FPS_MAX)]
+
+# Hardware profiles are chosen by name from the bundled list (never a path: nothing is read outside the
+# package), and the parameter space's names and values are fixed: the schema lists them.
+PROFILES = tuple(sorted(str(p) for p in sim_core.list_profiles()))
+Profile = Annotated[str, Field(json_schema_extra={"enum": list(PROFILES)},
+                               description="hardware profile (GET /health lists them)")]
+_SPACE = {p.name: list(p.values) for p in default_space().parameters}
+
+
+def _known_profile(name: str) -> str:
+    if name not in PROFILES:
+        raise ValueError(f"unknown hardware profile {name!r}; available: {', '.join(PROFILES)}")
+    return name
+
+
+def _known_parameter(name: str) -> str:
+    if name not in _SPACE:
+        raise ValueError(f"unknown parameter {name!r}; known: {list(_SPACE)}")
+    return name
+
+
+ProfileName = Annotated[Profile, AfterValidator(_known_profile)]
+ParameterName = Annotated[Name, AfterValidator(_known_parameter),
+                          Field(json_schema_extra={"enum": list(_SPACE)})]
+#: ``{parameter: value}`` of the default space (values as a store query returns them). Keys and values
+#: are checked against the space where it is built (422 naming the parameter); the schema lists them.
+SETTINGS_SCHEMA = {"type": "object", "additionalProperties": False,
+                   "properties": {n: {"enum": v} for n, v in _SPACE.items()}}
+#: ``{parameter: [values]}``: candidate values per parameter.
+SPACE_SCHEMA = {"type": "object", "additionalProperties": False,
+                "properties": {n: {"type": "array", "items": {"enum": v}, "minItems": 1, "maxItems": 16}
+                               for n, v in _SPACE.items()}}
 
 
 class StrictModel(BaseModel):
+    """Unknown fields are refused; numbers are strict per field (``strict=True``: a bool or a text is not a
+    number, as JSON Schema says), while arrays still fill tuples."""
+
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+
+def _check_camera_matrix(m: Matrix4, name: str) -> None:
+    """Invertible axes (JSON Schema cannot say it; the same test the renderer's camera makes)."""
+    check_affine(m, name)
+
+
+def _not_zero(v: tuple[float, ...], name: str) -> None:
+    if not any(v):
+        raise ValueError(f"{name} must be non-zero")
+
+
+def exactly_one(*alternatives: tuple[tuple[str, ...], tuple[str, ...]]) -> dict[str, Any]:
+    """JSON Schema for "exactly one of these field combinations": each alternative is (fields that must
+    be given, fields that must then be absent or null), as the validators below enforce."""
+    return {"oneOf": [{"required": list(given),
+                       "properties": {**{f: {"not": {"type": "null"}} for f in given},
+                                      **{f: {"type": "null"} for f in absent}}}
+                      for given, absent in alternatives]}
 
 
 # -- scenes --------------------------------------------------------------------------------------------
@@ -44,34 +125,51 @@ class ScenePublic(BaseModel):
     created: float
 
 
+class ScenePage(BaseModel):
+    items: list[ScenePublic] = Field(description="newest first")
+    next_cursor: str | None = Field(description="pass as ?cursor= for the next page; null on the last")
+
+
 # -- camera path and jobs ----------------------------------------------------------------------------------
 class CameraFrame(StrictModel):
     """One frame: ``matrix_world``, or ``position`` with ``rotation_quaternion`` (w, x, y, z) or
     ``direction`` (+ optional ``up``, default +Z)."""
 
-    time: Annotated[float, Field(ge=0.0, le=1e7)]
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, json_schema_extra=exactly_one(
+        (("matrix_world",), ("position", "rotation_quaternion", "direction", "up")),
+        (("position", "rotation_quaternion"), ("matrix_world", "direction", "up")),
+        (("position", "direction"), ("matrix_world", "rotation_quaternion")),
+    ))
+
+    time: Annotated[float, Field(strict=True, ge=0.0, le=1e7)]
     matrix_world: Matrix4 | None = None
-    position: Vec3 | None = None
-    rotation_quaternion: tuple[Finite, Finite, Finite, Finite] | None = None
-    direction: Vec3 | None = None
-    up: Vec3 | None = None
+    position: Position | None = None
+    rotation_quaternion: Quaternion | None = None
+    direction: NonZeroVec3 | None = None
+    up: NonZeroVec3 | None = None
     vfov: Vfov
     resolution: tuple[Pixels, Pixels]
 
     @model_validator(mode="after")
     def _orientation(self) -> CameraFrame:
+        check_resolution(*self.resolution)
         if self.matrix_world is not None:
-            if any(v is not None for v in (self.position, self.rotation_quaternion, self.direction)):
+            if any(v is not None for v in (self.position, self.rotation_quaternion, self.direction, self.up)):
                 raise ValueError("give matrix_world or position + orientation, not both")
-            check_affine(self.matrix_world, "matrix_world")
+            _check_camera_matrix(self.matrix_world, "matrix_world")
         elif self.position is None:
             raise ValueError("a frame needs matrix_world or position")
         elif (self.rotation_quaternion is None) == (self.direction is None):
             raise ValueError("position needs exactly one of rotation_quaternion and direction")
-        elif self.rotation_quaternion is not None and math.hypot(*self.rotation_quaternion) < 1e-9:
-            raise ValueError("rotation_quaternion must be non-zero")
-        elif self.direction is not None and math.hypot(*self.direction) < 1e-9:
-            raise ValueError("direction must be non-zero")
+        elif self.rotation_quaternion is not None:
+            if self.up is not None:
+                raise ValueError("up goes with direction, not with rotation_quaternion")
+            _not_zero(self.rotation_quaternion, "rotation_quaternion")
+        else:
+            assert self.direction is not None
+            _not_zero(self.direction, "direction")
+            if self.up is not None:
+                _not_zero(self.up, "up")
         return self
 
 
@@ -79,7 +177,7 @@ class CameraPathIn(StrictModel):
     """The camera-path JSON (ARCHITECTURE.md): Blender camera matrices, vfov in radians, seconds."""
 
     version: Literal[1] = 1
-    fps: Annotated[float, Field(gt=0.0, le=1000.0)]
+    fps: Fps
     frames: Annotated[list[CameraFrame], Field(min_length=1, max_length=20_000)]
 
     @model_validator(mode="after")
@@ -95,7 +193,7 @@ def _option_field(opt: options.Option) -> tuple[Any, Any]:
     if opt.choices:
         kind: Any = Literal[opt.choices]  # type: ignore[valid-type]
     elif opt.kind in (int, float):
-        kind = Annotated[opt.kind, Field(ge=opt.minimum, le=opt.maximum, allow_inf_nan=False)]
+        kind = Annotated[opt.kind, Field(strict=True, ge=opt.minimum, le=opt.maximum, allow_inf_nan=False)]
     else:
         kind = opt.kind
     return (kind | None) if opt.optional else kind, Field(default=opt.default, description=opt.help)
@@ -122,31 +220,27 @@ class Thresholds(StrictModel):
     error: _option_field(options.BY_NAME["threshold_error"])[0] | None = None  # type: ignore[valid-type]
 
 
-_EVAL_PIXELS = Annotated[int, Field(ge=options.BY_NAME["eval_height"].minimum,
+_EVAL_PIXELS = Annotated[int, Field(strict=True, ge=options.BY_NAME["eval_height"].minimum,
                                     le=options.BY_NAME["eval_height"].maximum)]
 
 
 class JobCreate(StrictModel):
     scene_id: SceneId
     camera_path: CameraPathIn
-    parameters: Annotated[list[Name], Field(min_length=1, max_length=8)] | None = Field(
+    parameters: Annotated[list[ParameterName], Field(min_length=1, max_length=8)] | None = Field(
         default=None, description="subset of the default parameter space (default: all, minus inert)"
     )
-    space: dict[Name, Annotated[list[Scalar], Field(min_length=1, max_length=16)]] | None = Field(
-        default=None, description="explicit candidate values per parameter, maximum quality first"
+    space: Annotated[dict[str, Annotated[list[Scalar], Field(min_length=1, max_length=16)]],
+                     Field(max_length=8, json_schema_extra=SPACE_SCHEMA)] | None = Field(
+        default=None, description="explicit candidate values per parameter (at most 8 parameters: settings "
+                                  "pack into 32 bits), maximum quality first"
     )
     options: JobOptionsIn = Field(default_factory=JobOptionsIn)  # type: ignore[valid-type]
-    profile: Name = "mobile"
+    profile: ProfileName = "mobile"
     thresholds: Thresholds | None = Field(
         default=None, description="older spelling of options.threshold_power_w and options.threshold_error")
     resolution: tuple[_EVAL_PIXELS, _EVAL_PIXELS] | None = Field(
         default=None, description="older spelling of [options.eval_width, options.eval_height]")
-
-    @model_validator(mode="after")
-    def _space(self) -> JobCreate:
-        if self.space is not None and len(self.space) > 8:
-            raise ValueError("space has more than 8 parameters (settings pack into 32 bits)")
-        return self
 
     @model_validator(mode="after")
     def _older_spellings(self) -> JobCreate:
@@ -192,32 +286,49 @@ class JobPublic(BaseModel):
     finished: float | None
 
 
+class JobPage(BaseModel):
+    items: list[JobPublic] = Field(description="newest first")
+    next_cursor: str | None = Field(description="pass as ?cursor= for the next page; null on the last")
+
+
 # -- stores ------------------------------------------------------------------------------------------
+class StorePublic(BaseModel):
+    id: str
+    scene_id: str
+    job_id: str = Field(description="the job that made it first (equal stores share one id)")
+    size: int = Field(description="bytes of the store JSON")
+    created: float
+
+
+class StorePage(BaseModel):
+    items: list[StorePublic] = Field(description="newest first")
+    next_cursor: str | None = Field(description="pass as ?cursor= for the next page; null on the last")
+
+
 class PreviousSettings(StrictModel):
     """The settings in use and how long ago the target changed, for the temporal filter (Eq. 8)."""
 
-    indices: Annotated[list[Annotated[int, Field(ge=0, le=15)]], Field(min_length=1, max_length=8)]
-    elapsed_s: Annotated[float, Field(ge=0.0, le=1e7)]
-    period_s: Annotated[float, Field(gt=0.0, le=3600.0)] = 2.0
+    indices: Annotated[list[Annotated[int, Field(strict=True, ge=0, le=15)]],
+                       Field(min_length=1, max_length=8)]
+    elapsed_s: Annotated[float, Field(strict=True, ge=0.0, le=1e7)]
+    period_s: Annotated[float, Field(strict=True, gt=0.0, le=3600.0)] = 2.0
 
 
 class StoreQuery(StrictModel):
     # "Exactly one budget" and "exactly one orientation" in the OpenAPI too, for clients and fuzzers.
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False, json_schema_extra={"allOf": [
-        {"oneOf": [{"required": [name], "properties": {name: {"type": "number"}}}
-                   for name in ("power_budget_w", "error_budget")]},
-        {"oneOf": [{"required": [name], "properties": {name: {"type": "array"}}}
-                   for name in ("direction", "matrix")]},
+        exactly_one((("power_budget_w",), ("error_budget",)), (("error_budget",), ("power_budget_w",))),
+        exactly_one((("direction",), ("matrix",)), (("matrix",), ("direction",))),
     ]})
 
-    position: Vec3
-    direction: Vec3 | None = Field(default=None, description="view direction (or give matrix)")
+    position: Position
+    direction: NonZeroVec3 | None = Field(default=None, description="view direction (or give matrix)")
     matrix: Matrix4 | None = Field(default=None, description="camera world matrix, looks down local -Z")
     fov: Vfov | None = None
-    aspect: Annotated[float, Field(gt=0.0, le=100.0)] | None = Field(
+    aspect: Annotated[float, Field(strict=True, ge=1.0 / MAX_ASPECT, le=MAX_ASPECT)] | None = Field(
         default=None, description="width / height (default: the store's)")
-    power_budget_w: Annotated[float, Field(gt=0.0, le=1e4)] | None = None
-    error_budget: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
+    power_budget_w: Annotated[float, Field(strict=True, gt=0.0, le=1e4)] | None = None
+    error_budget: Annotated[float, Field(strict=True, ge=0.0, le=1.0)] | None = None
     previous: PreviousSettings | None = None
 
     @model_validator(mode="after")
@@ -226,10 +337,10 @@ class StoreQuery(StrictModel):
             raise ValueError("give exactly one of power_budget_w and error_budget")
         if (self.direction is None) == (self.matrix is None):
             raise ValueError("give exactly one of direction and matrix")
-        if self.direction is not None and math.hypot(*self.direction) < 1e-12:
-            raise ValueError("direction must be non-zero")
+        if self.direction is not None:
+            _not_zero(self.direction, "direction")
         if self.matrix is not None:
-            check_affine(self.matrix, "matrix")
+            _check_camera_matrix(self.matrix, "matrix")
         return self
 
 
@@ -248,23 +359,24 @@ class QueryResult(BaseModel):
 class CameraIn(StrictModel):
     matrix_world: Matrix4
     vfov: Vfov
-    width: Annotated[int, Field(ge=8, le=4096)]
-    height: Annotated[int, Field(ge=8, le=4096)]
+    width: Annotated[int, Field(strict=True, ge=8, le=4096)]
+    height: Annotated[int, Field(strict=True, ge=8, le=4096)]
 
     @model_validator(mode="after")
-    def _affine(self) -> CameraIn:
-        check_affine(self.matrix_world, "matrix_world")
+    def _camera(self) -> CameraIn:
+        _check_camera_matrix(self.matrix_world, "matrix_world")
+        check_resolution(self.width, self.height)
         return self
 
 
 class RenderRequest(StrictModel):
     scene_id: SceneId
     camera: CameraIn
-    settings: dict[Name, Scalar] | None = Field(
+    settings: Annotated[dict[str, Scalar], Field(json_schema_extra=SETTINGS_SCHEMA)] | None = Field(
         default=None, description="parameter -> value (as a store query returns them); others at max quality"
     )
-    profile: Name = "mobile"
-    fps: Annotated[float, Field(gt=0.0, le=1000.0)] = 30.0
+    profile: ProfileName = "mobile"
+    fps: Fps = 30.0
     format: Literal["png", "exr"] = "png"
 
 
@@ -279,12 +391,19 @@ class RenderResponse(BaseModel):
     render_time_s: float
 
 
+PixelCount = Annotated[int, Field(ge=1, le=16384)]
+
+
 class EvaluateRequest(StrictModel):
     scene_id: SceneId
     camera: CameraIn
-    settings: dict[Name, Scalar] | None = None
-    profile: Name = "mobile"
-    fps: Annotated[float, Field(gt=0.0, le=1000.0)] = 30.0
+    settings: Annotated[dict[str, Scalar], Field(json_schema_extra=SETTINGS_SCHEMA)] | None = None
+    profile: ProfileName = "mobile"
+    fps: Fps = 30.0
+    power_resolution: tuple[PixelCount, PixelCount] | None = (
+        Field(default=None, description="[width, height] to report power and frame time for (static power "
+                                        "plus dynamic power scaled by the pixel count, as a store predicts "
+                                        "it); default: the camera's own size"))
 
 
 class EvaluateResponse(BaseModel):

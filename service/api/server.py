@@ -4,26 +4,22 @@ from __future__ import annotations
 
 import argparse
 import logging
-from pathlib import Path
+from collections.abc import Mapping
+from typing import Any
 
 import uvicorn
 
-from service.cli import add_serve_arguments
+from service.serve_options import add_serve_arguments, serve_overrides
 
 from .app import create_app
-from .config import Settings
+from .config import load_settings
 
 
-def run(host: str = "127.0.0.1", port: int = 8765, data_dir: str | Path | None = None,
-        dask_scheduler: str | None = None, token: str | None = None, *, log_level: str = "info",
-        eval_workers: int | None = None) -> None:
-    """Serve until interrupted. Raises ValueError for a non-loopback bind without a token."""
-    kwargs: dict[str, object] = {"host": host, "port": port, "dask_scheduler": dask_scheduler, "token": token}
-    if eval_workers is not None:
-        kwargs["eval_workers"] = eval_workers
-    if data_dir is not None:
-        kwargs["data_dir"] = Path(data_dir)
-    settings = Settings(**kwargs)
+def run(overrides: Mapping[str, Any] | None = None, *, log_level: str = "info") -> None:
+    """Serve until interrupted, with settings from ``RENDER_BUDGET_*`` variables and ``overrides`` (the
+    command-line options given) on top. Raises ValueError for a bad setting or a non-loopback bind
+    without a token."""
+    settings = load_settings(overrides)
     settings.check_bind()
     logging.basicConfig(level=getattr(logging, log_level.upper(), logging.INFO),
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
@@ -36,8 +32,7 @@ def main(argv: list[str] | None = None) -> int:
     add_serve_arguments(parser)
     args = parser.parse_args(argv)
     try:
-        run(args.host, args.port, args.data_dir, args.dask_scheduler, args.token, log_level=args.log_level,
-            eval_workers=args.eval_workers)
+        run(serve_overrides(args), log_level=args.log_level)
     except ValueError as exc:
         parser.exit(2, f"error: {exc}\n")
     return 0

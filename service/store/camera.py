@@ -8,6 +8,10 @@ Conventions: world frame Z up (Blender's); a camera looks down its local -Z with
 columns are (right, up, backward), the upper-left 3x3 of Blender's ``matrix_world``. The view cube
 around a point has six faces (cones of directions around the world axes, :data:`VIEW_NAMES`); a
 direction belongs to the face of its largest signed component.
+
+It also holds the one set of camera limits (:data:`VFOV_MIN` ... :data:`MIN_AXES_VOLUME`) and their
+checks: the REST schemas, camera paths, the store lookup and the renderer's cameras accept the same
+cameras, so a camera the service takes never fails later in the simulator.
 """
 
 from __future__ import annotations
@@ -34,6 +38,25 @@ VIEWPORT_SENSOR_MM = 72.0
 #: Frustum rays per side sampled to decide which face a camera looks through.
 FRUSTUM_SAMPLES = 8
 
+# -- camera limits ----------------------------------------------------------------------------------------
+#: Vertical field of view, radians: VFOV_MIN <= vfov < VFOV_MAX. The simulator's camera takes (0, 3.1)
+#: in float32, where 3.0999999999999996 is already 3.1: below 3.09 nothing rounds up to it. Blender's
+#: own range is 0.0064 .. 3.0168.
+VFOV_MIN = 1e-4
+VFOV_MAX = 3.09
+#: Largest camera coordinate, metres. The simulator computes in float32: positions up to 1e9 keep squared
+#: distances (1e18) and their products far from float32's 3.4e38, including the samples placed around a
+#: path.
+MAX_COORDINATE = 1e9
+#: Pixels per side the simulator renders.
+MAX_RESOLUTION = 16384
+#: Widest and tallest image, width / height and its inverse (sizes derived from a path's aspect, such as
+#: its evaluation images, must stay within MAX_RESOLUTION).
+MAX_ASPECT = 64.0
+#: The camera axes, scaled to unit length, must span at least this volume (the simulator's own test):
+#: a camera matrix with (nearly) parallel or zero axes has no orientation.
+MIN_AXES_VOLUME = 1e-3
+
 
 def vec3(v: Any, name: str) -> tuple[float, float, float]:
     """Three finite floats from a sequence or array (plain floats: cheap on the per-frame path)."""
@@ -51,7 +74,7 @@ def vec3(v: Any, name: str) -> tuple[float, float, float]:
 def _scale_free(v: tuple[float, float, float], name: str) -> tuple[float, float, float]:
     """Divide by the largest component (so squaring cannot overflow); zero vectors are refused."""
     m = max(abs(v[0]), abs(v[1]), abs(v[2]))
-    if m == 0.0 or m < 1e-300:
+    if m == 0.0:  # any other finite vector scales to unit size (even subnormal ones)
         raise ValueError(f"{name} must be non-zero")
     return v[0] / m, v[1] / m, v[2] / m
 
@@ -208,36 +231,70 @@ def face_of(direction: Any) -> int:
 
 
 def check_fov(vfov: Any, name: str = "fov") -> float:
-    """A vertical field of view in radians, in (0, pi)."""
+    """A vertical field of view in radians, in [VFOV_MIN, VFOV_MAX)."""
     v = float(vfov)
-    if not (math.isfinite(v) and 0 < v < math.pi):
-        raise ValueError(f"{name} must be in (0, pi) radians, got {vfov!r}")
+    if not (math.isfinite(v) and VFOV_MIN <= v < VFOV_MAX):
+        raise ValueError(f"{name} must be in [{VFOV_MIN}, {VFOV_MAX}) radians, got {vfov!r}")
     return v
 
 
 def check_aspect(aspect: Any) -> float:
-    """An image aspect (width / height), positive and finite."""
+    """An image aspect (width / height), within 1/MAX_ASPECT .. MAX_ASPECT."""
     a = float(aspect)
-    if not (math.isfinite(a) and a > 0):
-        raise ValueError("aspect must be positive")
+    if not (math.isfinite(a) and 1.0 / MAX_ASPECT <= a <= MAX_ASPECT):
+        raise ValueError(f"aspect must be within 1/{MAX_ASPECT:g} and {MAX_ASPECT:g}, got {aspect!r}")
     return a
 
 
+def check_resolution(width: Any, height: Any) -> tuple[int, int]:
+    """``(width, height)`` as ints within 1..MAX_RESOLUTION and an aspect within the limits."""
+    w, h = int(width), int(height)
+    if (w, h) != (width, height) or not (0 < w <= MAX_RESOLUTION and 0 < h <= MAX_RESOLUTION):
+        raise ValueError(f"resolution must be two integers in 1..{MAX_RESOLUTION}, got {(width, height)!r}")
+    if not 1.0 / MAX_ASPECT <= w / h <= MAX_ASPECT:
+        raise ValueError(f"resolution {w}x{h}: the aspect ratio must be within 1:{MAX_ASPECT:g} and "
+                         f"{MAX_ASPECT:g}:1")
+    return w, h
+
+
+def check_position(position: Any, name: str = "position") -> tuple[float, float, float]:
+    """A camera position: three finite floats within +-MAX_COORDINATE."""
+    p = vec3(position, name)
+    if max(abs(p[0]), abs(p[1]), abs(p[2])) > MAX_COORDINATE:
+        raise ValueError(f"{name} coordinates must be within +-{MAX_COORDINATE:g} m")
+    return p
+
+
+def check_axes(matrix: Any, name: str = "matrix_world") -> np.ndarray:
+    """The rotation of a camera matrix with unit columns (:func:`matrix_rotation`), or ValueError when
+    its axes span less than MIN_AXES_VOLUME: (nearly) parallel or zero axes give no orientation."""
+    try:
+        axes = matrix_rotation(matrix)
+    except ValueError as exc:
+        raise ValueError(f"{name}: {exc}") from None
+    if abs(float(np.linalg.det(axes))) < MIN_AXES_VOLUME:
+        raise ValueError(f"{name} axes are (nearly) parallel: the matrix must be invertible")
+    return axes
+
+
 def check_affine(rows: Any, name: str) -> None:
-    """ValueError unless ``rows`` is an affine 4x4 matrix (last row 0, 0, 0, 1) with an invertible
-    3x3 part. Each column is scaled to unit largest magnitude first: only the axes' directions matter,
-    and huge but finite entries must not overflow the determinant."""
+    """ValueError unless ``rows`` is an affine 4x4 matrix (last row 0, 0, 0, 1) whose axes pass
+    :func:`check_axes` (only their directions matter: huge or tiny but finite entries are fine)."""
     if tuple(rows[3]) != (0.0, 0.0, 0.0, 1.0):
         raise ValueError(f"{name} must be an affine 4x4 matrix with last row [0, 0, 0, 1]")
-    scale = [max(abs(rows[i][j]) for i in range(3)) or 1.0 for j in range(3)]
-    m = [[rows[i][j] / scale[j] for j in range(3)] for i in range(3)]
-    det = (
-        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
-        - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
-    )
-    if not math.isfinite(det) or abs(det) < 1e-12:
-        raise ValueError(f"{name} must have an invertible 3x3 part")
+    check_axes(rows, name)
+
+
+def normalised_camera_matrix(matrix: Any, name: str = "matrix_world") -> np.ndarray:
+    """A camera world matrix checked against the limits (:func:`check_affine`, :func:`check_position`)
+    with unit axes, ready for the simulator; ValueError naming the problem otherwise."""
+    m = np.array(matrix, dtype=np.float64)
+    if m.shape != (4, 4):
+        raise ValueError(f"{name} must be 4x4, got shape {m.shape}")
+    check_affine(m.tolist(), name)
+    check_position(m[:3, 3], f"{name} position")
+    m[:3, :3] = matrix_rotation(m)
+    return m
 
 
 def frustum_rays(vfov: float, aspect: float) -> tuple[np.ndarray, np.ndarray]:
@@ -265,29 +322,28 @@ def frustum_face(rotation: np.ndarray, rays: np.ndarray, weights: np.ndarray) ->
     return SIGNED_TO_VIEW[int(np.bincount(face, weights=weights, minlength=6).argmax())]
 
 
-def vertical_fov(lens_mm: float, sensor_width_mm: float, sensor_height_mm: float, sensor_fit: str,
-                 width: int, height: int, pixel_aspect_x: float = 1.0, pixel_aspect_y: float = 1.0) -> float:
+def vertical_fov(angle_x: float, angle_y: float, sensor_fit: str, width: int, height: int,
+                 pixel_aspect_x: float = 1.0, pixel_aspect_y: float = 1.0) -> float:
     """Vertical field of view (radians) of a perspective Blender camera for a render size.
 
-    Follows Blender's sensor-fit rule: AUTO fits the sensor width to the larger image side,
-    HORIZONTAL fits the width to the image width, VERTICAL fits the sensor height to the image height.
+    ``angle_x`` / ``angle_y`` are the camera's own lens angles over the sensor width / height (Blender's
+    ``Camera.angle_x`` / ``angle_y``: the lens and sensor converted once, by Blender). Follows Blender's
+    sensor-fit rule: AUTO fits the sensor width to the larger image side, HORIZONTAL fits the width to
+    the image width, VERTICAL fits the sensor height to the image height.
     """
-    if lens_mm <= 0 or not math.isfinite(lens_mm):
-        raise ValueError(f"lens must be a positive focal length in mm, got {lens_mm}")
+    for name, angle in (("angle_x", angle_x), ("angle_y", angle_y)):
+        if not (math.isfinite(angle) and 0.0 < angle < math.pi):
+            raise ValueError(f"{name} must be a lens angle in (0, pi) radians, got {angle}")
     if width <= 0 or height <= 0:
         raise ValueError(f"resolution must be positive, got {width}x{height}")
-    aspect = (width * pixel_aspect_x) / (height * pixel_aspect_y)  # display width / height
-    if sensor_fit == "AUTO":
-        if aspect >= 1.0:
-            half_w = math.atan(sensor_width_mm / (2.0 * lens_mm))
-            return 2.0 * math.atan(math.tan(half_w) / aspect)
-        return 2.0 * math.atan(sensor_width_mm / (2.0 * lens_mm))
-    if sensor_fit == "HORIZONTAL":
-        half_w = math.atan(sensor_width_mm / (2.0 * lens_mm))
-        return 2.0 * math.atan(math.tan(half_w) / aspect)
+    shown_w, shown_h = width * pixel_aspect_x, height * pixel_aspect_y  # the displayed image's shape
     if sensor_fit == "VERTICAL":
-        return 2.0 * math.atan(sensor_height_mm / (2.0 * lens_mm))
-    raise ValueError(f"unknown sensor_fit {sensor_fit!r}")
+        return float(angle_y)
+    if sensor_fit not in ("AUTO", "HORIZONTAL"):
+        raise ValueError(f"unknown sensor_fit {sensor_fit!r}")
+    if sensor_fit == "HORIZONTAL" or shown_w >= shown_h:
+        return 2.0 * math.atan(math.tan(angle_x / 2.0) * shown_h / shown_w)
+    return float(angle_x)  # AUTO, portrait: the sensor width spans the image height
 
 
 def camera_lens_from_viewport(viewport_lens_mm: float, sensor_width_mm: float) -> float:

@@ -6,20 +6,11 @@ from fastapi import APIRouter
 
 import service
 
+from ..checks import available_profiles
 from ..deps import JobsDep, StorageDep
 from ..schemas import Health
 
 router = APIRouter(tags=["health"])
-
-
-def available_profiles() -> list[str]:
-    """Names of the bundled hardware profiles (empty if the energy model is not importable)."""
-    try:
-        import sim_core
-
-        return sorted(str(p) for p in sim_core.list_profiles())
-    except (ImportError, AttributeError):
-        return []
 
 
 @router.get("/health", response_model=Health)

@@ -4,54 +4,42 @@ from __future__ import annotations
 
 import base64
 import dataclasses
-import io
 import math
 import time
 from typing import Any
 
 import numpy as np
 from fastapi import APIRouter
+from sim_core.image import encode_exr, encode_png
 
-from service.storage import Storage
-from service.store.camera import unit_axes
+import sim_core
+from service.evaluation import CameraSpec, evaluate
+from service.params import ParameterSpace, default_space
+from service.store.camera import normalised_camera_matrix
 
+from ..checks import scene_or_404
 from ..deps import ScenesDep, SettingsDep, StorageDep
-from ..errors import ApiError, ErrorResponse
+from ..errors import ApiError, error_responses
 from ..schemas import CameraIn, EvaluateRequest, EvaluateResponse, RenderRequest, RenderResponse
-from .jobs import check_profile
 
 router = APIRouter(tags=["render"])
-_ERRORS: dict[int | str, dict[str, Any]] = {404: {"model": ErrorResponse}, 422: {"model": ErrorResponse}}
+_ERRORS = error_responses(404, 408, 413, 422, e404="unknown scene")
 
 
-def scene_or_404(storage: Storage, scenes: Any, scene_id: str) -> Any:
-    if storage.get_scene(scene_id=scene_id) is None:
-        raise ApiError(404, f"scene {scene_id!r} not found")
-    return scenes.get(scene_id)
-
-
-def camera_matrix(cam: CameraIn) -> np.ndarray:
-    """The camera's world matrix with unit-length axes (:func:`service.store.camera.unit_axes`)."""
-    return unit_axes(cam.matrix_world)
-
-
-def make_camera(cam: CameraIn, max_pixels: int) -> Any:
-    import sim_core
-
+def camera_matrix(cam: CameraIn, max_pixels: int) -> np.ndarray:
+    """The camera's world matrix with unit axes, after the preview size limit."""
     if cam.width * cam.height > max_pixels:
-        raise ApiError(422, f"camera resolution {cam.width}x{cam.height} exceeds the preview limit of "
-                            f"{max_pixels} pixels")
+        raise ApiError(422, f"camera resolution {cam.width}x{cam.height} exceeds the limit of {max_pixels} "
+                            "pixels")
     try:
-        return sim_core.Camera.from_blender(camera_matrix(cam), cam.vfov, cam.width, cam.height)
-    except ValueError as exc:
+        return normalised_camera_matrix(cam.matrix_world)
+    except ValueError as exc:  # the schema checked the same already; kept for direct callers
         raise ApiError(422, f"camera: {exc}") from exc
 
 
-def settings_indices(values: dict[str, Any] | None) -> tuple[Any, tuple[int, ...]]:
+def settings_indices(values: dict[str, Any] | None) -> tuple[ParameterSpace, tuple[int, ...]]:
     """The default parameter space and the index vector of ``{parameter: value}`` (the names and values a
     store query returns); parameters left out stay at maximum quality."""
-    from service.params import default_space
-
     space = default_space()
     indices = list(space.max_quality_indices())
     for name, value in (values or {}).items():
@@ -82,50 +70,24 @@ def _jsonable(value: Any) -> Any:
     return str(value)
 
 
-def encode_png(image: np.ndarray) -> bytes:
-    """Linear float RGB -> 8-bit sRGB PNG."""
-    from PIL import Image
-
-    x = np.clip(np.nan_to_num(image, nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
-    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
-    buf = io.BytesIO()
-    Image.fromarray((srgb * 255.0 + 0.5).astype(np.uint8), "RGB").save(buf, format="PNG")
-    return buf.getvalue()
-
-
-def encode_exr(image: np.ndarray, storage: Storage) -> bytes:
-    """Linear float RGB -> half-float-free 32-bit EXR (OpenEXR writes files, so go through tmp/)."""
-    import OpenEXR
-
-    tmp = storage.new_temp_path(".exr")
-    try:
-        header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-        with OpenEXR.File(header, {"RGB": np.ascontiguousarray(image, dtype=np.float32)}) as f:
-            f.write(str(tmp))
-        return tmp.read_bytes()
-    finally:
-        tmp.unlink(missing_ok=True)
-
-
-@router.post("/render", response_model=RenderResponse, responses=_ERRORS)
+@router.post("/render", response_model=RenderResponse, operation_id="render_preview", responses=_ERRORS)
 def render_preview(body: RenderRequest, storage: StorageDep, scenes: ScenesDep,
                    settings: SettingsDep) -> RenderResponse:
     """Render one frame with the simulator; the image comes back base64-encoded next to its counters and
     the energy report of the chosen hardware profile."""
-    import sim_core
-
-    check_profile(body.profile)
+    m = camera_matrix(body.camera, settings.max_render_pixels)
     scene = scene_or_404(storage, scenes, body.scene_id)
-    camera = make_camera(body.camera, settings.max_render_pixels)
     space, indices = settings_indices(body.settings)
-    rs = space.to_settings(indices)
     t0 = time.perf_counter()
-    profile = sim_core.load_profile(body.profile)
-    result = sim_core.render(scene, camera, rs, threads=settings.render_threads)
-    report = sim_core.price(result, profile, body.fps)
+    try:
+        camera = sim_core.Camera.from_blender(m, body.camera.vfov, body.camera.width, body.camera.height)
+        result = sim_core.render(scene, camera, space.to_settings(indices), threads=settings.render_threads)
+        report = sim_core.price(result, sim_core.load_profile(body.profile), body.fps)
+    except ValueError as exc:  # the simulator's own checks: a 422 like every other invalid input
+        raise ApiError(422, f"render: {exc}") from exc
     elapsed = time.perf_counter() - t0
     image = np.asarray(result.image, dtype=np.float32)
-    data = encode_png(image) if body.format == "png" else encode_exr(image, storage)
+    data = encode_png(image) if body.format == "png" else encode_exr(image)
     return RenderResponse(
         format=body.format, media_type="image/png" if body.format == "png" else "image/x-exr",
         width=int(image.shape[1]), height=int(image.shape[0]), image_base64=base64.b64encode(data).decode(),
@@ -134,30 +96,23 @@ def render_preview(body: RenderRequest, storage: StorageDep, scenes: ScenesDep,
     )
 
 
-@router.post("/evaluate", response_model=EvaluateResponse, responses=_ERRORS)
+@router.post("/evaluate", response_model=EvaluateResponse, operation_id="evaluate_settings",
+             responses=_ERRORS)
 def evaluate_settings(body: EvaluateRequest, storage: StorageDep, scenes: ScenesDep,
                       settings: SettingsDep) -> EvaluateResponse:
     """Error (1 - SSIM against the maximum-quality render of the same camera) and power of settings
     (``{parameter: value}`` of the default space, as a store query returns them)."""
-    from service.evaluation import CameraSpec, evaluate
-
-    check_profile(body.profile)
-    scene = scene_or_404(storage, scenes, body.scene_id)
     cam = body.camera
-    if cam.width * cam.height > settings.max_render_pixels:
-        raise ApiError(422, f"camera resolution {cam.width}x{cam.height} exceeds the limit of "
-                            f"{settings.max_render_pixels} pixels")
-    m = camera_matrix(cam)
+    m = camera_matrix(cam, settings.max_render_pixels)
+    scene = scene_or_404(storage, scenes, body.scene_id)
+    space, indices = settings_indices(body.settings)
     try:
         spec = CameraSpec(eye=tuple(m[:3, 3]), forward=tuple(-m[:3, 2]), up=tuple(m[:3, 1]), vfov=cam.vfov,
                           width=cam.width, height=cam.height)
-    except ValueError as exc:
-        raise ApiError(422, f"camera: {exc}") from exc
-    space, indices = settings_indices(body.settings)
-    try:
+        pixels = None if body.power_resolution is None else math.prod(body.power_resolution)
         ev = evaluate(scene, spec, indices, space, profile=body.profile, fps=body.fps,
-                      threads=settings.render_threads)
+                      threads=settings.render_threads, target_pixels=pixels)
     except ValueError as exc:
-        raise ApiError(422, str(exc)) from exc
+        raise ApiError(422, f"evaluate: {exc}") from exc
     return EvaluateResponse(error=float(ev.error), power_w=float(ev.power_w),
                             frame_time_s=float(ev.frame_time_s), breakdown=_jsonable(ev.breakdown))

@@ -1,5 +1,5 @@
-"""POST /scenes (streamed, size-limited upload of a .glb or a render-budget scene file) and
-GET /scenes/{id}."""
+"""POST /scenes (streamed, size-limited upload of a .glb or a render-budget scene file), GET /scenes (a
+page), GET and DELETE /scenes/{id}."""
 
 from __future__ import annotations
 
@@ -8,17 +8,22 @@ import hashlib
 import logging
 import struct
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
-from fastapi import APIRouter, Request, status
+from fastapi import APIRouter, Query, Request, Response, status
+from sim_core.loaders.scene_file import DEFAULT_LIMITS, is_scene_file, read_scene_file
 from starlette.concurrency import run_in_threadpool
 from starlette.requests import ClientDisconnect
 
+import sim_core
+from service.params import default_space
 from service.storage import SceneRecord, Storage
 
-from ..deps import ScenesDep, SettingsDep, StorageDep
-from ..errors import ApiError, ErrorResponse
-from ..schemas import ScenePublic
+from ..checks import deleted
+from ..deps import JobsDep, ScenesDep, SettingsDep, StorageDep
+from ..errors import ApiError, error_responses
+from ..openapi_links import links
+from ..schemas import ScenePage, ScenePublic
 
 log = logging.getLogger("render_budget.api")
 router = APIRouter(prefix="/scenes", tags=["scenes"])
@@ -29,13 +34,11 @@ ACCEPTED_TYPES = ("model/gltf-binary", SCENE_FILE_TYPE, "application/octet-strea
 
 SUFFIXES = {"glb": ".glb", "scene": ".rbscene"}  # storage.SCENE_SUFFIXES
 
-_ERRORS: dict[int | str, dict[str, Any]] = {
-    400: {"model": ErrorResponse, "description": "neither a glTF binary nor a scene file, truncated, or "
-                                                 "unreadable"},
-    413: {"model": ErrorResponse, "description": "upload larger than the configured limit"},
-    415: {"model": ErrorResponse, "description": "wrong Content-Type"},
-    422: {"model": ErrorResponse, "description": "geometry the simulator rejects (NaN, bad indices, empty)"},
-}
+_UPLOAD_ERRORS = error_responses(
+    400, 408, 413, 415, 422, e400="neither a glTF binary nor a scene file, truncated, or unreadable",
+    e413="upload larger than the configured limit",
+    e422="a scene the simulator rejects (NaN, bad indices, empty) or a glTF that is not self-contained (a "
+         "URI naming a file: only the binary chunk and data: URIs are read)")
 
 
 def public(record: SceneRecord) -> ScenePublic:
@@ -65,16 +68,12 @@ def check_glb_header(path: Path, size: int) -> None:
 
 def default_space_mapping() -> dict[str, list[Any]]:
     """RenderSettings field -> candidate values of the default parameter space (for inert parameters)."""
-    from service.params import default_space
-
     return default_space().as_render_space()
 
 
 def upload_kind(path: Path, size: int, content_type: str) -> str:
     """"glb" or "scene" (a render-budget scene file): what the Content-Type declares, or for
     application/octet-stream what the first bytes say; 400 when the bytes are not what was declared."""
-    from sim_core.loaders.scene_file import is_scene_file
-
     with open(path, "rb") as f:
         head = f.read(64)
     if content_type == SCENE_FILE_TYPE or (content_type not in ACCEPTED_TYPES[:1] and is_scene_file(head)):
@@ -93,8 +92,6 @@ def analyse_scene(path: Path, kind: str = "glb", max_bytes: int | None = None
                   ) -> tuple[Any, dict[str, Any], dict[str, str]]:
     """Load with the real loader (the only judge of validity) and ask the simulator what is inert.
     A scene file's translation notes (what was approximated) join its statistics as ``notes``."""
-    import sim_core
-
     def private(exc: BaseException) -> str:  # the server's file names are nobody's business
         shown = "upload" + SUFFIXES[kind]
         return str(exc).replace(str(path), shown).replace(path.name, shown)
@@ -102,15 +99,13 @@ def analyse_scene(path: Path, kind: str = "glb", max_bytes: int | None = None
     notes: list[dict[str, str]] = []
     try:
         if kind == "scene":
-            from sim_core.loaders.scene_file import DEFAULT_LIMITS, read_scene_file
-
             limits = DEFAULT_LIMITS if max_bytes is None else dataclasses.replace(DEFAULT_LIMITS,
                                                                                  max_bytes=max_bytes)
             content = read_scene_file(path, limits=limits)
             notes = content.notes
             scene = sim_core.Scene.from_scene_data(content.data)
         else:
-            scene = sim_core.Scene.from_gltf(str(path))
+            scene = sim_core.Scene.from_gltf(str(path), self_contained=True)  # reads nothing but the upload
     except ValueError as exc:
         raise ApiError(422, f"scene rejected: {private(exc)}") from exc
     except MemoryError as exc:
@@ -155,8 +150,13 @@ async def receive_upload(request: Request, storage: Storage, limit: int) -> tupl
     return tmp, digest.hexdigest(), size
 
 
+_SCENE_LINKS = links(GetScene=("get_scene", "scene_id", "id"), DeleteScene=("delete_scene", "scene_id", "id"))
+
+
 @router.post(
-    "", status_code=status.HTTP_201_CREATED, response_model=ScenePublic, responses=_ERRORS,
+    "", status_code=status.HTTP_201_CREATED, response_model=ScenePublic, operation_id="upload_scene",
+    responses={**_UPLOAD_ERRORS, 201: {"description": "the scene (also for bytes uploaded before)",
+                                       "links": _SCENE_LINKS}},
     openapi_extra={"requestBody": {"required": True, "content": {
         t: {"schema": {"type": "string", "format": "binary"}} for t in ACCEPTED_TYPES}}},
 )
@@ -184,9 +184,30 @@ async def upload_scene(request: Request, storage: StorageDep, scenes: ScenesDep,
         tmp.unlink(missing_ok=True)
 
 
-@router.get("/{scene_id}", response_model=ScenePublic, responses={404: {"model": ErrorResponse}})
+@router.get("", response_model=ScenePage, operation_id="list_scenes", responses=error_responses(422))
+def list_scenes(storage: StorageDep, limit: Annotated[int, Query(ge=1, le=1000)] = 100,
+                cursor: Annotated[str | None, Query(max_length=512)] = None) -> ScenePage:
+    """Uploaded scenes, newest first, ``limit`` at a time (follow ``next_cursor``)."""
+    try:
+        page = storage.list_scenes(limit=limit, cursor=cursor)
+    except ValueError as exc:
+        raise ApiError(422, str(exc)) from exc
+    return ScenePage(items=[public(r) for r in page.items], next_cursor=page.next_cursor)
+
+
+@router.get("/{scene_id}", response_model=ScenePublic, operation_id="get_scene",
+            responses=error_responses(404))
 def get_scene(scene_id: str, storage: StorageDep) -> ScenePublic:
     record = storage.get_scene(scene_id=scene_id)
     if record is None:
         raise ApiError(404, f"scene {scene_id!r} not found")
     return public(record)
+
+
+@router.delete("/{scene_id}", status_code=status.HTTP_204_NO_CONTENT, response_class=Response,
+               operation_id="delete_scene",
+               responses=error_responses(404, 409, e409="the scene has queued or running jobs"))
+def delete_scene(scene_id: str, jobs: JobsDep) -> Response:
+    """Delete the scene file, the scene and its finished jobs. Stores made from it stay (they are
+    self-sufficient: delete them with ``DELETE /stores/{id}``); 409 while one of its jobs may still run."""
+    return deleted(lambda: jobs.delete_scene(scene_id=scene_id), f"scene {scene_id!r} not found")

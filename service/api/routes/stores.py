@@ -1,30 +1,61 @@
-"""GET /stores/{id} (the Pareto store document) and POST /stores/{id}/query (runtime lookup, sec. 6)."""
+"""GET /stores (a page), GET and DELETE /stores/{id} (the Pareto store document) and
+POST /stores/{id}/query (runtime lookup, sec. 6)."""
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Annotated, Any
 
-from fastapi import APIRouter, Response
+from fastapi import APIRouter, Query, Request, Response, status
 
+from service.storage import StoreRecord
 from service.store import TemporalFilter, pack_indices
 
-from ..deps import StoreRecordDep, StoresDep
-from ..errors import ApiError, ErrorResponse
-from ..schemas import QueryResult, StoreQuery
+from ..checks import deleted
+from ..deps import StorageDep, StoreRecordDep, StoresDep
+from ..errors import ApiError, error_responses
+from ..lean_route import LeanJsonRoute
+from ..schemas import QueryResult, SceneId, StorePage, StorePublic, StoreQuery
 
 router = APIRouter(prefix="/stores", tags=["stores"])
 
 
-@router.get("/{store_id}", responses={200: {"content": {"application/json": {}},
-                                            "description": "the store JSON (service.store format)"},
-                                       404: {"model": ErrorResponse}})
+def public(record: StoreRecord) -> StorePublic:
+    return StorePublic(id=record.id, scene_id=record.scene_id, job_id=record.job_id, size=record.size,
+                       created=record.created)
+
+
+@router.get("", response_model=StorePage, operation_id="list_stores", responses=error_responses(422))
+def list_stores(storage: StorageDep, limit: Annotated[int, Query(ge=1, le=1000)] = 100,
+                cursor: Annotated[str | None, Query(max_length=512)] = None,
+                scene_id: SceneId | None = None) -> StorePage:
+    """Stores (without their bodies), newest first, ``limit`` at a time (follow ``next_cursor``)."""
+    try:
+        page = storage.list_stores(limit=limit, cursor=cursor, scene_id=scene_id)
+    except ValueError as exc:
+        raise ApiError(422, str(exc)) from exc
+    return StorePage(items=[public(r) for r in page.items], next_cursor=page.next_cursor)
+
+
+@router.get("/{store_id}", operation_id="get_store",
+            responses={200: {"content": {"application/json": {}},
+                             "description": "the store JSON (service.store format)"},
+                       **error_responses(404)})
 def get_store(record: StoreRecordDep) -> Response:
     """The store exactly as the optimiser wrote it (load it with ``ParetoStore.from_json``)."""
     return Response(record.body, media_type="application/json", headers={"ETag": f'"{record.id}"'})
 
 
+@router.delete("/{store_id}", status_code=status.HTTP_204_NO_CONTENT, response_class=Response,
+               operation_id="delete_store", responses=error_responses(404))
+def delete_store(store_id: str, storage: StorageDep, stores: StoresDep) -> Response:
+    """Delete a store; the jobs that made it keep its id (and get 404 for it from then on)."""
+    answer = deleted(lambda: storage.delete_store(store_id=store_id), f"store {store_id!r} not found")
+    stores.drop(store_id)
+    return answer
+
+
 def answer_query(store: Any, body: StoreQuery) -> QueryResult:
-    """Lookup plus the optional temporal filter; shared by the route and the app's fast path."""
+    """Lookup plus the optional temporal filter."""
     try:  # the lookup's camera maths is scale-free: huge or tiny but finite orientations are fine
         hit = store.lookup(body.position, direction=body.direction, matrix=body.matrix, fov=body.fov,
                            power_budget=body.power_budget_w, error_budget=body.error_budget,
@@ -57,10 +88,16 @@ def answer_query(store: Any, body: StoreQuery) -> QueryResult:
     )
 
 
-@router.post("/{store_id}/query", response_model=QueryResult,
-             responses={404: {"model": ErrorResponse}, 422: {"model": ErrorResponse}})
-async def query_store(store_id: str, body: StoreQuery, stores: StoresDep) -> QueryResult:
+async def query_store(store_id: str, body: StoreQuery, request: Request) -> QueryResult:
     """Settings for a camera pose under a power or error budget, optionally through the temporal filter
     (Eq. 8) from the ``previous`` settings, ``elapsed_s`` after the target changed. ``power_w`` and
     ``error`` are the predictions for the target settings."""
-    return answer_query(stores.get(store_id), body)
+    return answer_query(request.app.state.render_budget.stores.get(store_id), body)
+
+
+# The per-frame call of a runtime: served without FastAPI's parameter solving (service.api.lean_route),
+# and matched before the other store routes.
+router.add_api_route("/{store_id}/query", query_store, methods=["POST"], response_model=QueryResult,
+                     operation_id="query_store", route_class_override=LeanJsonRoute,
+                     responses=error_responses(404, 408, 413, 422))
+router.routes.insert(0, router.routes.pop())

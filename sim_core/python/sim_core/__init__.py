@@ -5,8 +5,10 @@ from ._core import CacheConfig
 from .analysis import SceneAnalysis, analyze, inert_parameters
 from .camera import Camera
 from .energy import EnergyReport, Profile, list_profiles, load_profile, price
+from .geometry import smooth_normals
+from .image import load_exr
 from .render import COUNTER_NAMES, RenderResult, StereoResult, render, render_stereo
-from .scene import Scene, load_exr, smooth_normals
+from .scene import Scene
 from .scene_data import CameraData, Light, Material, SceneData, Texture
 from .settings import RenderSettings
 

@@ -16,6 +16,10 @@ from typing import Any
 
 import numpy as np
 
+from .camera import Camera
+from .render import render
+from .settings import RenderSettings
+
 __all__ = ["SceneAnalysis", "analyze", "inert_parameters"]
 
 
@@ -98,8 +102,6 @@ def analyze(scene: Any) -> SceneAnalysis:
 
 
 def _default_camera(scene: Any, width: int, height: int) -> Any:
-    from . import Camera
-
     cams = list(getattr(scene, "cameras", []) or [])
     if cams:
         c = cams[0]
@@ -124,6 +126,27 @@ def _reason(name: str, a: SceneAnalysis) -> str:
     return f"{base} ({hint[1]})" if hint and hint[0] else base
 
 
+def _contexts(name: str, space: Mapping[str, Sequence[Any]], bases: Sequence[Any]) -> list[Any]:
+    """Base settings to vary ``name`` from: every base, and every base with one other parameter of the
+    space set to each of its candidates (so interactions such as threshold x adaptive mode count)."""
+    out, seen = [], set()
+    for base in bases:
+        cands = [base]
+        for other, vals in space.items():
+            if other == name:
+                continue
+            for v in vals:
+                try:
+                    cands.append(dataclasses.replace(base, **{other: v}))
+                except ValueError:
+                    continue  # an invalid combination is not a context the search can reach
+        for c in cands:
+            if repr(c) not in seen:
+                seen.add(repr(c))
+                out.append(c)
+    return out
+
+
 def inert_parameters(scene: Any, space: Mapping[str, Sequence[Any]], camera: Any = None, *,
                      resolution: tuple[int, int] = (48, 32), bases: Sequence[Any] | None = None,
                      threads: int | None = None) -> dict[str, str]:
@@ -137,8 +160,6 @@ def inert_parameters(scene: Any, space: Mapping[str, Sequence[Any]], camera: Any
     context, all its values give the same image (bit for bit) and the same counters. ``camera`` defaults
     to the scene's first camera or one framing its bounds.
     """
-    from . import RenderSettings, render
-
     fields = {f.name for f in dataclasses.fields(RenderSettings)}
     for name, values in space.items():
         if name not in fields:
@@ -163,33 +184,13 @@ def inert_parameters(scene: Any, space: Mapping[str, Sequence[Any]], camera: Any
             cache[key] = (np.asarray(r.image), dict(r.counters))
         return cache[key]
 
-    def contexts(name: str) -> list[Any]:
-        """Base settings to vary ``name`` from: every base, and every base with one other parameter of the
-        space set to each of its candidates (so interactions such as threshold x adaptive mode count)."""
-        out, seen = [], set()
-        for base in base_list:
-            cands = [base]
-            for other, vals in space.items():
-                if other == name:
-                    continue
-                for v in vals:
-                    try:
-                        cands.append(dataclasses.replace(base, **{other: v}))
-                    except ValueError:
-                        continue  # an invalid combination is not a context the search can reach
-            for c in cands:
-                if repr(c) not in seen:
-                    seen.add(repr(c))
-                    out.append(c)
-        return out
-
     inert: dict[str, str] = {}
     for name, values in space.items():
         if len(values) < 2:
             inert[name] = "a single candidate value: nothing to choose"
             continue
         same = True
-        for base in contexts(name):
+        for base in _contexts(name, space, base_list):
             ref_img, ref_cnt = None, None
             for v in values:
                 try:

@@ -18,6 +18,8 @@ from typing import Any
 
 import numpy as np
 
+from . import _core
+
 __all__ = [
     "COMPARATOR_TABLE",
     "ComparatorStats",
@@ -110,15 +112,11 @@ class Profile:
     @property
     def cache(self) -> Any:
         """The node/triangle cache geometry as the native ``CacheConfig`` (pass to ``render(cache=...)``)."""
-        from . import _core
-
         return _core.CacheConfig(self.cache_size_bytes, self.cache_line_bytes, self.cache_ways)
 
     @property
     def texture_cache(self) -> Any:
         """The texture cache geometry as a native ``CacheConfig`` (``render(texture_cache=...)``)."""
-        from . import _core
-
         return _core.CacheConfig(
             self.texture_cache_size_bytes, self.texture_cache_line_bytes, self.texture_cache_ways
         )
@@ -222,8 +220,6 @@ def _table_columns() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np
 
 def comparator_stats(histogram: np.ndarray | None, energy_scale: float = 1.0) -> ComparatorStats:
     """Price a chain-length histogram with Table 4.1 (J, scaled by ``energy_scale`` for the process)."""
-    from . import _core
-
     bits = int(_core.COMPARATOR_BITS)
     if histogram is None:
         h = np.zeros(bits + 1, dtype=np.int64)
@@ -325,19 +321,9 @@ def _reads_per_lookup(settings: Any) -> int:
     return 1 if str(getattr(settings, "env_filter", "")).lower() == "off" else 4
 
 
-def price(result: Any, profile: Profile | str | Path, fps: float, *, scene: Any = None) -> EnergyReport:
-    """Price one rendered frame: energy and cycles by block, frame time, deadline, power, perf/W.
-
-    ``result`` is a ``RenderResult`` (its ``counters``, ``comparator_histogram`` and, when present,
-    ``settings``) or a plain mapping of counter names to counts. A block whose counters are 0 costs
-    exactly 0 J and 0 cycles. ``scene`` (optional): when given and its environment is a constant colour,
-    environment lookups of missed rays cost nothing (a constant is a register, not a map lookup).
-    """
-    prof = load_profile(profile) if not isinstance(profile, Profile) else profile
-    if isinstance(fps, bool) or not isinstance(fps, (int, float)) or not math.isfinite(fps) or fps <= 0:
-        raise ValueError(f"fps must be a finite positive number, got {fps!r}")
-    fps = float(fps)
-    c, hist, settings = _counters_of(result)
+def _block_costs(prof: Profile, c: Mapping[str, int], hist: np.ndarray | None, settings: Any, scene: Any
+                 ) -> tuple[dict[str, float], dict[str, float], ComparatorStats]:
+    """Energy (J) and cycles of every block for the counted events (the first half of :func:`price`)."""
 
     def n(name: str) -> int:
         return c.get(name, 0)
@@ -382,8 +368,6 @@ def price(result: Any, profile: Profile | str | Path, fps: float, *, scene: Any 
 
     # One node visit is one step of the 4-wide tree: four ray-box tests (and the ordering of the hit
     # children), priced per step; the unit's box testers set the step rate.
-    from . import _core
-
     energy["traversal"] = n("bvh_node_visits") * e["traversal_step"] * pj
     cycles["traversal"] = n("bvh_node_visits") * int(_core.BVH_NODE_BOXES) / thr["ti_box_tests_per_cycle"]
     energy["intersection"] = n("triangle_tests") * e["triangle_test"] * pj
@@ -417,6 +401,28 @@ def price(result: Any, profile: Profile | str | Path, fps: float, *, scene: Any 
         if not math.isfinite(v):
             raise ValueError(f"energy of block {k!r} is not finite")
 
+    return energy, cycles, comp
+
+
+def price(result: Any, profile: Profile | str | Path, fps: float, *, scene: Any = None) -> EnergyReport:
+    """Price one rendered frame: energy and cycles by block, frame time, deadline, power, perf/W.
+
+    ``result`` is a ``RenderResult`` (its ``counters``, ``comparator_histogram`` and, when present,
+    ``settings``) or a plain mapping of counter names to counts. A block whose counters are 0 costs
+    exactly 0 J and 0 cycles. ``scene`` (optional): when given and its environment is a constant colour,
+    environment lookups of missed rays cost nothing (a constant is a register, not a map lookup).
+    """
+    prof = load_profile(profile) if not isinstance(profile, Profile) else profile
+    if isinstance(fps, bool) or not isinstance(fps, (int, float)) or not math.isfinite(fps) or fps <= 0:
+        raise ValueError(f"fps must be a finite positive number, got {fps!r}")
+    fps = float(fps)
+    c, hist, settings = _counters_of(result)
+
+    def n(name: str) -> int:
+        return c.get(name, 0)
+
+    energy, cycles, comp = _block_costs(prof, c, hist, settings, scene)
+    clk, thr = prof.clock, prof.throughput
     unit_time = {
         "srp": sum(cycles[b] for b in BLOCKS if BLOCK_UNIT[b] == "srp") / clk["srp_hz"],
         # Traversal and intersection pipelines (and the cache ports feeding them) work concurrently.

@@ -14,6 +14,7 @@ import numpy as np
 
 from . import _core
 from .camera import Camera
+from .image import upsample_bilinear
 from .scene import Scene, _threads
 from .settings import RenderSettings
 
@@ -109,11 +110,6 @@ class RenderResult:
     extra: dict[str, Any] = field(default_factory=dict)
     rays: TracedRays | None = None  # with render(..., log_rays=True)
 
-    @property
-    def traced_ratio(self) -> float:
-        """Samples traced per pixel of the render resolution."""
-        return self.counters["samples_traced"] / max(1, self.counters["pixels"])
-
 
 @dataclass
 class StereoResult:
@@ -164,23 +160,6 @@ def _render_size(camera: Camera, settings: RenderSettings) -> tuple[int, int]:
     return max(1, round(camera.width * s)), max(1, round(camera.height * s))
 
 
-def _upscale(img: np.ndarray, height: int, width: int) -> np.ndarray:
-    """Bilinear resize with pixel-centre alignment (what a display upscaler does)."""
-    h, w = img.shape[:2]
-    if (h, w) == (height, width):
-        return img
-    ys = np.clip((np.arange(height) + 0.5) * h / height - 0.5, 0, h - 1)
-    xs = np.clip((np.arange(width) + 0.5) * w / width - 0.5, 0, w - 1)
-    y0 = np.floor(ys).astype(int)
-    x0 = np.floor(xs).astype(int)
-    y1, x1 = np.minimum(y0 + 1, h - 1), np.minimum(x0 + 1, w - 1)
-    fy = (ys - y0)[:, None, None].astype(np.float32)
-    fx = (xs - x0)[None, :, None].astype(np.float32)
-    top = img[y0][:, x0] * (1 - fx) + img[y0][:, x1] * fx
-    bot = img[y1][:, x0] * (1 - fx) + img[y1][:, x1] * fx
-    return (top * (1 - fy) + bot * fy).astype(np.float32)
-
-
 def _trace_args(bvh_width: Any, log_rays: Any) -> dict[str, Any]:
     if bvh_width not in (2, 4) or isinstance(bvh_width, bool):
         raise ValueError(
@@ -211,7 +190,7 @@ def _result(
     counters = {k: int(v) for k, v in d["counters"].items()}
     rays = TracedRays(**d["rays"]) if "rays" in d else None
     return RenderResult(
-        image=_upscale(d["image"], camera.height, camera.width),
+        image=upsample_bilinear(d["image"], camera.height, camera.width),
         aovs=aovs,
         counters=counters,
         tile_stats=list(d["tile_stats"]),

@@ -15,6 +15,8 @@ from typing import Any
 import numpy as np
 
 from . import _core
+from .loaders import load_gltf, load_obj
+from .loaders.scene_file import Limits, load_scene_file
 from .scene_data import ALPHA_MODES, WRAPS, CameraData, Light, Material, SceneData, Texture, finite_clamped
 
 # Blender's default world colour: what a scene without an environment sees.
@@ -22,51 +24,6 @@ DEFAULT_ENVIRONMENT = (0.050876, 0.050876, 0.050876)
 _LIGHT_KINDS = {"point": 0, "spot": 1, "sun": 2, "area": 3}
 _MATERIAL_FIELDS = 14
 _LIGHT_FIELDS = 20
-
-
-def load_exr(path: str | os.PathLike[str]) -> np.ndarray:
-    """Read an OpenEXR image as (H, W, 3) float32 linear RGB (an equirectangular environment map).
-
-    Raises FileNotFoundError when the file is missing and ValueError when it is not a readable RGB EXR.
-    Negative and non-finite texels (most of Blender's bundled HDRIs hold tiny negative ones) are clamped
-    with a warning, never rejected.
-    """
-    import OpenEXR
-
-    p = os.fspath(path)
-    if not os.path.isfile(p):
-        raise FileNotFoundError(f"EXR file not found: {p}")
-    try:
-        with OpenEXR.File(p) as f:
-            channels = f.channels()
-            if "RGB" in channels:
-                rgb = np.asarray(channels["RGB"].pixels, dtype=np.float32)
-            elif "RGBA" in channels:
-                rgb = np.asarray(channels["RGBA"].pixels, dtype=np.float32)[..., :3]
-            elif all(c in channels for c in "RGB"):
-                rgb = np.stack([np.asarray(channels[c].pixels, dtype=np.float32) for c in "RGB"], axis=-1)
-            else:
-                raise ValueError(f"{p}: EXR has no R, G, B channels ({sorted(channels)})")
-    except ValueError:
-        raise
-    except Exception as exc:
-        raise ValueError(f"{p}: not a readable EXR file ({exc})") from None
-    if rgb.ndim != 3 or rgb.shape[2] != 3:
-        raise ValueError(f"{p}: expected an (H, W, 3) image, got shape {rgb.shape}")
-    return np.ascontiguousarray(finite_clamped(rgb, p))
-
-
-def smooth_normals(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """Area-weighted per-vertex normals (for meshes that come without normals)."""
-    p = np.asarray(positions, dtype=np.float64)
-    t = np.asarray(triangles, dtype=np.int64)
-    fn = np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]])
-    vn = np.zeros_like(p)
-    for k in range(3):
-        np.add.at(vn, t[:, k], fn)
-    length = np.linalg.norm(vn, axis=1, keepdims=True)
-    vn = np.divide(vn, length, out=np.zeros_like(vn), where=length > 0)
-    return vn.astype(np.float32)
 
 
 def _as_array(value: Any, name: str, dtype: type, ncols: int | None) -> np.ndarray:
@@ -115,6 +72,53 @@ def _environment(env: Any, strength: float = 1.0) -> tuple[np.ndarray, np.ndarra
             arr = arr * np.float32(strength)
         return np.zeros(3, np.float32), np.ascontiguousarray(arr)
     raise ValueError(f"environment must be an RGB triple or an (H, W, 3) map, got shape {arr.shape}")
+
+
+def _non_degenerate(pos: np.ndarray, tri: np.ndarray) -> np.ndarray:
+    """Triangles to keep: no repeated vertex and a non-zero area (computed in double precision)."""
+    p64 = pos.astype(np.float64)
+    e1 = p64[tri[:, 1]] - p64[tri[:, 0]]
+    e2 = p64[tri[:, 2]] - p64[tri[:, 0]]
+    area2 = np.linalg.norm(np.cross(e1, e2), axis=1)
+    return (area2 > 0) & (tri[:, 0] != tri[:, 1]) & (tri[:, 1] != tri[:, 2]) & (tri[:, 0] != tri[:, 2])
+
+
+def _triangle_ids(values: Any, name: str, n_tri: int) -> np.ndarray:
+    """Per-triangle ids as uint32 (zeros when not given), one per triangle."""
+    if values is None:
+        return np.zeros(n_tri, np.uint32)
+    ids = _as_array(values, name, np.int64, None)
+    if ids.shape[0] != n_tri:
+        raise ValueError(f"{name} must have one entry per triangle ({n_tri}), got {ids.shape[0]}")
+    return ids.astype(np.uint32)
+
+
+def _effects(mats: Sequence[Material], lights: Sequence[Light], environment_lights: int,
+             environment_map: bool, cutouts: bool) -> list[str]:
+    """What the scene's content can show (``stats["effects"]``); the environment map's suns light it as
+    soft sun lights."""
+    effects = []
+    if lights or environment_lights:
+        effects.append("direct_light")
+    if any(m.is_reflective for m in mats):
+        effects.append("reflection")
+    if any(m.metallic > 0 and m.roughness > 0 for m in mats):
+        effects.append("glossy")
+    if any(m.is_refractive for m in mats):
+        effects.append("refraction")
+    if any(max(m.emission) > 0 for m in mats):
+        effects.append("emission")
+    if any(light.radius > 0 or light.kind == "area" for light in lights) or environment_lights:
+        effects.append("soft_shadows")
+    if any(light.kind == "area" for light in lights):
+        effects.append("area_lights")
+    if environment_map:
+        effects.append("environment_map")
+    if any(m.base_color_texture is not None for m in mats):
+        effects.append("textures")
+    if cutouts:
+        effects.append("alpha_cutouts")
+    return effects
 
 
 def _material_table(materials: Sequence[Material], texture_count: int) -> np.ndarray:
@@ -197,6 +201,8 @@ class Scene:
         self.textures: list[Texture] = []
 
     # ---- construction -------------------------------------------------------------------------
+    # Long: one validation pass over a dozen optional arrays (each checked where it is read, with its
+    # own message) before the single native build; the checks are helpers, the order is the story.
     @classmethod
     def from_arrays(
         cls,
@@ -251,26 +257,12 @@ class Scene:
         native_textures = _native_textures(texs)
         mats = list(materials) if materials else [Material()]
         mtab = _material_table(mats, len(texs))
-        if material_ids is None:
-            mid = np.zeros(n_tri, np.uint32)
-        else:
-            mid = _as_array(material_ids, "material_ids", np.int64, None)
-            if mid.shape[0] != n_tri:
-                raise ValueError(
-                    f"material_ids must have one entry per triangle ({n_tri}), got {mid.shape[0]}"
-                )
-            if mid.size and mid.max() >= len(mats):
-                raise ValueError(f"material id {int(mid.max())} out of range (have {len(mats)} materials)")
-            mid = mid.astype(np.uint32)
-        if object_ids is None:
-            oid = np.zeros(n_tri, np.uint32)
-        else:
-            oid = _as_array(object_ids, "object_ids", np.int64, None)
-            if oid.shape[0] != n_tri:
-                raise ValueError(f"object_ids must have one entry per triangle ({n_tri}), got {oid.shape[0]}")
-            if oid.size and oid.max() >= 2**31:
-                raise ValueError("object ids must be < 2**31")
-            oid = oid.astype(np.uint32)
+        mid = _triangle_ids(material_ids, "material_ids", n_tri)
+        if mid.size and mid.max() >= len(mats):
+            raise ValueError(f"material id {int(mid.max())} out of range (have {len(mats)} materials)")
+        oid = _triangle_ids(object_ids, "object_ids", n_tri)
+        if oid.size and oid.max() >= 2**31:
+            raise ValueError("object ids must be < 2**31")
         lts = list(lights) if lights else []
         if len(lts) > 32:
             raise ValueError(f"at most 32 lights are supported (one shadow bit each), got {len(lts)}")
@@ -280,12 +272,7 @@ class Scene:
         if not math.isfinite(rotation):
             raise ValueError(f"environment_rotation must be finite, got {environment_rotation!r}")
 
-        # Degenerate triangles: repeated vertices or zero area (computed in double precision).
-        p64 = pos.astype(np.float64)
-        e1 = p64[tri[:, 1]] - p64[tri[:, 0]]
-        e2 = p64[tri[:, 2]] - p64[tri[:, 0]]
-        area2 = np.linalg.norm(np.cross(e1, e2), axis=1)
-        keep = (area2 > 0) & (tri[:, 0] != tri[:, 1]) & (tri[:, 1] != tri[:, 2]) & (tri[:, 0] != tri[:, 2])
+        keep = _non_degenerate(pos, tri)
         dropped = int(n_tri - np.count_nonzero(keep))
         if not np.any(keep):
             raise ValueError(f"empty scene: all {n_tri} triangles are degenerate (zero area)")
@@ -322,27 +309,6 @@ class Scene:
                 h.update(np.ascontiguousarray(arr).tobytes())
         # The environment map's suns, lit like sun lamps (Environment::lights in the native core).
         env_lights = len(native.environment_lights)
-        effects = []
-        if lts or env_lights:
-            effects.append("direct_light")
-        if any(m.is_reflective for m in mats):
-            effects.append("reflection")
-        if any(m.metallic > 0 and m.roughness > 0 for m in mats):
-            effects.append("glossy")
-        if any(m.is_refractive for m in mats):
-            effects.append("refraction")
-        if any(max(m.emission) > 0 for m in mats):
-            effects.append("emission")
-        if any(light.radius > 0 or light.kind == "area" for light in lts) or env_lights:
-            effects.append("soft_shadows")
-        if any(light.kind == "area" for light in lts):
-            effects.append("area_lights")
-        if env_map is not None:
-            effects.append("environment_map")
-        if any(m.base_color_texture is not None for m in mats):
-            effects.append("textures")
-        if native.has_cutouts:
-            effects.append("alpha_cutouts")
         stats = {
             "triangles": int(np.count_nonzero(keep)),
             "degenerate_dropped": dropped,
@@ -350,7 +316,7 @@ class Scene:
             "lights": len(lts),
             "environment_lights": env_lights,
             "objects": int(np.unique(oid[keep]).size),
-            "effects": effects,
+            "effects": _effects(mats, lts, env_lights, env_map is not None, native.has_cutouts),
         }
         scene = cls(native, stats, h.hexdigest(), mats, lts, list(cameras or []), source)
         scene.object_names = [str(n) for n in object_names] if object_names else []
@@ -382,23 +348,18 @@ class Scene:
     def from_scene_file(cls, path: str | os.PathLike[str], **limits: Any) -> Scene:
         """A render-budget scene file (what the add-on's depsgraph translator writes; ``limits``: fields of
         ``sim_core.loaders.scene_file.Limits``)."""
-        from .loaders.scene_file import Limits, load_scene_file
-
         return cls.from_scene_data(load_scene_file(path, limits=Limits(**limits)))
 
     @classmethod
     def from_obj(cls, path: str | os.PathLike[str]) -> Scene:
         """Wavefront OBJ (Y-up files are converted to the Z-up world frame by the loader)."""
-        from .loaders.obj import load_obj
-
         return cls.from_scene_data(load_obj(path))
 
     @classmethod
-    def from_gltf(cls, path: str | os.PathLike[str]) -> Scene:
-        """glTF 2.0 (.glb/.gltf) as Blender exports it: meshes, materials, punctual lights, cameras."""
-        from .loaders.gltf import load_gltf
-
-        return cls.from_scene_data(load_gltf(path))
+    def from_gltf(cls, path: str | os.PathLike[str], *, self_contained: bool = False) -> Scene:
+        """glTF 2.0 (.glb/.gltf) as Blender exports it: meshes, materials, punctual lights, cameras.
+        ``self_contained=True`` reads nothing but the file itself (see :func:`loaders.gltf.load_gltf`)."""
+        return cls.from_scene_data(load_gltf(path, self_contained=self_contained))
 
     # ---- queries --------------------------------------------------------------------------------
     def intersect(

@@ -23,22 +23,37 @@ scene translated from Blender's depsgraph carries them.
 Two scene facts glTF cannot carry travel as extras (custom properties Blender exports with
 ``export_extras=True``): the environment (:data:`ENVIRONMENT_EXTRAS_KEY` on the scene: an EXR file name
 next to the .glb, or an RGB colour) and light radii (:data:`LIGHT_RADIUS_EXTRAS_KEY`).
+
+Files outside the document (buffer and image URIs, the environment EXR) follow one policy,
+:func:`_referenced_file`, checked for every reference before any of them is read: with
+``self_contained=True`` (scenes uploaded to the service) only the GLB binary chunk and ``data:`` URIs
+are allowed; otherwise relative files are read, but only inside the scene file's own folder (resolved
+paths, so neither ``..`` nor a symbolic link leads out). Error messages name the reference as the file
+wrote it, never a resolved path or the bytes of another file.
 """
 
 from __future__ import annotations
 
 import base64
+import io
 import json
 import math
 import os
+import re
 import struct
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+from urllib.parse import unquote, unquote_to_bytes
 
 import numpy as np
+from PIL import Image
 
+from ..geometry import smooth_normals
+from ..image import load_exr
 from ..scene_data import CameraData, Light, Material, SceneData, Texture
+from .confined import confined_path, shown
 
 #: glTF (Y-up) to Blender (Z-up) world frame: (x, y, z) -> (x, -z, y).
 GLTF_TO_BLENDER = np.array(
@@ -87,6 +102,8 @@ LIGHT_RADIUS_EXTRAS_KEY = "render_budget_radius"
 MAX_LOADED_TEXTURE_SIDE = 8192
 _WRAPS = {10497: "repeat", 33071: "clamp", 33648: "mirror"}
 _ALPHA_MODES = {"OPAQUE": "opaque", "MASK": "clip", "BLEND": "hashed"}
+#: A URI scheme ("http:", "file:", a Windows drive letter): never a file next to the scene.
+_URI_SCHEME = re.compile(r"^[A-Za-z][A-Za-z0-9+.-]*:")
 
 
 @dataclass
@@ -94,6 +111,7 @@ class _Document:
     gltf: dict[str, Any]
     buffers: list[bytes]
     path: Path
+    self_contained: bool
 
 
 # --------------------------------------------------------------------------------------------------
@@ -101,7 +119,7 @@ class _Document:
 # --------------------------------------------------------------------------------------------------
 
 
-def _read_document(path: Path) -> _Document:
+def _read_document(path: Path, *, self_contained: bool) -> _Document:
     if not path.is_file():
         raise FileNotFoundError(f"glTF file not found: {path}")
     data = path.read_bytes()
@@ -146,7 +164,9 @@ def _read_document(path: Path) -> _Document:
     if unsupported:
         raise ValueError(f"{path}: requires unsupported glTF extensions {sorted(unsupported)}")
 
-    buffers: list[bytes] = []
+    doc = _Document(gltf, [], path, self_contained)
+    for what, uri in _references(gltf):  # every reference obeys the policy before anything is read
+        _referenced_file(doc, uri, what)
     for i, buf in enumerate(gltf.get("buffers", [])):
         byte_length = int(buf.get("byteLength", 0))
         uri = buf.get("uri")
@@ -154,22 +174,64 @@ def _read_document(path: Path) -> _Document:
             if i != 0 or bin_chunk is None:
                 raise ValueError(f"{path}: buffer {i} has no uri and there is no GLB binary chunk")
             blob = bin_chunk
-        elif uri.startswith("data:"):
-            try:
-                blob = base64.b64decode(uri.split(",", 1)[1], validate=False)
-            except (IndexError, ValueError) as exc:
-                raise ValueError(f"{path}: buffer {i} has a bad data URI ({exc})") from None
         else:
-            from urllib.parse import unquote
-
-            ext = path.parent / unquote(uri)
-            if not ext.is_file():
-                raise FileNotFoundError(f"{path}: buffer {i} file not found: {ext}")
-            blob = ext.read_bytes()
+            blob = _referenced_bytes(doc, uri, f"buffer {i}")
         if len(blob) < byte_length:
             raise ValueError(f"{path}: buffer {i} truncated ({len(blob)} bytes, expected {byte_length})")
-        buffers.append(blob[:byte_length])
-    return _Document(gltf, buffers, path)
+        doc.buffers.append(blob[:byte_length])
+    return doc
+
+
+# --------------------------------------------------------------------------------------------------
+# Files and URIs the document refers to
+# --------------------------------------------------------------------------------------------------
+
+
+def _references(gltf: dict[str, Any]) -> list[tuple[str, Any]]:
+    """(what, reference) for everything outside the document's own bytes that loading may read."""
+    refs: list[tuple[str, Any]] = [(f"buffer {i}", b["uri"]) for i, b in enumerate(gltf.get("buffers", []))
+                                   if isinstance(b, dict) and "uri" in b]
+    refs += [(f"image {i}", im["uri"]) for i, im in enumerate(gltf.get("images", []))
+             if isinstance(im, dict) and "uri" in im and "bufferView" not in im]
+    environment = _environment_extra(gltf)
+    if isinstance(environment, str):
+        refs.append(("environment map", environment))
+    return refs
+
+
+def _referenced_file(doc: _Document, uri: Any, what: str) -> Path | None:
+    """The one policy for data outside the document (buffers, images, the environment map): None for a
+    ``data:`` URI (its bytes are in the document), else the confined path of a relative file. Nothing is
+    read here; raises ValueError naming the reference when the policy forbids it."""
+    if not isinstance(uri, str) or not uri:
+        raise ValueError(f"{doc.path}: {what} has an empty or non-text uri")
+    if uri.startswith("data:"):
+        return None
+    if doc.self_contained:
+        raise ValueError(
+            f"{doc.path}: {what} refers to the external file {shown(uri)}: an uploaded scene must be "
+            "self-contained (a .glb with its binary chunk, or data: URIs)")
+    if _URI_SCHEME.match(uri):
+        raise ValueError(f"{doc.path}: {what} uri {shown(uri)} is not a relative file reference")
+    try:
+        return confined_path(doc.path.parent, unquote(uri))
+    except ValueError as exc:
+        raise ValueError(f"{doc.path}: {what} uri {exc}") from None
+
+
+def _referenced_bytes(doc: _Document, uri: Any, what: str) -> bytes:
+    file = _referenced_file(doc, uri, what)
+    if file is None:
+        head, comma, payload = uri.partition(",")
+        if not comma:
+            raise ValueError(f"{doc.path}: {what} has a bad data URI (no comma)")
+        try:
+            return base64.b64decode(payload) if head.endswith(";base64") else unquote_to_bytes(payload)
+        except ValueError as exc:
+            raise ValueError(f"{doc.path}: {what} has a bad data URI ({exc})") from None
+    if not file.is_file():
+        raise FileNotFoundError(f"{doc.path}: {what} file {shown(uri)} not found next to the scene")
+    return file.read_bytes()
 
 
 # --------------------------------------------------------------------------------------------------
@@ -370,18 +432,6 @@ def _primitive_triangles(doc: _Document, prim: dict[str, Any], vcount: int, what
     return np.stack([np.full(k.size, idx[0]), idx[k + 1], idx[k + 2]], axis=1)  # fan
 
 
-def _vertex_normals(positions: np.ndarray, tris: np.ndarray) -> np.ndarray:
-    """Area-weighted vertex normals for primitives that carry none."""
-    p0 = positions[tris[:, 0]]
-    face = np.cross(positions[tris[:, 1]] - p0, positions[tris[:, 2]] - p0)
-    normals = np.zeros_like(positions)
-    for k in range(3):
-        np.add.at(normals, tris[:, k], face)
-    length = np.linalg.norm(normals, axis=1, keepdims=True)
-    fallback = np.array([0.0, 0.0, 1.0])
-    return np.where(length > 0, normals / np.where(length > 0, length, 1.0), fallback)
-
-
 def _image_bytes(doc: _Document, image_index: int) -> bytes:
     images = doc.gltf.get("images", [])
     if not 0 <= image_index < len(images):
@@ -390,18 +440,9 @@ def _image_bytes(doc: _Document, image_index: int) -> bytes:
     if "bufferView" in img:
         raw, _ = _buffer_view_bytes(doc, int(img["bufferView"]))
         return bytes(raw)
-    uri = str(img.get("uri", ""))
-    if uri.startswith("data:"):
-        try:
-            return base64.b64decode(uri.split(",", 1)[1])
-        except (IndexError, ValueError) as exc:
-            raise ValueError(f"{doc.path}: image {image_index} has a bad data URI ({exc})") from None
-    from urllib.parse import unquote
-
-    file = doc.path.parent / unquote(uri)
-    if not uri or not file.is_file():
-        raise FileNotFoundError(f"{doc.path}: image {image_index} file not found: {file}")
-    return file.read_bytes()
+    if "uri" not in img:
+        raise ValueError(f"{doc.path}: image {image_index} has neither a bufferView nor a uri")
+    return _referenced_bytes(doc, img["uri"], f"image {image_index}")
 
 
 @dataclass
@@ -459,11 +500,6 @@ class _TextureTable:
         """(H, W, 3|4) uint8, sRGB-encoded (what glTF base-colour images are), row 0 at the top."""
         if source in self._images:
             return self._images[source]
-        import io
-        import warnings
-
-        from PIL import Image
-
         doc = self.doc
         try:
             with warnings.catch_warnings():
@@ -592,20 +628,26 @@ def _light(doc: _Document, index: int, world_b: np.ndarray, name: str) -> Light:
     )
 
 
-def _environment(doc: _Document) -> np.ndarray | tuple[float, float, float] | None:
-    scenes = doc.gltf.get("scenes", [])
+def _environment_extra(gltf: dict[str, Any]) -> Any:
+    scenes = gltf.get("scenes", [])
     if not scenes:
         return None
-    extras = scenes[int(doc.gltf.get("scene", 0))].get("extras") or {}
-    value = extras.get(ENVIRONMENT_EXTRAS_KEY) if isinstance(extras, dict) else None
+    extras = scenes[int(gltf.get("scene", 0))].get("extras") or {}
+    return extras.get(ENVIRONMENT_EXTRAS_KEY) if isinstance(extras, dict) else None
+
+
+def _environment(doc: _Document) -> np.ndarray | tuple[float, float, float] | None:
+    value = _environment_extra(doc.gltf)
     if value is None:
         return None
     if isinstance(value, str):
-        exr = doc.path.parent / value
+        exr = _referenced_file(doc, value, "environment map")
+        if exr is None:
+            raise ValueError(f"{doc.path}: the environment map must be an EXR file next to the scene, "
+                             "not a data: URI")
         if not exr.is_file():
-            raise FileNotFoundError(f"{doc.path}: environment map {value!r} not found next to the scene")
-        from ..scene import load_exr  # the one EXR reader (late: scene.py imports the loaders)
-
+            raise FileNotFoundError(f"{doc.path}: environment map {shown(value)} not found next to the "
+                                    "scene")
         return load_exr(exr)
     rgb = np.asarray(value, dtype=np.float64).reshape(-1)
     if rgb.shape != (3,) or not np.all(np.isfinite(rgb)):
@@ -640,8 +682,12 @@ def _gpu_instances(doc: _Document, ext: dict[str, Any], what: str) -> list[np.nd
     return out
 
 
-def load_gltf(path: str | os.PathLike[str]) -> SceneData:
+def load_gltf(path: str | os.PathLike[str], *, self_contained: bool = False) -> SceneData:
     """Load a .glb/.gltf into flat arrays in Blender's world frame (Z up, metres).
+
+    ``self_contained=True`` (files from untrusted clients) refuses every reference outside the file
+    itself: only the GLB binary chunk and ``data:`` URIs; otherwise relative files inside the scene's
+    own folder are read too (a .gltf next to its .bin, textures and environment map).
 
     One object id per mesh instance (node with a mesh, or each of its EXT_mesh_gpu_instancing instances),
     in depth-first node order; degenerate triangles are kept (the core drops and counts them). Raises
@@ -651,15 +697,17 @@ def load_gltf(path: str | os.PathLike[str]) -> SceneData:
     """
     p = Path(path)
     try:
-        return _load(p)
+        return _load(p, self_contained)
     except (KeyError, TypeError, AttributeError, IndexError, OverflowError) as exc:
         raise ValueError(f"{p}: malformed glTF ({type(exc).__name__}: {exc})") from exc
     except (MemoryError, RecursionError) as exc:
         raise ValueError(f"{p}: glTF too large or too deeply nested to load ({type(exc).__name__})") from exc
 
 
-def _load(p: Path) -> SceneData:
-    doc = _read_document(p)
+# Long: one walk over the node hierarchy filling per-primitive parts (positions, normals, ids) that are
+# concatenated at the end; the module (over 500 lines) is the one glTF reader, helpers included.
+def _load(p: Path, self_contained: bool) -> SceneData:
+    doc = _read_document(p, self_contained=self_contained)
     gltf = doc.gltf
     nodes = gltf.get("nodes", [])
     meshes = gltf.get("meshes", [])
@@ -789,7 +837,7 @@ def _load(p: Path) -> SceneData:
         filled = []
         starts = np.cumsum([0] + [part.shape[0] for part in pos_parts[:-1]])
         for part_pos, part_nrm, part_tri, start in zip(pos_parts, nrm_parts, tri_parts, starts, strict=True):
-            filled.append(part_nrm if part_nrm is not None else _vertex_normals(part_pos, part_tri - start))
+            filled.append(part_nrm if part_nrm is not None else smooth_normals(part_pos, part_tri - start))
         normals = np.concatenate(filled).astype(np.float32)
     uvs: np.ndarray | None = None
     if any(u is not None for u in uv_parts):  # UVs only when some textured material is drawn

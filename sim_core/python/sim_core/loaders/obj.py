@@ -16,7 +16,9 @@ from typing import Literal
 
 import numpy as np
 
+from ..geometry import smooth_normals
 from ..scene_data import Material, SceneData
+from .confined import confined_path
 
 _Y_TO_Z = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 
@@ -35,7 +37,7 @@ def _parse_mtl(path: Path) -> dict[str, Material]:
     """Materials of an MTL file; Blender's OBJ importer mapping (roughness = 1 - sqrt(Ns / 1000))."""
     out: dict[str, Material] = {}
     if not path.is_file():
-        raise FileNotFoundError(f"material library not found: {path}")
+        raise FileNotFoundError(f"material library {path.name!r} not found next to the OBJ file")
     current: str | None = None
     props: dict[str, object] = {}
 
@@ -101,6 +103,8 @@ def _parse_simple(lines: list[str]) -> tuple[np.ndarray, np.ndarray] | None:
     return verts.reshape(-1, 3), idx.reshape(-1, 3) - 1
 
 
+# Long: one pass over the file's lines whose face, object and material state (a dozen running lists) is
+# local to that pass; split into parts it would only be handed around.
 def load_obj(path: str | os.PathLike[str], *, up_axis: Literal["Y", "Z"] = "Y") -> SceneData:
     """Load an OBJ into flat arrays in the project's Z-up world frame.
 
@@ -208,7 +212,11 @@ def load_obj(path: str | os.PathLike[str], *, up_axis: Literal["Y", "Z"] = "Y") 
             object_names.append(name)
         elif key == "mtllib":
             for lib in parts[1:]:
-                library.update(_parse_mtl(p.parent / lib))
+                try:
+                    mtl = confined_path(p.parent, lib)
+                except ValueError as exc:
+                    raise ValueError(f"{p}:{lineno}: material library {exc}") from None
+                library.update(_parse_mtl(mtl))
         elif key == "usemtl":
             name = " ".join(parts[1:])
             if name not in mat_index:
@@ -238,9 +246,7 @@ def load_obj(path: str | os.PathLike[str], *, up_axis: Literal["Y", "Z"] = "Y") 
         out_nrm[has_n] = nrm[uniq[has_n, 1]]
         tris = inverse.reshape(-1, 3)
         if not has_n.all():  # corners without a normal: area-weighted normals of their faces
-            from .gltf import _vertex_normals
-
-            out_nrm[~has_n] = _vertex_normals(out_pos, tris)[~has_n]
+            out_nrm[~has_n] = smooth_normals(out_pos, tris)[~has_n]
         length = np.linalg.norm(out_nrm, axis=1, keepdims=True)
         out_nrm = np.where(length > 0, out_nrm / np.where(length > 0, length, 1.0), 0.0)
         positions, normals = out_pos, out_nrm

@@ -1,0 +1,488 @@
+"""The main job as a library: a camera path evaluated the way the power-budget paper's Table 3 is made.
+
+One campaign, two front ends that write the same report folder: ``tools/demo.py`` (``make demo``,
+``make report SCENE=...``) and the add-on's *Evaluate Path* (its operator and ``batch evaluate``).
+Pure (stdlib + numpy; the service only through :class:`ServiceClient`), so it ships in the extension.
+
+A campaign measures, through the service's POST /evaluate (:mod:`.evaluate_path`, the REST adapter):
+
+1. the paper's four fixed presets (Max, Max-Mid, Mid-Min, Min) at every evaluated path frame;
+2. a power budget: given, or placed ``power_fraction`` of the way between the Min and Max presets'
+   measured mean powers (:func:`budget_from_presets`) or between the store frontiers' ends
+   (:func:`choose_power_budget`) -- never tuned on the budget modes' results;
+3. the store's settings under that power budget and under the error budget, temporal filter included.
+
+Then it writes the report folder (:func:`run`): ``report.md`` (Table 3, notes, then sections: issue 7's
+targets, Table 2, time per phase), ``per_frame.csv`` (``frame`` = path index), plots, ``store.json``,
+``summary.json`` and ``frames/`` (sample frames as PNG and EXR from POST /render, named by path index).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import report
+from .client import ServiceClient
+from .evaluate_path import EvalSpec, camera_payload, evaluate_path, preset_settings
+from .playback_logic import PlaybackDriver, validate_budget
+from .vendored import camera_path, options, pareto_store
+
+try:  # CPU time of finished child processes too (Unix)
+    import resource
+except ImportError:  # Windows Blender: this process's own CPU time only
+    resource = None  # type: ignore[assignment]
+
+CameraPath = camera_path.CameraPath
+ParetoStore = pareto_store.ParetoStore
+
+#: The paper's Table 2 (published figures, shown next to ours for comparison; not our results).
+PAPER_TABLE2 = (
+    # demo, triangles, thresholds (W, e), preprocess hours, levels, corners, views, data KB, duration s
+    ("Valley (paper)", "55.9 k", "(0.5 W, 0.002)", "29.9 h", 4, 279, 759, "18.1 KB", "50 s"),
+    ("Hall (paper)", "31.7 k", "(0.15 W, 0.002)", "35.3 h", 4, 108, 316, "9.3 KB", "50 s"),
+    ("Elven Ruins (paper)", "191.2 k", "(0.5 W, 0.005)", "67.1 h", 5, 393, 956, "36.6 KB", "60 s"),
+    ("Sun Temple (paper)", "667.9 k", "(0.5 W, 0.005)", "35.4 h", 3, 125, 511, "18 KB", "60 s"),
+)
+
+#: Issue 7's targets (checked and reported, never used to choose anything).
+TARGET_SAVING = 0.30
+TARGET_ERROR = 0.02
+TARGET_ERROR_RATIO = 5.0
+TARGET_KEPT = 0.95
+STORE_LIMIT_BYTES = 40 * 1024
+#: Sample frames are this tall by default (width from the path's aspect).
+SAMPLE_HEIGHT = 72
+
+#: ``progress(pass_label, renders_done, renders_total)``; the counts run over the whole campaign.
+Progress = Callable[[str, int, int], None]
+
+
+# -- small parts ---------------------------------------------------------------------------------------
+class SizeError(ValueError, argparse.ArgumentTypeError):
+    """A bad ``WxH`` text (a ValueError; argparse prints its message as it is)."""
+
+
+def parse_size(text: str, minimum: int = 8) -> tuple[int, int]:
+    """``"64x36"`` -> (64, 36); both sides at least ``minimum`` pixels."""
+    try:
+        w, h = (int(v) for v in str(text).lower().split("x"))
+    except ValueError:
+        raise SizeError(f"expected WxH like 64x36, got {text!r}") from None
+    if w < minimum or h < minimum:
+        raise SizeError(f"resolution must be at least {minimum}x{minimum}, got {text!r}")
+    return w, h
+
+
+def size_for_path(path: CameraPath, height: int, width: int | None = None) -> tuple[int, int]:
+    """An image ``height`` pixels tall, ``width`` wide or else with the path's (median) aspect, as the
+    optimiser sizes its evaluation images (``service.options.eval_resolution``)."""
+    return options.eval_resolution(width, height, float(np.median([f.aspect for f in path.frames])))
+
+
+def frame_step(path_frames: int, about: int) -> int:
+    """The step that evaluates about ``about`` evenly spaced path frames (0 or less: every frame)."""
+    return 1 if about <= 0 else max(1, math.ceil(path_frames / about))
+
+
+def sample_picks(path_frames: int, count: int) -> list[int]:
+    """``count`` path indices spread evenly from the first frame to the last."""
+    if count <= 0:
+        return []
+    return sorted({round(k * (path_frames - 1) / max(1, count - 1)) for k in range(count)})
+
+
+def own_cpu_s() -> float:
+    """CPU seconds of this process and its finished children."""
+    if resource is None:
+        return time.process_time()
+    r, c = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime + c.ru_utime + c.ru_stime
+
+
+class Clock:
+    """Wall and CPU time per phase; ``extra_cpu`` adds another process's CPU (a local service)."""
+
+    def __init__(self, extra_cpu: Callable[[], float | None] | None = None) -> None:
+        self.phases: list[dict[str, Any]] = []
+        self.extra_cpu = extra_cpu
+        self.started = self.start()
+
+    def _cpu(self) -> float:
+        return own_cpu_s() + ((self.extra_cpu() if self.extra_cpu else None) or 0.0)
+
+    def start(self) -> tuple[float, float]:
+        return time.perf_counter(), self._cpu()
+
+    def stop(self, name: str, t: tuple[float, float]) -> dict[str, Any]:
+        rec = {"phase": name, "wall_s": round(time.perf_counter() - t[0], 2),
+               "cpu_s": round(self._cpu() - t[1], 2)}
+        self.phases.append(rec)
+        return rec
+
+
+# -- the campaign's inputs and measurements ------------------------------------------------------------
+@dataclass(frozen=True)
+class CampaignSpec:
+    """How to evaluate: the service's scene, sizes, frames, budgets and sample frames."""
+
+    scene_id: str
+    resolution: tuple[int, int]  # evaluation (preview) size
+    profile: str | None = None  # None: the store's hardware profile
+    #: Report power for this size (the path's): the store predicts for the path's pixel count.
+    power_resolution: tuple[int, int] | None = None
+    frame_step: int = 1
+    filter_period_s: float = 2.0
+    error_budget: float = TARGET_ERROR
+    power_budget: float | None = None  # None: automatic (power_budget_from, power_fraction)
+    power_budget_from: str = "presets"  # "presets" | "store"
+    power_fraction: float = 0.4  # where the paper's Elven Ruins demo put its budget
+    samples: int = 3
+    sample_resolution: tuple[int, int] | None = None  # None: SAMPLE_HEIGHT tall, the path's aspect
+    concurrency: int = 2
+
+    def __post_init__(self) -> None:
+        validate_budget("ERROR", self.error_budget)
+        if self.power_budget is not None:
+            validate_budget("POWER", self.power_budget)
+        if self.power_budget_from not in ("presets", "store"):
+            raise ValueError(f"power_budget_from must be presets or store, got {self.power_budget_from!r}")
+        if not 0.0 <= self.power_fraction <= 1.0:
+            raise ValueError(f"power fraction must be in [0, 1], got {self.power_fraction}")
+        if self.frame_step < 1 or self.samples < 0 or self.concurrency < 1:
+            raise ValueError("frame_step and concurrency must be >= 1, samples >= 0")
+
+
+@dataclass
+class Measured:
+    """The campaign's measurements: rows of every (frame, mode) and the budgets they ran under."""
+
+    rows: list[report.FrameRow]
+    frames: list[int]  # evaluated path indices
+    power_budget: float
+    power_reason: str
+    error_budget: float
+    error_reason: str
+
+    @property
+    def budgets(self) -> dict[str, tuple[str, float]]:
+        """Budget-driven mode label -> (budget mode, value)."""
+        return {"ours_power": ("POWER", self.power_budget), "ours_error": ("ERROR", self.error_budget)}
+
+
+def measure(client: ServiceClient, store: ParetoStore, path: CameraPath, spec: CampaignSpec, *,
+            progress: Progress | None = None, say: Callable[[str], None] = lambda _t: None) -> Measured:
+    """Presets first (the automatic power budget may come from their powers), then both budget modes."""
+    frames = list(range(0, len(path), spec.frame_step))
+    total = len(frames) * (len(report.PRESET_LEVELS) + 2)
+    rows: list[report.FrameRow] = []
+
+    def run_pass(label: str, mode: str, value: float, modes: tuple[str, ...]) -> None:
+        es = EvalSpec(scene_id=spec.scene_id, profile=spec.profile or store.profile,
+                      resolution=spec.resolution, budget_mode=mode, budget_value=value,
+                      filter_period_s=spec.filter_period_s, frame_step=spec.frame_step, modes=modes,
+                      power_resolution=spec.power_resolution)
+        offset = len(rows)
+        tick = None if progress is None else (lambda done, _n: progress(label, offset + done, total))
+        part = evaluate_path(client, store, path, es, progress=tick, concurrency=spec.concurrency)
+        rows.extend(dataclasses.replace(r, mode=label) if r.mode == "ours" else r for r in part)
+
+    run_pass("presets", "ERROR", spec.error_budget, tuple(report.PRESET_LEVELS))
+    if spec.power_budget is not None:
+        power_budget, power_reason = spec.power_budget, f"power budget {spec.power_budget:g} W (given)"
+    elif spec.power_budget_from == "store":
+        power_budget, power_reason = choose_power_budget(store, path, frames, spec.power_fraction)
+    else:
+        power_budget, power_reason = budget_from_presets(rows, spec.power_fraction)
+    error_reason = f"error budget {spec.error_budget:g} (1 - SSIM)"
+    say(f"  {power_reason}")
+    say(f"  {error_reason}")
+    run_pass("ours_power", "POWER", power_budget, ("ours",))
+    run_pass("ours_error", "ERROR", spec.error_budget, ("ours",))
+    return Measured(rows, frames, power_budget, power_reason, spec.error_budget, error_reason)
+
+
+# -- budget choice ---------------------------------------------------------------------------------------
+def frontier_span(store: ParetoStore, path: CameraPath, frames: Sequence[int]) -> tuple[float, float]:
+    """Path averages of the store's cheapest and most accurate predicted power at the given frames."""
+    lo, hi = [], []
+    for i in frames:
+        f = path.frames[i]
+        m = np.asarray(f.matrix_world, dtype=np.float64)
+        kw = {"matrix": m, "fov": f.vfov, "aspect": f.aspect}
+        lo.append(store.lookup(m[:3, 3], error_budget=1.0, **kw).power_w)
+        hi.append(store.lookup(m[:3, 3], error_budget=0.0, **kw).power_w)
+    return float(np.mean(lo)), float(np.mean(hi))
+
+
+def choose_power_budget(store: ParetoStore, path: CameraPath, frames: Sequence[int], fraction: float
+                        ) -> tuple[float, str]:
+    """A power budget ``fraction`` of the way from the frontiers' cheapest point to their most accurate
+    one (each averaged over the evaluated frames); the reason is returned for the report."""
+    if not 0.0 <= fraction <= 1.0:
+        raise ValueError(f"power fraction must be in [0, 1], got {fraction}")
+    lo, hi = frontier_span(store, path, frames)
+    budget = lo + fraction * (hi - lo)
+    return budget, (f"power budget {budget:.3f} W = {fraction:g} of the way from the store frontiers' "
+                    f"cheapest point ({lo:.3f} W) to their most accurate one ({hi:.3f} W), path averages "
+                    "of the store's predictions")
+
+
+def budget_from_presets(rows: Sequence[report.FrameRow], fraction: float) -> tuple[float, str]:
+    """A power budget ``fraction`` of the way from the Min preset's mean measured power to the Max
+    preset's (the paper's Elven Ruins demo put its 10 W budget 0.4 of the way from Min's 6.11 W to Max's
+    15.87 W; Sun Temple's 7 W sits at 0.36)."""
+    if not 0.0 <= fraction <= 1.0:
+        raise ValueError(f"power fraction must be in [0, 1], got {fraction}")
+    lo = float(np.mean([r.power_w for r in rows if r.mode == "min"]))
+    hi = float(np.mean([r.power_w for r in rows if r.mode == "max"]))
+    budget = lo + fraction * (hi - lo)
+    return budget, (f"power budget {budget:.3f} W = {fraction:g} of the way from the Min preset's mean "
+                    f"measured power ({lo:.3f} W) to the Max preset's ({hi:.3f} W) on the evaluated frames")
+
+
+# -- sample frames, targets, diagnostics --------------------------------------------------------------
+def write_samples(client: ServiceClient, store: ParetoStore, path: CameraPath, spec: CampaignSpec,
+                  budgets: dict[str, tuple[str, float]], out_dir: Path) -> list[Path]:
+    """A few frames (evenly spread) with the Max and Min presets and each budget mode's unfiltered target
+    settings, as PNG and EXR rendered by the service: ``frame<path index>_<mode>.<png|exr>``."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    resolution = spec.sample_resolution or size_for_path(path, SAMPLE_HEIGHT)
+    presets = preset_settings(store)
+    written = []
+    for i in sample_picks(len(path), spec.samples):
+        f = path.frames[i]
+        chosen = {"max": presets["max"], "min": presets["min"]}
+        for label, (mode, value) in budgets.items():
+            chosen[label] = PlaybackDriver(store, 0.0).step(f.matrix_world, f.vfov, f.aspect, f.time, mode,
+                                                            value).active_settings
+        for label, settings in chosen.items():
+            for fmt in ("png", "exr"):
+                img = client.render({"scene_id": spec.scene_id, "camera": camera_payload(f, resolution),
+                                     "settings": settings, "profile": spec.profile or store.profile,
+                                     "fps": path.fps,
+                                     "format": fmt}, timeout_s=300.0)
+                target = out_dir / f"frame{i:05d}_{label}.{fmt}"
+                target.write_bytes(img.data)
+                written.append(target)
+    return written
+
+
+def check_targets(summaries: Sequence[report.ModeSummary]) -> dict[str, Any]:
+    """Issue 7's targets on this run's measured numbers."""
+    by = {s.mode: s for s in summaries}
+    ours_e, ours_p, mn = by.get("ours_error"), by.get("ours_power"), by.get("min")
+    out: dict[str, Any] = {}
+    if ours_e is not None and ours_e.saving_vs_max is not None:
+        out["error_budget_saving"] = ours_e.saving_vs_max
+        out["error_budget_mean_error"] = ours_e.mean_error
+        out["error_budget_saving_met"] = bool(ours_e.saving_vs_max >= TARGET_SAVING
+                                              and ours_e.mean_error <= TARGET_ERROR)
+    if ours_p is not None and mn is not None:
+        ratio = mn.mean_error / ours_p.mean_error if ours_p.mean_error > 0 else math.inf
+        out["power_budget_error_ratio_vs_min"] = ratio
+        out["power_budget_error_ratio_met"] = bool(ratio >= TARGET_ERROR_RATIO)
+    for name, s in (("error", ours_e), ("power", ours_p)):
+        if s is not None and s.budget_kept_fraction is not None:
+            out[f"{name}_budget_kept"] = s.budget_kept_fraction
+            out[f"{name}_budget_kept_met"] = bool(s.budget_kept_fraction >= TARGET_KEPT)
+    met = [v for k, v in out.items() if k.endswith("_met")]
+    out["all_met"] = bool(met) and all(met)
+    return out
+
+
+def target_lines(targets: dict[str, Any], store_bytes: int) -> list[str]:
+    """The targets as four report bullets (also printed by the demo)."""
+    nan = float("nan")
+    kept = targets.get("power_budget_kept_met") and targets.get("error_budget_kept_met")
+    return [
+        f"- error budget: {100 * targets.get('error_budget_saving', nan):.1f} % power saved vs Max at mean "
+        f"error {targets.get('error_budget_mean_error', nan):.4f} (target >= 30 % at <= 0.02): "
+        + ("met" if targets.get("error_budget_saving_met") else "MISSED"),
+        f"- power budget: Min's error / ours = {targets.get('power_budget_error_ratio_vs_min', 0):.1f}x "
+        f"(target >= 5x): {'met' if targets.get('power_budget_error_ratio_met') else 'MISSED'}",
+        f"- budget kept: power {100 * targets.get('power_budget_kept', 0):.1f} %, error "
+        f"{100 * targets.get('error_budget_kept', 0):.1f} % of frames (target >= 95 %): "
+        + ("met" if kept else "MISSED"),
+        f"- store {store_bytes / 1024:.1f} KB (target <= 40 KB): "
+        + ("met" if store_bytes <= STORE_LIMIT_BYTES else "MISSED"),
+    ]
+
+
+def background_views(store: ParetoStore, path: CameraPath, frames: Sequence[int], tol: float = 1e-3
+                     ) -> tuple[int, int, float]:
+    """Store views whose whole frontier has error < ``tol`` (every setting looks the same there: the view
+    sees background only), and the share of evaluated frames whose lookup lands on such a view."""
+    n_corners = len(store.corner_positions())
+    flat = {(c, v) for c in range(n_corners) for v in range(6)
+            if float(np.max(store.frontier(c, v).error)) < tol}
+    hits = []
+    for i in frames:
+        f = path.frames[i]
+        m = np.asarray(f.matrix_world, dtype=np.float64)
+        hits.append(store.locate(m[:3, 3], matrix=m, fov=f.vfov, aspect=f.aspect) in flat)
+    return len(flat), 6 * n_corners, float(np.mean(hits)) if hits else 0.0
+
+
+# -- the report ------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Preprocessing:
+    """How the store was made, for the row next to the paper's Table 2."""
+
+    name: str
+    triangles: int | None = None
+    wall_s: float | None = None  # the optimisation's wall time (None: the store's own elapsed_s)
+    cpu_s: float | None = None
+
+
+def table2_markdown(rows: Sequence[Sequence[Any]]) -> str:
+    head = ("Demo", "Tris.", "Thld. (power, error) or path sampling", "Preprocess", "Levels", "Corners",
+            "Views", "Data size", "Duration")
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    lines += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
+    return "\n".join(lines) + "\n"
+
+
+def table2_row(pre: Preprocessing, store: ParetoStore, path: CameraPath) -> tuple[Any, ...]:
+    st, meta = store.stats(), store.meta
+    sampling = (f"path {meta.get('path_resolution', 0):g} x view dist., {meta.get('guard_frames', 0)} guards"
+                if meta.get("view_sampling") == "path" else
+                f"({meta['thresholds']['power_w']:g} W, {meta['thresholds']['error']:g})")
+    wall = pre.wall_s if pre.wall_s is not None else float(meta.get("elapsed_s") or 0.0)
+    cpu = "" if pre.cpu_s is None else f" ({pre.cpu_s / 60:.1f} CPU min)"
+    triangles = "?" if pre.triangles is None else f"{pre.triangles:,}"
+    return (f"{pre.name} (ours)", triangles, sampling, f"{wall / 60:.1f} min{cpu}",
+            st["depth"], st["corners"], st["unique_frontiers"], f"{st['size_bytes'] / 1024:.1f} KB",
+            f"{path_duration(path):.0f} s")
+
+
+def path_duration(path: CameraPath) -> float:
+    return path.frames[-1].time - path.frames[0].time + 1.0 / path.fps
+
+
+def notes(measured: Measured, spec: CampaignSpec, path: CameraPath, store: ParetoStore) -> list[str]:
+    """What the report's figures mean: budgets, sizes, frames, presets, 'budget kept'."""
+    w, h = spec.resolution
+    pw, ph = spec.power_resolution or (w, h)
+    step, n = spec.frame_step, len(measured.frames)
+    fixed = ", ".join(store.meta.get("fixed_parameters") or {}) or "none"
+    return [
+        measured.power_reason + ".", measured.error_reason + ": issue 7's target error.",
+        f"Evaluated at {w}x{h} (preview resolution); power is the simulator's for the path's {pw}x{ph} at "
+        f"{path.fps:g} fps (static power plus dynamic power scaled by the pixel count, as the store "
+        "predicts it).",
+        f"Frames: {n} of {len(path)} path frames evaluated (every {step}th, {step / path.fps:.2f} s apart); "
+        f"the temporal filter (T = {spec.filter_period_s:g} s) runs over the evaluated frames in path order. "
+        "`frame` in per_frame.csv and in the sample file names is the index into the camera path.",
+        "Presets: every searchable parameter at its maximum-quality value (Max), at 3/4 and 1/4 of the way "
+        f"from its cheapest value (Max-Mid, Mid-Min) and at its cheapest value (Min); parameters the scene "
+        f"cannot exercise are fixed: {fixed}.",
+        "Budget kept: measured power <= power budget (Ours, power budget) or measured error <= error "
+        "budget (Ours, error budget) on a frame.",
+    ]
+
+
+def sections(targets: dict[str, Any], store: ParetoStore, path: CameraPath, measured: Measured,
+             pre: Preprocessing, clock: Clock, samples: Sequence[Path]) -> list[report.Section]:
+    """The report's parts after Table 3 and the notes."""
+    st, meta = store.stats(), store.meta
+    flat, views, share = targets["background_views"], 6 * st["corners"], targets["background_view_frames"]
+    diagnostic = (f"Diagnostic: {flat} of the store's {views} corner views have a frontier whose every "
+                  f"point has error < 0.001 (they see background only, so every setting looks free there); "
+                  f"{100 * share:.0f} % of the evaluated frames look such a view up. Where that share is "
+                  "high, the budget modes pick cheap settings the real camera does not tolerate.")
+    store_line = (f"Store: {meta.get('evaluations')} renders ({meta.get('cache_hits')} from the evaluation "
+                  f"cache), optimiser's own time {meta.get('elapsed_s')} s, executor {meta.get('executor')}, "
+                  f"camera sampling {meta.get('view_sampling')}. Views: the optimised camera samples "
+                  "(frontiers of their own), as the paper counts them; the other corner faces inherit one. "
+                  "Times are on this machine; CPU time counts this process, its finished children and, "
+                  "for a local service, the service process with its evaluation workers.")
+    pngs = [p for p in samples if p.suffix == ".png"]
+    return [
+        report.Section("Issue 7 targets on this run", (*target_lines(targets, st["size_bytes"]), "",
+                                                       diagnostic)),
+        report.Section("Preprocessing next to the paper's Table 2",
+                       (table2_markdown([table2_row(pre, store, path), *PAPER_TABLE2]), store_line)),
+        report.Section("Time per phase", (
+            "| Phase | Wall (s) | CPU (s) |", "|---|---|---|",
+            *[f"| {p['phase']} | {p['wall_s']:.1f} | {p['cpu_s']:.1f} |" for p in clock.phases], "",
+            "Sample frames (PNG and EXR): " + (", ".join(f"`frames/{p.name}`" for p in pngs) or "none"))),
+    ]
+
+
+def _jsonable(x: Any) -> Any:
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    if isinstance(x, dict):
+        return {k: _jsonable(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_jsonable(v) for v in x]
+    return x
+
+
+# -- the whole campaign ----------------------------------------------------------------------------------
+@dataclass
+class Outcome:
+    """What :func:`run` measured and wrote."""
+
+    measured: Measured
+    summaries: list[report.ModeSummary]
+    targets: dict[str, Any]
+    written: dict[str, Any]  # report.write_report's paths (+ 'plots_skipped' with the reason)
+    samples: list[Path] = field(default_factory=list)
+    summary: dict[str, Any] = field(default_factory=dict)  # what summary.json holds
+
+
+def run(client: ServiceClient, store_text: str, path: CameraPath, spec: CampaignSpec, out_dir: str | Path,
+        *, title: str, pre: Preprocessing, clock: Clock | None = None, progress: Progress | None = None,
+        say: Callable[[str], None] = lambda _t: None, plot: bool = True) -> Outcome:
+    """Measure (phase 'evaluate'), then write the report folder (phase 'report') and summary.json."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    clock = clock or Clock()
+    store = ParetoStore.from_json(store_text)
+    (out / "store.json").write_text(store_text, encoding="utf-8")
+    w, h = spec.resolution
+    pw, ph = spec.power_resolution or (w, h)
+    n = len(range(0, len(path), spec.frame_step))
+    say("== evaluate the path through the service (POST /evaluate)")
+    say(f"  {n} of {len(path)} frames (every {spec.frame_step}th, {spec.frame_step / path.fps:.2f} s apart), "
+        f"{w}x{h}, power scaled to {pw}x{ph}")
+    t = clock.start()
+    measured = measure(client, store, path, spec, progress=progress, say=say)
+    clock.stop("evaluate", t)
+
+    say("== report")
+    t = clock.start()
+    samples = write_samples(client, store, path, spec, measured.budgets, out / "frames")
+    summaries = report.summarise(measured.rows)
+    targets = check_targets(summaries)
+    flat, _views, share = background_views(store, path, measured.frames)
+    targets.update(background_views=flat, background_view_frames=share)
+    written = report.write_report(out, measured.rows, title=title, plot=plot,
+                                  notes=notes(measured, spec, path, store),
+                                  budget=[("POWER", measured.power_budget), ("ERROR", measured.error_budget)],
+                                  sections=sections(targets, store, path, measured, pre, clock, samples))
+    clock.stop("report", t)
+    clock.stop("total", clock.started)
+    summary = {
+        "scene": pre.name, "resolution": [w, h], "path_resolution": [pw, ph],
+        "frames_evaluated": len(measured.frames), "frame_step": spec.frame_step, "path_frames": len(path),
+        "power_budget_w": measured.power_budget, "error_budget": measured.error_budget,
+        "budget_choice": measured.power_reason, "store": {**store.stats(), "meta": dict(store.meta)},
+        "summaries": [dataclasses.asdict(s) for s in summaries], "targets": targets,
+        "phases": clock.phases, "report": str(written["report"]),
+    }
+    summary["files"] = sorted({*(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file()),
+                               "summary.json"})
+    (out / "summary.json").write_text(json.dumps(_jsonable(summary), indent=2), encoding="utf-8")
+    return Outcome(measured, summaries, targets, written, samples, summary)

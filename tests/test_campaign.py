@@ -1,0 +1,104 @@
+"""The evaluation campaign's pure parts (addon.core.campaign): sizes, frame choice, budgets, targets and the
+report's sections. The whole campaign runs against a real service in test_demo.py and
+test_addon_service.py (the demo and the add-on's batch evaluate)."""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from addon.core import campaign, report
+
+
+def test_parse_size_accepts_wxh_and_reports_bad_text() -> None:
+    assert campaign.parse_size("64x36") == (64, 36)
+    assert campaign.parse_size("128X72") == (128, 72)
+    for bad in ("64", "64x", "ax36", "64x36x2"):
+        with pytest.raises(ValueError, match="expected WxH"):
+            campaign.parse_size(bad)
+    with pytest.raises(ValueError, match="at least 8x8"):
+        campaign.parse_size("4x4")
+    assert campaign.parse_size("4x4", minimum=4) == (4, 4)
+    # argparse shows the message itself (not "invalid parse_size value")
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--size", type=campaign.parse_size)
+    assert issubclass(campaign.SizeError, argparse.ArgumentTypeError)
+    assert ap.parse_args(["--size", "16x9"]).size == (16, 9)
+
+
+@given(n=st.integers(1, 5000), about=st.integers(-1, 400))
+def test_frame_step_evaluates_about_the_asked_number(n: int, about: int) -> None:
+    step = campaign.frame_step(n, about)
+    frames = range(0, n, step)
+    if about <= 0:
+        assert step == 1
+    else:
+        assert len(frames) <= max(about, 1) or step == 1
+        assert step == 1 or len(range(0, n, step - 1)) > about  # the smallest step that fits
+
+
+@given(n=st.integers(1, 5000), count=st.integers(0, 12))
+def test_sample_picks_spread_from_first_to_last(n: int, count: int) -> None:
+    picks = campaign.sample_picks(n, count)
+    assert picks == sorted(set(picks)) and all(0 <= i < n for i in picks)
+    if count == 0:
+        assert picks == []
+    else:
+        assert picks[0] == 0 and len(picks) <= count
+        assert count == 1 or picks[-1] == n - 1
+
+
+def test_spec_rejects_bad_budgets_and_counts() -> None:
+    ok = {"scene_id": "s", "resolution": (64, 36)}
+    campaign.CampaignSpec(**ok)
+    for bad, match in (({"error_budget": 1.5}, "error budget"), ({"power_budget": 0.0}, "power budget"),
+                       ({"power_budget_from": "guess"}, "presets or store"),
+                       ({"power_fraction": 1.2}, "fraction"), ({"frame_step": 0}, "frame_step")):
+        with pytest.raises(ValueError, match=match):
+            campaign.CampaignSpec(**ok, **bad)
+
+
+def _rows() -> list[report.FrameRow]:
+    rows = []
+    for i in range(4):
+        t = i / 30
+        rows += [report.FrameRow(i, t, "max", 10.0, 0.0), report.FrameRow(i, t, "max_mid", 6.0, 0.01),
+                 report.FrameRow(i, t, "mid_min", 3.0, 0.05), report.FrameRow(i, t, "min", 2.0, 0.3),
+                 report.FrameRow(i, t, "ours_power", 5.0 + (i == 3), 0.02, budget_kept=i != 3),
+                 report.FrameRow(i, t, "ours_error", 4.0, 0.01, budget_kept=True)]
+    return rows
+
+
+def test_budget_from_presets_lies_between_min_and_max() -> None:
+    budget, reason = campaign.budget_from_presets(_rows(), 0.4)
+    assert budget == pytest.approx(2.0 + 0.4 * 8.0)
+    assert "(2.000 W)" in reason and "(10.000 W)" in reason
+    with pytest.raises(ValueError, match="fraction"):
+        campaign.budget_from_presets(_rows(), -0.1)
+
+
+def test_targets_follow_the_measured_summaries() -> None:
+    targets = campaign.check_targets(report.summarise(_rows()))
+    assert targets["error_budget_saving"] == pytest.approx(0.6)
+    assert targets["error_budget_saving_met"] is True
+    assert targets["power_budget_error_ratio_vs_min"] == pytest.approx(15.0)
+    assert targets["power_budget_kept"] == pytest.approx(0.75) and targets["power_budget_kept_met"] is False
+    assert targets["all_met"] is False
+    lines = campaign.target_lines(targets, 50 * 1024)
+    assert len(lines) == 4 and lines[2].endswith("MISSED") and lines[3].endswith("MISSED")
+    assert "60.0 % power saved" in lines[0] and lines[0].endswith("met")
+
+
+def test_report_takes_sections_and_is_written_once(tmp_path: Path) -> None:
+    sections = [report.Section("First", ("- a", "- b")), report.Section("Second", ("text",))]
+    written = report.write_report(tmp_path, _rows(), title="t", budget=[("POWER", 6.0), ("ERROR", 0.02)],
+                                  notes=["a note"], sections=sections, plot=False)
+    text = Path(written["report"]).read_text()
+    assert text.index("| Avg. Power (W)") < text.index("- a note") < text.index("## First")
+    assert text.index("## First\n\n- a\n- b") < text.index("## Second\n\ntext")
+    assert math.isclose(float(text.split("power <= ")[1].split(" W")[0]), 6.0)
