@@ -7,6 +7,8 @@ PY     := $(BIN)/python
 STAMP  := $(VENV)/.render-budget-installed
 NATIVE_SOURCES := $(shell find sim_core -name '*.cpp' -o -name '*.h' -o -name 'CMakeLists.txt' 2>/dev/null) \
                   CMakeLists.txt pyproject.toml
+# A new Python package (or module turned package) changes the editable install's module map: reinstall.
+PY_PACKAGES := $(shell find service sim_core/python -name '__init__.py' 2>/dev/null)
 PYTEST_ARGS ?=
 
 .PHONY: all venv test demo report lint native-tests sanitize bench scenes addon clean
@@ -17,7 +19,7 @@ $(PY):
 	$(PYTHON) -m venv $(VENV)
 
 # Build requirements are read from pyproject.toml so that versions stay pinned in one place.
-$(STAMP): $(PY) $(NATIVE_SOURCES)
+$(STAMP): $(PY) $(NATIVE_SOURCES) $(PY_PACKAGES)
 	flock $(VENV)/.lock sh -c '\
 	  $(PY) -m pip install -q $$($(PY) -c "import tomllib;print(\" \".join(tomllib.load(open(\"pyproject.toml\",\"rb\"))[\"build-system\"][\"requires\"]))") cmake==4.4.4 ninja==1.13.0 && \
 	  $(PY) -m pip install -q --no-build-isolation -e ".[test]"'
@@ -35,7 +37,8 @@ demo: venv
 scenes: venv
 	$(PY) -m blend_scenes.build
 
-# The installable Blender extension zip, built with Blender's own extension build.
+# The installable Blender extension zip for this platform (dist/render_budget-<version>-<platform>.zip):
+# this project's wheel (native core) and its runtime wheels in the manifest, then Blender's own build.
 addon: venv
 	$(PY) tools/build_extension.py --out dist/
 

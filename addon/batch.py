@@ -1,13 +1,15 @@
 """Headless batch runs of the add-on: optimize, evaluate, playback.
 
-    blender -b scene.blend --python-exit-code 1 -P addon/batch.py -- --url http://127.0.0.1:8765 optimize
-    python -m addon.batch --blend scene.blend --serve optimize          # the same through the bpy module
-    python -m addon.batch --blend scene.blend --serve evaluate --out report/
+    blender -b scene.blend --python-exit-code 1 -P addon/batch.py -- optimize     # jobs on this computer
+    python -m addon.batch --blend scene.blend optimize                            # with the bpy module
+    python -m addon.batch --blend scene.blend --url http://host:8765 optimize     # on a remote service
+    python -m addon.batch --blend scene.blend --workers 2 evaluate --out report/
 
-The service options (--url, --token, --serve, --python, --data-dir, --timeout) come before the command;
-each command's own options after it (`python -m addon.batch optimize --help`). ``evaluate`` runs the
-evaluation campaign of ``make demo`` under the scene's power and error budgets and writes the same report
-folder. Prints a text progress bar; exits non-zero (with the reason on stderr) on any failure.
+Where jobs run (--url, --token, --workers, --data-dir, --timeout) comes before the command: by default on
+this computer with the bundled core, or on the remote service at --url. Each command's own options come
+after it (`python -m addon.batch optimize --help`). ``evaluate`` runs the evaluation campaign of ``make
+demo`` under the scene's power and error budgets and writes the same report folder. Prints a text progress
+bar; exits non-zero (with the reason on stderr) on any failure.
 """
 
 from __future__ import annotations
@@ -57,7 +59,7 @@ class ProgressBar:
 # -- extension loading ---------------------------------------------------------------------------------
 def ensure_extension(bpy: ModuleType) -> str:
     """The enabled extension's module name: an installed copy if enabled, else stage it from the source
-    tree (with its vendored service modules) and enable it as a dev repository."""
+    tree and enable it as a dev repository (the source tree's Python packages are then importable)."""
     for name in bpy.context.preferences.addons.keys():
         if name.endswith("." + EXT_ID):
             return name
@@ -72,6 +74,10 @@ def ensure_extension(bpy: ModuleType) -> str:
     if not (tools / "build_extension.py").is_file():
         raise RuntimeError("the render_budget extension is not installed and no source tree is next to this "
                            "script: install the zip first")
+    if importlib.util.find_spec("service") is None or importlib.util.find_spec("sim_core") is None:
+        raise RuntimeError("the render_budget extension is not installed in this Blender: install the zip "
+                           "(make addon, then Install from Disk), or run this script with the bpy module "
+                           "of the checkout's .venv")
     sys.path.insert(0, str(tools))
     try:
         build_extension = importlib.import_module("build_extension")
@@ -114,7 +120,7 @@ def _option_schema() -> ModuleType:
         from service import options
     except ImportError:
         here = Path(__file__).resolve().parent
-        for path in (here.parent / "service" / "options.py", here / "_vendored" / "options.py"):
+        for path in (here.parent / "service" / "options.py",):
             if path.is_file():
                 spec = importlib.util.spec_from_file_location("render_budget_options", path)
                 assert spec is not None and spec.loader is not None
@@ -131,12 +137,12 @@ def parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="batch", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--blend", help="open this .blend first (needed with the bpy module)")
-    svc = ap.add_argument_group("service")
-    svc.add_argument("--url", default="http://127.0.0.1:8765")
-    svc.add_argument("--token", default="")
-    svc.add_argument("--serve", action="store_true", help="start a local service for this run")
-    svc.add_argument("--python", help="Python of a render-budget environment (default: this one)")
-    svc.add_argument("--data-dir", help="data folder of the local service")
+    svc = ap.add_argument_group("where jobs run (default: this computer, with the bundled core)")
+    svc.add_argument("--url", help="a remote render-budget service instead")
+    svc.add_argument("--token", default="", help="the remote service's token")
+    svc.add_argument("--workers", type=int, help="local evaluation processes (default: one per CPU core)")
+    svc.add_argument("--data-dir", help="local jobs' scenes and evaluation cache (default: the extension's "
+                                        "user folder)")
     svc.add_argument("--timeout", type=float, default=3600.0, help="seconds before giving up on a job")
     sub = ap.add_subparsers(dest="command", required=True)
 
@@ -196,17 +202,16 @@ def _apply_scene_options(ext: str, props, args: argparse.Namespace) -> None:
 
 def _configure_service(bpy: ModuleType, ext: str, args: argparse.Namespace) -> None:
     prefs = importlib.import_module(f"{ext}.preferences").get(bpy.context)
-    prefs.token = args.token
-    prefs.timeout_s = 120
-    if args.serve:
-        from_local = importlib.import_module(f"{ext}.core.local_service")
-        prefs.service_mode = "LOCAL"
-        prefs.python_path = args.python or sys.executable
-        prefs.local_port = from_local.free_port()
-        prefs.data_dir = args.data_dir or ""
+    if args.url:
+        prefs.service_mode = "REMOTE"
+        prefs.url, prefs.token, prefs.timeout_s = args.url, args.token, 120
     else:
-        prefs.service_mode = "URL"
-        prefs.url = args.url
+        prefs.service_mode = "LOCAL"
+        if args.workers is not None:
+            if args.workers < 1:
+                raise ValueError(f"--workers must be >= 1, got {args.workers}")
+            prefs.local_workers = args.workers
+        prefs.data_dir = args.data_dir or ""
 
 
 # -- commands ------------------------------------------------------------------------------------------
@@ -222,9 +227,11 @@ def cmd_optimize(bpy: ModuleType, ext: str, args: argparse.Namespace) -> int:
     client = sp.client_for(bpy.context)
     bar = ProgressBar("optimize")
     t0 = time.monotonic()
-    summary = ops.run_sync(scene, client, progress=lambda u: bar(u.fraction, u.text), timeout_s=args.timeout)
+    applied = ops.run_sync(scene, client, progress=lambda u: bar(u.fraction, u.text), timeout_s=args.timeout)
     bar.done()
-    sys.stdout.write(f"store: {summary} ({time.monotonic() - t0:.1f} s)\n")
+    sys.stdout.write(f"store: {applied.summary} ({time.monotonic() - t0:.1f} s)\n")
+    if applied.shortfall:
+        sys.stderr.write(f"warning: {applied.shortfall}\n")
     if args.store_out:
         Path(args.store_out).write_text(scene.render_budget.store_text.as_string(), encoding="utf-8")
     if not args.no_save:
@@ -305,7 +312,8 @@ def main(argv: list[str] | None = None) -> int:
         _apply_scene_options(ext, bpy.context.scene.render_budget, args)
         return COMMANDS[args.command](bpy, ext, args)
     except Exception as err:  # batch contract: one clear line and a non-zero status
-        sys.stderr.write(f"render-budget batch {args.command} failed: {err}\n")
+        message = importlib.import_module(f"{ext}.service_process").explain(err) if ext else str(err)
+        sys.stderr.write(f"render-budget batch {args.command} failed: {message}\n")
         return 1
     finally:
         if ext:

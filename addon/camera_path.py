@@ -6,9 +6,10 @@ from __future__ import annotations
 import bpy
 from mathutils import Matrix
 
+from service import camera_path as path_format
+from service.store import camera
+
 from .core.path_sampling import build_path, frame_times
-from .core.vendored import camera
-from .core.vendored import camera_path as path_format
 
 PATH_TEXT_PREFIX = "render_budget_path"
 

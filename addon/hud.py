@@ -17,6 +17,8 @@ def hud_lines(scene: bpy.types.Scene) -> list[tuple[str, tuple[float, float, flo
         return []
     ok = (1.0, 1.0, 1.0, 1.0)
     bad = (1.0, 0.35, 0.3, 1.0)
+    if props.playback_status.startswith("error"):  # nothing applies: say why instead of stale numbers
+        return [(f"Render Budget playback {props.playback_status}", bad)]
     if props.budget_mode == "POWER":
         over = props.predicted_power > props.power_budget
         budget = f"budget {props.power_budget:.2f} W"

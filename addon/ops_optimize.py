@@ -1,9 +1,10 @@
 """Optimize power: send the scene (as the render engine renders it: the depsgraph translator at render level,
-written as a render-budget scene file) and the camera path, run a job on the service, keep the store.
+written as a render-budget scene file) and the camera path, run a job (a local job process with the bundled
+core by default, or the remote service), keep the store.
 
-GUI (invoke): the export happens on the main thread, a worker thread does HTTP only, and a timer on the
-main thread drains a queue into the WindowManager progress properties. Background/batch (execute): the
-same steps synchronously. The store ends up in a text datablock that is saved with the .blend.
+GUI (invoke): the export happens on the main thread, a worker thread follows the job (no bpy), and a timer
+on the main thread drains a queue into the WindowManager progress properties. Background/batch (execute):
+the same steps synchronously. The store ends up in a text datablock that is saved with the .blend.
 """
 
 from __future__ import annotations
@@ -19,14 +20,16 @@ from pathlib import Path
 
 import bpy
 
+from service import camera_path as path_format
+from service import store as pareto_store
+
 from . import playback, preferences, service_process
 from .camera_path import load_path, sample_animation, store_path
 from .core.client import ServiceClient
 from .core.job_runner import JobOutcome, JobRequest, JobUpdate, run_job
-from .core.playback_logic import predicted_path_summary, summary_text, validate_budget
+from .core.local_jobs import LocalClient
+from .core.playback_logic import budget_shortfall, predicted_path_summary, summary_text, validate_budget
 from .core.scene_translation import notes_text
-from .core.vendored import camera_path as path_format
-from .core.vendored import pareto_store
 from .properties import option_values
 from .translate import translate_for_render
 
@@ -68,7 +71,8 @@ def export_scene(scene: bpy.types.Scene, directory: str | Path) -> Path:
     world, camera at the current frame), translated from a render depsgraph and written as a render-budget
     scene file: exactly what the render engine renders. What the translation approximated is kept in
     ``scene.render_budget.scene_notes`` (the panel shows it) and travels inside the file to the job."""
-    from sim_core.loaders.scene_file import SUFFIX, write_scene_file  # lazy: optional, not in a stock Blender
+    # lazy: the native core loads on first use, not when the add-on registers
+    from sim_core.loaders.scene_file import SUFFIX, write_scene_file
 
     window = bpy.context.window
     with bpy.context.temp_override(scene=scene, **({"window": window} if window else {})):
@@ -117,7 +121,15 @@ def prepare(scene: bpy.types.Scene) -> Prepared:
     return Prepared(scene.name, scene_file, path, request, tmp)
 
 
-def apply_outcome(scene: bpy.types.Scene, outcome: JobOutcome, path: path_format.CameraPath) -> str:
+@dataclass(frozen=True)
+class Applied:
+    """The results summary shown in the panel, and why the current budget cannot be met (None: it can)."""
+
+    summary: str
+    shortfall: str | None
+
+
+def apply_outcome(scene: bpy.types.Scene, outcome: JobOutcome, path: path_format.CameraPath) -> Applied:
     """Keep the store in the .blend (text datablock), record ids and the results summary."""
     store = pareto_store.ParetoStore.from_json(outcome.store_text)  # validate before replacing anything
     props = scene.render_budget
@@ -133,9 +145,10 @@ def apply_outcome(scene: bpy.types.Scene, outcome: JobOutcome, path: path_format
     mode = props.budget_mode
     value = props.power_budget if mode == "POWER" else props.error_budget
     frames = path.frames[:: max(1, len(path.frames) // 300)]  # a few hundred poses are plenty here
-    props.summary = summary_text(predicted_path_summary(store, frames, mode, value))
+    summary = predicted_path_summary(store, frames, mode, value)
+    props.summary = summary_text(summary)
     playback.reset()
-    return props.summary
+    return Applied(props.summary, budget_shortfall(summary))
 
 
 def fill_parameters(scene: bpy.types.Scene, inert: dict[str, str],
@@ -157,8 +170,8 @@ def fill_parameters(scene: bpy.types.Scene, inert: dict[str, str],
         item.name, item.inert, item.reason, item.enabled = name, True, reason, False
 
 
-def run_sync(scene: bpy.types.Scene, client: ServiceClient,
-             progress: Callable[[JobUpdate], None] | None = None, timeout_s: float | None = None) -> str:
+def run_sync(scene: bpy.types.Scene, client: ServiceClient | LocalClient,
+             progress: Callable[[JobUpdate], None] | None = None, timeout_s: float | None = None) -> Applied:
     """The whole optimisation on the calling (main) thread: for background mode, batch and tests."""
     prep = prepare(scene)
     try:
@@ -185,8 +198,9 @@ def job_running() -> bool:
     return _active is not None and _active.thread.is_alive()
 
 
-def _worker(job: _ActiveJob, client: ServiceClient) -> None:
-    """HTTP only: never touches bpy. Posts ('progress'|'done'|'error', payload) messages."""
+def _worker(job: _ActiveJob, client: ServiceClient | LocalClient) -> None:
+    """Follows the job (HTTP or the local job process); never touches bpy. Posts ('progress'|'done'|'error',
+    payload) messages."""
     try:
         outcome = run_job(client, job.prep.scene_file, job.prep.path.to_dict(), job.prep.request,
                           progress=lambda u: job.messages.put(("progress", u)),
@@ -225,13 +239,13 @@ def _poll_queue() -> float | None:
                 rt.job_status = "finished, but the scene was removed; store not kept"
             else:
                 try:
-                    rt.job_status = "done: " + apply_outcome(scene, payload, job.prep.path)
+                    rt.job_status = status_text(apply_outcome(scene, payload, job.prep.path))
                     rt.job_progress = 1.0
                 except ValueError as err:
-                    rt.job_status = f"failed: invalid store from service ({err})"
+                    rt.job_status = f"failed: invalid store ({err})"
             finished = True
         else:
-            rt.job_status = f"failed: {payload}"
+            rt.job_status = f"failed: {service_process.explain(payload)}"
             finished = True
     _redraw()
     if finished:
@@ -242,8 +256,16 @@ def _poll_queue() -> float | None:
     return 0.25
 
 
+def status_text(applied: Applied) -> str:
+    """The job line of the panel: done, or done but the budget cannot be met (said first)."""
+    if applied.shortfall:
+        return f"done, but {applied.shortfall}"
+    return f"done: {applied.summary}"
+
+
 class RENDER_BUDGET_OT_optimize(bpy.types.Operator):
-    """Optimise render settings along the camera path on the render-budget service"""
+    """Optimise render settings along the camera path (locally with the bundled simulator, or on the remote
+    service chosen in the preferences)"""
 
     bl_idname = "render_budget.optimize"
     bl_label = "Optimize Power"
@@ -264,15 +286,15 @@ class RENDER_BUDGET_OT_optimize(bpy.types.Operator):
                 wm.progress_update(int(100 * u.fraction))
                 log.info("%s", u.text)
 
-            summary = run_sync(context.scene, client, progress)
+            applied = run_sync(context.scene, client, progress)
         except Exception as err:  # report every failure; the .blend keeps its previous store
-            rt.job_status = f"failed: {err}"
-            self.report({"ERROR"}, f"Optimize power failed: {err}")
+            rt.job_status = f"failed: {service_process.explain(err)}"
+            self.report({"ERROR"}, f"Optimize power failed: {service_process.explain(err)}")
             return {"CANCELLED"}
         finally:
             wm.progress_end()
-        rt.job_status = "done: " + summary
-        self.report({"INFO"}, summary)
+        rt.job_status = status_text(applied)
+        self.report({"WARNING"} if applied.shortfall else {"INFO"}, rt.job_status)
         return {"FINISHED"}
 
     def invoke(self, context: bpy.types.Context, event: bpy.types.Event) -> set[str]:
@@ -284,7 +306,7 @@ class RENDER_BUDGET_OT_optimize(bpy.types.Operator):
             client = service_process.client_for(context)
             prep = prepare(context.scene)
         except Exception as err:
-            self.report({"ERROR"}, f"Optimize power: {err}")
+            self.report({"ERROR"}, f"Optimize power: {service_process.explain(err)}")
             return {"CANCELLED"}
         job = _ActiveJob(prep, threading.Thread(name="render-budget-job", daemon=True))
         job.thread = threading.Thread(target=_worker, args=(job, client), name="render-budget-job",
@@ -297,7 +319,8 @@ class RENDER_BUDGET_OT_optimize(bpy.types.Operator):
 
 
 class RENDER_BUDGET_OT_cancel_job(bpy.types.Operator):
-    """Cancel the running optimisation (the service stops the job; nothing in the .blend changes)"""
+    """Cancel the running optimisation (the job stops; what it evaluated stays in the evaluation cache;
+    nothing in the .blend changes)"""
 
     bl_idname = "render_budget.cancel_job"
     bl_label = "Cancel"
@@ -335,7 +358,8 @@ class RENDER_BUDGET_OT_load_store(bpy.types.Operator):
             self.report({"ERROR"}, "record a camera path first (the summary is computed along it)")
             return {"CANCELLED"}
         outcome = JobOutcome("", scene.render_budget.scene_id, "", text)
-        self.report({"INFO"}, apply_outcome(scene, outcome, path))
+        applied = apply_outcome(scene, outcome, path)
+        self.report({"WARNING"} if applied.shortfall else {"INFO"}, status_text(applied))
         return {"FINISHED"}
 
     def invoke(self, context: bpy.types.Context, event: bpy.types.Event) -> set[str]:

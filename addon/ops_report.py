@@ -11,28 +11,23 @@ from pathlib import Path
 
 import bpy
 
-from . import preferences, service_process
+from service import options as option_schema
+
+from . import service_process
 from .camera_path import load_path
 from .core import campaign
 from .core import report as report_data
 from .core.client import ServiceClient
+from .core.local_jobs import LocalClient
 from .core.playback_logic import validate_budget
-from .core.vendored import options as option_schema
 from .ops_preview import upload_scene_info
 
 log = logging.getLogger(__name__)
 
 
 def _plot_elsewhere(csv_path: Path, out_dir: Path) -> str | None:
-    """Stock Blender lacks matplotlib: draw the plots with the service's Python if one is configured."""
-    candidates = []
-    try:
-        prefs = preferences.get()
-        if prefs.python_path:
-            candidates.append(bpy.path.abspath(prefs.python_path))
-    except RuntimeError:
-        pass
-    candidates.append(shutil.which("python3") or "")
+    """Stock Blender lacks matplotlib: draw the plots with a system Python that has it, if any."""
+    candidates = [shutil.which("python3") or ""]
     script = Path(report_data.__file__)
     for python in filter(None, candidates):
         proc = subprocess.run([python, str(script), "plot", str(csv_path), str(out_dir)], capture_output=True,
@@ -42,7 +37,7 @@ def _plot_elsewhere(csv_path: Path, out_dir: Path) -> str | None:
     return None
 
 
-def evaluate_scene(scene: bpy.types.Scene, client: ServiceClient, out_dir: str | Path, *,
+def evaluate_scene(scene: bpy.types.Scene, client: ServiceClient | LocalClient, out_dir: str | Path, *,
                    progress: Callable[[int, int], None] | None = None, frame_step: int | None = None,
                    samples: bool = True) -> dict:
     """Run the evaluation campaign (the same as ``make demo``'s) for a scene with a store and a path,
@@ -96,7 +91,7 @@ class RENDER_BUDGET_OT_evaluate_path(bpy.types.Operator):
             written = evaluate_scene(context.scene, client, out,
                                      progress=lambda d, t: wm.progress_update(int(100 * d / max(t, 1))))
         except Exception as err:  # report, the .blend is untouched
-            self.report({"ERROR"}, f"Evaluate path failed: {err}")
+            self.report({"ERROR"}, f"Evaluate path failed: {service_process.explain(err)}")
             return {"CANCELLED"}
         finally:
             wm.progress_end()

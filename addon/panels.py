@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import bpy
 
-from . import ops_optimize, service_process
-from .core.vendored import options as option_schema
+from service import options as option_schema
+
+from . import ops_optimize, preferences
 
 
 class RENDER_BUDGET_UL_parameters(bpy.types.UIList):
@@ -37,11 +38,13 @@ class VIEW3D_PT_render_budget(bpy.types.Panel):
 
         box = layout.box()
         row = box.row(align=True)
-        row.operator("render_budget.service_start", icon="URL")
-        if service_process.local_running():
-            row.operator("render_budget.service_stop", text="", icon="X")
+        remote = _remote(context)
+        row.label(text="Jobs: remote service" if remote else "Jobs: this computer", icon="URL" if remote
+                  else "DESKTOP")
+        row.operator("render_budget.service_start", text="Check", icon="CHECKMARK")
         if rt.service_status:
-            box.label(text=rt.service_status)
+            for chunk in _wrap(rt.service_status, 48):
+                box.label(text=chunk, icon="ERROR" if rt.service_status.startswith("error") else "NONE")
         box.prop_search(props, "profile", props, "profiles", text="Profile")
 
         col = layout.column(align=True)
@@ -71,7 +74,13 @@ class VIEW3D_PT_render_budget(bpy.types.Panel):
         if ops_optimize.job_running():
             row.operator("render_budget.cancel_job", text="", icon="CANCEL")
         if rt.job_running or rt.job_status:
-            layout.progress(factor=rt.job_progress, type="BAR", text=rt.job_status or "")
+            failed = rt.job_status.startswith(("failed", "done, but"))
+            if rt.job_running or not failed:
+                layout.progress(factor=rt.job_progress, type="BAR", text=rt.job_status or "")
+            if failed:  # the whole message, wrapped: it says what to do
+                box = layout.box()
+                for i, chunk in enumerate(_wrap(rt.job_status, 48)):
+                    box.label(text=chunk, icon="ERROR" if i == 0 else "BLANK1")
         if props.scene_notes:
             box = layout.box()
             box.label(text="The simulated scene differs:", icon="ERROR")
@@ -86,13 +95,17 @@ class VIEW3D_PT_render_budget(bpy.types.Panel):
                 box.label(text=chunk)
             box.prop(props, "playback_enabled")
             box.prop(props, "hud_enabled")
-            box.label(text=f"Power {props.predicted_power:.3f} W, error {props.predicted_error:.4f}")
-            for chunk in _wrap(props.active_settings, 48):
-                box.label(text=chunk)
-            if props.infeasible:
-                box.label(text="budget cannot be met here", icon="ERROR")
-            if props.clamped:
-                box.label(text="camera outside the optimised space", icon="ERROR")
+            if props.playback_status.startswith("error"):  # nothing applies: why, and no stale numbers
+                for i, chunk in enumerate(_wrap(f"Playback {props.playback_status}", 48)):
+                    box.label(text=chunk, icon="ERROR" if i == 0 else "BLANK1")
+            elif props.active_indices:
+                box.label(text=f"Power {props.predicted_power:.3f} W, error {props.predicted_error:.4f}")
+                for chunk in _wrap(props.active_settings, 48):
+                    box.label(text=chunk)
+                if props.infeasible:
+                    box.label(text="budget cannot be met here", icon="ERROR")
+                if props.clamped:
+                    box.label(text="camera outside the optimised space", icon="ERROR")
         row = layout.row(align=True)
         row.operator("render_budget.preview", icon="RENDER_STILL")
         row.operator("render_budget.evaluate_path", icon="GRAPH")
@@ -111,6 +124,13 @@ def draw_options(layout: bpy.types.UILayout, props: bpy.types.PropertyGroup) -> 
                 row = col.row(align=True)
                 row.active = not opt.modes or props.view_sampling in opt.modes
                 row.prop(props, opt.name)
+
+
+def _remote(context: bpy.types.Context) -> bool:
+    try:
+        return preferences.get(context).service_mode == "REMOTE"
+    except RuntimeError:
+        return False
 
 
 def _wrap(text: str, width: int) -> list[str]:

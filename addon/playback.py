@@ -25,6 +25,19 @@ def budget_of(props: bpy.types.PropertyGroup) -> tuple[str, float]:
     return mode, (props.power_budget if mode == "POWER" else props.error_budget)
 
 
+def show_error(scene: bpy.types.Scene, message: str) -> None:
+    """Playback cannot drive this frame: say why (panel and HUD read `playback_status`) and clear the
+    previous frame's settings and predictions, which no longer apply."""
+    props = scene.render_budget
+    status = f"error: {message}"
+    if props.playback_status != status or props.active_indices:
+        props.active_settings = props.active_indices = props.target_indices = ""
+        props.predicted_power = props.predicted_error = 0.0
+        props.clamped = props.infeasible = False
+        props.playback_status = status
+    _written.pop(scene.as_pointer(), None)
+
+
 def update_scene(scene: bpy.types.Scene) -> PlaybackFrame | None:
     """Look up, filter and write this frame's settings; returns what was written (None: nothing to do)."""
     props = scene.render_budget
@@ -33,7 +46,7 @@ def update_scene(scene: bpy.types.Scene) -> PlaybackFrame | None:
         return None
     cam = scene.camera
     if cam is None:
-        props.playback_status = "no active camera"
+        show_error(scene, "the scene has no active camera: set one (Scene properties > Camera)")
         return None
     w, h = render_resolution(scene)
     try:
@@ -42,8 +55,7 @@ def update_scene(scene: bpy.types.Scene) -> PlaybackFrame | None:
         mode, value = budget_of(props)
         frame = driver.step(cam.matrix_world, camera_vfov(cam, scene), w / h, scene_time(scene), mode, value)
     except ValueError as err:
-        props.playback_status = f"error: {err}"
-        _written.pop(scene.as_pointer(), None)
+        show_error(scene, str(err))
         return None
     # Most frames repeat the previous answer: write only when it changed (checked against what the
     # scene holds, so undo or a hand edit of these outputs is corrected on the next frame).

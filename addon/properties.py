@@ -19,7 +19,7 @@ from bpy.props import (
     StringProperty,
 )
 
-from .core.vendored import options as option_schema
+from service import options as option_schema
 
 
 class RENDER_BUDGET_PG_parameter(bpy.types.PropertyGroup):

@@ -1,5 +1,7 @@
-"""Reach the service: a configured URL, or a local `render-budget serve` started on demand and stopped
-when the add-on is disabled or Blender exits."""
+"""Where jobs run: on this computer with the bundled core (the default: scenes analysed in this process,
+each optimisation job in a child process started with Blender's own Python), or on a remote service at a
+URL. Local jobs end with their job, when the add-on is disabled, when Blender exits and when Blender is
+killed (`core.local_jobs`)."""
 
 from __future__ import annotations
 
@@ -10,65 +12,96 @@ from pathlib import Path
 import bpy
 
 from . import preferences
-from .core.client import ServiceClient, is_loopback
-from .core.local_service import LocalService
+from .core.client import ServiceClient, ServiceUnavailable, is_loopback, normalise_base_url
+from .core.local_jobs import LocalClient
 
-_local: LocalService | None = None
+_local: LocalClient | None = None
 
 
-def _data_dir(prefs: preferences.RENDER_BUDGET_AP_preferences) -> Path:
+def local_data_dir(prefs: preferences.RENDER_BUDGET_AP_preferences) -> Path:
     if prefs.data_dir:
         return Path(bpy.path.abspath(prefs.data_dir))
-    return Path(bpy.utils.extension_path_user(__package__, path="service", create=True))
+    return Path(bpy.utils.extension_path_user(__package__, path="local", create=True))
 
 
-def client_for(context: bpy.types.Context) -> ServiceClient:
-    """A client for the configured service, starting the local one if asked to (main thread only)."""
+def local_client(context: bpy.types.Context) -> LocalClient:
+    """The local client for the current preferences (kept while jobs run; main thread only)."""
     global _local
     prefs = preferences.get(context)
-    if prefs.service_mode == "LOCAL":
-        if not prefs.python_path:
-            raise RuntimeError("set the Python interpreter of a render-budget environment in the preferences")
-        python = bpy.path.abspath(prefs.python_path)
-        if _local is None or not _local.running() or _local.port != prefs.local_port:
-            stop_local()
-            # a desktop service: render a job's evaluations on every core
-            _local = LocalService(python, prefs.local_port, _data_dir(prefs), prefs.token or None,
-                                  eval_workers=os.cpu_count() or 1)
-            _local.start()
-        return _local.client(timeout_s=float(prefs.timeout_s))
+    data_dir = local_data_dir(prefs)
+    workers = prefs.local_workers or os.cpu_count() or 1
+    if _local is None or ((_local.data_dir, _local.workers) != (data_dir, workers) and not _local.job_pids()):
+        stop_local()
+        _local = LocalClient(data_dir, workers=workers)
+    return _local
+
+
+def remote_client(prefs: preferences.RENDER_BUDGET_AP_preferences) -> ServiceClient:
+    """A client for the remote service in the preferences; errors say what to set up."""
+    url = prefs.url.strip()
+    if not url:
+        raise RuntimeError(f"no remote service URL is set: enter it in {preferences.WHERE} "
+                           "(e.g. http://render-host:8765), or choose 'This computer' to run jobs here")
+    try:
+        base = normalise_base_url(url)
+    except ValueError:
+        raise RuntimeError(f"the remote service URL {url!r} is malformed: it must look like "
+                           f"http://host:port or https://host:port ({preferences.WHERE})") from None
     # Loopback is not "online": a service on this machine is usable whatever 'Allow Online Access' says.
-    if not is_loopback(prefs.url) and not bpy.app.online_access and not prefs.allow_remote_offline:
-        raise RuntimeError("a remote service needs 'Allow Online Access' (Preferences > System > Network)")
-    return ServiceClient(prefs.url, prefs.token or None, timeout_s=float(prefs.timeout_s))
+    if not is_loopback(base) and not bpy.app.online_access and not prefs.allow_remote_offline:
+        raise RuntimeError(f"the remote service {base} needs 'Allow Online Access' (Preferences > System > "
+                           f"Network), or choose 'This computer' in {preferences.WHERE}")
+    return ServiceClient(base, prefs.token or None, timeout_s=float(prefs.timeout_s))
+
+
+def client_for(context: bpy.types.Context) -> ServiceClient | LocalClient:
+    """The client the operators use: local by default, the remote service if chosen (main thread only)."""
+    prefs = preferences.get(context)
+    if prefs.service_mode == "REMOTE":
+        return remote_client(prefs)
+    return local_client(context)
+
+
+def explain(err: BaseException) -> str:
+    """An error message for the user that says what to set up when the remote service is unreachable."""
+    if isinstance(err, ServiceUnavailable):
+        return (f"{err}: start it there (`render-budget serve`), correct the URL in {preferences.WHERE}, "
+                "or choose 'This computer' to run jobs here")
+    return str(err)
 
 
 def stop_local() -> None:
+    """Stop every local job still running (the add-on is disabled or Blender exits)."""
     global _local
     if _local is not None:
-        _local.stop()
+        _local.close()
         _local = None
 
 
-def local_running() -> bool:
-    return _local is not None and _local.running()
+def local_job_pids() -> list[int]:
+    return _local.job_pids() if _local is not None else []
 
 
 class RENDER_BUDGET_OT_service_start(bpy.types.Operator):
-    """Start the local render-budget service (or check that the configured URL answers)"""
+    """Check where jobs run: the bundled simulator on this computer, or that the remote service answers"""
 
     bl_idname = "render_budget.service_start"
-    bl_label = "Connect to Service"
+    bl_label = "Check Jobs Backend"
 
     def execute(self, context: bpy.types.Context) -> set[str]:
         try:
             client = client_for(context)
             health = client.health()
         except Exception as err:  # report any failure to the user, nothing else to clean up
-            self.report({"ERROR"}, str(err))
+            self.report({"ERROR"}, explain(err))
+            context.window_manager.render_budget_runtime.service_status = f"error: {explain(err)}"
             return {"CANCELLED"}
         wm = context.window_manager.render_budget_runtime
-        wm.service_status = f"connected: {client.base_url} (version {health.get('version', '?')})"
+        if isinstance(client, LocalClient):
+            wm.service_status = (f"this computer: bundled simulator {health.get('version', '?')}, "
+                                 f"{health.get('workers')} worker processes")
+        else:
+            wm.service_status = f"remote: {client.base_url} (version {health.get('version', '?')})"
         profiles = health.get("profiles") or []
         scene_props = context.scene.render_budget
         scene_props.profiles.clear()
@@ -78,19 +111,7 @@ class RENDER_BUDGET_OT_service_start(bpy.types.Operator):
         return {"FINISHED"}
 
 
-class RENDER_BUDGET_OT_service_stop(bpy.types.Operator):
-    """Stop the local render-budget service started by this add-on"""
-
-    bl_idname = "render_budget.service_stop"
-    bl_label = "Stop Local Service"
-
-    def execute(self, context: bpy.types.Context) -> set[str]:
-        stop_local()
-        context.window_manager.render_budget_runtime.service_status = "stopped"
-        return {"FINISHED"}
-
-
-classes = (RENDER_BUDGET_OT_service_start, RENDER_BUDGET_OT_service_stop)
+classes = (RENDER_BUDGET_OT_service_start,)
 _register, _unregister = bpy.utils.register_classes_factory(classes)
 
 

@@ -490,7 +490,7 @@ class _Reader:
 
     # camera -------------------------------------------------------------------------------------------
     def read_camera(self) -> None:
-        from sim_core.scene_data import CameraData  # lazy: optional, not in a stock Blender
+        from sim_core.scene_data import CameraData  # lazy: the native core loads on first use
 
         cam = self.scene.camera
         if cam is None:

@@ -168,6 +168,15 @@ class ParameterSpace:
                 return i
         raise ValueError(f"{value!r} is not a value of {name!r}; values: {list(p.values)}")
 
+    def indices_of(self, values: Mapping[str, Any] | None) -> Indices:
+        """Indices of ``{parameter: value}`` (a store query's settings); parameters left out stay at
+        maximum quality. ValueError names an unknown parameter or value."""
+        indices = list(self.max_quality_indices())
+        for name, value in (values or {}).items():
+            index = self.index_of(name, value)  # checks the name first
+            indices[self.names.index(name)] = index
+        return tuple(indices)
+
     def values_of(self, indices: Sequence[int]) -> dict[str, Any]:
         self.validate(indices)
         return {p.name: p.values[i] for p, i in zip(self.parameters, indices, strict=True)}

@@ -3,7 +3,11 @@
 from __future__ import annotations
 
 import json
+import os
+import signal
+import subprocess
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -50,9 +54,26 @@ def synthetic_store(root_min: tuple[float, float, float] = (-10.0, -10.0, -10.0)
 
 
 def stage_extension(tmp: Path) -> Path:
-    """Stage the extension (with its vendored modules) under `tmp`; returns the repo folder."""
+    """Stage the extension under `tmp` (the add-on folder only: this environment has the project's
+    packages); returns the repo folder."""
     build_extension.stage(tmp)
     return tmp
+
+
+def start_gui_job(bpy: Any) -> tuple[Any, Any]:
+    """What the Optimize button's invoke() does, without a window: prepare on the main thread, a worker
+    thread follows the job; returns (ops_optimize module, the active job). `ops._poll_queue()` is the
+    timer's step."""
+    import importlib
+    import threading
+
+    ops = importlib.import_module(f"{EXT_MODULE}.ops_optimize")
+    client = importlib.import_module(f"{EXT_MODULE}.service_process").client_for(bpy.context)
+    job = ops._ActiveJob(ops.prepare(bpy.context.scene), threading.Thread())
+    job.thread = threading.Thread(target=ops._worker, args=(job, client), daemon=True)
+    ops._active = job
+    job.thread.start()
+    return ops, job
 
 
 def enable_dev(bpy: Any, repo_dir: Path) -> Any:
@@ -77,6 +98,61 @@ def disable_dev() -> None:
 
 def _raise(exc: BaseException) -> None:
     raise exc
+
+
+def alive(pid: int) -> bool:
+    """A live process (zombies, whose parent has not reaped them yet, count as gone)."""
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def descendants(pid: int) -> list[int]:
+    """Live processes below `pid` (Linux /proc)."""
+    children: dict[int, list[int]] = {}
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat") as fh:
+                    ppid = int(fh.read().rsplit(")", 1)[1].split()[1])
+            except (OSError, ValueError, IndexError):
+                continue
+            children.setdefault(ppid, []).append(int(entry))
+    out, todo = [], [pid]
+    while todo:
+        for c in children.get(todo.pop(), []):
+            if alive(c):
+                out.append(c)
+                todo.append(c)
+    return out
+
+
+def wait_gone(pids: list[int], timeout_s: float = 15.0) -> list[int]:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline and any(alive(p) for p in pids):
+        time.sleep(0.1)
+    return [p for p in pids if alive(p)]
+
+
+def kill_and_check_nothing_left(parent: subprocess.Popen, below: list[int]) -> None:
+    """SIGKILL the parent of a running local job (no clean-up code of ours runs) and check that the job
+    process and its workers, `below` it, end too."""
+    assert len(below) >= 3  # the job process and its two evaluation workers (+ resource tracker)
+    parent.send_signal(signal.SIGKILL)
+    parent.wait(timeout=10)
+    assert wait_gone(below) == []
+
+
+def cancel_gui_job(bpy: Any, ops: Any, job: Any) -> Any:
+    """What the Cancel button does to a job :func:`start_gui_job` started, then the timer's last step;
+    returns the window manager's runtime state (job status line)."""
+    job.cancel.set()
+    job.thread.join(120)
+    assert not job.thread.is_alive()
+    assert ops._poll_queue() is None
+    return bpy.context.window_manager.render_budget_runtime
 
 
 def store_json(store: ParetoStore) -> str:

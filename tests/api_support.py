@@ -161,6 +161,17 @@ def tiny_job(scene_id: str, *, resolution: tuple[int, int] = (16, 12), seed: int
     }
 
 
+RUN_STATISTICS = ("evaluations", "cache_hits", "elapsed_s", "executor")
+
+
+def comparable(store_json: str) -> dict[str, Any]:
+    """The store without the statistics of the run that made it (renders, hits, time, executor)."""
+    doc = json.loads(store_json)
+    for key in RUN_STATISTICS:
+        doc["meta"].pop(key)
+    return doc
+
+
 def free_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))

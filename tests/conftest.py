@@ -23,6 +23,15 @@ def models_dir() -> Path:
     return MODELS_DIR
 
 
+@pytest.fixture(scope="session")
+def extension_zip(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The extension zip for this platform, built once per test session (tools/build_extension.py)."""
+    from tests.addon_support import build_extension
+
+    [path] = build_extension.build(tmp_path_factory.mktemp("dist"))
+    return path
+
+
 @pytest.fixture
 def opened_files() -> Iterator[list[str]]:
     """Every file this process opens while the test runs (Python's ``open`` audit event), resolved; a

@@ -1,6 +1,6 @@
 """The add-on inside real Blender (the bpy 5.0.1 module): registration, path recording, playback from a
-store saved in the .blend, and bad input. The extension is staged (with its vendored modules) into a temp
-folder and loaded from there as a dev extension repository."""
+store saved in the .blend, and bad input. The add-on folder is staged into a temp folder (this environment
+has the project's packages) and loaded from there as a dev extension repository."""
 
 from __future__ import annotations
 
@@ -297,13 +297,22 @@ def test_budget_change_during_playback_goes_through_the_filter(scene, tmp_path) 
     assert props.predicted_power <= 1.7
     sc.frame_set(2 + 26)  # more than T = 1 s later (24 fps)
     assert props.playback_status in ("on target", "blending")
-    # invalid budget: reported in the status, nothing written
-    before = props.active_indices
+    # invalid budget: reported in the status (panel and HUD show it), the stale settings are cleared
+    assert props.active_indices
     props.budget_mode = "POWER"
     props.power_budget = 0.0
     sc.frame_set(30)
     assert props.playback_status.startswith("error: power budget must be > 0")
-    assert props.active_indices == before
+    assert (props.active_indices, props.active_settings, props.predicted_power) == ("", "", 0.0)
+    hud = ext_module("hud").hud_lines(sc)
+    assert len(hud) == 1 and "power budget must be > 0" in hud[0][0] and hud[0][1][1] < 0.5
+    props.power_budget = 10.0  # fixed: playback resumes
+    sc.frame_set(31)
+    assert props.playback_status in ("on target", "blending") and props.active_indices
+    sc.camera = None  # no active camera: said, and nothing stale left
+    sc.frame_set(32)
+    assert props.playback_status.startswith("error: the scene has no active camera")
+    assert (props.active_indices, props.predicted_power) == ("", 0.0)
 
 
 # -- bad input for the operators ----------------------------------------------------------------------------
@@ -311,9 +320,18 @@ def _point_at_dead_service() -> None:
     from addon.core.local_service import free_port
 
     prefs = ext_module("preferences").get()
-    prefs.service_mode = "URL"
+    prefs.service_mode = "REMOTE"
     prefs.url = f"http://127.0.0.1:{free_port()}"
     prefs.timeout_s = 2
+
+
+@pytest.fixture
+def local_jobs(ext):
+    """Jobs on this computer (the default), restored after the test."""
+    prefs = ext_module("preferences").get()
+    prefs.service_mode, prefs.url = "LOCAL", ""
+    yield prefs
+    prefs.service_mode = "LOCAL"
 
 
 def test_optimize_with_service_down_keeps_the_blend_intact(scene, tmp_path) -> None:
@@ -325,13 +343,43 @@ def test_optimize_with_service_down_keeps_the_blend_intact(scene, tmp_path) -> N
     store_before = sc.render_budget.store_text.as_string()
     path_before = sc.render_budget.path_text.as_string()
     _point_at_dead_service()
-    with pytest.raises(RuntimeError, match="no render-budget service"):
+    with pytest.raises(RuntimeError, match=r"no render-budget service.*render-budget serve.*This computer"):
         bpy.ops.render_budget.optimize()
     assert sc.render_budget.store_text.as_string() == store_before
     assert sc.render_budget.path_text.as_string() == path_before
     assert bpy.context.window_manager.render_budget_runtime.job_status.startswith("failed")
-    with pytest.raises(RuntimeError, match="no render-budget service"):
-        bpy.ops.render_budget.preview()
+    # previews render here with the bundled core whatever the service does
+    assert bpy.ops.render_budget.preview(scale=0.25) == {"FINISHED"}
+
+
+@pytest.mark.parametrize(("url", "message"), [
+    ("127.0.0.1:8765", "URL '127.0.0.1:8765' is malformed: it must look like http://host:port"),
+    ("render-host:8765", "URL 'render-host:8765' is malformed"),
+    ("", "no remote service URL is set"),
+    ("http://render-host.example:8765", "needs 'Allow Online Access'"),
+])
+def test_remote_url_problems_say_what_to_set_up(scene, url, message) -> None:
+    turning_camera(scene, 6)
+    add_cube(scene)
+    prefs = ext_module("preferences").get()
+    prefs.service_mode, prefs.url = "REMOTE", url
+    assert not bpy.app.online_access
+    try:
+        with pytest.raises(RuntimeError, match=message):
+            bpy.ops.render_budget.optimize()
+        with pytest.raises(RuntimeError, match=message):
+            bpy.ops.render_budget.service_start()
+    finally:
+        prefs.service_mode, prefs.url = "LOCAL", ""
+
+
+def test_the_default_runs_jobs_here_and_needs_no_set_up(ext) -> None:
+    prefs = ext_module("preferences").get()
+    assert prefs.bl_rna.properties["service_mode"].default == "LOCAL"
+    assert prefs.bl_rna.properties["url"].default == ""
+    assert bpy.ops.render_budget.service_start() == {"FINISHED"}
+    status = bpy.context.window_manager.render_budget_runtime.service_status
+    assert status.startswith("this computer: bundled simulator")
 
 
 @pytest.mark.parametrize(("mode", "field", "value", "message"),
@@ -386,6 +434,30 @@ def test_hud_text_flags_a_broken_budget(scene, tmp_path) -> None:
     scene.frame_set(3)
     lines = hud.hud_lines(scene)
     assert lines[0][1][1] < 0.5 and any("infeasible" in text for text, _ in lines)
+
+
+def test_an_infeasible_budget_says_it_cannot_be_met_and_what_the_cheapest_setting_costs(scene, tmp_path
+                                                                                       ) -> None:
+    turning_camera(scene, 12)
+    add_cube(scene)
+    bpy.ops.render_budget.record_path_animation()
+    props = scene.render_budget
+    props.budget_mode, props.power_budget = "POWER", 0.05  # the synthetic store's cheapest point: 1.35 W+
+    _load_store(tmp_path)
+    assert "cannot be met on every frame of the path" in props.summary
+    assert "cheapest setting costs" in props.summary and "saved" not in props.summary
+    from service.camera_path import CameraPath
+
+    store = synthetic_store()
+    frames = CameraPath.from_json(props.path_text.as_string()).frames
+    cheapest = [store.lookup(f.position, matrix=f.matrix_world, fov=f.vfov, aspect=f.aspect,
+                             power_budget=0.05) for f in frames]
+    assert all(hit.infeasible for hit in cheapest)
+    lo, hi = min(h.power_w for h in cheapest), max(h.power_w for h in cheapest)
+    assert f"costs {lo:.3f}-{hi:.3f} W there (raise the budget to at least {hi:.3f} W)" in props.summary
+    props.power_budget = 10.0  # a budget the store meets: the usual summary
+    _load_store(tmp_path)
+    assert "saved" in props.summary and "cannot be met" not in props.summary
 
 
 def test_panel_and_preferences_refer_to_existing_properties(ext) -> None:

@@ -13,7 +13,6 @@ import os
 import re
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
@@ -22,15 +21,22 @@ import pytest
 
 from addon.core.client import ServiceClient
 from addon.core.local_service import LocalService, free_port
-from tests.addon_support import EXT_MODULE, REPO_ROOT, disable_dev, enable_dev, stage_extension
+from tests import orbit_scene
+from tests.addon_support import (
+    EXT_MODULE,
+    REPO_ROOT,
+    cancel_gui_job,
+    disable_dev,
+    enable_dev,
+    stage_extension,
+    start_gui_job,
+)
 
 pytestmark = [pytest.mark.blender, pytest.mark.service, pytest.mark.slow]
 bpy = pytest.importorskip("bpy")
 
 FRAMES = 16
 RES = (96, 54)  # scene render size: the path's aspect, so the add-on and the CLI see the same frustum
-EVAL = (32, 18)
-PARAMETERS = ("sampling", "shadow_samples", "resolution_scale")
 
 
 @pytest.fixture(scope="module")
@@ -45,7 +51,7 @@ def service(tmp_path_factory: pytest.TempPathFactory):
 def ext(tmp_path_factory: pytest.TempPathFactory, service):
     mod = enable_dev(bpy, stage_extension(tmp_path_factory.mktemp("ext")))
     prefs = importlib.import_module(f"{EXT_MODULE}.preferences").get()
-    prefs.service_mode, prefs.url, prefs.timeout_s = "URL", service.url, 120
+    prefs.service_mode, prefs.url, prefs.timeout_s = "REMOTE", service.url, 120
     yield mod
     disable_dev()
 
@@ -55,44 +61,9 @@ def m(name: str):
 
 
 def build_scene() -> bpy.types.Scene:
-    """A lit box on a floor with a camera orbiting it once (keyframed, 24 fps); search space of 3 params."""
-    import bmesh
-
-    bpy.ops.wm.read_homefile(use_empty=True, use_factory_startup=True)
-    sc = bpy.context.scene
-    sc.render.resolution_x, sc.render.resolution_y, sc.render.resolution_percentage = *RES, 100
-    sc.render.fps, sc.render.fps_base = 24, 1.0
-    for name, size, loc in (("Box", 1.0, (0, 0, 0.5)), ("Floor", 6.0, (0, 0, -3.0))):
-        me = bpy.data.meshes.new(name)
-        bm = bmesh.new()
-        bmesh.ops.create_cube(bm, size=size)
-        bm.to_mesh(me)
-        bm.free()
-        ob = bpy.data.objects.new(name, me)
-        ob.location = loc
-        sc.collection.objects.link(ob)
-    light = bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "POINT"))
-    light.data.energy = 800
-    light.location = (2, -2, 3)
-    sc.collection.objects.link(light)
-    cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
-    cam.data.lens = 30
-    sc.collection.objects.link(cam)
-    sc.camera = cam
-    sc.frame_start, sc.frame_end = 1, FRAMES
-    for i in range(FRAMES):
-        a = 2 * math.pi * i / FRAMES
-        cam.location = (4 * math.cos(a), 4 * math.sin(a), 1.2)
-        cam.rotation_euler = (math.radians(80), 0.0, a + math.pi / 2)
-        cam.keyframe_insert("location", frame=i + 1)
-        cam.keyframe_insert("rotation_euler", frame=i + 1)
-    props = sc.render_budget
-    for name in PARAMETERS:
-        item = props.parameters.add()
-        item.name = name
-    props.eval_width, props.eval_height = EVAL
-    props.max_depth, props.population, props.generations, props.exhaustive_limit = 0, 8, 2, 128
-    props.filter_period = 0.25
+    """The orbiting box scene with a search space of 3 parameters and small optimiser options."""
+    sc = orbit_scene.build(bpy, FRAMES, RES)
+    orbit_scene.small_job(sc.render_budget)
     return sc
 
 
@@ -183,14 +154,8 @@ def test_optimize_end_to_end_store_in_blend_and_playback_matches_query(optimized
 
 def test_gui_path_worker_thread_and_queue(ext) -> None:
     """invoke()'s machinery without a window: the worker thread does HTTP, the timer callback applies."""
-    ops = m("ops_optimize")
     sc = build_scene()
-    client = m("service_process").client_for(bpy.context)
-    prep = ops.prepare(sc)
-    job = ops._ActiveJob(prep, threading.Thread())
-    job.thread = threading.Thread(target=ops._worker, args=(job, client), daemon=True)
-    ops._active = job
-    job.thread.start()
+    ops, job = start_gui_job(bpy)
     job.thread.join(600)
     assert not job.thread.is_alive()
     assert ops._poll_queue() is None  # drained: job finished, timer would stop
@@ -200,24 +165,14 @@ def test_gui_path_worker_thread_and_queue(ext) -> None:
 
 
 def test_cancel_from_the_gui_path(ext, service) -> None:
-    ops = m("ops_optimize")
     sc = build_scene()
     sc.render_budget.seed = 12345  # a job the cache has not seen
     sc.render_budget.max_depth = 2
-    client = m("service_process").client_for(bpy.context)
-    prep = ops.prepare(sc)
-    job = ops._ActiveJob(prep, threading.Thread())
-    job.thread = threading.Thread(target=ops._worker, args=(job, client), daemon=True)
-    ops._active = job
-    job.thread.start()
+    ops, job = start_gui_job(bpy)
     deadline = time.monotonic() + 60
     while job.messages.qsize() < 2 and time.monotonic() < deadline:  # uploaded, submitted, first poll
         time.sleep(0.02)
-    job.cancel.set()  # what the Cancel button does
-    job.thread.join(120)
-    assert not job.thread.is_alive()
-    assert ops._poll_queue() is None
-    rt = bpy.context.window_manager.render_budget_runtime
+    rt = cancel_gui_job(bpy, ops, job)
     assert "cancelled" in rt.job_status and sc.render_budget.store_text is None
     assert "service state: cancelled" in rt.job_status
     job_id = re.search(r"job (\S+) cancelled", rt.job_status).group(1)

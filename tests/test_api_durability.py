@@ -13,7 +13,7 @@ from typing import Any
 import httpx
 import psutil
 import pytest
-from api_support import ServerProcess, server_thread, sse_events, teapot_scene_glb, tiny_job
+from api_support import ServerProcess, comparable, server_thread, sse_events, teapot_scene_glb, tiny_job
 
 from service.api import Settings
 
@@ -41,17 +41,6 @@ def job_state_on_disk(data_dir: Path, job_id: str) -> str:
         return str(db.execute("SELECT state FROM jobs WHERE id = ?", (job_id,)).fetchone()[0])
     finally:
         db.close()
-
-
-RUN_STATISTICS = ("evaluations", "cache_hits", "elapsed_s", "executor")
-
-
-def comparable(store_json: str) -> dict[str, Any]:
-    """The store without the statistics of the run that made it (renders, hits, time, executor)."""
-    doc = json.loads(store_json)
-    for key in RUN_STATISTICS:
-        doc["meta"].pop(key)
-    return doc
 
 
 def small_spec(scene_id: str, sampling: str = "aimed") -> dict[str, Any]:

@@ -2,7 +2,8 @@
 
 One campaign, two front ends that write the same report folder: ``tools/demo.py`` (``make demo``,
 ``make report SCENE=...``) and the add-on's *Evaluate Path* (its operator and ``batch evaluate``).
-Pure (stdlib + numpy; the service only through :class:`ServiceClient`), so it ships in the extension.
+Pure (stdlib + numpy + the service's store, path and option modules; the service's jobs only through a
+client: :class:`ServiceClient` or the add-on's local one), so it runs inside the extension.
 
 A campaign measures, through the service's POST /evaluate (:mod:`.evaluate_path`, the REST adapter):
 
@@ -31,11 +32,13 @@ from typing import Any
 
 import numpy as np
 
+from service import camera_path, options
+from service import store as pareto_store
+
 from . import report
 from .client import ServiceClient
 from .evaluate_path import EvalSpec, camera_payload, evaluate_path, preset_settings
 from .playback_logic import PlaybackDriver, validate_budget
-from .vendored import camera_path, options, pareto_store
 
 try:  # CPU time of finished child processes too (Unix)
     import resource

@@ -131,7 +131,7 @@ class ServiceClient:
         if data[:4] == b"glTF":
             content_type = "model/gltf-binary"
         else:
-            from sim_core.loaders.scene_file import (  # lazy: optional, not in a stock Blender
+            from sim_core.loaders.scene_file import (  # lazy: the native core loads on first use
                 MEDIA_TYPE,
                 is_scene_file,
             )

@@ -10,10 +10,12 @@ from typing import Any
 
 import numpy as np
 
+from service import camera_path
+from service import store as pareto_store
+
 from .client import ServiceClient
 from .playback_logic import PlaybackDriver, validate_budget
 from .report import PRESET_LEVELS, FrameRow, preset_indices
-from .vendored import camera_path, pareto_store
 
 
 @dataclass(frozen=True)

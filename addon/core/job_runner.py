@@ -11,8 +11,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from service import options as option_schema
+
 from .client import ServiceClient, ServiceError
-from .vendored import options as option_schema
 
 TERMINAL = ("done", "failed", "cancelled")
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 import os
 import socket
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -106,7 +105,3 @@ class LocalService:
         except OSError:
             return "(no log)"
 
-
-def default_python() -> str:
-    """The interpreter running this code (right for the bpy module in a venv; not for stock Blender)."""
-    return sys.executable

@@ -1,5 +1,5 @@
 """Camera-path helpers shared by recording, export and playback (pure: no bpy; the camera maths itself
- is `service.store.camera`, vendored as `core.vendored.camera`)."""
+ is `service.store.camera`)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .vendored import camera_path
+from service import camera_path
 
 
 def frame_times(frame_start: int, frame_end: int, fps: float, step: int = 1) -> list[tuple[int, float]]:

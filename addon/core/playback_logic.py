@@ -10,7 +10,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from .vendored import pareto_store
+from service import store as pareto_store
 
 BUDGET_MODES = ("POWER", "ERROR")
 
@@ -120,19 +120,22 @@ def predicted_path_summary(store: pareto_store.ParetoStore, frames: Sequence[Any
     """Store size and the power the store predicts along a path under a budget, against the
     maximum-quality (least-error) point of the same frontiers: what the panel's summary shows.
 
+    Frames where nothing meets the budget are counted, with what the nearest setting costs there: under a
+    power budget the cheapest setting's power, under an error budget the most accurate setting's error.
     `frames` are camera_path.CameraFrame objects (matrix_world, vfov, aspect).
     """
     validate_budget(budget_mode, budget_value)
     kwargs = {"power_budget": budget_value} if budget_mode == "POWER" else {"error_budget": budget_value}
     chosen = best = 0.0
-    infeasible = 0
+    nearest: list[float] = []
     for f in frames:
         pos = f.matrix_world[:3, 3]
         hit = store.lookup(pos, matrix=f.matrix_world, fov=f.vfov, aspect=f.aspect, **kwargs)
         top = store.lookup(pos, matrix=f.matrix_world, fov=f.vfov, aspect=f.aspect, error_budget=0.0)
         chosen += hit.power_w
         best += top.power_w
-        infeasible += int(hit.infeasible)
+        if hit.infeasible:
+            nearest.append(hit.power_w if budget_mode == "POWER" else hit.error)
     stats = store.stats()
     n = max(1, len(frames))
     return {
@@ -140,16 +143,40 @@ def predicted_path_summary(store: pareto_store.ParetoStore, frames: Sequence[Any
         "corners": stats["corners"],
         "depth": stats["depth"],
         "size_bytes": stats["size_bytes"],
+        "budget_mode": budget_mode,
+        "budget": float(budget_value),
         "mean_power_w": chosen / n,
         "mean_max_quality_power_w": best / n,
         "predicted_saving": (1.0 - chosen / best) if best > 0 else 0.0,
-        "infeasible_frames": infeasible,
+        "infeasible_frames": len(nearest),
+        "nearest_min": min(nearest) if nearest else None,
+        "nearest_max": max(nearest) if nearest else None,
         "frames": len(frames),
     }
 
 
+def budget_shortfall(summary: dict[str, Any]) -> str | None:
+    """What to tell the user when the budget cannot be met on some frames (None when it can)."""
+    k, n = summary["infeasible_frames"], summary["frames"]
+    if not k:
+        return None
+    lo, hi = summary["nearest_min"], summary["nearest_max"]
+    where = "on every frame of the path" if k == n else f"on {k} of {n} path frames"
+    if summary["budget_mode"] == "POWER":
+        span = f"{lo:.3f} W" if hi - lo < 5e-4 else f"{lo:.3f}-{hi:.3f} W"
+        return (f"the power budget {summary['budget']:.3f} W cannot be met {where}: the cheapest setting "
+                f"costs {span} there (raise the budget to at least {hi:.3f} W)")
+    span = f"{lo:.4f}" if hi - lo < 5e-5 else f"{lo:.4f}-{hi:.4f}"
+    return (f"the error budget {summary['budget']:.4f} cannot be met {where}: the most accurate setting "
+            f"has error {span} there (raise the budget to at least {hi:.4f})")
+
+
 def summary_text(summary: dict[str, Any]) -> str:
-    return (f"{summary['views']} views, {summary['corners']} corners, depth {summary['depth']}, "
-            f"{summary['size_bytes'] / 1024:.1f} KB; predicted {summary['mean_power_w']:.3f} W vs "
+    store = (f"{summary['views']} views, {summary['corners']} corners, depth {summary['depth']}, "
+             f"{summary['size_bytes'] / 1024:.1f} KB")
+    shortfall = budget_shortfall(summary)
+    if shortfall:
+        return f"{store}; {shortfall}"
+    return (f"{store}; predicted {summary['mean_power_w']:.3f} W vs "
             f"{summary['mean_max_quality_power_w']:.3f} W at max quality "
             f"({100 * summary['predicted_saving']:.1f} % saved)")

@@ -307,7 +307,7 @@ def material_from_inputs(inputs: MaterialInputs, notes: Notes, texture: int | No
     note), emission = colour x strength, alpha below 1 (or from the texture) as Cycles' stochastic alpha
     ("hashed"). ``texture``: the scene index of ``inputs.base_image`` (None: the image, if any, is reduced to
     its mean colour with a note, as for a mesh without UVs)."""
-    from sim_core.scene_data import Material  # lazy: optional, not in a stock Blender
+    from sim_core.scene_data import Material  # lazy: the native core loads on first use
 
     subject = f"material {inputs.name!r}"
     base = _colour(inputs.base_color, "base colour", subject, notes)
@@ -346,7 +346,7 @@ def material_from_inputs(inputs: MaterialInputs, notes: Notes, texture: int | No
 def texture_from_image(image: ImageData, wrap: str, with_alpha: bool) -> Texture:
     """A ``sim_core.Texture`` of a Blender image: its pixels (row 0 at the top), colour space and wrap; the
     alpha channel only when the material reads it (Cycles ignores an image's alpha otherwise)."""
-    from sim_core.scene_data import Texture  # lazy: optional, not in a stock Blender
+    from sim_core.scene_data import Texture  # lazy: the native core loads on first use
 
     px = image.pixels
     if px.shape[-1] == 4 and not with_alpha:
@@ -381,7 +381,7 @@ class LightInputs:
 def light_from_inputs(inputs: LightInputs, notes: Notes) -> Light | None:
     """A ``sim_core.Light`` through ``Light.from_blender`` (the one conversion of Blender's units, checked
     against Cycles); None (with a note) for a light that emits nothing or has no emitting surface."""
-    from sim_core.scene_data import Light  # lazy: optional, not in a stock Blender
+    from sim_core.scene_data import Light  # lazy: the native core loads on first use
 
     subject = f"light {inputs.name!r}"
     power = float(inputs.energy) * 2.0 ** float(inputs.exposure)
@@ -409,7 +409,7 @@ def light_from_inputs(inputs: LightInputs, notes: Notes) -> Light | None:
 def environment_map(pixels: np.ndarray, name: str, notes: Notes) -> np.ndarray:
     """An equirectangular world image as the core takes it: (H, W, 3) float32 linear RGB, row 0 at the
     zenith; negative and non-finite texels are clamped (with a note), never rejected."""
-    from sim_core.scene_data import finite_clamped  # lazy: optional, not in a stock Blender
+    from sim_core.scene_data import finite_clamped  # lazy: the native core loads on first use
 
     px = np.asarray(pixels)
     rgb = px[..., :3] if px.shape[-1] >= 3 else np.repeat(px[..., :1], 3, axis=-1)
@@ -514,7 +514,7 @@ class SceneAssembler:
         return idx
 
     def default_material(self) -> int:
-        from sim_core.scene_data import Material  # lazy: optional, not in a stock Blender
+        from sim_core.scene_data import Material  # lazy: the native core loads on first use
 
         return self.material_index(("<default>",), lambda: Material(base_color=DEFAULT_BASE_COLOR,
                                                                      roughness=0.5, name="default"))
@@ -535,7 +535,7 @@ class SceneAssembler:
 
     def build(self, source: str = "") -> SceneData:
         """World-space arrays of every instance (one object id each, in instance order)."""
-        from sim_core.scene_data import SceneData  # lazy: optional, not in a stock Blender
+        from sim_core.scene_data import SceneData  # lazy: the native core loads on first use
 
         positions, normals, uvs, triangles, material_ids, object_ids, names = [], [], [], [], [], [], []
         pass_indices: list[int] = []
@@ -587,6 +587,6 @@ class SceneAssembler:
         )
 
     def _fallback_material(self) -> Material:
-        from sim_core.scene_data import Material  # lazy: optional, not in a stock Blender
+        from sim_core.scene_data import Material  # lazy: the native core loads on first use
 
         return Material(name="default")

@@ -86,7 +86,9 @@ class TileSampler {
 };
 
 SampleResult TileSampler::trace_subsample(int sx, int sy) {
-  const std::uint32_t key = sample_key(static_cast<std::uint32_t>(sx), static_cast<std::uint32_t>(sy),
+  // Seeds by position in the whole frame: a window of it (Camera::crop_x/y) samples like the whole.
+  const std::uint32_t key = sample_key(static_cast<std::uint32_t>(ctx_.camera.crop_x * k_ + sx),
+                                       static_cast<std::uint32_t>(ctx_.camera.crop_y * k_ + sy),
                                        static_cast<std::uint32_t>(k_));
   ++traced_;
   ++ctx_.counters.tile_buffer_writes;
@@ -103,8 +105,11 @@ void TileSampler::trace_guard(FrameBuffers& fb) {
   if (sb.empty()) return;
   const int g = sb.guard;
   const int ix0 = x0_ * k_, iy0 = y0_ * k_, ix1 = ix0 + nx_, iy1 = iy0 + ny_;
-  const int ex0 = x0_ == 0 ? ix0 - g : ix0, ex1 = x0_ + w_ == fb.width ? ix1 + g : ix1;
-  const int ey0 = y0_ == 0 ? iy0 - g : iy0, ey1 = y0_ + h_ == fb.height ? iy1 + g : iy1;
+  // Only on the whole frame's edges (a window's inner edges read its neighbours' samples, render.h).
+  const Camera& cam = ctx_.camera;
+  const int fx0 = cam.crop_x + x0_, fy0 = cam.crop_y + y0_;
+  const int ex0 = fx0 == 0 ? ix0 - g : ix0, ex1 = fx0 + w_ == cam.frame_width() ? ix1 + g : ix1;
+  const int ey0 = fy0 == 0 ? iy0 - g : iy0, ey1 = fy0 + h_ == cam.frame_height() ? iy1 + g : iy1;
   for (int sy = ey0; sy < ey1; ++sy)
     for (int sx = ex0; sx < ex1; ++sx) {
       if (sx >= ix0 && sx < ix1 && sy >= iy0 && sy < iy1) continue;  // the tile's own samples

@@ -62,7 +62,13 @@ namespace {
 bool has_ambient(const AmbientSample& a) { return max_component(a.all) > 0.f; }
 
 // Step 1: each sample's visible share of the ambient light from its pool of same-surface neighbours.
-void denoise_ambient(SampleBuffer& b, Vec3 eye, Counters* counters, int threads) {
+// Samples [x0, x1) x [y0, y1) of a buffer (guard ring included): the ones whose resolve work is counted.
+struct SampleRange {
+  int x0, y0, x1, y1;
+  bool contains(int x, int y) const { return x >= x0 && x < x1 && y >= y0 && y < y1; }
+};
+
+void denoise_ambient(SampleBuffer& b, Vec3 eye, const SampleRange& counted, Counters* counters, int threads) {
   const int reach = static_cast<int>(std::ceil(kAmbientRadius * static_cast<float>(b.k)));
   const float sigma = static_cast<float>(b.k);  // 1 px
   std::vector<float> spatial(static_cast<std::size_t>((2 * reach + 1) * (2 * reach + 1)));
@@ -81,6 +87,7 @@ void denoise_ambient(SampleBuffer& b, Vec3 eye, Counters* counters, int threads)
         const std::size_t i = y * static_cast<std::size_t>(b.width) + static_cast<std::size_t>(x);
         const AmbientSample& a = b.ambient_samples[i];
         if (b.object[i] < 0 || !has_ambient(a)) continue;
+        const bool count = counted.contains(x, yi);
         const Vec3 n = b.normal[i], p = b.position[i];
         const float tolerance = kAmbientPlaneTolerance * length(p - eye);
         Vec3 seen, all;
@@ -91,7 +98,7 @@ void denoise_ambient(SampleBuffer& b, Vec3 eye, Counters* counters, int threads)
             const int xj = x + dx;
             const float g = spatial[static_cast<std::size_t>((dy + reach) * (2 * reach + 1) + dx + reach)];
             if (xj < 0 || xj >= b.width || !(g > 0.f)) continue;
-            ++row_taps[y];
+            if (count) ++row_taps[y];
             const std::size_t j = static_cast<std::size_t>(yj) * static_cast<std::size_t>(b.width) +
                                   static_cast<std::size_t>(xj);
             const AmbientSample& q = b.ambient_samples[j];
@@ -117,8 +124,7 @@ void denoise_ambient(SampleBuffer& b, Vec3 eye, Counters* counters, int threads)
 }
 
 // Step 2: the separable pixel filter (k > 1).
-void filter_pixels(const SampleBuffer& b, int pixel_width, int pixel_height, float* pixels, Counters* counters,
-                   int threads) {
+void filter_pixels(const SampleBuffer& b, int pixel_width, int pixel_height, float* pixels, int threads) {
   const PixelFilter filter(b.k);
   const int k = b.k, taps = static_cast<int>(filter.weights.size());
   // Horizontal pass over every sample row: one value per pixel column. The guard makes every pixel's
@@ -151,26 +157,40 @@ void filter_pixels(const SampleBuffer& b, int pixel_width, int pixel_height, flo
         for (int c = 0; c < 3; ++c) p[c] = static_cast<float>(acc[c]);
       }
   });
-  counters->resolve_taps += static_cast<std::uint64_t>(taps) * static_cast<std::uint64_t>(pixel_width) *
-                            (static_cast<std::uint64_t>(b.height) + static_cast<std::uint64_t>(pixel_height));
 }
 
 }  // namespace
 
 void resolve_pixels(SampleBuffer& samples, int pixel_width, int pixel_height, Vec3 eye, float* pixels,
-                    Counters* counters, int threads) {
+                    Counters* counters, int threads, PixelRect counted) {
   const int guard = PixelFilter(samples.k).guard;
   if (samples.guard != guard || samples.width != pixel_width * samples.k + 2 * guard ||
       samples.height != pixel_height * samples.k + 2 * guard)
     throw std::invalid_argument("resolve_pixels: sample buffer does not match the frame");
-  if (samples.ambient) denoise_ambient(samples, eye, counters, threads);
-  if (samples.k > 1) {
-    filter_pixels(samples, pixel_width, pixel_height, pixels, counters, threads);
+  if (counted.width <= 0) counted = {0, 0, pixel_width, pixel_height};
+  if (counted.x0 < 0 || counted.y0 < 0 || counted.height <= 0 || counted.x0 + counted.width > pixel_width ||
+      counted.y0 + counted.height > pixel_height)
+    throw std::invalid_argument("resolve_pixels: counted pixels outside the frame");
+  // The counted pixels' samples, with the guard ring where they reach the buffer's edge.
+  const int k = samples.k;
+  const SampleRange range{
+      counted.x0 == 0 ? 0 : counted.x0 * k + guard,
+      counted.y0 == 0 ? 0 : counted.y0 * k + guard,
+      counted.x0 + counted.width == pixel_width ? samples.width : (counted.x0 + counted.width) * k + guard,
+      counted.y0 + counted.height == pixel_height ? samples.height : (counted.y0 + counted.height) * k + guard};
+  const auto columns = static_cast<std::uint64_t>(range.x1 - range.x0),
+             rows = static_cast<std::uint64_t>(range.y1 - range.y0);
+  if (samples.ambient) denoise_ambient(samples, eye, range, counters, threads);
+  if (k > 1) {
+    filter_pixels(samples, pixel_width, pixel_height, pixels, threads);
+    // Horizontal pass: every sample row of the counted pixels' footprint; vertical: every counted pixel.
+    const auto taps = static_cast<std::uint64_t>(PixelFilter(k).weights.size());
+    counters->resolve_taps +=
+        taps * static_cast<std::uint64_t>(counted.width) * (rows + static_cast<std::uint64_t>(counted.height));
   } else {
     std::copy(samples.color.begin(), samples.color.end(), pixels);
   }
-  counters->resolve_bytes += static_cast<std::uint64_t>(samples.width) * static_cast<std::uint64_t>(samples.height) *
-                             (kResolveColorBytes + (samples.ambient ? kResolveAmbientBytes : 0));
+  counters->resolve_bytes += columns * rows * (kResolveColorBytes + (samples.ambient ? kResolveAmbientBytes : 0));
 }
 
 }  // namespace sim_core

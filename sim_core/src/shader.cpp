@@ -828,7 +828,9 @@ TileContext::TileContext(const Scene& s, const RenderSettings& st, const Camera&
   trace.validate();
   cos_threshold = st.normal_threshold_deg < 0.f ? 2.f : std::cos(st.normal_threshold_deg * kPi / 180.f);
   ao_distance = st.ao_distance > 0.f ? st.ao_distance : kInf;
-  pixel_spread = 2.f * c.tan_half() / static_cast<float>(std::max(1, c.height)) / static_cast<float>(st.subgrid());
+  // Per pixel of the whole frame (a window of it, Camera::crop_*, has the frame's pixels).
+  pixel_spread =
+      2.f * c.tan_half() / static_cast<float>(std::max(1, c.frame_height())) / static_cast<float>(st.subgrid());
 }
 
 void TileContext::finish() {
@@ -852,11 +854,14 @@ SampleResult trace_sample(TileContext& ctx, float px, float py, std::uint32_t ke
   const float c = dot(ray.dir, ctx.camera.forward);
   const RayCone cone{0.f, ctx.pixel_spread * c * c};
   const int k = ctx.settings.subgrid();
-  // The sample's place in its 4x4 block of the sample grid and the block's key. (Coordinates may be
-  // negative: samples just outside the frame that the pixel filter reads; modulo 2^32 they keep their
-  // places and blocks.)
-  const auto sx = static_cast<std::uint32_t>(static_cast<std::int32_t>(std::floor(px * static_cast<float>(k))));
-  const auto sy = static_cast<std::uint32_t>(static_cast<std::int32_t>(std::floor(py * static_cast<float>(k))));
+  // The sample's place in its 4x4 block of the sample grid and the block's key, by its position in the
+  // whole frame (a window of it samples like the whole). Coordinates may be negative: samples just outside
+  // the frame that the pixel filter reads; modulo 2^32 they keep their places and blocks.
+  const float fk = static_cast<float>(k);
+  const auto sx = static_cast<std::uint32_t>(
+      static_cast<std::int32_t>(std::floor((px + static_cast<float>(ctx.camera.crop_x)) * fk)));
+  const auto sy = static_cast<std::uint32_t>(
+      static_cast<std::int32_t>(std::floor((py + static_cast<float>(ctx.camera.crop_y)) * fk)));
   const std::uint32_t place = (sx & 1u) + 2u * (sy & 1u) + 4u * ((sx >> 1) & 1u) + 8u * ((sy >> 1) & 1u);
   const Branch root{key, 1u, 0, place, sample_key(sx >> 2, sy >> 2, static_cast<std::uint32_t>(k) | 0x200u)};
   out.color = shader.trace(ray, RayKind::kPrimary, root, cone, nullptr, &info, &out.geom);

@@ -41,14 +41,10 @@ def settings_indices(values: dict[str, Any] | None) -> tuple[ParameterSpace, tup
     """The default parameter space and the index vector of ``{parameter: value}`` (the names and values a
     store query returns); parameters left out stay at maximum quality."""
     space = default_space()
-    indices = list(space.max_quality_indices())
-    for name, value in (values or {}).items():
-        try:
-            index = space.index_of(name, value)
-        except ValueError as exc:
-            raise ApiError(422, f"settings: {exc}") from None
-        indices[space.names.index(name)] = index
-    return space, tuple(indices)
+    try:
+        return space, space.indices_of(values)
+    except ValueError as exc:
+        raise ApiError(422, f"settings: {exc}") from None
 
 
 def _jsonable(value: Any) -> Any:

@@ -13,9 +13,16 @@ struct Camera {
   Vec3 forward{0.f, 1.f, 0.f};  // unit, world -Z of the camera (viewing direction)
   float vfov = 0.6911f;         // vertical field of view, radians
   int width = 64, height = 64;
+  // A window of a larger frame: this camera's pixels are pixels [crop_x, crop_x + width) x
+  // [crop_y, crop_y + height) of a full_width x full_height image (0 = width / height: no window). Rays,
+  // projection and sampling seeds are the full frame's, so a frame traced window by window (tiles of a
+  // preview, bands of a progressive render) equals the frame traced at once.
+  int crop_x = 0, crop_y = 0, full_width = 0, full_height = 0;
 
   void validate() const;  // throws std::invalid_argument
   float tan_half() const;
+  int frame_width() const { return full_width > 0 ? full_width : width; }
+  int frame_height() const { return full_height > 0 ? full_height : height; }
   // Ray through continuous pixel coordinates (x right, y down; pixel centres at +0.5). Unit direction.
   Ray primary(float px, float py) const;
   // Projects a world point: continuous pixel coordinates and camera-space depth along forward.

@@ -76,11 +76,19 @@ struct SampleBuffer {
   void set(int sx, int sy, Vec3 c, const AmbientSample& a, std::int32_t obj, Vec3 n, Vec3 p);
 };
 
+// The pixels of a buffer whose resolve work is counted (a window inside the apron traced around it);
+// width 0 = all of them. A window touching the buffer's edge there touches the frame's edge (its guard ring
+// is counted with it).
+struct PixelRect {
+  int x0 = 0, y0 = 0, width = 0, height = 0;
+};
+
 // Resolves `samples` into `pixels` (pixel_width * pixel_height * 3, row-major): ambient denoising with
 // AO (the samples' colours are updated), then the pixel filter (or a copy at one sample per pixel). `eye`
 // is the camera position (the ambient filter's plane tolerance grows with a hit's distance from it).
-// Counts the pass into `counters`. `threads` share the work; the result does not depend on them.
+// Counts the pass for the pixels of `counted` into `counters`. `threads` share the work; the result does
+// not depend on them.
 void resolve_pixels(SampleBuffer& samples, int pixel_width, int pixel_height, Vec3 eye, float* pixels,
-                    Counters* counters, int threads);
+                    Counters* counters, int threads, PixelRect counted = {});
 
 }  // namespace sim_core

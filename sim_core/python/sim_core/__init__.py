@@ -7,7 +7,7 @@ from .camera import Camera
 from .energy import EnergyReport, Profile, list_profiles, load_profile, price
 from .geometry import smooth_normals
 from .image import load_exr
-from .render import COUNTER_NAMES, RenderResult, StereoResult, render, render_stereo
+from .render import COUNTER_NAMES, RenderResult, StereoResult, render, render_stereo, render_tiled
 from .scene import Scene
 from .scene_data import CameraData, Light, Material, SceneData, Texture
 from .settings import RenderSettings
@@ -38,5 +38,6 @@ __all__ = [
     "price",
     "render",
     "render_stereo",
+    "render_tiled",
     "smooth_normals",
 ]

@@ -7,6 +7,7 @@ histogram) next to the image and its AOVs, so `price(result, profile, fps)` need
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -243,6 +244,67 @@ def render(
         **trace,
     )
     return _result(d, camera, settings, (w, h))
+
+
+def render_tiled(
+    scene: Scene,
+    camera: Camera,
+    settings: RenderSettings | None = None,
+    threads: int | None = None,
+    cache: Any = None,
+    texture_cache: Any = None,
+    *,
+    band_pixels: int = 1 << 16,
+    progress: Callable[[int, int], None] | None = None,
+) -> RenderResult:
+    """The frame `render()` gives (same rays, sampling seeds and tile grid: the same image and counters),
+    traced in horizontal bands of whole tiles of about `band_pixels` pixels, one native call each.
+
+    Between bands `progress(rows_done, rows_total)` is called on the calling thread (raise from it to
+    stop), so a long render (a full-resolution preview) can report progress and be cancelled. The result
+    carries no multi-rate history (`multirate_state` is None): it is a still frame.
+    """
+    settings = _check(scene, camera, settings)
+    w, h = _render_size(camera, settings)
+    ts = settings.tile_size
+    band = ts * max(1, -(-int(band_pixels) // (w * ts)))
+    frame = camera.frame()
+    native = settings.to_native()
+    n_threads = _threads(threads)
+    cache_args = (*_cache_args(cache), *_cache_args(texture_cache, DEFAULT_TEXTURE_CACHE))
+    image = np.empty((h, w, 3), dtype=np.float32)
+    aovs: dict[str, np.ndarray] = {}
+    counters = dict.fromkeys(COUNTER_NAMES, 0)
+    histogram: np.ndarray | None = None
+    tile_stats: list[dict[str, Any]] = []
+    for y0 in range(0, h, band):
+        rows = min(band, h - y0)
+        d = _core.render_frame(scene.native, frame, camera.vfov, w, rows, native, n_threads, None,
+                               *cache_args, crop_x=0, crop_y=y0, full_width=w, full_height=h)
+        image[y0:y0 + rows] = d["image"]
+        for key in ("depth", "normal", "object_id", "sample_kind", "position"):
+            part = d[key]
+            if key not in aovs:
+                aovs[key] = np.empty((h, *part.shape[1:]), dtype=part.dtype)
+            aovs[key][y0:y0 + rows] = part
+        for k, v in d["counters"].items():
+            counters[k] = counters.get(k, 0) + int(v)
+        hist = np.asarray(d["comparator_histogram"], dtype=np.int64)
+        histogram = hist if histogram is None else histogram + hist
+        tile_stats.extend({**t, "y0": int(t["y0"]) + y0} for t in d["tile_stats"])
+        if progress is not None:
+            progress(y0 + rows, h)
+    return RenderResult(
+        image=upsample_bilinear(image, camera.height, camera.width),
+        aovs=aovs,
+        counters=counters,
+        tile_stats=tile_stats,
+        comparator_histogram=histogram if histogram is not None else np.zeros(25, dtype=np.int64),
+        multirate_state=None,
+        settings=settings,
+        camera=camera,
+        render_resolution=(w, h),
+    )
 
 
 def render_stereo(

@@ -122,8 +122,14 @@ void bind_render(nb::module_& m) {
       [](const Scene& scene, CameraFrame frame, float vfov, int width, int height, const RenderSettings& settings,
          int threads, const MultirateState* previous, std::uint32_t cache_size, std::uint32_t cache_line,
          std::uint32_t cache_ways, std::uint32_t texture_cache_size, std::uint32_t texture_cache_line,
-         std::uint32_t texture_cache_ways, int bvh_width, bool log_rays) {
-        const Camera cam = camera_from_frame(frame, vfov, width, height);
+         std::uint32_t texture_cache_ways, int bvh_width, bool log_rays, int crop_x, int crop_y, int full_width,
+         int full_height) {
+        Camera cam = camera_from_frame(frame, vfov, width, height);
+        cam.crop_x = crop_x;
+        cam.crop_y = crop_y;
+        cam.full_width = full_width;
+        cam.full_height = full_height;
+        cam.validate();
         const TraceOptions trace = trace_options(bvh_width, log_rays);
         const CacheConfig cc{cache_size, cache_line, cache_ways};
         const CacheConfig tc{texture_cache_size, texture_cache_line, texture_cache_ways};
@@ -136,9 +142,11 @@ void bind_render(nb::module_& m) {
       },
       "scene"_a, "frame"_a, "vfov"_a, "width"_a, "height"_a, "settings"_a, "threads"_a, "previous"_a.none(),
       "cache_size"_a, "cache_line"_a, "cache_ways"_a, "texture_cache_size"_a, "texture_cache_line"_a,
-      "texture_cache_ways"_a, "bvh_width"_a = 4, "log_rays"_a = false,
-      "Renders one frame. frame rows: position, right, up, forward (unit) of the camera. bvh_width 2: the "
-      "binary reference walk; log_rays: also return every traced ray (\"rays\").");
+      "texture_cache_ways"_a, "bvh_width"_a = 4, "log_rays"_a = false, "crop_x"_a = 0, "crop_y"_a = 0,
+      "full_width"_a = 0, "full_height"_a = 0,
+      "Renders one frame, or the width x height window at (crop_x, crop_y) of a full_width x full_height\n"
+      "frame. frame rows: position, right, up, forward (unit) of the camera. bvh_width 2: the binary\n"
+      "reference walk; log_rays: also return every traced ray (\"rays\").");
 }
 
 }  // namespace sim_core
