@@ -79,7 +79,8 @@ def test_windows_in_both_directions_sum_to_the_whole_frame(scene: sim_core.Scene
     for y0, y1 in ((0, 16), (16, 48), (48, 72)):
         for x0, x1 in ((0, 32), (32, 96)):
             d = _core.render_frame(scene.native, cam.frame(), cam.vfov, x1 - x0, y1 - y0, native, 1, None,
-                                   32768, 64, 4, 16384, 64, 4, crop_x=x0, crop_y=y0, full_width=96, full_height=72)
+                                   32768, 64, 4, 16384, 64, 4, crop_x=x0, crop_y=y0,
+                                   full_width=96, full_height=72)
             image[y0:y1, x0:x1] = d["image"]
             for k, v in d["counters"].items():
                 counters[k] = counters.get(k, 0) + int(v)
