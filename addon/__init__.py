@@ -20,6 +20,9 @@ _MODULE_NAMES = (
     "ops_optimize",
     "ops_preview",
     "ops_report",
+    "engine.properties",
+    "engine.render",
+    "engine.panels",
     "panels",
 )
 

@@ -7,8 +7,10 @@ from __future__ import annotations
 import bpy
 from bpy.app.handlers import persistent
 
+from service import store as pareto_store
+
 from .camera_path import camera_vfov, render_resolution, scene_fps
-from .core.playback_logic import PlaybackFrame, StoreCache
+from .core.playback_logic import PlaybackDriver, PlaybackFrame, StoreCache
 from .handlers import add_handler, remove_handler
 
 _cache = StoreCache()
@@ -23,6 +25,17 @@ def scene_time(scene: bpy.types.Scene) -> float:
 def budget_of(props: bpy.types.PropertyGroup) -> tuple[str, float]:
     mode = props.budget_mode
     return mode, (props.power_budget if mode == "POWER" else props.error_budget)
+
+
+def _driver(props: bpy.types.PropertyGroup) -> PlaybackDriver:
+    text = props.store_text
+    return _cache.driver((text.as_pointer(), text.name, props.store_revision), text.as_string,
+                         props.filter_period)
+
+
+def store_of(scene: bpy.types.Scene) -> pareto_store.ParetoStore | None:
+    """The scene's store, parsed once per revision (shared with the render engine)."""
+    return None if scene.render_budget.store_text is None else _driver(scene.render_budget).store
 
 
 def show_error(scene: bpy.types.Scene, message: str) -> None:
@@ -50,8 +63,7 @@ def update_scene(scene: bpy.types.Scene) -> PlaybackFrame | None:
         return None
     w, h = render_resolution(scene)
     try:
-        driver = _cache.driver((text.as_pointer(), text.name, props.store_revision), text.as_string,
-                               props.filter_period)
+        driver = _driver(props)
         mode, value = budget_of(props)
         frame = driver.step(cam.matrix_world, camera_vfov(cam, scene), w / h, scene_time(scene), mode, value)
     except ValueError as err:

@@ -44,7 +44,7 @@ from service.store.camera import check_fov
 #: Bumped whenever the pipeline that turns renders into errors changes (part of every cache key).
 PIPELINE_VERSION = "v1"
 
-__all__ = ["METRICS", "CameraSpec", "Evaluation", "Evaluator", "SceneHandle", "evaluate"]
+__all__ = ["METRICS", "CameraSpec", "Evaluation", "Evaluator", "SceneHandle", "evaluate", "image_error"]
 
 
 @dataclass(frozen=True)
@@ -209,7 +209,10 @@ def _image(result: Any) -> np.ndarray:
     return img
 
 
-def _error(metric: str, reference: np.ndarray, image: np.ndarray) -> float:
+def image_error(metric: str, reference: np.ndarray, image: np.ndarray) -> float:
+    """The error of ``image`` against the maximum-quality ``reference`` (linear RGB; a smaller image is
+    upsampled to the reference's size) by ``metric`` on display values, in [0, 1]: what a store's
+    errors mean, for anyone who measures one (the render engine's Measure Error)."""
     ref = linear_to_srgb(reference)
     img = linear_to_srgb(upsample_bilinear(image, ref.shape[0], ref.shape[1]))
     if metric == "ssim":
@@ -263,7 +266,7 @@ def evaluate(scene: Any, camera: CameraSpec, indices: Sequence[int], space: Para
     if reference is None:
         reference = _reference(scene, handle_hash, camera, space, threads)
     result = _render(scene, camera, space.to_settings(idx), threads)
-    err = 0.0 if idx == space.max_quality_indices() else _error(metric, reference, _image(result))
+    err = 0.0 if idx == space.max_quality_indices() else image_error(metric, reference, _image(result))
     ratio = 1.0 if target_pixels is None else float(target_pixels) / (camera.width * camera.height)
     power, frame_time, breakdown = _price(result, profile, fps, ratio)
     return Evaluation(err, power, frame_time, breakdown)

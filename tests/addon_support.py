@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -88,6 +90,17 @@ def enable_dev(bpy: Any, repo_dir: Path) -> Any:
     elif repo_dir != Path() and repo.custom_directory != str(repo_dir):
         repo.custom_directory = str(repo_dir)
     return addon_utils.enable(EXT_MODULE, default_set=True, handle_error=_raise)
+
+
+@contextlib.contextmanager
+def dev_extension(bpy: Any, tmp: Path) -> Iterator[Any]:
+    """The add-on staged under `tmp` and enabled as a dev extension, disabled again on exit (the body of
+    a module-scoped fixture)."""
+    mod = enable_dev(bpy, stage_extension(tmp))
+    try:
+        yield mod
+    finally:
+        disable_dev()
 
 
 def disable_dev() -> None:

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.addon_support import EXT_MODULE, disable_dev, enable_dev, stage_extension, synthetic_store
+from tests.addon_support import EXT_MODULE, dev_extension, disable_dev, enable_dev, synthetic_store
 
 pytestmark = pytest.mark.blender
 bpy = pytest.importorskip("bpy")
@@ -20,10 +20,8 @@ bpy = pytest.importorskip("bpy")
 
 @pytest.fixture(scope="module")
 def ext(tmp_path_factory: pytest.TempPathFactory):
-    repo = stage_extension(tmp_path_factory.mktemp("ext"))
-    mod = enable_dev(bpy, repo)
-    yield mod
-    disable_dev()
+    with dev_extension(bpy, tmp_path_factory.mktemp("ext")) as mod:
+        yield mod
 
 
 @pytest.fixture

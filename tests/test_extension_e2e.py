@@ -2,7 +2,9 @@
 folder of a virtual environment that holds only bpy (a stand-in for a stock Blender: never this project),
 then, in background mode and nothing else configured: a small scene with a keyframed camera, the path
 recorded, Optimize Power with small options (a local job process of the venv's Python), playback under a
-power budget, a second job left running while the extension is disabled, and no child process left.
+power budget, one frame rendered with the Render Budget GPU engine under that store and budget (in its own
+step, after playback: background mode draws nothing), a second job left running while the extension is
+disabled, and no child process left.
 
 The script runs its steps in order (`STEPS`); a new step is a function that returns a dict of what it saw
 plus a line in `STEPS`, and its checks go in the test below.
@@ -129,6 +131,38 @@ def playback():
     return {"budget": budget, "frames": frames}
 
 
+def png_text(path):
+    """The text chunks of a PNG (the metadata Blender writes; stdlib only, no Pillow in this venv)."""
+    import struct
+    data, out, at = open(path, "rb").read(), {}, 8
+    while at < len(data):
+        (size,), kind = struct.unpack(">I", data[at:at + 4]), data[at + 4:at + 8]
+        if kind == b"tEXt":
+            key, _, value = data[at + 8:at + 8 + size].partition(b"\0")
+            out[key.decode("latin-1")] = value.decode("latin-1")
+        at += 12 + size
+    return out
+
+
+def render_engine():
+    """One frame with the Render Budget GPU engine, under the store and the budget playback used."""
+    sc = bpy.context.scene
+    sc.render.engine = "RENDER_BUDGET"
+    sc.render.image_settings.file_format = "PNG"
+    sc.render.filepath = os.path.abspath("engine_frame.png")
+    sc.frame_set(sc.frame_start + 3)
+    res = bpy.ops.render.render(write_still=True)
+    last = ext("engine.render").last_frame
+    if last is None:  # the engine reported an error instead of a frame (on the log the test shows)
+        return {"result": sorted(res), "passes": []}
+    meta = png_text(sc.render.filepath)
+    return {"result": sorted(res), "passes": list(last.layer_passes), "source": last.output.settings.source,
+            "size": list(last.output.combined.shape), "power": last.output.power_w,
+            "playback_power": sc.render_budget.predicted_power,
+            "predicted": last.output.settings.predicted_power_w,
+            "meta": {k: v for k, v in meta.items() if k.startswith("render_budget.")}}
+
+
 def start_long_job():
     """Optimize Power as the button starts it (a worker thread follows the job); returns when the job
     process and its two evaluation workers are at work."""
@@ -166,7 +200,7 @@ def no_children():
     return {"left": descendants()}
 
 
-STEPS = [install, scene, record, optimize, playback, disable_mid_job, no_children]
+STEPS = [install, scene, record, optimize, playback, render_engine, disable_mid_job, no_children]
 
 if sys.argv[2:] == ["--killed-mid-job"]:  # a job at work, then this process waits to be killed
     install()
@@ -219,6 +253,14 @@ def test_zip_in_a_bpy_only_environment_optimises_plays_back_and_leaves_nothing_r
         if frame["status"] == "on target":
             assert frame["power"] <= budget + 1e-9, frame
     assert len({f["settings"] for f in step["frames"]}) >= 1
+
+    step = out["render_engine"]  # the engine renders in-process on the zip's core, under the store
+    assert step["result"] == ["FINISHED"], (step, log)
+    assert step["passes"] == ["Combined", "Depth", "Normal", "IndexOB", "Sample Kind", "Power"], (step, log)
+    assert step["size"] == [54, 96, 4] and step["source"] == "store" and step["power"] > 0
+    assert step["predicted"] == pytest.approx(step["playback_power"], rel=1e-5)  # playback's choice here
+    assert step["meta"]["render_budget.source"] == "store" and step["meta"]["render_budget.settings"]
+    assert float(step["meta"]["render_budget.simulated_power_w"]) == pytest.approx(step["power"], rel=1e-5)
 
     step = out["disable_mid_job"]
     assert step["running_before"] >= 3 and not step["enabled"] and not step["thread_alive"]

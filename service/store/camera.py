@@ -351,3 +351,32 @@ def camera_lens_from_viewport(viewport_lens_mm: float, sensor_width_mm: float) -
     if viewport_lens_mm <= 0 or sensor_width_mm <= 0:
         raise ValueError("lens and sensor width must be positive")
     return viewport_lens_mm * sensor_width_mm / VIEWPORT_SENSOR_MM
+
+
+def projection_window(projection: Any, width: int, height: int) -> tuple[float, int, int, int, int]:
+    """A perspective projection as a pinhole camera that renders a window of a centred frame.
+
+    ``projection`` is an OpenGL-style 4x4 matrix, rows as Blender's ``mathutils`` indexes them (a 3D
+    view's ``window_matrix``, ``Object.calc_matrix_camera``). Its frustum may be off-centre (camera lens
+    shift, a panned camera view); the pinhole camera is centred, so the image is the ``width`` x
+    ``height`` window at (``crop_x``, ``crop_y``) from the top left of a ``full_width`` x ``full_height``
+    centred frame of the same pixel density. Returns ``(vfov, full_width, full_height, crop_x,
+    crop_y)``; ValueError for orthographic or malformed projections. Assumes square pixels.
+    """
+    p = [[float(projection[i][j]) for j in range(4)] for i in range(4)]
+    if not all(math.isfinite(v) for row in p for v in row):
+        raise ValueError("projection must be finite")
+    if abs(p[3][2] + 1.0) > 1e-6 or abs(p[3][3]) > 1e-6:
+        raise ValueError("only perspective projections can be traced (orthographic views cannot)")
+    if width <= 0 or height <= 0:
+        raise ValueError(f"resolution must be positive, got {width}x{height}")
+    sx, sy, a, b = p[0][0], p[1][1], p[0][2], p[1][2]
+    if sx <= 0 or sy <= 0:
+        raise ValueError("projection must have positive focal terms")
+    # NDC x = sx * tan_x - a over the image, so tan_x spans (a - 1, a + 1) / sx (likewise y with b).
+    full_w = max(width, round(width * (1.0 + abs(a))))
+    full_h = max(height, round(height * (1.0 + abs(b))))
+    crop_x = min(full_w - width, max(0, round(width * (a + abs(a)) / 2.0)))
+    crop_y = min(full_h - height, max(0, round(height * (abs(b) - b) / 2.0)))
+    vfov = 2.0 * math.atan(full_h / (sy * height))
+    return check_fov(vfov, "vertical fov of the projection"), full_w, full_h, crop_x, crop_y

@@ -51,8 +51,6 @@ void render_tiles(const Scene& scene, const Camera& camera, const RenderSettings
   trace.validate();
   const std::size_t ntiles = static_cast<std::size_t>(grid.count());
   out->tiles.resize(ntiles);
-  std::vector<Counters> tile_counters(ntiles);
-  std::vector<ComparatorHistogram> tile_hist(ntiles);
   std::vector<std::vector<TracedRay>> tile_rays(trace.log_rays ? ntiles : 0);
   parallel_chunks(ntiles, threads, 1, [&](std::size_t begin, std::size_t end) {
     for (std::size_t t = begin; t < end; ++t) {
@@ -68,16 +66,16 @@ void render_tiles(const Scene& scene, const Camera& camera, const RenderSettings
       stat.bvh_node_visits = ctx.counters.bvh_node_visits;
       stat.triangle_tests = ctx.counters.triangle_tests;
       stat.cache_misses = ctx.counters.cache_misses;
-      tile_counters[t] = ctx.counters;
-      tile_hist[t] = ctx.histogram;
+      stat.counters = ctx.counters;
+      stat.histogram = ctx.histogram;
       if (trace.log_rays) tile_rays[t] = std::move(ctx.ray_log);
     }
   });
   for (std::size_t t = 0; t < ntiles; ++t) {
     if (counted && !(*counted)[t]) continue;
     if (trace.log_rays) out->rays.insert(out->rays.end(), tile_rays[t].begin(), tile_rays[t].end());
-    out->counters += tile_counters[t];
-    for (std::size_t i = 0; i < out->histogram.size(); ++i) out->histogram[i] += tile_hist[t][i];
+    out->counters += out->tiles[t].counters;
+    for (std::size_t i = 0; i < out->histogram.size(); ++i) out->histogram[i] += out->tiles[t].histogram[i];
   }
 }
 

@@ -1,6 +1,6 @@
 // The frame driver: identical images, depths, counters and comparator histograms for any thread count in
-// every sampling mode; finite non-negative colours; per-tile statistics that add up to the frame's
-// counters; a multi-rate frame that takes the previous frame's state.
+// every sampling mode; finite non-negative colours; per-tile statistics (every counter and the comparator
+// histogram) that add up to the frame's; a multi-rate frame that takes the previous frame's state.
 #include <cmath>
 #include <cstdint>
 
@@ -36,6 +36,17 @@ void check_tile_sums(const RenderOutput& o) {
   CHECK(rays == o.counters.rays_total && nodes == o.counters.bvh_node_visits);
   CHECK(tris == o.counters.triangle_tests && misses == o.counters.cache_misses);
   CHECK(pixels == o.counters.pixels && pixels == static_cast<std::uint64_t>(o.fb.width) * o.fb.height);
+  Counters sum;  // every counter and the comparator histogram of the tiles add up to the frame's
+  ComparatorHistogram hist{};
+  for (const TileStat& t : o.tiles) {
+    sum += t.counters;
+    for (std::size_t i = 0; i < hist.size(); ++i) hist[i] += t.histogram[i];
+    CHECK(t.counters.rays_total == t.rays_total && t.counters.cache_misses == t.cache_misses);
+  }
+#define SIM_CORE_SUMS(name) CHECK(sum.name == o.counters.name);
+  SIM_CORE_COUNTERS(SIM_CORE_SUMS)
+#undef SIM_CORE_SUMS
+  CHECK(hist == o.histogram);
 }
 
 void check_render(const Scene& s) {

@@ -26,6 +26,8 @@ struct TileStat {
   std::uint64_t similarity_checks = 0, similarity_passed = 0;
   float similarity_ratio = 0.f;  // passed / checks (0 when no check ran)
   std::uint64_t rays_total = 0, bvh_node_visits = 0, triangle_tests = 0, cache_misses = 0;
+  Counters counters;                 // every activity counter of this tile (they sum to the frame's)
+  ComparatorHistogram histogram{};   // this tile's closest-hit comparisons (sum to the frame's)
 };
 
 // Multi-rate state carried from one frame to the next (explicit, never global).

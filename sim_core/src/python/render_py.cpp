@@ -77,6 +77,11 @@ nb::dict render_output_dict(const RenderOutput& o, const TraceOptions& trace) {
     td["bvh_node_visits"] = t.bvh_node_visits;
     td["triangle_tests"] = t.triangle_tests;
     td["cache_misses"] = t.cache_misses;
+    nb::dict tile_counters;
+    t.counters.for_each([&](const char* name, std::uint64_t v) { tile_counters[name] = v; });
+    td["counters"] = tile_counters;
+    std::vector<std::uint64_t> tile_hist(t.histogram.begin(), t.histogram.end());
+    td["comparator_histogram"] = to_numpy(tile_hist, {tile_hist.size()});
     tiles.append(td);
   }
   d["tile_stats"] = tiles;
