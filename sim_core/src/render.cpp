@@ -156,9 +156,19 @@ RenderOutput render_frame(const Scene& scene, const Camera& camera, const Render
     }
     render_tile(ctx, out.fb, stat.x0, stat.y0, stat.width, stat.height, k, spacing, &stat);
   }, texture_cache, &counted);
-  if (!out.fb.samples.empty())
-    resolve_pixels(out.fb.samples, out.fb.width, out.fb.height, camera.position, out.fb.color.data(), &out.counters,
-                   threads, PixelRect{wx, wy, camera.width, camera.height});
+  if (!out.fb.samples.empty()) {
+    // Each tile of the window carries its share of the resolve pass (its pixels' filter and samples).
+    const ResolveWork work =
+        resolve_pixels(out.fb.samples, out.fb.width, out.fb.height, camera.position, out.fb.color.data(), threads);
+    for (std::size_t t = 0; t < out.tiles.size(); ++t) {
+      if (!counted[t]) continue;
+      TileStat& stat = out.tiles[t];
+      const Counters c = resolve_counters(out.fb.samples, work, out.fb.width, out.fb.height,
+                                          PixelRect{stat.x0, stat.y0, stat.width, stat.height});
+      stat.counters += c;
+      out.counters += c;
+    }
+  }
   if (apron > 0) {
     out.fb = crop_pixels(out.fb, wx, wy, camera.width, camera.height);
     std::vector<TileStat> tiles(static_cast<std::size_t>(window_grid.count()));

@@ -62,13 +62,8 @@ namespace {
 bool has_ambient(const AmbientSample& a) { return max_component(a.all) > 0.f; }
 
 // Step 1: each sample's visible share of the ambient light from its pool of same-surface neighbours.
-// Samples [x0, x1) x [y0, y1) of a buffer (guard ring included): the ones whose resolve work is counted.
-struct SampleRange {
-  int x0, y0, x1, y1;
-  bool contains(int x, int y) const { return x >= x0 && x < x1 && y >= y0 && y < y1; }
-};
-
-void denoise_ambient(SampleBuffer& b, Vec3 eye, const SampleRange& counted, Counters* counters, int threads) {
+// `taps` gets each sample's neighbour count.
+void denoise_ambient(SampleBuffer& b, Vec3 eye, std::vector<std::uint16_t>* taps, int threads) {
   const int reach = static_cast<int>(std::ceil(kAmbientRadius * static_cast<float>(b.k)));
   const float sigma = static_cast<float>(b.k);  // 1 px
   std::vector<float> spatial(static_cast<std::size_t>((2 * reach + 1) * (2 * reach + 1)));
@@ -79,7 +74,7 @@ void denoise_ambient(SampleBuffer& b, Vec3 eye, const SampleRange& counted, Coun
           d2 <= static_cast<float>(reach * reach) ? std::exp(-d2 / (2.f * sigma * sigma)) : 0.f;
     }
   std::vector<float> out(b.color);
-  std::vector<std::uint64_t> row_taps(static_cast<std::size_t>(b.height), 0);
+  taps->assign(b.color.size() / 3, 0);
   parallel_chunks(static_cast<std::size_t>(b.height), threads, 8, [&](std::size_t begin, std::size_t end) {
     for (std::size_t y = begin; y < end; ++y) {
       const int yi = static_cast<int>(y);
@@ -87,7 +82,7 @@ void denoise_ambient(SampleBuffer& b, Vec3 eye, const SampleRange& counted, Coun
         const std::size_t i = y * static_cast<std::size_t>(b.width) + static_cast<std::size_t>(x);
         const AmbientSample& a = b.ambient_samples[i];
         if (b.object[i] < 0 || !has_ambient(a)) continue;
-        const bool count = counted.contains(x, yi);
+        std::uint16_t n_taps = 0;
         const Vec3 n = b.normal[i], p = b.position[i];
         const float tolerance = kAmbientPlaneTolerance * length(p - eye);
         Vec3 seen, all;
@@ -98,7 +93,7 @@ void denoise_ambient(SampleBuffer& b, Vec3 eye, const SampleRange& counted, Coun
             const int xj = x + dx;
             const float g = spatial[static_cast<std::size_t>((dy + reach) * (2 * reach + 1) + dx + reach)];
             if (xj < 0 || xj >= b.width || !(g > 0.f)) continue;
-            if (count) ++row_taps[y];
+            ++n_taps;
             const std::size_t j = static_cast<std::size_t>(yj) * static_cast<std::size_t>(b.width) +
                                   static_cast<std::size_t>(xj);
             const AmbientSample& q = b.ambient_samples[j];
@@ -109,6 +104,7 @@ void denoise_ambient(SampleBuffer& b, Vec3 eye, const SampleRange& counted, Coun
             all += q.all * g;
           }
         }
+        (*taps)[i] = n_taps;
         // The sample's colour holds unoccluded x (seen / all) of its own rays; it takes the pool's share.
         for (int c = 0; c < 3; ++c) {
           const float own = a.all[c] > 0.f ? a.seen[c] / a.all[c] : 0.f;
@@ -120,7 +116,6 @@ void denoise_ambient(SampleBuffer& b, Vec3 eye, const SampleRange& counted, Coun
     }
   });
   b.color.swap(out);
-  for (const std::uint64_t t : row_taps) counters->ambient_filter_taps += t;
 }
 
 // Step 2: the separable pixel filter (k > 1).
@@ -161,36 +156,47 @@ void filter_pixels(const SampleBuffer& b, int pixel_width, int pixel_height, flo
 
 }  // namespace
 
-void resolve_pixels(SampleBuffer& samples, int pixel_width, int pixel_height, Vec3 eye, float* pixels,
-                    Counters* counters, int threads, PixelRect counted) {
+ResolveWork resolve_pixels(SampleBuffer& samples, int pixel_width, int pixel_height, Vec3 eye, float* pixels,
+                           int threads) {
   const int guard = PixelFilter(samples.k).guard;
   if (samples.guard != guard || samples.width != pixel_width * samples.k + 2 * guard ||
       samples.height != pixel_height * samples.k + 2 * guard)
     throw std::invalid_argument("resolve_pixels: sample buffer does not match the frame");
-  if (counted.width <= 0) counted = {0, 0, pixel_width, pixel_height};
-  if (counted.x0 < 0 || counted.y0 < 0 || counted.height <= 0 || counted.x0 + counted.width > pixel_width ||
-      counted.y0 + counted.height > pixel_height)
-    throw std::invalid_argument("resolve_pixels: counted pixels outside the frame");
-  // The counted pixels' samples, with the guard ring where they reach the buffer's edge.
-  const int k = samples.k;
-  const SampleRange range{
-      counted.x0 == 0 ? 0 : counted.x0 * k + guard,
-      counted.y0 == 0 ? 0 : counted.y0 * k + guard,
-      counted.x0 + counted.width == pixel_width ? samples.width : (counted.x0 + counted.width) * k + guard,
-      counted.y0 + counted.height == pixel_height ? samples.height : (counted.y0 + counted.height) * k + guard};
-  const auto columns = static_cast<std::uint64_t>(range.x1 - range.x0),
-             rows = static_cast<std::uint64_t>(range.y1 - range.y0);
-  if (samples.ambient) denoise_ambient(samples, eye, range, counters, threads);
-  if (k > 1) {
+  ResolveWork work;
+  if (samples.ambient) denoise_ambient(samples, eye, &work.ambient_taps, threads);
+  if (samples.k > 1) {
     filter_pixels(samples, pixel_width, pixel_height, pixels, threads);
-    // Horizontal pass: every sample row of the counted pixels' footprint; vertical: every counted pixel.
-    const auto taps = static_cast<std::uint64_t>(PixelFilter(k).weights.size());
-    counters->resolve_taps +=
-        taps * static_cast<std::uint64_t>(counted.width) * (rows + static_cast<std::uint64_t>(counted.height));
   } else {
     std::copy(samples.color.begin(), samples.color.end(), pixels);
   }
-  counters->resolve_bytes += columns * rows * (kResolveColorBytes + (samples.ambient ? kResolveAmbientBytes : 0));
+  return work;
+}
+
+Counters resolve_counters(const SampleBuffer& samples, const ResolveWork& work, int pixel_width, int pixel_height,
+                          PixelRect rect) {
+  if (rect.width <= 0) rect = {0, 0, pixel_width, pixel_height};
+  if (rect.x0 < 0 || rect.y0 < 0 || rect.height <= 0 || rect.x0 + rect.width > pixel_width ||
+      rect.y0 + rect.height > pixel_height)
+    throw std::invalid_argument("resolve_counters: the rectangle is outside the frame");
+  // The rectangle's samples, with the guard ring where it reaches the buffer's edge.
+  const int k = samples.k, g = samples.guard;
+  const int x0 = rect.x0 == 0 ? 0 : rect.x0 * k + g, y0 = rect.y0 == 0 ? 0 : rect.y0 * k + g;
+  const int x1 = rect.x0 + rect.width == pixel_width ? samples.width : (rect.x0 + rect.width) * k + g;
+  const int y1 = rect.y0 + rect.height == pixel_height ? samples.height : (rect.y0 + rect.height) * k + g;
+  const auto columns = static_cast<std::uint64_t>(x1 - x0), rows = static_cast<std::uint64_t>(y1 - y0);
+  Counters c;
+  if (!work.ambient_taps.empty())
+    for (int y = y0; y < y1; ++y)
+      for (int x = x0; x < x1; ++x)
+        c.ambient_filter_taps +=
+            work.ambient_taps[static_cast<std::size_t>(y) * static_cast<std::size_t>(samples.width) +
+                              static_cast<std::size_t>(x)];
+  if (k > 1) {  // horizontal pass: every sample row of the pixels' footprint; vertical: every pixel
+    const auto taps = static_cast<std::uint64_t>(PixelFilter(k).weights.size());
+    c.resolve_taps = taps * static_cast<std::uint64_t>(rect.width) * (rows + static_cast<std::uint64_t>(rect.height));
+  }
+  c.resolve_bytes = columns * rows * (kResolveColorBytes + (samples.ambient ? kResolveAmbientBytes : 0));
+  return c;
 }
 
 }  // namespace sim_core

@@ -52,20 +52,24 @@ int main() {
     for (int sy = -b.guard; sy < 8 * 2 + b.guard; ++sy)
       for (int sx = -b.guard; sx < 12 * 2 + b.guard; ++sx) b.set(sx, sy, Vec3(0.3f, 0.5f, 0.7f), {}, -1, {}, {});
     std::vector<float> px(12 * 8 * 3);
-    sim_core::Counters c;
-    sim_core::resolve_pixels(b, 12, 8, Vec3(), px.data(), &c, 2);
+    const sim_core::ResolveWork work = sim_core::resolve_pixels(b, 12, 8, Vec3(), px.data(), 2);
+    const sim_core::Counters c = sim_core::resolve_counters(b, work, 12, 8);
     for (std::size_t i = 0; i < px.size(); i += 3) CHECK(std::fabs(px[i] - 0.3f) < 1e-6f && std::fabs(px[i + 2] - 0.7f) < 1e-6f);
     CHECK(c.resolve_taps == 6u * 12u * (20u + 8u));  // horizontal over 20 sample rows, vertical per pixel
     CHECK(c.resolve_bytes == 28u * 20u * sim_core::kResolveColorBytes);
     CHECK(c.ambient_filter_taps == 0u);
+    sim_core::Counters parts;  // the guard ring goes with the rectangles on the frame's edges
+    for (const sim_core::PixelRect r : {sim_core::PixelRect{0, 0, 12, 3}, sim_core::PixelRect{0, 3, 4, 5},
+                                        sim_core::PixelRect{4, 3, 8, 5}})
+      parts += sim_core::resolve_counters(b, work, 12, 8, r);
+    CHECK(parts.resolve_taps == c.resolve_taps && parts.resolve_bytes == c.resolve_bytes);
   }
   {  // An impulse (one bright sub-sample) spreads over the neighbouring pixels as the separable window,
      // and keeps its energy (a sub-sample is a quarter of a pixel's).
     SampleBuffer b = frame(2, false);
     b.set(10, 7, Vec3(1.f, 1.f, 1.f), {}, -1, {}, {});  // pixel (5, 3), its sub-sample (0, 1)
     std::vector<float> px(12 * 8 * 3);
-    sim_core::Counters c;
-    sim_core::resolve_pixels(b, 12, 8, Vec3(), px.data(), &c, 1);
+    sim_core::resolve_pixels(b, 12, 8, Vec3(), px.data(), 1);
     const sim_core::PixelFilter f(2);
     double total = 0.0;
     for (std::size_t i = 0; i < px.size(); i += 3) total += px[i];
@@ -88,8 +92,8 @@ int main() {
               Vec3(static_cast<float>(x), static_cast<float>(y), 0.f));
       }
     std::vector<float> px(12 * 8 * 3);
-    sim_core::Counters c;
-    sim_core::resolve_pixels(b, 12, 8, Vec3(0.f, 0.f, 10.f), px.data(), &c, 2);
+    const sim_core::ResolveWork work = sim_core::resolve_pixels(b, 12, 8, Vec3(0.f, 0.f, 10.f), px.data(), 2);
+    const sim_core::Counters c = sim_core::resolve_counters(b, work, 12, 8);
     double mean = 0.0, var = 0.0;
     int n = 0;
     for (int y = 2; y < 6; ++y)
@@ -102,6 +106,12 @@ int main() {
     for (int y = 0; y < 8; ++y)
       for (int x = 6; x < 12; ++x) CHECK(std::fabs(px[(y * 12 + x) * 3] - (0.1f + 0.5f * 0.75f)) < 1e-5f);
     CHECK(c.ambient_filter_taps > 0u && c.resolve_taps == 0u);
+    // Rectangles that tile the frame (the tiles of a render) share its counts exactly.
+    sim_core::Counters parts;
+    for (const sim_core::PixelRect r : {sim_core::PixelRect{0, 0, 5, 3}, sim_core::PixelRect{5, 0, 7, 3},
+                                        sim_core::PixelRect{0, 3, 5, 5}, sim_core::PixelRect{5, 3, 7, 5}})
+      parts += sim_core::resolve_counters(b, work, 12, 8, r);
+    CHECK(parts.ambient_filter_taps == c.ambient_filter_taps && parts.resolve_bytes == c.resolve_bytes);
     CHECK(c.resolve_bytes == 12u * 8u * (sim_core::kResolveColorBytes + sim_core::kResolveAmbientBytes));
   }
   return check_exit_code();

@@ -76,19 +76,28 @@ struct SampleBuffer {
   void set(int sx, int sy, Vec3 c, const AmbientSample& a, std::int32_t obj, Vec3 n, Vec3 p);
 };
 
-// The pixels of a buffer whose resolve work is counted (a window inside the apron traced around it);
-// width 0 = all of them. A window touching the buffer's edge there touches the frame's edge (its guard ring
-// is counted with it).
+// A rectangle of a frame's pixels (width 0 = the whole frame).
 struct PixelRect {
   int x0 = 0, y0 = 0, width = 0, height = 0;
+};
+
+// What a resolve pass did per sample, for pricing any part of the frame: the ambient denoiser's
+// neighbour taps of each sample of the buffer (empty without AO).
+struct ResolveWork {
+  std::vector<std::uint16_t> ambient_taps;
 };
 
 // Resolves `samples` into `pixels` (pixel_width * pixel_height * 3, row-major): ambient denoising with
 // AO (the samples' colours are updated), then the pixel filter (or a copy at one sample per pixel). `eye`
 // is the camera position (the ambient filter's plane tolerance grows with a hit's distance from it).
-// Counts the pass for the pixels of `counted` into `counters`. `threads` share the work; the result does
-// not depend on them.
-void resolve_pixels(SampleBuffer& samples, int pixel_width, int pixel_height, Vec3 eye, float* pixels,
-                    Counters* counters, int threads, PixelRect counted = {});
+// `threads` share the work; the result does not depend on them.
+ResolveWork resolve_pixels(SampleBuffer& samples, int pixel_width, int pixel_height, Vec3 eye, float* pixels,
+                           int threads);
+
+// The resolve pass's counters (resolve_bytes, resolve_taps, ambient_filter_taps) for the pixels of `rect`:
+// their samples, with the guard ring where `rect` reaches the buffer's edge (there it reaches the frame's
+// edge). Additive: rectangles that tile the frame sum to the whole frame's counts.
+Counters resolve_counters(const SampleBuffer& samples, const ResolveWork& work, int pixel_width, int pixel_height,
+                          PixelRect rect = {});
 
 }  // namespace sim_core
