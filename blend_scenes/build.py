@@ -38,8 +38,8 @@ REPO_ROOT = PACKAGE_DIR.parent
 DEFAULT_OUT = PACKAGE_DIR / "build"
 #: What scene.rbscene depends on besides the generator: the depsgraph translator and the file format.
 _SCENE_FILE_PACKAGE = REPO_ROOT / "sim_core" / "python" / "sim_core" / "loaders" / "scene_file"
-TRANSLATOR_SOURCES = (REPO_ROOT / "addon" / "translate.py",
-                      REPO_ROOT / "addon" / "core" / "scene_translation.py",
+TRANSLATOR_SOURCES = (REPO_ROOT / "addon" / "translate.py", REPO_ROOT / "addon" / "node_trees.py",
+                      *sorted((REPO_ROOT / "addon" / "core" / "scene_translation").glob("*.py")),
                       *sorted(_SCENE_FILE_PACKAGE.glob("*.py")))
 SCENE_FILES = ("scene.blend", "scene.glb", "scene.rbscene", "path.json", "stats.json")
 #: The add-on's helpers the build uses (path sampling, fov, glTF export): part of every scene's hash.
