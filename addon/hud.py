@@ -1,4 +1,5 @@
-"""Viewport HUD: active settings, predicted power and error against the budget (GUI sessions only).
+"""Viewport HUD: active settings, predicted power (with the frame rate it is drawn at) and error against
+the budget (GUI sessions only).
 
 Nothing here runs in background mode: there the draw handler is never added (blf.draw would segfault).
 """
@@ -25,13 +26,17 @@ def hud_lines(scene: bpy.types.Scene) -> list[tuple[str, tuple[float, float, flo
     else:
         over = props.predicted_error > props.error_budget
         budget = f"budget e {props.error_budget:.4f}"
+    # the frame rate the power is drawn at (0: a store before frame times)
+    rate = f" at {props.predicted_fps:.1f} fps" if props.predicted_fps > 0 else ""
     lines = [
-        (f"Power {props.predicted_power:.3f} W   Error {props.predicted_error:.4f}   ({budget})",
+        (f"Power {props.predicted_power:.3f} W{rate}   Error {props.predicted_error:.4f}   ({budget})",
          bad if over or props.infeasible else ok),
         (f"Settings: {props.active_settings}", ok),
     ]
     flags = [f for f, on in (("blending", props.playback_status == "blending"),
-                             ("outside store", props.clamped), ("budget infeasible", props.infeasible)) if on]
+                             ("outside store", props.clamped), ("budget infeasible", props.infeasible),
+                             ("no setting keeps up with the store's frame rate", props.slower_than_fps))
+             if on]
     if flags:
         lines.append(("; ".join(flags), bad if props.infeasible else ok))
     return lines

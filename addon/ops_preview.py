@@ -132,7 +132,8 @@ def render_preview(scene: bpy.types.Scene, *, use_active: bool = True, fmt: str 
 def _message(image: bpy.types.Image, job: PreviewJob) -> str:
     r = job.result
     return (f"preview in image {image.name!r} ({image.size[0]}x{image.size[1]}): {r.power_w:.3f} W at "
-            f"{job.fps:g} fps on {job.profile}, rendered in {r.render_s:.1f} s")
+            f"{r.energy['achieved_fps']:.3g} of {job.fps:g} fps on {job.profile}, rendered in "
+            f"{r.render_s:.1f} s")
 
 
 class RENDER_BUDGET_OT_preview(bpy.types.Operator):

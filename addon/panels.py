@@ -99,11 +99,15 @@ class VIEW3D_PT_render_budget(bpy.types.Panel):
                 for i, chunk in enumerate(_wrap(f"Playback {props.playback_status}", 48)):
                     box.label(text=chunk, icon="ERROR" if i == 0 else "BLANK1")
             elif props.active_indices:
-                box.label(text=f"Power {props.predicted_power:.3f} W, error {props.predicted_error:.4f}")
+                rate = f" at {props.predicted_fps:.1f} fps" if props.predicted_fps > 0 else ""
+                box.label(text=f"Power {props.predicted_power:.3f} W{rate}, "
+                               f"error {props.predicted_error:.4f}")
                 for chunk in _wrap(props.active_settings, 48):
                     box.label(text=chunk)
                 if props.infeasible:
                     box.label(text="budget cannot be met here", icon="ERROR")
+                if props.slower_than_fps:
+                    box.label(text="no setting keeps up with the store's frame rate here", icon="ERROR")
                 if props.clamped:
                     box.label(text="camera outside the optimised space", icon="ERROR")
         row = layout.row(align=True)

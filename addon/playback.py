@@ -45,8 +45,8 @@ def show_error(scene: bpy.types.Scene, message: str) -> None:
     status = f"error: {message}"
     if props.playback_status != status or props.active_indices:
         props.active_settings = props.active_indices = props.target_indices = ""
-        props.predicted_power = props.predicted_error = 0.0
-        props.clamped = props.infeasible = False
+        props.predicted_power = props.predicted_error = props.predicted_fps = 0.0
+        props.clamped = props.infeasible = props.slower_than_fps = False
         props.playback_status = status
     _written.pop(scene.as_pointer(), None)
 
@@ -73,7 +73,7 @@ def update_scene(scene: bpy.types.Scene) -> PlaybackFrame | None:
     # scene holds, so undo or a hand edit of these outputs is corrected on the next frame).
     status = "blending" if frame.in_transition else "on target"
     key = (frame.active_indices, frame.target_indices, frame.predicted_power_w, frame.predicted_error,
-           frame.clamped, frame.infeasible, status)
+           frame.predicted_fps, frame.meets_fps, frame.clamped, frame.infeasible, status)
     written = _written.get(scene.as_pointer())
     active_text = " ".join(map(str, frame.active_indices))
     if written == key and props.active_indices == active_text and props.playback_status == status:
@@ -83,6 +83,8 @@ def update_scene(scene: bpy.types.Scene) -> PlaybackFrame | None:
     props.target_indices = " ".join(map(str, frame.target_indices))
     props.predicted_power = frame.predicted_power_w
     props.predicted_error = frame.predicted_error
+    props.predicted_fps = frame.predicted_fps or 0.0
+    props.slower_than_fps = frame.meets_fps is False
     props.clamped = frame.clamped
     props.infeasible = frame.infeasible
     props.playback_status = status

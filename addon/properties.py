@@ -83,6 +83,13 @@ class RENDER_BUDGET_PG_scene(bpy.types.PropertyGroup):
     target_indices: StringProperty(name="Target indices")  # type: ignore
     predicted_power: FloatProperty(name="Predicted power (W)")  # type: ignore
     predicted_error: FloatProperty(name="Predicted error", precision=4)  # type: ignore
+    predicted_fps: FloatProperty(  # type: ignore
+        name="Predicted frame rate (fps)",
+        description="The frame rate the target settings reach on the store's hardware profile, at which the "
+                    "predicted power is drawn (0: the store predates frame times)")
+    slower_than_fps: BoolProperty(  # type: ignore
+        name="Slower than the store's frame rate",
+        description="No setting of the store keeps up with its frame rate here")
     clamped: BoolProperty(name="Outside the store's space")  # type: ignore
     infeasible: BoolProperty(name="Budget infeasible")  # type: ignore
     playback_status: StringProperty(name="Playback status")  # type: ignore

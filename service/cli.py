@@ -187,7 +187,8 @@ def _query(args: argparse.Namespace) -> int:
                      power_budget=args.power_budget, error_budget=args.error_budget)
     out = {"settings": r.settings, "indices": list(r.indices), "packed": r.packed, "power_w": r.power_w,
            "error": r.error, "clamped": r.clamped, "infeasible": r.infeasible, "corner": r.corner,
-           "view": r.view}
+           "view": r.view, "frame_time_s": r.frame_time_s, "fps": r.fps, "fps_target": store.fps,
+           "meets_fps": r.meets_fps}
     if args.json:
         print(json.dumps(out))
     else:
@@ -195,6 +196,14 @@ def _query(args: argparse.Namespace) -> int:
             print(f"{k:>22}: {v}")
         print(f"{'predicted power':>22}: {r.power_w:.4f} W")
         print(f"{'predicted error':>22}: {r.error:.5f} (1 - SSIM)")
+        if r.fps is None:
+            print(f"{'frame rate':>22}: unknown (the store predates frame times; target {store.fps:g} fps)")
+        else:
+            print(f"{'frame rate':>22}: {r.fps:.1f} of {store.fps:g} fps ({1e3 * r.frame_time_s:.1f} ms a "
+                  "frame)")
+        if r.meets_fps is False:
+            print(f"{'note':>22}: no setting of this view keeps up with {store.fps:g} fps; the power is "
+                  "drawn at the frame rate shown")
         if r.clamped:
             print(f"{'note':>22}: clamped: camera outside the optimised region")
         if r.infeasible:

@@ -1,15 +1,18 @@
 """Error and power of one settings vector at one camera (power-budget paper, Eq. 1 and sec. 5.1.1).
 
 ``error = 1 - SSIM(reference, image)`` where the reference is the maximum-quality render of the same
-camera; ``power`` is the energy model's power at the target frame rate. Both images go through one
-fixed display transform before SSIM: linear RGB clamped to [0, 1], then the sRGB transfer curve (so the
-error is measured on what a display shows, and highlights above 1 do not dominate). A render smaller
-than the reference (resolution scale) is upsampled bilinearly to the reference size first.
+camera; ``power`` is what the modelled GPU draws at the frame rate it reaches when asked for the target
+frame rate (``sim_core.sustained_power``: the target when the frame meets its deadline, else its own
+lower rate; never above the full-speed power), ``frame_time_s`` the modelled frame time. Both images go
+through one fixed display transform before SSIM: linear RGB clamped to [0, 1], then the sRGB transfer
+curve (so the error is measured on what a display shows, and highlights above 1 do not dominate). A
+render smaller than the reference (resolution scale) is upsampled bilinearly to the reference size first.
 
 Evaluations run at a small resolution, but the power a store predicts is for the path's real
 resolution: static power stays, dynamic energy and frame time are scaled by the pixel-count ratio
-(``target_pixels``; the energy model's dynamic energy grows linearly with pixels, see its tests). At a
-few hundred pixels the static power would otherwise hide every difference between settings.
+(``target_pixels``; the energy model's dynamic energy grows linearly with pixels, see its tests), and
+the power is drawn at the frame rate that scaled frame time reaches. At a few hundred pixels the static
+power would otherwise hide every difference between settings.
 
 :class:`Evaluator` is the driver side: it answers batches of (camera, settings) from the persistent
 cache and sends only the misses, as one batch, to an executor; workers keep their scene and each
@@ -41,8 +44,10 @@ from service.options import METRICS
 from service.params import Indices, ParameterSpace
 from service.store.camera import check_fov
 
-#: Bumped whenever the pipeline that turns renders into errors changes (part of every cache key).
-PIPELINE_VERSION = "v1"
+#: Bumped whenever the pipeline that turns renders into errors or power changes (part of every cache
+#: key). v2: power at the frame rate reached (it was P_static + E * target fps even for frames that
+#: miss their deadline).
+PIPELINE_VERSION = "v2"
 
 __all__ = ["METRICS", "CameraSpec", "Evaluation", "Evaluator", "SceneHandle", "evaluate", "image_error"]
 
@@ -228,15 +233,19 @@ def image_error(metric: str, reference: np.ndarray, image: np.ndarray) -> float:
 
 def _price(result: Any, profile: str, fps: float, pixel_ratio: float = 1.0
            ) -> tuple[float, float, dict[str, float]]:
-    """Power (W) and frame time at ``pixel_ratio`` times the rendered pixel count, and the breakdown
-    (energy per block at the rendered size)."""
-    rep = sim_core.price(result, _profile(profile), fps)
-    dynamic = float(rep.dynamic_energy_j)
-    static_w = float(rep.power_w) - dynamic * fps
+    """Power (W) and frame time at ``pixel_ratio`` times the rendered pixel count (dynamic energy and
+    frame time scale with the pixels; the power is drawn at the frame rate that frame time reaches), and
+    the breakdown (energy per block at the rendered size, the frame rate reached at the scaled size)."""
+    prof = _profile(profile)
+    rep = sim_core.price(result, prof, fps)
+    frame_time = float(rep.frame_time_s) * pixel_ratio
+    power, reached = sim_core.sustained_power(prof.static_power_w, float(rep.dynamic_energy_j) * pixel_ratio,
+                                              frame_time, fps)
     breakdown = {f"energy_j.{k}": float(v) for k, v in dict(rep.energy_j).items()}
     breakdown["rays_total"] = float(getattr(rep, "rays_total", 0))
     breakdown["pixel_ratio"] = float(pixel_ratio)
-    return static_w + dynamic * pixel_ratio * fps, float(rep.frame_time_s) * pixel_ratio, breakdown
+    breakdown["fps"] = reached
+    return power, frame_time, breakdown
 
 
 def _reference(scene: Any, scene_hash: str, camera: CameraSpec, space: ParameterSpace,
@@ -322,6 +331,11 @@ class Evaluator:
         self.evaluations = 0  # renders actually done
         self.cache_hits = 0
         self.render_time_s = 0.0
+
+    @property
+    def fps(self) -> float:
+        """The target frame rate power is priced at."""
+        return self.ctx.fps
 
     def _key(self, camera: CameraSpec) -> CacheKey:
         return CacheKey(self.scene.content_hash, camera.key(), self.metric_key, self.ctx.profile,

@@ -7,7 +7,11 @@ result (its non-dominated set is the frontier); and the ask/tell loop takes batc
 which go straight to the evaluation cache and the executor. Everything is driven by one seeded
 ``numpy.random.Generator``: the same seed gives the same frontier.
 
-Objectives are minimised; rows of ``F`` are points, columns objectives (here: error, power).
+Objectives are minimised; rows of ``F`` are points, columns objectives (here: error, power). A point
+may also be *infeasible* (here: its frame time misses the target frame rate): Deb's constrained
+domination then ranks every feasible point ahead of every infeasible one, and the points of each group
+by their own non-dominated fronts (:func:`constrained_fronts`); the archive's frontier is that of the
+feasible points when there are any.
 """
 
 from __future__ import annotations
@@ -59,10 +63,22 @@ def non_dominated_sort(F: np.ndarray) -> list[np.ndarray]:
     return fronts
 
 
-def rank_of(F: np.ndarray) -> np.ndarray:
-    """Front number of every point (0 = non-dominated)."""
+def constrained_fronts(F: np.ndarray, feasible: np.ndarray | None = None) -> list[np.ndarray]:
+    """Fronts under constrained domination (Deb 2002): the feasible points' fronts first, then the
+    infeasible points' (each group sorted by its own objectives); ``feasible=None``: all feasible."""
+    F = np.asarray(F, dtype=np.float64)
+    if feasible is None or bool(np.all(feasible)):
+        return non_dominated_sort(F)
+    ok = np.flatnonzero(feasible)
+    bad = np.flatnonzero(~np.asarray(feasible, dtype=bool))
+    return ([ok[f] for f in non_dominated_sort(F[ok])] if ok.size else []) + [
+        bad[f] for f in non_dominated_sort(F[bad])]
+
+
+def rank_of(F: np.ndarray, feasible: np.ndarray | None = None) -> np.ndarray:
+    """Front number of every point (0 = non-dominated), feasible points ahead of infeasible ones."""
     rank = np.empty(np.asarray(F).shape[0], dtype=np.int64)
-    for r, f in enumerate(non_dominated_sort(F)):
+    for r, f in enumerate(constrained_fronts(F, feasible)):
         rank[f] = r
     return rank
 
@@ -163,12 +179,21 @@ class NSGAConfig:
 
 @dataclass
 class Archive:
-    """Every evaluated point of a search: settings (index tuples) and objectives, in evaluation order."""
+    """Every evaluated point of a search: settings (index tuples), objectives and feasibility, in
+    evaluation order."""
 
     points: dict[Indices, tuple[float, float]] = field(default_factory=dict)
+    infeasible: set[Indices] = field(default_factory=set)
 
-    def add(self, x: Indices, f: Sequence[float]) -> None:
-        self.points.setdefault(tuple(int(v) for v in x), (float(f[0]), float(f[1])))
+    def add(self, x: Indices, f: Sequence[float], feasible: bool = True) -> None:
+        key = tuple(int(v) for v in x)
+        if key not in self.points:
+            self.points[key] = (float(f[0]), float(f[1]))
+            if not feasible:
+                self.infeasible.add(key)
+
+    def feasible_mask(self, xs: Sequence[Indices]) -> np.ndarray:
+        return np.asarray([x not in self.infeasible for x in xs], dtype=bool)
 
     def __contains__(self, x: object) -> bool:
         return x in self.points
@@ -182,10 +207,15 @@ class Archive:
         return xs, F
 
     def frontier(self) -> list[tuple[Indices, float, float]]:
-        """Non-dominated points, power ascending (ties in both objectives: first evaluated kept)."""
+        """Non-dominated points, power ascending (ties in both objectives: first evaluated kept): of the
+        feasible points when there are any, else of all."""
         xs, F = self.arrays()
         if not xs:
             return []
+        feasible = self.feasible_mask(xs)
+        if feasible.any() and not feasible.all():
+            xs = [x for x, ok in zip(xs, feasible, strict=True) if ok]
+            F = F[feasible]
         mask = non_dominated_mask(F)
         seen: set[tuple[float, float]] = set()
         out = []
@@ -268,9 +298,10 @@ class NSGA2:
     def _offspring(self) -> list[Indices]:
         pop = self._pop
         F = np.asarray([self.archive.points[x] for x in pop])
-        rank = rank_of(F)
+        feasible = self.archive.feasible_mask(pop)
+        rank = rank_of(F, feasible)
         crowd = np.zeros(len(pop))
-        for front in non_dominated_sort(F):
+        for front in constrained_fronts(F, feasible):
             crowd[front] = crowding_distance(F[front])
         want = min(self.config.population, self.size - len(self.archive))
         out: list[Indices] = []
@@ -322,8 +353,9 @@ class NSGA2:
         self._pending = out
         return list(out)
 
-    def tell(self, F: np.ndarray | Sequence[Sequence[float]]) -> None:
-        """Objectives (N, 2) of the last ``ask()`` batch, same order."""
+    def tell(self, F: np.ndarray | Sequence[Sequence[float]], feasible: Sequence[bool] | None = None) -> None:
+        """Objectives (N, 2) of the last ``ask()`` batch, same order, and whether each point is feasible
+        (None: all are)."""
         if self._pending is None:
             raise RuntimeError("ask() first")
         arr = np.asarray(F, dtype=np.float64).reshape(-1, 2)
@@ -331,8 +363,11 @@ class NSGA2:
             raise ValueError("tell() got a different number of results than ask() gave")
         if not np.all(np.isfinite(arr)):
             raise ValueError("objectives must be finite")
-        for x, f in zip(self._pending, arr, strict=True):
-            self.archive.add(x, f)
+        ok = [True] * arr.shape[0] if feasible is None else [bool(v) for v in feasible]
+        if len(ok) != arr.shape[0]:
+            raise ValueError("tell() got a different number of feasibility flags than results")
+        for x, f, good in zip(self._pending, arr, ok, strict=True):
+            self.archive.add(x, f, good)
         merged = list(dict.fromkeys(self._pop + self._pending))
         self._pending = None
         self._pop = self._survive(merged)
@@ -345,7 +380,7 @@ class NSGA2:
             return cand
         F = np.asarray([self.archive.points[x] for x in cand])
         keep: list[int] = []
-        for front in non_dominated_sort(F):
+        for front in constrained_fronts(F, self.archive.feasible_mask(cand)):
             if len(keep) + front.size <= k:
                 keep.extend(front.tolist())
                 if len(keep) == k:

@@ -32,22 +32,27 @@ PARAMETERS = (
 )
 
 
-def view_frontier(view: int) -> Frontier:
-    """A frontier whose cheap end depends on the view, so lookups differ by camera direction."""
+def view_frontier(view: int, timed: bool = False, slow: bool = False) -> Frontier:
+    """A frontier whose cheap end depends on the view, so lookups differ by camera direction; ``timed``:
+    with frame times, the max-quality setting too slow for the store's 24 fps (so it is left out);
+    ``slow``: no setting keeps up with 24 fps."""
     pts = []
     for k in range(4):  # quality level k: 0 = max quality
         idx = [k, min(3, (k + view) % 4), k]
         power = 4.0 - 0.8 * k - 0.05 * view
         error = 0.0 if k == 0 else 0.004 * k * (1 + view)
         pts.append((pack_indices(idx), error, power))
-    return Frontier.from_points([p[0] for p in pts], [p[1] for p in pts], [p[2] for p in pts])
+    times = [0.1, 0.08, 0.07, 0.06] if slow else [0.1, 0.03, 0.02, 0.01] if timed else None
+    return Frontier.from_points([p[0] for p in pts], [p[1] for p in pts], [p[2] for p in pts], times,
+                                fps=24.0 if times else None)
 
 
-def synthetic_store(root_min: tuple[float, float, float] = (-10.0, -10.0, -10.0), size: float = 20.0
-                    ) -> ParetoStore:
-    """One-leaf store (8 corners, 6 views each) with view-dependent frontiers."""
+def synthetic_store(root_min: tuple[float, float, float] = (-10.0, -10.0, -10.0), size: float = 20.0,
+                    timed: bool = False, slow: bool = False) -> ParetoStore:
+    """One-leaf store (8 corners, 6 views each) with view-dependent frontiers (``timed``: with frame
+    times, store format 4; ``slow``: with frame times none of which keeps up with its 24 fps)."""
     corners = np.array([[(k & 1), (k >> 1) & 1, (k >> 2) & 1] for k in range(8)], dtype=np.int64)
-    frontiers = [view_frontier(v) for v in range(6)]
+    frontiers = [view_frontier(v, timed, slow) for v in range(6)]
     views = np.tile(np.arange(6, dtype=np.int64), (8, 1))
     return ParetoStore(parameters=PARAMETERS, root_min=np.asarray(root_min), root_size=size,
                        lattice_depth=0, children=np.array([-1]), corner_coords=corners, corner_views=views,

@@ -1,7 +1,13 @@
 """The store lookup as it was before the fast one (commit f99fe45's ``service/pareto_store.py``, copied
 but for names; the pieces that moved unchanged into ``service.store.camera`` are imported from there):
 the slow reference the property tests compare ``ParetoStore.lookup`` with. It reads only a store's
-public fields."""
+public fields.
+
+Extended deliberately once since: the frame-rate target (store format 4). Where a frontier knows its
+frame times, the budget search runs over the points whose frame time fits in the store's frame period
+1 / fps (all points when none does), and the answer adds the chosen point's frame time, the frame rate it
+reaches (fps, or 1 / frame time when it misses) and whether it meets the target (None, None, None for
+frontiers without frame times)."""
 
 from __future__ import annotations
 
@@ -127,7 +133,8 @@ class ReferenceLookup:
     def lookup(self, position: Any, direction: Any = None, matrix: Any = None, fov: float | None = None,
                power_budget: float | None = None, error_budget: float | None = None,
                aspect: float | None = None, up: Any = None) -> tuple:
-        """(indices, packed, settings, power_w, error, clamped, infeasible, corner, view, leaf)."""
+        """(indices, packed, settings, power_w, error, clamped, infeasible, corner, view, leaf,
+        frame_time_s, fps, meets_fps)."""
         if (power_budget is None) == (error_budget is None):
             raise ValueError("give exactly one of power_budget or error_budget")
         budget = float(power_budget if power_budget is not None else error_budget)  # type: ignore[arg-type]
@@ -142,14 +149,24 @@ class ReferenceLookup:
             raise ValueError("aspect must be positive")
         leaf, corner, view, clamped = self._locate(position, rot, vf, asp)
         fr = self.s.frontiers[int(self.s.corner_views[corner, view])]
+        period = 1.0 / self.s.fps
+        keep = np.arange(len(fr))
+        if fr.frame_time_s is not None and np.any(fr.frame_time_s <= period):
+            keep = np.flatnonzero(fr.frame_time_s <= period)  # settings that keep up with the target
+        power_w, error = fr.power_w[keep], fr.error[keep]
         if power_budget is not None:
-            i = int(np.searchsorted(fr.power_w, budget, side="right")) - 1
+            i = int(np.searchsorted(power_w, budget, side="right")) - 1
             i, infeasible = (0, True) if i < 0 else (i, False)
         else:
-            i = int(np.searchsorted(-fr.error, -budget, side="left"))
-            i, infeasible = (len(fr) - 1, True) if i >= len(fr) else (i, False)
+            i = int(np.searchsorted(-error, -budget, side="left"))
+            i, infeasible = (len(keep) - 1, True) if i >= len(keep) else (i, False)
+        i = int(keep[i])
         packed = int(fr.packed[i])
         indices = tuple((packed >> (4 * k)) & 15 for k in range(len(self.s.parameters)))
         settings = {p.name: p.values[j] for p, j in zip(self.s.parameters, indices, strict=True)}
+        timing: tuple = (None, None, None)
+        if fr.frame_time_s is not None:
+            t = float(fr.frame_time_s[i])
+            timing = (t, self.s.fps if t <= period else 1.0 / t, t <= period)
         return (indices, packed, settings, float(fr.power_w[i]), float(fr.error[i]), clamped, infeasible,
-                corner, view, leaf)
+                corner, view, leaf, *timing)

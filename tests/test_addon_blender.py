@@ -228,9 +228,9 @@ def test_record_without_camera_is_reported(scene) -> None:
 
 
 # -- playback from a store in the .blend ------------------------------------------------------------------
-def _load_store(tmp_path: Path):
+def _load_store(tmp_path: Path, **kind: bool):
     f = tmp_path / "store.json"
-    f.write_text(synthetic_store().to_json())
+    f.write_text(synthetic_store(**kind).to_json())
     assert bpy.ops.render_budget.load_store(filepath=str(f)) == {"FINISHED"}
 
 
@@ -432,6 +432,32 @@ def test_hud_text_flags_a_broken_budget(scene, tmp_path) -> None:
     scene.frame_set(3)
     lines = hud.hud_lines(scene)
     assert lines[0][1][1] < 0.5 and any("infeasible" in text for text, _ in lines)
+
+
+def test_hud_shows_the_frame_rate_the_power_is_drawn_at(scene, tmp_path) -> None:
+    """A store with frame times: the HUD says the frame rate the predicted power is drawn at, and flags
+    the frames where no setting keeps up with the store's frame rate; an older store shows none."""
+    hud = ext_module("hud")
+    turning_camera(scene, 6)
+    add_cube(scene)
+    bpy.ops.render_budget.record_path_animation()
+    props = scene.render_budget
+    props.budget_mode, props.power_budget = "POWER", 10.0
+    _load_store(tmp_path, timed=True)
+    scene.frame_set(2)
+    lines = hud.hud_lines(scene)
+    assert props.predicted_fps == pytest.approx(24.0) and not props.slower_than_fps
+    assert "W at 24.0 fps" in lines[0][0] and lines[0][1] == (1.0, 1.0, 1.0, 1.0)
+    _load_store(tmp_path, slow=True)  # every setting takes >= 60 ms: below 24 fps
+    scene.frame_set(3)
+    lines = hud.hud_lines(scene)
+    assert props.slower_than_fps and props.predicted_fps == pytest.approx(10.0)  # max quality: 0.1 s a frame
+    assert "W at 10.0 fps" in lines[0][0]
+    assert any("keeps up" in text for text, _ in lines)
+    _load_store(tmp_path)  # a store before frame times: no frame rate shown, nothing flagged
+    scene.frame_set(4)
+    lines = hud.hud_lines(scene)
+    assert props.predicted_fps == 0.0 and not props.slower_than_fps and " fps" not in lines[0][0]
 
 
 def test_an_infeasible_budget_says_it_cannot_be_met_and_what_the_cheapest_setting_costs(scene, tmp_path

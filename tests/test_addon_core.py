@@ -13,7 +13,13 @@ from addon.core import client as client_mod
 from addon.core.job_runner import JobRequest, describe
 from addon.core.local_service import free_port, serve_command
 from addon.core.path_sampling import build_path, frame_times
-from addon.core.playback_logic import PlaybackDriver, StoreCache, predicted_path_summary, validate_budget
+from addon.core.playback_logic import (
+    PlaybackDriver,
+    StoreCache,
+    predicted_path_summary,
+    summary_text,
+    validate_budget,
+)
 from addon.core.report import (
     FrameRow,
     plot_over_time,
@@ -264,6 +270,24 @@ def test_predicted_summary_reports_savings() -> None:
     assert 0.0 < s["predicted_saving"] < 1.0
     assert s["mean_power_w"] < s["mean_max_quality_power_w"]
     assert predicted_path_summary(store, frames, "ERROR", 0.0)["predicted_saving"] == pytest.approx(0.0)
+    assert s["mean_fps"] is None and "frame rate unknown" in summary_text(s)
+
+
+def test_playback_and_summary_carry_the_frame_rate() -> None:
+    """With frame times (format 4) the playback frame and the panel's summary say the frame rate the
+    store's choice reaches; the max-quality setting, too slow for 24 fps, is never chosen."""
+    from service.camera_path import CameraFrame
+
+    store = synthetic_store(timed=True)
+    m = _look((1.0, 0.2, 0.1), (0.0, 0.0, 0.0))
+    pf = PlaybackDriver(store, 0.0).step(m, 0.69, 16 / 9, 0.0, "ERROR", 0.0)
+    assert pf.meets_fps is True and pf.predicted_fps == 24.0
+    assert pf.infeasible and pf.predicted_error > 0.0  # error 0 only at max quality, which cannot keep up
+    frames = [CameraFrame(i / 24, _look((math.cos(i / 5), math.sin(i / 5), 0), (i * 0.1, 0, 0)), 0.69,
+                          (64, 36)) for i in range(10)]
+    s = predicted_path_summary(store, frames, "POWER", 3.0)
+    assert s["mean_fps"] == 24.0 and s["slow_frames"] == 0 and s["fps_target"] == 24.0
+    assert summary_text(s).endswith("24.0 of 24 fps")
 
 
 # -- report data ------------------------------------------------------------------------------------------
@@ -332,6 +356,13 @@ def test_predictions_round_trip_and_are_compared_in_the_report(tmp_path) -> None
     assert read_csv(write_csv(tmp_path / "p.csv", rows)) == rows
     notes = prediction_notes(rows)
     assert len(notes) == 1 and "predicted mean error 0.0200" in notes[0] and "0.0500" in notes[0]
+    assert "frame rate" not in notes[0]  # a store before frame times predicts none
+    timed = [FrameRow(12, 1.2, "ours", 0.5, 0.01, "", True, 0.5, 0.01, 30.0, True, 30.0),
+             FrameRow(13, 1.3, "ours", 0.7, 0.01, "", True, 0.6, 0.01, 20.0, False, 30.0)]
+    assert read_csv(write_csv(tmp_path / "t.csv", timed)) == timed
+    (note,) = prediction_notes(timed)
+    assert note.endswith("frame rate predicted 30 fps, reached 25 fps (equal on 1 of 2)")
+    assert "(2 frames on target; power within 10 % on 1, mean |error predicted - measured| 0.0000)" in note
     text = (write_report(tmp_path / "r", rows, title="t", budget=("ERROR", 0.02), plot=False)["report"]
             ).read_text()
     assert "store predicted" in text

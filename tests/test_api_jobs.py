@@ -109,9 +109,13 @@ def test_job_end_to_end_events_store_and_query(client: httpx.Client, finished: d
     assert cheap["infeasible"] is True and rich["infeasible"] is False
     assert rich["error"] <= cheap["error"] and rich["power_w"] >= cheap["power_w"]
     assert cheap["clamped"] is False
-    # Same answer as the store module itself.
+    # Same answer as the store module itself, frame rate included.
     direct = store.lookup(m[:3, 3], matrix=m, fov=frame["vfov"], power_budget=1e4)
     assert rich["packed"] == direct.packed and rich["indices"] == list(direct.indices)
+    assert store.frame_times_known and rich["fps_target"] == store.fps
+    assert (rich["frame_time_s"], rich["fps"], rich["meets_fps"]) == (direct.frame_time_s, direct.fps,
+                                                                      direct.meets_fps)
+    assert rich["frame_time_s"] > 0 and rich["fps"] <= store.fps
     wide = client.post(f"/stores/{job['store_id']}/query",
                        json={**query, "aspect": 3.0, "power_budget_w": 0.5}).json()
     assert wide["packed"] == store.lookup(m[:3, 3], matrix=m, fov=frame["vfov"], power_budget=0.5,
@@ -267,11 +271,18 @@ def test_evaluate_reference_and_cheap_settings(client: httpx.Client, scene: dict
                                            "settings": {"sampling": "undersample_4x4", "max_depth": 0,
                                                         "shadow_samples": 0, "ao_samples": 0}}).json()
     assert 0.0 < cheap["error"] < 1.0 and cheap["power_w"] < best["power_w"]
-    # power for a bigger frame (the path's, as stores predict it): static stays, dynamic scales by pixels
+    assert best["deadline_met"] and best["fps"] == best["fps_target"] == 30.0
+    # power for a bigger frame (the path's, as stores predict it): static stays, dynamic energy and frame
+    # time scale by pixels, and the power is drawn at the frame rate the bigger frame reaches
     big = client.post("/evaluate", json={"scene_id": scene["id"], "camera": camera(),
                                          "power_resolution": [320, 240]}).json()
     static_w = best["breakdown"]["energy_j.static"] * 30.0
-    assert big["power_w"] - static_w == pytest.approx(100 * (best["power_w"] - static_w), rel=1e-9)
+    dynamic = (best["power_w"] - static_w) / 30.0
+    assert big["frame_time_s"] == pytest.approx(100 * best["frame_time_s"], rel=1e-12)
+    rate = min(30.0, 1.0 / big["frame_time_s"])
+    assert big["fps"] == pytest.approx(rate) and big["deadline_met"] == (big["frame_time_s"] <= 1 / 30)
+    assert big["power_w"] == pytest.approx(static_w + 100 * dynamic * rate, rel=1e-9)
+    assert big["power_w"] <= static_w + dynamic / best["frame_time_s"] * (1 + 1e-12)  # full-speed power
     assert big["error"] == 0.0 and big["breakdown"]["pixel_ratio"] == 100.0
     r = client.post("/evaluate", json={"scene_id": scene["id"], "camera": camera(),
                                        "settings": {"max_depth": 7}})

@@ -102,3 +102,40 @@ def test_report_takes_sections_and_is_written_once(tmp_path: Path) -> None:
     assert text.index("| Avg. Power (W)") < text.index("- a note") < text.index("## First")
     assert text.index("## First\n\n- a\n- b") < text.index("## Second\n\ntext")
     assert math.isclose(float(text.split("power <= ")[1].split(" W")[0]), 6.0)
+
+
+def test_reports_show_fps_per_mode_and_which_presets_are_real_time(tmp_path: Path) -> None:
+    rows = []
+    for i in range(4):
+        t = i / 4  # times the CSV keeps exactly
+        rows += [report.FrameRow(i, t, "max", 0.7, 0.0, fps=1.3, deadline_met=False),
+                 report.FrameRow(i, t, "max_mid", 0.8, 0.01, fps=8.0 + i, deadline_met=False),
+                 report.FrameRow(i, t, "mid_min", 0.45, 0.05, fps=30.0 if i else 25.0, deadline_met=i > 0),
+                 report.FrameRow(i, t, "min", 0.27, 0.3, fps=30.0, deadline_met=True),
+                 report.FrameRow(i, t, "ours_error", 0.4, 0.01, budget_kept=True, fps=30.0,
+                                 deadline_met=True)]
+    s = {x.mode: x for x in report.summarise(rows)}
+    assert s["max_mid"].mean_fps == pytest.approx(9.5) and s["max_mid"].min_fps == 8.0
+    assert s["mid_min"].real_time_fraction == 0.75 and s["mid_min"].real_time is False
+    assert s["min"].real_time is True and s["max"].real_time is False
+    md = report.table3_markdown(report.summarise(rows)).splitlines()
+    assert md[3].startswith("| Avg. fps (reached) | 30 | 1.3 | 9.5 | 28.8 | 30 |")  # Ours first
+    assert md[4].startswith("| Frames at target fps | 100 % | 0 % | 0 % | 75 % | 100 % |")
+    notes = report.real_time_notes(report.summarise(rows), 30.0, "on the `mobile` profile at 1280x720")
+    assert notes[0].startswith("Real time (30 fps) on the `mobile` profile at 1280x720: Min; not real time: "
+                               "Max (1.3 fps on average, 0 % of frames at the target); Max-Mid")
+    assert "Max preset is not real time here: it delivers 1.3 fps, not 30" in notes[1]
+    # the CSV keeps the frame rates; a CSV written before them reads with the frame rate unknown
+    assert report.read_csv(report.write_csv(tmp_path / "a.csv", rows)) == rows
+    old = tmp_path / "old.csv"
+    old.write_text("frame,time_s,mode,power_w,error,settings,budget_kept,predicted_power_w,predicted_error\n"
+                   "0,0.0,max,8.8,0.0,,,,\n", encoding="utf-8")
+    (row,) = report.read_csv(old)
+    assert row.fps is None and row.deadline_met is None
+    assert report.summarise([row])[0].mean_fps is None and report.real_time_notes(
+        report.summarise([row]), 30.0, "") == []
+    assert "Avg. fps" not in report.table3_markdown(report.summarise([row]))
+    with pytest.raises(ValueError, match="frame rate"):
+        report.FrameRow(0, 0.0, "max", 1.0, 0.0, fps=0.0)
+    with pytest.raises(ValueError, match="frame rate"):
+        report.FrameRow(0, 0.0, "ours_power", 1.0, 0.0, predicted_fps=math.inf)

@@ -13,11 +13,13 @@ from service import cli
 from service.store import Frontier, ParetoStore, StoredParameter, pack_indices
 
 
-def _store_file(tmp_path):
+def _store_file(tmp_path, frame_times=None):
     params = (StoredParameter("max_depth", (0, 1, 2, 3), 3),
               StoredParameter("shadow_samples", (0, 1, 4, 16), 3))
     fr = [Frontier.from_points([pack_indices([k, k]) for k in range(4)], [0.3, 0.1, 0.02, 0.0],
                                [1.0 + v, 1.5 + v, 2.0 + v, 3.0 + v]) for v in range(6)]
+    if frame_times is not None:
+        fr = [Frontier(f.packed, f.error, f.power_w, np.asarray(frame_times)) for f in fr]
     corners = np.array([[(k & 1), (k >> 1) & 1, (k >> 2) & 1] for k in range(8)])
     views = np.tile(np.arange(6), (8, 1))
     store = ParetoStore(params, np.zeros(3), 4.0, 0, np.array([-1]), corners, views, fr,
@@ -35,6 +37,25 @@ def test_query_json(tmp_path, capsys) -> None:
     out = json.loads(capsys.readouterr().out)
     assert out["view"] == 5 and out["settings"] == {"max_depth": 2, "shadow_samples": 4}
     assert out["power_w"] == pytest.approx(7.0, abs=1e-3) and not out["infeasible"] and not out["clamped"]
+
+
+def test_query_reports_the_frame_rate(tmp_path, capsys) -> None:
+    """The most accurate setting misses 30 fps: an error budget it alone keeps gets the most accurate one
+    that keeps up (infeasible), with its frame rate; a store without frame times says it does not know."""
+    f = _store_file(tmp_path, frame_times=[0.005, 0.01, 0.02, 0.1])
+    args = ["query", str(f), "--position", "1", "1", "1", "--direction", "0", "0", "-1",
+            "--error-budget", "0"]
+    assert cli.main([*args, "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["settings"] == {"max_depth": 2, "shadow_samples": 4} and out["infeasible"]
+    assert out["meets_fps"] is True and out["fps"] == 30.0 and out["fps_target"] == 30.0
+    assert out["frame_time_s"] == pytest.approx(0.02, rel=1e-4)
+    assert cli.main(args) == 0
+    assert "30.0 of 30 fps (20.0 ms a frame)" in capsys.readouterr().out
+    (tmp_path / "old").mkdir()
+    f = _store_file(tmp_path / "old")
+    assert cli.main(["query", str(f), *args[2:]]) == 0
+    assert "unknown (the store predates frame times" in capsys.readouterr().out
 
 
 def test_query_text_flags_and_matrix(tmp_path, capsys) -> None:

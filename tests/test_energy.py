@@ -64,16 +64,19 @@ def test_load_profile_by_path_and_errors(tmp_path: Path) -> None:
 @pytest.mark.parametrize("profile", ["mobile", "desktop"])
 @pytest.mark.parametrize("fps", [24.0, 60.0])
 def test_total_is_sum_of_blocks_and_power_is_static_plus_e_fps(profile: str, fps: float) -> None:
-    r = price(COUNTERS, profile, fps)
+    small = {k: v // 100 for k, v in COUNTERS.items()}  # a frame well inside its deadline
+    r = price(small, profile, fps)
+    assert r.deadline_met  # priced at the target frame rate
     assert set(r.energy_j) == set(BLOCKS) | {"static"}
     assert r.total_energy_j == pytest.approx(math.fsum(r.energy_j.values()), rel=1e-12)
     assert r.dynamic_energy_j == pytest.approx(r.total_energy_j - r.energy_j["static"], rel=1e-12)
     p = load_profile(profile)
+    assert r.achieved_fps == fps
     assert r.power_w == pytest.approx(p.static_power_w + r.dynamic_energy_j * fps, rel=1e-12)
     assert r.power_w == pytest.approx(r.total_energy_j * fps, rel=1e-12)
     assert r.frame_time_s == pytest.approx(max(r.unit_time_s.values()))
     assert r.deadline_met == (r.frame_time_s <= 1 / fps)
-    assert r.mrays_per_s == pytest.approx(COUNTERS["rays_total"] / r.frame_time_s / 1e6)
+    assert r.mrays_per_s == pytest.approx(small["rays_total"] / r.frame_time_s / 1e6)
     assert r.perf_per_watt == pytest.approx(r.max_fps / r.power_full_speed_w)
 
 
@@ -152,6 +155,59 @@ def test_bad_input_is_rejected() -> None:
 _counts = st.integers(min_value=0, max_value=10**10)
 
 
+@pytest.mark.parametrize("profile", ["mobile", "desktop"])
+@settings(max_examples=80, deadline=None)
+@given(counters=st.dictionaries(st.sampled_from(energy.COUNTERS[:-1]), _counts, max_size=12),
+       fps=st.floats(min_value=0.5, max_value=480.0))
+def test_no_reported_power_exceeds_the_full_speed_power(profile: str, counters: dict[str, int],
+                                                        fps: float) -> None:
+    counters = {k: v for k, v in counters.items() if k != "closest_hit_comparisons"}
+    r = price(counters, profile, fps)
+    static = load_profile(profile).static_power_w
+    assert static <= r.power_w <= r.power_full_speed_w
+    assert r.achieved_fps <= fps and (r.frame_time_s == 0 or r.achieved_fps <= r.max_fps)
+    if r.deadline_met:  # exactly as before the frame rate was taken into account
+        assert r.achieved_fps == fps
+        assert r.power_w == pytest.approx(static + r.dynamic_energy_j * fps, rel=1e-12)
+    else:  # at its own frame rate: running flat out
+        assert r.achieved_fps == pytest.approx(r.max_fps, rel=1e-12)
+        assert r.power_w == r.power_full_speed_w
+
+
+@settings(max_examples=200, deadline=None)
+@given(static=st.floats(min_value=0.0, max_value=100.0), dynamic=st.floats(min_value=0.0, max_value=1e3),
+       frame_time=st.floats(min_value=0.0, max_value=1e3), fps=st.floats(min_value=1e-3, max_value=1e4))
+def test_sustained_power_is_bounded_by_full_speed_and_target(static: float, dynamic: float,
+                                                              frame_time: float, fps: float) -> None:
+    power, rate = energy.sustained_power(static, dynamic, frame_time, fps)
+    assert rate <= fps
+    assert power <= static + dynamic * fps
+    if frame_time > 0:
+        assert rate <= 1.0 / frame_time
+        assert power <= static + dynamic / frame_time  # never above the full-speed power
+    if frame_time <= 1.0 / fps:  # the deadline is met: the target frame rate, as before
+        assert rate == fps
+        assert power == pytest.approx(static + dynamic * fps, rel=1e-12)
+    else:
+        assert rate == 1.0 / frame_time
+        assert power == static + dynamic / frame_time
+
+
+def test_a_frame_that_misses_its_deadline_is_priced_at_its_own_rate() -> None:
+    slow = {k: v * 10**4 for k, v in COUNTERS.items()}
+    r = price(slow, "mobile", 30.0)
+    assert not r.deadline_met and r.max_fps < 30.0
+    assert r.achieved_fps == r.max_fps
+    assert r.power_w == r.power_full_speed_w
+    assert r.power_w < load_profile("mobile").static_power_w + r.dynamic_energy_j * 30.0
+    assert r.energy_j["static"] == pytest.approx(load_profile("mobile").static_power_w * r.frame_time_s)
+    for bad in (float("nan"), -1.0, float("inf")):
+        with pytest.raises(ValueError):
+            energy.sustained_power(0.25, 1.0, bad, 30.0)
+    with pytest.raises(ValueError):
+        energy.sustained_power(0.25, 1.0, 0.1, 0.0)
+
+
 @settings(max_examples=60, deadline=None)
 @given(counters=st.dictionaries(st.sampled_from(energy.COUNTERS[:-1]), _counts, max_size=12),
        fps=st.floats(min_value=1.0, max_value=240.0), scale=st.integers(min_value=1, max_value=7))
@@ -160,7 +216,12 @@ def test_pricing_invariants_hold_for_any_counters(counters: dict[str, int], fps:
     r = price(counters, "mobile", fps)
     assert r.total_energy_j == pytest.approx(math.fsum(r.energy_j.values()), rel=1e-9, abs=1e-18)
     static = load_profile("mobile").static_power_w
-    assert r.power_w == pytest.approx(static + r.dynamic_energy_j * fps, rel=1e-9)
+    # power at the frame rate the GPU reaches: the target when the frame meets its deadline, else its own
+    rate = fps if r.deadline_met else 1.0 / r.frame_time_s
+    assert r.achieved_fps == pytest.approx(rate, rel=1e-12)
+    assert r.power_w == pytest.approx(static + r.dynamic_energy_j * rate, rel=1e-9)
+    assert r.power_w <= r.power_full_speed_w
+    assert r.power_w == pytest.approx(r.total_energy_j * r.achieved_fps, rel=1e-9)
     assert all(v >= 0 for v in r.energy_j.values()) and all(v >= 0 for v in r.cycles.values())
     for b in BLOCKS:  # a block with no activity costs exactly nothing
         if r.cycles[b] == 0 and b != "comparator":

@@ -133,7 +133,8 @@ def test_frame_passes(scene: sim_core.Scene) -> None:
     report = sim_core.price(direct, "mobile", 30.0, scene=scene)
     assert out.power_w == pytest.approx(report.power_w)
     assert out.passes["Power"].sum() * 1e-6 == pytest.approx(out.dynamic_power_w, rel=1e-5)
-    assert out.dynamic_power_w == pytest.approx(report.dynamic_energy_j * 30.0)
+    assert out.dynamic_power_w == pytest.approx(report.dynamic_energy_j * report.achieved_fps)
+    assert out.achieved_fps == report.achieved_fps and out.power_w <= report.power_full_speed_w
     meta = out.metadata()
     assert meta["render_budget.source"] == "manual" and "max_depth=1" in meta["render_budget.settings"]
     assert float(meta["render_budget.simulated_power_w"]) == pytest.approx(out.power_w, rel=1e-5)
@@ -182,6 +183,26 @@ def test_a_window_of_a_frame_keeps_its_share(scene: sim_core.Scene) -> None:
     assert win.frame_time_s < out.frame_time_s and "window" in win.metadata()["render_budget.note"]
     with pytest.raises(ValueError, match="outside"):
         out.window(60, 0, 50, 10)
+
+
+def test_a_frame_that_misses_its_frame_rate_draws_power_at_its_own(scene: sim_core.Scene) -> None:
+    """Asked for more frames a second than the GPU delivers, a frame's power is the full-speed power at
+    1 / frame time (never E x fps), the Power pass sums to it, the metadata and the viewport's status
+    say the rate reached; a window of it, faster, may keep up again and is priced at its own rate."""
+    prof = sim_core.load_profile("mobile")
+    slow = render_frame(scene, VIEW, FrameSettings("manual", CHEAP), profile="mobile", fps=30.0)
+    fps = 3.0 / slow.frame_time_s  # three times what this frame can do
+    out = render_frame(scene, VIEW, FrameSettings("manual", CHEAP), profile="mobile", fps=fps)
+    assert not out.deadline_met and out.achieved_fps == pytest.approx(1.0 / out.frame_time_s)
+    energy = out.dynamic_power_w / out.achieved_fps
+    assert out.power_w == pytest.approx(prof.static_power_w + energy / out.frame_time_s)
+    assert out.dynamic_power_w < energy * fps  # E x fps would be three times as much
+    assert out.passes["Power"].sum() * 1e-6 == pytest.approx(out.dynamic_power_w, rel=1e-5)
+    assert float(out.metadata()["render_budget.achieved_fps"]) == pytest.approx(out.achieved_fps, rel=1e-3)
+    win = out.window(0, 0, VIEW.width // 4, VIEW.height // 4)
+    assert win.passes["Power"].sum() * 1e-6 == pytest.approx(win.dynamic_power_w, rel=1e-5)
+    assert win.achieved_fps == (fps if win.deadline_met else pytest.approx(1.0 / win.frame_time_s))
+    assert win.power_w <= out.power_w
 
 
 def test_without_passes_the_image_and_power_are_the_same(scene: sim_core.Scene) -> None:
@@ -447,7 +468,8 @@ def test_viewport_renders_progressively_and_restarts_on_scene_updates() -> None:
         assert [f.image.shape for f in frames] == [(12, 20, 4), (48, 80, 4)]
         first = frames[-1]
         assert first.info.source == "manual" and first.info.size == (80, 48)
-        assert 0 < first.info.dynamic_power_w and first.info.power_at(1920 * 1080) > first.info.static_power_w
+        power, rate = first.info.power_at(1920 * 1080)  # scaled to the render size, at the rate it reaches
+        assert 0 < first.info.dynamic_power_w and power > first.info.static_power_w and 0 < rate <= 30
         # a shaded box in front of the sky: some pixels hit, some do not
         assert first.image[..., :3].std() > 0.01
         # the box moves: the depsgraph reports it, the viewport restarts with the new scene

@@ -49,10 +49,21 @@ def test_error_and_power(scene) -> None:
     assert best.error == 0.0 and 0.05 < cheap.error <= 1.0
     assert cheap.power_w < best.power_w and cheap.frame_time_s < best.frame_time_s
     assert best.breakdown["energy_j.static"] > 0
-    # power extrapolated to a bigger frame: static power stays, dynamic power grows with the pixels
-    big = evaluate(scene, _cam(), mq, sp, target_pixels=32 * 24 * 100)
-    static_w = best.breakdown["energy_j.static"] * 30.0
-    assert big.power_w - static_w == pytest.approx(100 * (best.power_w - static_w), rel=1e-9)
+    # power extrapolated to a bigger frame: static power stays, dynamic energy and frame time grow with
+    # the pixels, and the power is drawn at the frame rate the bigger frame reaches
+    static_w = sim_core.load_profile("mobile").static_power_w
+    assert best.frame_time_s <= 1 / 30 and best.breakdown["fps"] == 30.0  # the small frame keeps up
+    assert best.breakdown["energy_j.static"] == pytest.approx(static_w / 30.0)
+    dynamic = (best.power_w - static_w) / 30.0  # energy of one frame at the rendered size
+    for ratio in (100, 10_000):
+        big = evaluate(scene, _cam(), mq, sp, target_pixels=32 * 24 * ratio)
+        assert big.frame_time_s == pytest.approx(ratio * best.frame_time_s, rel=1e-12)
+        rate = min(30.0, 1.0 / big.frame_time_s)
+        assert big.breakdown["fps"] == pytest.approx(rate, rel=1e-12)
+        assert big.power_w == pytest.approx(static_w + ratio * dynamic * rate, rel=1e-9)
+        # never above the full-speed power, which the pixel ratio does not change (E and t scale alike)
+        assert big.power_w <= static_w + dynamic / best.frame_time_s * (1 + 1e-12)
+    assert big.frame_time_s > 1 / 30 and big.power_w == pytest.approx(static_w + dynamic / best.frame_time_s)
     # lower resolution scale renders a smaller image, upsampled before SSIM: error but finite
     idx = list(mq)
     idx[sp.names.index("resolution_scale")] = 0

@@ -158,3 +158,56 @@ def test_ask_tell_misuse() -> None:
         algo.tell(np.zeros((len(b) + 1, 2)))
     with pytest.raises(ValueError):
         algo.tell(np.full((len(b), 2), np.nan))
+
+
+@given(points, st.data())
+def test_constrained_fronts_put_feasible_points_first(P, data) -> None:
+    F = np.asarray(P, dtype=float)
+    feasible = np.asarray(data.draw(st.lists(st.booleans(), min_size=len(P), max_size=len(P))))
+    fronts = nsga.constrained_fronts(F, feasible)
+    assert sorted(np.concatenate(fronts).tolist()) == list(range(len(P)))
+    seen_infeasible = False
+    for front in fronts:  # every feasible front before every infeasible one, never mixed
+        kinds = set(feasible[front].tolist())
+        assert len(kinds) == 1
+        seen_infeasible |= not kinds.pop()
+        assert not (seen_infeasible and feasible[front].any())
+    for ok in (True, False):  # within each group, the group's own non-dominated sort
+        group = np.flatnonzero(feasible == ok)
+        if group.size:
+            ranks = _brute_ranks([P[i] for i in group])
+            offset = 0 if ok else sum(1 for f in fronts if feasible[f].all())
+            got = nsga.rank_of(F, feasible)[group] - offset
+            assert got.tolist() == ranks
+    assert [f.tolist() for f in nsga.constrained_fronts(F)] == [
+        f.tolist() for f in nsga.non_dominated_sort(F)]
+
+
+def test_archive_frontier_and_search_keep_to_feasible_points() -> None:
+    """Infeasible points (here: the cheap, slow corner of the space) never reach the frontier while a
+    feasible point exists; with none feasible the frontier is that of all points."""
+    f, nv = _problem(4, 4)
+
+    def slow(batch):  # "misses the frame rate": half the space, cheap points included
+        F = f(batch)
+        return F[:, 1] < np.median(f(nsga.enumerate_space(nv))[:, 1])
+
+    algo = nsga.NSGA2(nv, nsga.NSGAConfig(population=12, generations=8, seed=3))
+    while not algo.done:
+        b = algo.ask()
+        algo.tell(f(b), feasible=~slow(b))
+    front = algo.archive.frontier()
+    assert front and not any(x in algo.archive.infeasible for x, _, _ in front)
+    xs, F = algo.archive.arrays()
+    ok = algo.archive.feasible_mask(xs)
+    exact = {x for x, m in zip([x for x, o in zip(xs, ok, strict=True) if o],
+                               nsga.non_dominated_mask(F[ok]), strict=True) if m}
+    assert {x for x, _, _ in front} == exact
+    everything = nsga.Archive()
+    for x, fx in zip(xs, F, strict=True):
+        everything.add(x, fx, feasible=False)
+    assert {x for x, _, _ in everything.frontier()} == {
+        x for x, m in zip(xs, nsga.non_dominated_mask(F), strict=True) if m}
+    with pytest.raises(ValueError, match="feasibility"):
+        a = nsga.NSGA2(nv)
+        a.tell(f(a.ask()), feasible=[True])

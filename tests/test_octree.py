@@ -114,8 +114,15 @@ def test_structure_and_lookups(reference_run) -> None:
     # every frontier is non-dominated and sorted
     for fr in store.frontiers:
         assert np.all(np.diff(fr.power_w) >= 0) and np.all(np.diff(fr.error) <= 0)
-    # the max-quality setting is never dominated in error: each frontier's least error is 0
-    assert all(float(fr.error.min()) == 0.0 for fr in store.frontiers)
+    # the max-quality setting is never dominated in error: each frontier's least error is 0, unless it
+    # misses the store's frame rate (at this path's 320x240 it takes ~60 ms on mobile at some cameras);
+    # then every point keeps up: a frontier mixes no settings that miss it with ones that meet it
+    period = 1.0 / store.fps
+    assert store.frame_times_known
+    for fr in store.frontiers:
+        assert float(fr.error.min()) == 0.0 or np.all(fr.frame_time_s <= period)
+        assert np.all(fr.frame_time_s <= period) or np.all(fr.frame_time_s > period)
+    assert any(float(fr.error.min()) > 0.0 for fr in store.frontiers)  # the frame rate did decide
 
 
 @pytest.mark.slow
@@ -305,16 +312,18 @@ def test_path_sampling_without_guards_and_determinism(scene) -> None:
 
     ev = Evaluator(scene, SPACE, cache=cache, profile="mobile", fps=30.0, target_pixels=320 * 240)
     step = coarse.stats()["power_step_w"]
+    time_step = max(float(fr.frame_time_s.max()) for fr in coarse.frontiers) / 65535
     for fid, fr in enumerate(coarse.frontiers):
         eye, fwd = coarse.frontier_eyes[fid], coarse.frontier_dirs[fid]
         cam = CameraSpec(tuple(eye), tuple(fwd), tuple(view_up(fwd)), coarse.vfov, 16, 12)
         got = ev.evaluate([(cam, unpack_indices(int(p), coarse.n_params)) for p in fr.packed])
         assert np.allclose([g.error for g in got], fr.error, atol=2e-5)
         assert np.allclose([g.power_w for g in got], fr.power_w, atol=step)
+        assert np.allclose([g.frame_time_s for g in got], fr.frame_time_s, rtol=0, atol=time_step)
     assert ev.evaluations == 0  # every one of them was rendered by the optimiser at that very camera
     for store in (coarse, fine):
-        assert all(float(fr.error.min()) == 0.0 for fr in store.frontiers)
-        for fr in store.frontiers:
+        for fr in store.frontiers:  # max quality (error 0) unless it misses the frame rate
+            assert float(fr.error.min()) == 0.0 or np.all(fr.frame_time_s <= 1.0 / store.fps)
             assert np.all(np.diff(fr.power_w) >= 0) and np.all(np.diff(fr.error) <= 0)
     with pytest.raises(ValueError):
         OptimizeConfig(path_resolution=0.0)
@@ -338,9 +347,14 @@ def _digest(store: ParetoStore) -> str:
 # per node visit) the optimiser still writes the previous digests, edb20ba2... and 013ba3ee....
 # Re-recorded again when the renders themselves changed (issue 12's shading: GGX specular and glossy rays,
 # f0 from the IOR, Principled layering, SH ambient, Cycles' light falloffs), the octree code unchanged.
+# Re-recorded when power became the power at the frame rate reached and the searches put settings that
+# miss 30 fps behind those that keep up (store format 4 with frame times; at this path's 320x240 the
+# costliest settings take up to ~70 ms on mobile). With the old power (P_static + E * fps), every setting
+# counted as keeping up and the frame-time fields dropped (version 3), the optimiser still writes the
+# previous digests, 62a5886b... and 999ff659....
 RECORDED = {
-    "axis_d1_min1": "62a5886b74543969921b0e3e825efa312c644230723972231f41333fff7a71de",
-    "path_d4_guard0": "999ff65988e1cd89d7970ff23ab404bacf6d5946d6cf5433524a13923d32f7ce",
+    "axis_d1_min1": "8c672f8c577d11fbaf4340fba747719ab87759501baf7e028571fca1c1313ce1",
+    "path_d4_guard0": "09e7b188b51a533072386a7aacdbf8dfa67754182a2a49a0eb4180ec3e358ab8",
 }
 
 

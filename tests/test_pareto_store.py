@@ -384,7 +384,7 @@ def test_view_dirs_roundtrip_and_old_version_loads_as_axis_views() -> None:
     s = _aimed_store()
     text = s.to_json()
     doc = json.loads(text)
-    assert doc["version"] == 3 and "view_dirs" in doc
+    assert doc["version"] == FORMAT_VERSION and "view_dirs" in doc
     t = ParetoStore.from_json(text)
     assert t.to_json() == text
     assert np.allclose(t.view_dirs, quantise_directions(s.view_dirs))
@@ -428,7 +428,7 @@ def test_frontier_cameras_roundtrip_and_locate_matches_lookup() -> None:
     s.__post_init__()
     text = s.to_json()
     doc = json.loads(text)
-    assert doc["version"] == 3 and "frontier_dirs" in doc and "frontier_eyes" in doc
+    assert doc["version"] == FORMAT_VERSION and "frontier_dirs" in doc and "frontier_eyes" in doc
     t = ParetoStore.from_json(text)
     assert t.to_json() == text  # decoding and re-encoding is stable
     assert np.allclose(t.frontier_eyes, quantise_eyes(eyes, s.root_min, s.root_size), atol=1e-12)
@@ -477,3 +477,106 @@ def test_root_cube_resting_on_the_path_still_contains_it(pts, pad) -> None:
     assert np.all(p >= lo2 - 1e-9) and np.all(p <= lo2 + size2 + 1e-9)
     assert lo2[2] >= lo[2]
     assert lo2[2] >= p[:, 2].min() - pad * np.ptp(p[:, 2]) - 1e-9
+
+
+# ------------------------------------------------------------------------------------------ frame times
+
+
+def _timed_store(times: list[np.ndarray], fps: float = 30.0) -> ParetoStore:
+    """The one-cube store with frontier i's frame times ``times[i % len(times)]`` (frontiers unchanged)."""
+    s = _store()
+    frontiers = [Frontier(f.packed, f.error, f.power_w, times[i % len(times)][: len(f)])
+                 for i, f in enumerate(s.frontiers)]
+    return ParetoStore(s.parameters, s.root_min, s.root_size, s.lattice_depth, s.children, s.corner_coords,
+                       s.corner_views, frontiers, vfov=s.vfov, aspect=s.aspect, fps=fps)
+
+
+def test_frontier_of_settings_that_meet_the_frame_rate() -> None:
+    packed, err = [1, 2, 3, 4], [0.0, 0.01, 0.05, 0.2]
+    power = [0.7, 0.9, 0.5, 0.3]  # the max-quality setting draws less than the next: it runs slowly
+    times = [0.75, 0.12, 0.01, 0.001]
+    fr = Frontier.from_points(packed, err, power, times, fps=30.0)
+    assert fr.packed.tolist() == [4, 3] and fr.frame_time_s.tolist() == [0.001, 0.01]
+    # without frame times (or when no setting keeps up) the slow settings stay on the frontier
+    assert Frontier.from_points(packed, err, power).packed.tolist() == [4, 3, 1]
+    slow = Frontier.from_points(packed, err, power, [1.0] * 4, fps=30.0)
+    assert slow.packed.tolist() == [4, 3, 1] and slow.meeting(30.0) is slow
+    with pytest.raises(ValueError, match="fps"):
+        Frontier.from_points(packed, err, power, times)
+    with pytest.raises(ValueError, match="frame times"):
+        Frontier.from_points(packed, err, power, [0.1, -1.0, 0.1, 0.1], fps=30.0)
+    with pytest.raises(ValueError, match="frame times"):
+        Frontier(np.asarray([1], dtype=np.uint32), np.zeros(1), np.ones(1), np.asarray([math.nan]))
+
+
+@settings(max_examples=60, deadline=None)
+@given(times=st.lists(st.lists(st.floats(0.0, 5.0), min_size=6, max_size=6), min_size=1, max_size=4),
+       fps=st.sampled_from([30.0, 24.0, 60.0, 10.0, 29.97]), edge=st.booleans())
+def test_frame_times_round_trip_on_their_side_of_the_frame_period(times: list[list[float]], fps: float,
+                                                                  edge: bool) -> None:
+    t = [np.asarray(v) for v in times]
+    if edge:  # frame times exactly on, and one rounding step either side of, the frame period
+        t[0][:3] = [1.0 / fps, np.nextafter(1.0 / fps, 0.0), np.nextafter(1.0 / fps, 1.0)]
+    s = _timed_store(t, fps)
+    text = s.to_json()
+    doc = json.loads(text)
+    assert doc["version"] == FORMAT_VERSION == 4 and "frontier_frame_time" in doc
+    back = ParetoStore.from_json(text)
+    assert back.frame_times_known and back.to_json() == text
+    step = doc["frame_time_scale"] / 65535
+    for a, b in zip(s.frontiers, back.frontiers, strict=True):
+        assert np.all(np.abs(a.frame_time_s - b.frame_time_s) <= step * (1 + 1e-9))
+        for x, y in zip(a.frame_time_s, b.frame_time_s, strict=True):
+            assert (x <= 1.0 / fps) == (y <= 1.0 / fps)  # still on its side of the frame period
+            if x > 1.0 / fps:
+                assert y >= x or y == pytest.approx(x, rel=1e-12)  # never optimistic for a slow frame
+    assert back.stats()["frame_times_known"]
+
+
+def test_lookup_marks_the_frame_rate_and_never_picks_a_slow_setting_when_a_fast_one_exists() -> None:
+    fast_and_slow = np.asarray([0.001, 0.01, 0.02, 0.03, 0.2, 0.9])  # the last two miss 30 fps
+    slow_and_cheap = np.asarray([0.9, 0.2, 0.01, 0.02, 0.001, 0.03])  # slow settings at the cheap end
+    all_slow = np.full(6, 0.5)
+    s = _timed_store([fast_and_slow, slow_and_cheap, all_slow])
+    budgets = ({"power_budget": 1e3}, {"error_budget": 0.0}, {"power_budget": 0.0}, {"error_budget": 1.0})
+    for budget in budgets:
+        for direction in ([1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]):
+            hit = s.lookup([0.2, 0.2, 0.2], direction=direction, **budget)
+            fr = s.frontiers[int(s.corner_views[hit.corner, hit.view])]
+            points = zip(fr.packed, fr.power_w, fr.error, fr.frame_time_s, strict=True)
+            t = next(ft for pk, pw, e, ft in points if (pk, pw, e) == (hit.packed, hit.power_w, hit.error))
+            assert hit.frame_time_s == t
+            if (fr.frame_time_s <= 1 / 30).any():
+                assert hit.meets_fps is True and hit.fps == 30.0 and t <= 1 / 30
+            else:  # no setting keeps up: the pick says so, with the frame rate it reaches
+                assert hit.meets_fps is False and hit.fps == pytest.approx(1 / t)
+    # a store without frame times (format before 4): unknown, and the old answers
+    old = _store()
+    hit = old.lookup([0.2, 0.2, 0.2], direction=[1, 0, 0], power_budget=1e3)
+    assert (hit.frame_time_s, hit.fps, hit.meets_fps) == (None, None, None)
+    assert not old.frame_times_known and "frontier_frame_time" not in old.to_dict()
+
+
+def test_stores_before_frame_times_still_load() -> None:
+    """A version-3 document (no frame times) loads with frame times unknown; a store mixing frontiers
+    with and without them, or with a bad scale or length, is refused."""
+    doc = _store(subdivide=True).to_dict()
+    doc["version"] = 3
+    v3 = ParetoStore.from_dict(doc)
+    assert not v3.frame_times_known and v3.lookup([0.3, 0.3, 0.3], direction=[0, 1, 0],
+                                                  error_budget=0.1).meets_fps is None
+    timed = _timed_store([np.full(6, 0.01)]).to_dict()
+    for key, value in (("frame_time_scale", 0.0), ("frame_time_scale", math.inf),
+                       ("frontier_frame_time", "<u2:AAA=")):
+        bad = dict(timed, **{key: value})
+        with pytest.raises(ValueError):
+            ParetoStore.from_dict(bad)
+    s = _store()
+    mixed = [Frontier(f.packed, f.error, f.power_w, np.zeros(len(f)) if i else None)
+             for i, f in enumerate(s.frontiers)]
+    with pytest.raises(ValueError, match="every frontier"):
+        ParetoStore(s.parameters, s.root_min, s.root_size, 0, s.children, s.corner_coords, s.corner_views,
+                    mixed)
+    with pytest.raises(ValueError, match="fps"):
+        ParetoStore(s.parameters, s.root_min, s.root_size, 0, s.children, s.corner_coords, s.corner_views,
+                    s.frontiers, fps=0.0)

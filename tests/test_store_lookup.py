@@ -1,7 +1,8 @@
 """The fast store lookup gives exactly the answers of the lookup it replaced (``tests/store_reference.py``)
 over random stores, poses and budgets: inside and outside the root, on cell middles and face edges
 (ties), matrices with any scale, infeasible budgets, budgets equal to frontier points, single-point
-frontiers."""
+frontiers, and frame times (none, all or some settings keeping up with the store's frame rate, on the
+frame period itself)."""
 
 from __future__ import annotations
 
@@ -54,6 +55,11 @@ def stores(draw: st.DrawFn) -> ParetoStore:
                 xyz = (x + s * (k & 1), y + s * ((k >> 1) & 1), z + s * ((k >> 2) & 1))
                 corners.setdefault(xyz, len(corners))
     n_frontiers = draw(st.integers(1, 12))
+    fps = draw(st.sampled_from([30.0, 24.0, 60.0, 29.97]))
+    timed = draw(st.booleans())  # frame times known (format 4) or not
+    period = 1.0 / fps
+    times = st.one_of(st.floats(0.0, 0.2), st.sampled_from(
+        [period, float(np.nextafter(period, 0.0)), float(np.nextafter(period, 1.0)), 0.0, 5.0]))
     frontiers = []
     for _ in range(n_frontiers):
         n = draw(st.integers(1, 6))  # single-point frontiers included
@@ -61,7 +67,11 @@ def stores(draw: st.DrawFn) -> ParetoStore:
                   for _ in range(n)]
         err = draw(st.lists(st.floats(0.0, 1.0), min_size=n, max_size=n))
         pw = draw(st.lists(st.floats(0.0, 20.0), min_size=n, max_size=n))
-        frontiers.append(Frontier.from_points(packed, err, pw))
+        fr = Frontier.from_points(packed, err, pw)
+        if timed:  # any mix of settings that meet and miss the frame rate, wherever they lie on it
+            t = draw(st.lists(times, min_size=len(fr), max_size=len(fr)))
+            fr = Frontier(fr.packed, fr.error, fr.power_w, np.asarray(t))
+        frontiers.append(fr)
     n_views = 6 * len(corners)
     views = draw(st.lists(st.integers(0, n_frontiers - 1), min_size=n_views, max_size=n_views))
     coords = np.zeros((len(corners), 3), dtype=np.int64)
@@ -71,7 +81,7 @@ def stores(draw: st.DrawFn) -> ParetoStore:
     size = draw(st.sampled_from([1.0, 2.0, 20.0, 0.3, 123.456]))
     return ParetoStore(PARAMS, np.asarray(root_min), size, depth, np.asarray(children), coords,
                        np.asarray(views).reshape(-1, 6), frontiers, vfov=draw(st.floats(0.1, 2.5)),
-                       aspect=draw(st.sampled_from([16 / 9, 4 / 3, 1.0, 0.5])))
+                       aspect=draw(st.sampled_from([16 / 9, 4 / 3, 1.0, 0.5])), fps=fps)
 
 
 AXES = [(1, 0, 0), (0, 1, 0), (0, 0, 1), (-1, 0, 0), (1, 1, 0), (1, -1, 0), (1, 1, 1), (-1, 1, -1),
@@ -148,7 +158,10 @@ def test_fast_lookup_equals_the_reference(data: st.DataObject) -> None:
             continue
         got = store.lookup(where, fov=fov, aspect=aspect, **pose, **budget)
         assert (got.indices, got.packed, got.settings, got.power_w, got.error, got.clamped, got.infeasible,
-                got.corner, got.view, got.leaf) == want
+                got.corner, got.view, got.leaf, got.frame_time_s, got.fps, got.meets_fps) == want
+        if got.meets_fps is False:  # a setting that misses the frame rate only when none meets it
+            fr = store.frontiers[int(store.corner_views[got.corner, got.view])]
+            assert not np.any(fr.frame_time_s <= 1.0 / store.fps)
         want_cv = ref.locate(where, fov=fov, aspect=aspect, **pose)
         assert store.locate(where, fov=fov, aspect=aspect, **pose) == want_cv
 

@@ -210,6 +210,8 @@ def summarise(outcome: campaign.Outcome, out: Path) -> None:
     say(report.table3_markdown(outcome.summaries, title=f"Table 3: {s['scene']}"))
     for line in campaign.target_lines(outcome.targets, st["size_bytes"]):
         say(line)
+    for line in s.get("real_time_notes", ()):
+        say(f"- {line}")
     total = next(p for p in s["phases"] if p["phase"] == "total")
     evaluate = next(p for p in s["phases"] if p["phase"] == "evaluate")
     say(f"\nwrote {out}/: report.md, per_frame.csv, power_over_time.png, error_over_time.png, store.json, "

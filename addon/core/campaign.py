@@ -380,9 +380,9 @@ def notes(measured: Measured, spec: CampaignSpec, path: CameraPath, store: Paret
     fixed = ", ".join(store.meta.get("fixed_parameters") or {}) or "none"
     return [
         measured.power_reason + ".", measured.error_reason + ": issue 7's target error.",
-        f"Evaluated at {w}x{h} (preview resolution); power is the simulator's for the path's {pw}x{ph} at "
-        f"{path.fps:g} fps (static power plus dynamic power scaled by the pixel count, as the store "
-        "predicts it).",
+        f"Evaluated at {w}x{h} (preview resolution); power is the simulator's for the path's {pw}x{ph} "
+        f"asked for {path.fps:g} fps (static power plus dynamic energy and frame time scaled by the pixel "
+        "count, as the store predicts it), drawn at the frame rate reached.",
         f"Frames: {n} of {len(path)} path frames evaluated (every {step}th, {step / path.fps:.2f} s apart); "
         f"the temporal filter (T = {spec.filter_period_s:g} s) runs over the evaluated frames in path order. "
         "`frame` in per_frame.csv and in the sample file names is the index into the camera path.",
@@ -471,8 +471,10 @@ def run(client: ServiceClient, store_text: str, path: CameraPath, spec: Campaign
     targets = check_targets(summaries)
     flat, _views, share = background_views(store, path, measured.frames)
     targets.update(background_views=flat, background_view_frames=share)
+    profile = spec.profile or store.profile
+    real_time = report.real_time_notes(summaries, path.fps, f"on the `{profile}` profile at {pw}x{ph}")
     written = report.write_report(out, measured.rows, title=title, plot=plot,
-                                  notes=notes(measured, spec, path, store),
+                                  notes=[*notes(measured, spec, path, store), *real_time],
                                   budget=[("POWER", measured.power_budget), ("ERROR", measured.error_budget)],
                                   sections=sections(targets, store, path, measured, pre, clock, samples))
     clock.stop("report", t)
@@ -482,6 +484,9 @@ def run(client: ServiceClient, store_text: str, path: CameraPath, spec: Campaign
         "frames_evaluated": len(measured.frames), "frame_step": spec.frame_step, "path_frames": len(path),
         "power_budget_w": measured.power_budget, "error_budget": measured.error_budget,
         "budget_choice": measured.power_reason, "store": {**store.stats(), "meta": dict(store.meta)},
+        "profile": profile, "fps_target": path.fps,
+        "real_time_presets": [s.mode for s in summaries if s.mode in report.PRESET_LEVELS and s.real_time],
+        "real_time_notes": real_time,
         "summaries": [dataclasses.asdict(s) for s in summaries], "targets": targets,
         "phases": clock.phases, "report": str(written["report"]),
     }

@@ -10,7 +10,8 @@ and Power.
 The Power pass shows where the frame's dynamic power goes, tile by tile: the tracer reports every tile's
 own activity counters and closest-hit comparisons (they sum to the frame's), the energy model prices
 each tile's activity (``sim_core.price``; its energy is linear in them, so the tiles' energies sum to the
-frame's), and a pixel holds its tile's power at the scene's frame rate spread evenly over the tile's
+frame's), and a pixel holds its tile's power at the frame rate the GPU reaches (the scene's when the
+frame keeps up, else its own lower rate: ``sim_core.sustained_power``) spread evenly over the tile's
 pixels, in microwatts: the pass sums to the frame's dynamic power (static power is the same everywhere
 and left out).
 """
@@ -81,10 +82,11 @@ class FrameOutput:
     settings: FrameSettings
     profile: str
     fps: float
-    power_w: float  # simulated: static + dynamic at fps
-    dynamic_power_w: float
+    power_w: float  # simulated: static + dynamic at achieved_fps (never above the full-speed power)
+    dynamic_power_w: float  # at achieved_fps
     frame_time_s: float
     deadline_met: bool
+    achieved_fps: float  # the frame rate reached: fps when the deadline is met, else 1 / frame_time_s
     render_resolution: tuple[int, int]
     render_s: float
     counters: dict[str, int] = field(default_factory=dict)
@@ -109,12 +111,16 @@ class FrameOutput:
         area = width * height / (full_w * full_h)
         share = dynamic / self.dynamic_power_w if self.dynamic_power_w > 0 else area
         frame_time = self.frame_time_s * share
+        # the window's own energy, drawn at the rate its own (shorter) frame time reaches
+        static = self.power_w - self.dynamic_power_w
+        power, reached = sim_core.sustained_power(static, dynamic / self.achieved_fps, frame_time, self.fps)
+        passes["Power"] = passes["Power"] * np.float32(reached / self.achieved_fps)
         note = (f"off-centre camera: a {full_w}x{full_h} centred frame was traced and its {width}x{height} "
                 f"window kept; power and frame time are the window's share")
         return dataclasses.replace(
             self, combined=np.ascontiguousarray(self.combined[rows, cols]), passes=passes,
-            power_w=self.power_w - self.dynamic_power_w + dynamic, dynamic_power_w=dynamic,
-            frame_time_s=frame_time, deadline_met=frame_time <= 1.0 / self.fps, notes=(*self.notes, note))
+            power_w=power, dynamic_power_w=power - static, frame_time_s=frame_time,
+            deadline_met=frame_time <= 1.0 / self.fps, achieved_fps=reached, notes=(*self.notes, note))
 
     def metadata(self) -> dict[str, str]:
         """Image metadata (stamp fields, written into the EXR header / PNG text by Blender)."""
@@ -128,6 +134,7 @@ class FrameOutput:
             "deadline_met": "yes" if self.deadline_met else "no",
             "profile": self.profile,
             "fps": f"{self.fps:g}",
+            "achieved_fps": f"{self.achieved_fps:.4g}",
             "render_resolution": "{}x{}".format(*self.render_resolution),
         }
         if s.predicted_power_w is not None:
@@ -244,10 +251,12 @@ def render_frame(scene: Any, view: CameraView, frame_settings: FrameSettings, *,
     combined[..., 3] = np.where(hit, 1.0, 0.0) if transparent else 1.0
     if transparent:
         combined[..., :3] *= combined[..., 3:]  # Blender's render results are premultiplied
-    dynamic_w = float(report.dynamic_energy_j) * float(fps)
+    rate = float(report.achieved_fps)  # power is drawn at the frame rate reached (sim_core.sustained_power)
+    dynamic_w = float(report.power_w) - prof.static_power_w
     out = FrameOutput(combined, {}, frame_settings, prof.name, float(fps), float(report.power_w), dynamic_w,
-                      float(report.frame_time_s), bool(report.deadline_met), tuple(result.render_resolution),
-                      render_s, {k: int(v) for k, v in result.counters.items()}, measured_error=measured)
+                      float(report.frame_time_s), bool(report.deadline_met), rate,
+                      tuple(result.render_resolution), render_s,
+                      {k: int(v) for k, v in result.counters.items()}, measured_error=measured)
     if not passes:
         return out
     depth = np.where(hit, _nearest(np.asarray(aovs["depth"]), h, w), BACKGROUND_DEPTH)
@@ -259,7 +268,7 @@ def render_frame(scene: Any, view: CameraView, frame_settings: FrameSettings, *,
     index = np.where(hit, lookup[np.maximum(object_id, 0)], 0.0)
     energy = tile_energy(result.tile_stats, prof, float(fps), settings, scene)
     normal = np.where(hit[..., None], _nearest(np.asarray(aovs["normal"]), h, w), 0.0)
-    power = power_pass(result.tile_stats, energy, float(fps), result.render_resolution, (w, h))
+    power = power_pass(result.tile_stats, energy, rate, result.render_resolution, (w, h))
     out.passes = {
         "Depth": depth.astype(np.float32)[..., None],
         "Normal": normal.astype(np.float32),
@@ -272,7 +281,7 @@ def render_frame(scene: Any, view: CameraView, frame_settings: FrameSettings, *,
 
 CSV_COLUMNS_BEFORE = ("frame", "time_s", "source")
 CSV_COLUMNS_AFTER = ("predicted_power_w", "simulated_power_w", "predicted_error", "measured_error",
-                     "frame_time_ms",
+                     "frame_time_ms", "achieved_fps",
                      "deadline_met", "in_transition", "clamped", "infeasible", "render_s")
 
 
@@ -300,6 +309,7 @@ class AnimationLog:
             "predicted_error": "" if s.predicted_error is None else f"{s.predicted_error:.6g}",
             "measured_error": "" if out.measured_error is None else f"{out.measured_error:.6g}",
             "frame_time_ms": f"{1e3 * out.frame_time_s:.4g}",
+            "achieved_fps": f"{out.achieved_fps:.4g}",
             "deadline_met": int(out.deadline_met),
             "in_transition": int(s.in_transition),
             "clamped": int(s.clamped),

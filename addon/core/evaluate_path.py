@@ -57,8 +57,8 @@ def budget_kept(mode: str, value: float, power_w: float, error: float) -> bool:
 def evaluate_path(client: ServiceClient, store: pareto_store.ParetoStore, path: camera_path.CameraPath,
                   spec: EvalSpec, *, progress: Callable[[int, int], None] | None = None,
                   concurrency: int = 4) -> list[FrameRow]:
-    """Rows for every (sampled frame, mode); errors and power measured by the service, not predicted.
-    A row's ``frame`` is the index into the path.
+    """Rows for every (sampled frame, mode); errors, power and the frame rate reached measured by the
+    service, not predicted. A row's ``frame`` is the index into the path.
 
     The settings of every frame are decided first (the budget-driven mode runs the temporal filter over
     the path in order, exactly as playback does); the evaluations then go out `concurrency` at a time.
@@ -66,7 +66,7 @@ def evaluate_path(client: ServiceClient, store: pareto_store.ParetoStore, path: 
     validate_budget(spec.budget_mode, spec.budget_value)
     presets = preset_settings(store)
     driver = PlaybackDriver(store, spec.filter_period_s)
-    Job = tuple[int, camera_path.CameraFrame, str, dict[str, Any], tuple[float, float] | None]
+    Job = tuple[int, camera_path.CameraFrame, str, dict[str, Any], tuple[float, float, float | None] | None]
     jobs: list[Job] = []
     for number in range(0, len(path), max(1, spec.frame_step)):
         f = path.frames[number]
@@ -77,7 +77,7 @@ def evaluate_path(client: ServiceClient, store: pareto_store.ParetoStore, path: 
                                  spec.budget_value)
                 settings = pf.active_settings
                 if not pf.in_transition:  # the store predicts its target settings only
-                    predicted = (pf.predicted_power_w, pf.predicted_error)
+                    predicted = (pf.predicted_power_w, pf.predicted_error, pf.predicted_fps)
             else:
                 settings = presets[mode]
             jobs.append((number, f, mode, settings, predicted))
@@ -91,8 +91,10 @@ def evaluate_path(client: ServiceClient, store: pareto_store.ParetoStore, path: 
         res = client.evaluate(body)
         p, e = float(res["power_w"]), float(res["error"])
         kept = budget_kept(spec.budget_mode, spec.budget_value, p, e) if mode == "ours" else None
-        pp, pe = predicted or (None, None)
-        return FrameRow(number, f.time, mode, p, e, _settings_text(settings), kept, pp, pe)
+        pp, pe, pfps = predicted or (None, None, None)
+        fps, met = res.get("fps"), res.get("deadline_met")  # a service before frame rates lacks them
+        return FrameRow(number, f.time, mode, p, e, _settings_text(settings), kept, pp, pe,
+                        None if fps is None else float(fps), None if met is None else bool(met), pfps)
 
     rows: list[FrameRow] = []
     with ThreadPoolExecutor(max_workers=max(1, concurrency)) as pool:

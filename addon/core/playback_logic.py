@@ -40,6 +40,8 @@ class PlaybackFrame:
     predicted_error: float
     clamped: bool
     infeasible: bool
+    predicted_fps: float | None = None  # the frame rate the target settings reach (None: store predates it)
+    meets_fps: bool | None = None  # they keep up with the store's frame rate (False: no setting does)
 
     @property
     def in_transition(self) -> bool:
@@ -93,7 +95,7 @@ class PlaybackDriver:
         active = self.filter.update(hit.indices, now_s)
         settings = hit.settings if active == hit.indices else self.store.settings_of(active)
         return PlaybackFrame(active, tuple(hit.indices), settings, hit.power_w, hit.error, hit.clamped,
-                             hit.infeasible)
+                             hit.infeasible, hit.fps, hit.meets_fps)
 
 
 class StoreCache:
@@ -117,8 +119,9 @@ class StoreCache:
 
 def predicted_path_summary(store: pareto_store.ParetoStore, frames: Sequence[Any], budget_mode: str,
                            budget_value: float) -> dict[str, Any]:
-    """Store size and the power the store predicts along a path under a budget, against the
-    maximum-quality (least-error) point of the same frontiers: what the panel's summary shows.
+    """Store size and the power (and frame rate) the store predicts along a path under a budget, against
+    the least-error point of the same frontiers (the most accurate setting that keeps up with the
+    store's frame rate, where frame times are known): what the panel's summary shows.
 
     Frames where nothing meets the budget are counted, with what the nearest setting costs there: under a
     power budget the cheapest setting's power, under an error budget the most accurate setting's error.
@@ -127,6 +130,8 @@ def predicted_path_summary(store: pareto_store.ParetoStore, frames: Sequence[Any
     validate_budget(budget_mode, budget_value)
     kwargs = {"power_budget": budget_value} if budget_mode == "POWER" else {"error_budget": budget_value}
     chosen = best = 0.0
+    slow = 0
+    rates: list[float] = []
     nearest: list[float] = []
     for f in frames:
         pos = f.matrix_world[:3, 3]
@@ -134,6 +139,9 @@ def predicted_path_summary(store: pareto_store.ParetoStore, frames: Sequence[Any
         top = store.lookup(pos, matrix=f.matrix_world, fov=f.vfov, aspect=f.aspect, error_budget=0.0)
         chosen += hit.power_w
         best += top.power_w
+        slow += int(hit.meets_fps is False)
+        if hit.fps is not None:
+            rates.append(hit.fps)
         if hit.infeasible:
             nearest.append(hit.power_w if budget_mode == "POWER" else hit.error)
     stats = store.stats()
@@ -152,6 +160,9 @@ def predicted_path_summary(store: pareto_store.ParetoStore, frames: Sequence[Any
         "nearest_min": min(nearest) if nearest else None,
         "nearest_max": max(nearest) if nearest else None,
         "frames": len(frames),
+        "fps_target": store.fps,
+        "mean_fps": sum(rates) / len(rates) if rates else None,  # None: the store predates frame times
+        "slow_frames": slow,  # frames where no setting of the store keeps up with fps_target
     }
 
 
@@ -172,11 +183,15 @@ def budget_shortfall(summary: dict[str, Any]) -> str | None:
 
 
 def summary_text(summary: dict[str, Any]) -> str:
+    fps = summary.get("mean_fps")
+    rate = ("frame rate unknown (store before frame times)" if fps is None else
+            f"{fps:.1f} of {summary['fps_target']:g} fps" + (
+                f", {summary['slow_frames']} frames slower" if summary.get("slow_frames") else ""))
     store = (f"{summary['views']} views, {summary['corners']} corners, depth {summary['depth']}, "
              f"{summary['size_bytes'] / 1024:.1f} KB")
     shortfall = budget_shortfall(summary)
     if shortfall:
-        return f"{store}; {shortfall}"
+        return f"{store}; {shortfall}; {rate}"
     return (f"{store}; predicted {summary['mean_power_w']:.3f} W vs "
-            f"{summary['mean_max_quality_power_w']:.3f} W at max quality "
-            f"({100 * summary['predicted_saving']:.1f} % saved)")
+            f"{summary['mean_max_quality_power_w']:.3f} W at the most accurate setting "
+            f"({100 * summary['predicted_saving']:.1f} % saved), {rate}")

@@ -133,6 +133,7 @@ def render(scene: Any, matrix_world: Sequence[Sequence[float]], vfov: float, wid
     energy = {"power_w": float(report.power_w), "frame_time_s": float(report.frame_time_s),
               "max_fps": float(report.max_fps), "deadline_met": bool(report.deadline_met),
               "bottleneck": str(report.bottleneck), "profile": profile, "fps": float(fps),
+              "achieved_fps": float(report.achieved_fps),  # the rate power_w is drawn at
               "energy_j": {k: float(v) for k, v in report.energy_j.items()}}
     counters = {k: int(v) for k, v in result.counters.items()}
     return Preview(np.asarray(result.image, dtype=np.float32), float(report.power_w),

@@ -26,12 +26,13 @@ MODE_LABELS: dict[str, str] = {
     "min": "Min",
 }
 CSV_FIELDS = ("frame", "time_s", "mode", "power_w", "error", "settings", "budget_kept", "predicted_power_w",
-              "predicted_error")
+              "predicted_error", "fps", "deadline_met", "predicted_fps")
 
 
 @dataclass(frozen=True)
 class FrameRow:
-    """Figures of one frame rendered in one mode."""
+    """Figures of one frame rendered in one mode. ``power_w`` is drawn at ``fps``, the frame rate the
+    modelled GPU reaches (the path's when the frame meets its deadline, else its own lower rate)."""
 
     frame: int
     time_s: float
@@ -42,10 +43,17 @@ class FrameRow:
     budget_kept: bool | None = None  # only meaningful for budget-driven modes
     predicted_power_w: float | None = None  # the store's prediction (budget-driven modes, on target)
     predicted_error: float | None = None
+    fps: float | None = None  # the frame rate reached (None: not measured, e.g. an older CSV)
+    deadline_met: bool | None = None  # the frame keeps up with the path's frame rate
+    predicted_fps: float | None = None  # the store's (budget-driven modes on target, stores with frame times)
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.power_w) and math.isfinite(self.error)):
             raise ValueError(f"non-finite power/error at frame {self.frame} ({self.mode})")
+        for rate in (self.fps, self.predicted_fps):
+            if rate is not None and not (math.isfinite(rate) and rate > 0):
+                raise ValueError(f"frame rates must be finite and positive at frame {self.frame} "
+                                 f"({self.mode})")
 
 
 @dataclass(frozen=True)
@@ -64,6 +72,14 @@ class ModeSummary:
     mean_error: float
     saving_vs_max: float | None  # fraction of the max preset's mean power saved
     budget_kept_fraction: float | None
+    mean_fps: float | None = None  # mean frame rate reached (None: not measured)
+    min_fps: float | None = None
+    real_time_fraction: float | None = None  # share of frames that keep up with the path's frame rate
+
+    @property
+    def real_time(self) -> bool | None:
+        """Every frame keeps up with the path's frame rate (None: not measured)."""
+        return None if self.real_time_fraction is None else self.real_time_fraction >= 1.0
 
 
 def preset_indices(value_counts: Sequence[int], max_quality: Sequence[int], level: float) -> list[int]:
@@ -97,7 +113,11 @@ def summarise(rows: Iterable[FrameRow]) -> list[ModeSummary]:
         p, e = means[mode]
         saving = (1.0 - p / max_power) if max_power else None
         kept = [r.budget_kept for r in rs if r.budget_kept is not None]
-        out.append(ModeSummary(mode, len(rs), p, e, saving, (sum(kept) / len(kept)) if kept else None))
+        fps = [r.fps for r in rs if r.fps is not None]
+        met = [r.deadline_met for r in rs if r.deadline_met is not None]
+        out.append(ModeSummary(mode, len(rs), p, e, saving, (sum(kept) / len(kept)) if kept else None,
+                               sum(fps) / len(fps) if fps else None, min(fps) if fps else None,
+                               sum(met) / len(met) if met else None))
     order = list(MODE_LABELS)
     out.sort(key=lambda s: order.index(s.mode) if s.mode in order else len(order))
     return out
@@ -112,6 +132,12 @@ def table3_markdown(summaries: Sequence[ModeSummary], title: str = "") -> str:
     lines.append("| | " + " | ".join(labels) + " |")
     lines.append("|---|" + "---|" * len(labels))
     lines.append("| Avg. Power (W) | " + " | ".join(f"{s.mean_power_w:.3f}" for s in summaries) + " |")
+    if any(s.mean_fps is not None for s in summaries):
+        lines.append("| Avg. fps (reached) | " + " | ".join(
+            "" if s.mean_fps is None else f"{s.mean_fps:.3g}" for s in summaries) + " |")
+        lines.append("| Frames at target fps | " + " | ".join(
+            "" if s.real_time_fraction is None else f"{100.0 * s.real_time_fraction:.0f} %"
+            for s in summaries) + " |")
     lines.append("| Avg. Error (e) | " + " | ".join(f"{s.mean_error:.4f}" for s in summaries) + " |")
     lines.append("| Power saved vs Max | " + " | ".join(
         "" if s.saving_vs_max is None else f"{100.0 * s.saving_vs_max:.1f} %" for s in summaries) + " |")
@@ -130,13 +156,37 @@ def write_csv(path: str | Path, rows: Iterable[FrameRow]) -> Path:
         w.writerow(CSV_FIELDS)
         for r in rows:
             kept = "" if r.budget_kept is None else int(r.budget_kept)
+            met = "" if r.deadline_met is None else int(r.deadline_met)
             w.writerow([r.frame, f"{r.time_s:.6f}", r.mode, f"{r.power_w:.6g}", f"{r.error:.6g}",
-                        r.settings, kept, _opt(r.predicted_power_w), _opt(r.predicted_error)])
+                        r.settings, kept, _opt(r.predicted_power_w), _opt(r.predicted_error), _opt(r.fps),
+                        met, _opt(r.predicted_fps)])
     return path
 
 
 def _opt(v: float | None) -> str:
     return "" if v is None else f"{v:.6g}"
+
+
+def real_time_notes(summaries: Sequence[ModeSummary], fps: float, where: str) -> list[str]:
+    """Which fixed presets keep up with ``fps`` on every evaluated frame (``where``: the profile and
+    resolution, for the sentence), and what power saved against Max means when Max does not."""
+    presets = [s for s in summaries if s.mode in PRESET_LEVELS and s.real_time_fraction is not None]
+    if not presets:
+        return []
+    label = {s.mode: MODE_LABELS.get(s.mode, s.mode) for s in presets}
+    fast = [label[s.mode] for s in presets if s.real_time]
+    slow = [f"{label[s.mode]} ({s.mean_fps:.3g} fps on average, {100 * s.real_time_fraction:.0f} % of frames "
+            "at the target)" for s in presets if not s.real_time]
+    notes = [f"Real time ({fps:g} fps) {where}: " + (", ".join(fast) or "no preset") + "; not real time: "
+             + ("; ".join(slow) or "none") + ". Power is what the modelled GPU draws at the frame rate it "
+             "reaches (the target when a frame meets its deadline, else its own lower rate), so it never "
+             "exceeds the GPU's full-speed power."]
+    mx = next((s for s in presets if s.mode == "max"), None)
+    if mx is not None and not mx.real_time:
+        notes.append(f"The Max preset is not real time here: it delivers {mx.mean_fps:.3g} fps, not {fps:g}, "
+                     "and draws its power at that rate; 'power saved vs Max' compares each mode with a GPU "
+                     "that shows fewer frames, and says nothing about energy per frame.")
+    return notes
 
 
 def prediction_notes(rows: Sequence[FrameRow]) -> list[str]:
@@ -149,22 +199,36 @@ def prediction_notes(rows: Sequence[FrameRow]) -> list[str]:
         pp = sum(r.predicted_power_w or 0.0 for r in rs) / len(rs)
         me = sum(r.error for r in rs) / len(rs)
         mp = sum(r.power_w for r in rs) / len(rs)
+        timed = [r for r in rs if r.predicted_fps is not None and r.fps is not None]
+        rate = ""
+        if timed:  # the frame rate the store predicted against the one reached (stores with frame times)
+            pf = sum(r.predicted_fps or 0.0 for r in timed) / len(timed)
+            mf = sum(r.fps or 0.0 for r in timed) / len(timed)
+            agree = sum(math.isclose(r.predicted_fps or 0.0, r.fps or 0.0, rel_tol=1e-6) for r in timed)
+            rate = (f"; frame rate predicted {pf:.3g} fps, reached {mf:.3g} fps (equal on {agree} of "
+                    f"{len(timed)})")
+        close = sum(abs((r.predicted_power_w or 0.0) - r.power_w) <= 0.1 * r.power_w for r in rs)
+        gap = sum(abs((r.predicted_error or 0.0) - r.error) for r in rs) / len(rs)
         notes.append(f"{MODE_LABELS.get(mode, mode)}: the store predicted mean error {pe:.4f} and power "
                      f"{pp:.3f} W; measured at the path's cameras: {me:.4f} and {mp:.3f} W "
-                     f"({len(rs)} frames on target)")
+                     f"({len(rs)} frames on target; power within 10 % on {close}, mean |error predicted - "
+                     f"measured| {gap:.4f}){rate}")
     return notes
 
 
 def read_csv(path: str | Path) -> list[FrameRow]:
     rows = []
     with Path(path).open(newline="", encoding="utf-8") as fh:
-        for rec in csv.DictReader(fh):
-            kept = rec.get("budget_kept", "")
+        for rec in csv.DictReader(fh):  # columns a CSV of an earlier version lacks are None
+            kept, met = rec.get("budget_kept") or "", rec.get("deadline_met") or ""
             pp, pe = rec.get("predicted_power_w") or "", rec.get("predicted_error") or ""
+            fps, pf = rec.get("fps") or "", rec.get("predicted_fps") or ""
             rows.append(FrameRow(int(rec["frame"]), float(rec["time_s"]), rec["mode"], float(rec["power_w"]),
                                  float(rec["error"]), rec.get("settings", ""),
                                  None if kept == "" else bool(int(kept)),
-                                 None if pp == "" else float(pp), None if pe == "" else float(pe)))
+                                 None if pp == "" else float(pp), None if pe == "" else float(pe),
+                                 None if fps == "" else float(fps), None if met == "" else bool(int(met)),
+                                 None if pf == "" else float(pf)))
     return rows
 
 

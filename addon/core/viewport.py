@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+import sim_core
 from service.store import camera as camera_maths
 
 from .engine_frame import CameraView, render_frame
@@ -60,15 +61,21 @@ class ViewInfo:
     settings_text: str
     source: str
     static_power_w: float
-    dynamic_power_w: float  # at the size rendered
+    dynamic_power_w: float  # at the size rendered, drawn at achieved_fps
     predicted_power_w: float | None
     predicted_error: float | None
     size: tuple[int, int]
+    frame_time_s: float  # at the size rendered
+    fps: float  # the frame rate asked for
+    achieved_fps: float  # the frame rate reached at the size rendered
 
-    def power_at(self, pixels: int) -> float:
-        """Simulated power scaled to ``pixels`` (dynamic energy grows with the pixel count), so a reduced
-        viewport image compares with the store's prediction at the render resolution."""
-        return self.static_power_w + self.dynamic_power_w * pixels / (self.size[0] * self.size[1])
+    def power_at(self, pixels: int) -> tuple[float, float]:
+        """(power W, frame rate reached) scaled to ``pixels`` (dynamic energy and frame time grow with the
+        pixel count; the power is drawn at the rate that frame time reaches), so a reduced viewport image
+        compares with the store's prediction at the render resolution."""
+        ratio = pixels / (self.size[0] * self.size[1])
+        energy = self.dynamic_power_w / self.achieved_fps * ratio
+        return sim_core.sustained_power(self.static_power_w, energy, self.frame_time_s * ratio, self.fps)
 
 
 class ViewportRenderer:
@@ -129,5 +136,6 @@ class ViewportRenderer:
             out = out.window(x0, y0, width, height)
         s = payload.settings
         info = ViewInfo(s.text(), s.source, out.power_w - out.dynamic_power_w, out.dynamic_power_w,
-                        s.predicted_power_w, s.predicted_error, (width, height))
+                        s.predicted_power_w, s.predicted_error, (width, height), out.frame_time_s, out.fps,
+                        out.achieved_fps)
         return out.combined, info

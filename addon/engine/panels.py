@@ -97,7 +97,8 @@ class RENDER_PT_render_budget_hardware(_EnginePanel, bpy.types.Panel):
             layout.prop_search(props, "profile", props, "profiles", text="Profile")
         else:
             layout.prop(props, "profile")
-        layout.label(text=f"Power is priced at the scene's {scene.render.fps / scene.render.fps_base:g} fps")
+        layout.label(text=f"Power at the scene's {scene.render.fps / scene.render.fps_base:g} fps, or the "
+                          "lower rate a slow frame reaches")
         layout.prop(scene.render_budget_engine, "threads")
 
 
@@ -130,7 +131,7 @@ class RENDER_PT_render_budget_last(_EnginePanel, bpy.types.Panel):
         out = last.output
         col = layout.column(align=True)
         col.label(text=f"Frame {last.frame}: {out.power_w:.3f} W simulated "
-                       f"on {out.profile} at {out.fps:g} fps")
+                       f"on {out.profile} at {out.achieved_fps:.3g} of {out.fps:g} fps")
         s = out.settings
         if s.predicted_power_w is not None:
             col.label(text=f"Store predicted {s.predicted_power_w:.3f} W, error {s.predicted_error:.4f}")

@@ -247,7 +247,8 @@ class RenderBudgetEngine(bpy.types.RenderEngine):
             session.log.add(scene.frame_current, t, out)
         last_frame = LastFrame(scene.frame_current, out, layer_passes, session.log.path if session else None,
                                _final_scenes.builds)
-        self.update_stats("", f"{ENGINE_LABEL} | {out.power_w:.3f} W simulated | {settings.text()}")
+        self.update_stats("", f"{ENGINE_LABEL} | {out.power_w:.3f} W simulated at {out.achieved_fps:.3g} "
+                              f"fps | {settings.text()}")
 
     def _write_result(self, out: FrameOutput, layer: str) -> tuple[str, ...]:
         h, w = out.combined.shape[:2]
@@ -366,8 +367,8 @@ def _viewport_status(frame: Any, error: str | None, render_size: tuple[int, int]
     if frame is None:
         return f"{ENGINE_LABEL} | rendering"
     info = frame.info
-    power = info.power_at(render_size[0] * render_size[1])
-    text = f"{ENGINE_LABEL} | {info.source}: {info.settings_text} | {power:.3f} W"
+    power, rate = info.power_at(render_size[0] * render_size[1])
+    text = f"{ENGINE_LABEL} | {info.source}: {info.settings_text} | {power:.3f} W at {rate:.3g} fps"
     if info.predicted_power_w is not None:
         text += f" (store: {info.predicted_power_w:.3f} W, error {info.predicted_error:.4f})"
     if not frame.final:

@@ -348,11 +348,20 @@ class QueryResult(BaseModel):
     settings: dict[str, Any]
     indices: list[int]
     packed: int
-    power_w: float
+    power_w: float = Field(description="predicted power of the target settings at the frame rate they reach")
     error: float
     clamped: bool
     infeasible: bool
     filtered: bool = Field(description="indices come from the temporal filter, not the raw target")
+    frame_time_s: float | None = Field(
+        default=None, description="predicted frame time of the target settings (null: the store predates "
+                                  "frame times)")
+    fps: float | None = Field(default=None, description="the frame rate the target settings reach: "
+                                                        "fps_target when they keep up, else 1 / frame_time_s")
+    fps_target: float = Field(description="the store's frame rate (what its power was priced for)")
+    meets_fps: bool | None = Field(
+        default=None, description="the target settings keep up with fps_target; false only when no setting "
+                                  "of this view does (null: unknown)")
 
 
 # -- render and evaluate -----------------------------------------------------------------------------
@@ -408,8 +417,12 @@ class EvaluateRequest(StrictModel):
 
 class EvaluateResponse(BaseModel):
     error: float
-    power_w: float
+    power_w: float = Field(description="drawn at the frame rate reached (never above the full-speed power)")
     frame_time_s: float
+    fps: float = Field(description="the frame rate reached: fps_target when the frame keeps up, else "
+                                   "1 / frame_time_s")
+    fps_target: float = Field(description="the frame rate asked for (the request's fps)")
+    deadline_met: bool = Field(description="frame_time_s <= 1 / fps_target")
     breakdown: dict[str, Any]
 
 

@@ -60,14 +60,14 @@ def densify(points: np.ndarray, step: float) -> np.ndarray:
 
 @dataclass
 class FrontierRecord:
-    """A frontier as measured at one camera sample: full index vectors with error and power."""
+    """A frontier as measured at one camera sample: full index vectors with error, power and frame time."""
 
     corner: int
     view: int
-    points: list[tuple[Indices, float, float]]
+    points: list[tuple[Indices, float, float, float]]
 
     def settings(self) -> list[Indices]:
-        return [x for x, _, _ in self.points]
+        return [pt[0] for pt in self.points]
 
 
 class Lattice:
@@ -145,7 +145,7 @@ class Lattice:
                 self.corner((x + h * i, y + h * j, z + h * k))
         return children
 
-    def set_frontier(self, corner: int, view: int, points: list[tuple[Indices, float, float]]) -> None:
+    def set_frontier(self, corner: int, view: int, points: list[tuple[Indices, float, float, float]]) -> None:
         """Record a frontier measured for (corner, view)."""
         self.frontiers.append(FrontierRecord(corner, view, points))
         self.corner_views[corner][view] = len(self.frontiers) - 1
@@ -163,9 +163,10 @@ class Lattice:
         frontiers = []
         for f in used:
             rec = self.frontiers[f]
-            frontiers.append(Frontier.from_points([space.pack(x) for x, _, _ in rec.points],
-                                                  [min(max(e, 0.0), 1.0) for _, e, _ in rec.points],
-                                                  [p for _, _, p in rec.points]))
+            frontiers.append(Frontier.from_points([space.pack(pt[0]) for pt in rec.points],
+                                                  [min(max(pt[1], 0.0), 1.0) for pt in rec.points],
+                                                  [pt[2] for pt in rec.points], [pt[3] for pt in rec.points],
+                                                  fps=fps))
         return ParetoStore(
             parameters=space.to_stored(), root_min=self.root_min, root_size=self.root_size,
             lattice_depth=self.max_depth, children=np.asarray(self.children),

@@ -170,8 +170,8 @@ class PathSampling:
 
     def _guard(self, guards: dict[tuple[int, int], list[CameraSpec]]) -> None:
         """Price every frontier setting at its sample's guard cameras too and keep, per setting, the
-        worst error and power seen: the stored frontier then bounds the frames between the sample and
-        its guards, not just the sample itself."""
+        worst error, power and frame time seen: the stored frontier then bounds the frames between the
+        sample and its guards, not just the sample itself."""
         reqs: list[tuple[CameraSpec, Indices]] = []
         for cv, cams in guards.items():
             rec = self.lattice.frontier(*cv)
@@ -185,14 +185,16 @@ class PathSampling:
             rec = self.lattice.frontier(*cv)
             e = np.asarray([pt[1] for pt in rec.points], dtype=np.float64)
             pw = np.asarray([pt[2] for pt in rec.points], dtype=np.float64)
+            ft = np.asarray([pt[3] for pt in rec.points], dtype=np.float64)
             for _ in cams:
                 r = [next(res) for _ in rec.points]
                 e = np.maximum(e, [x.error for x in r])
                 pw = np.maximum(pw, [x.power_w for x in r])
-            # points the worst case made dominated are dropped where every record becomes a store
-            # frontier (Frontier.from_points in to_store)
-            rec.points = [(x, float(ei), float(pi))
-                          for (x, _, _), ei, pi in zip(rec.points, e, pw, strict=True)]
+                ft = np.maximum(ft, [x.frame_time_s for x in r])
+            # points the worst case made dominated, or too slow for the frame rate while others keep
+            # up, are dropped where every record becomes a store frontier (Frontier.from_points in to_store)
+            rec.points = [(pt[0], float(ei), float(pi), float(ti))
+                          for pt, ei, pi, ti in zip(rec.points, e, pw, ft, strict=True)]
 
     def _inherit_unsampled(self) -> None:
         """Views no path frame looks up take the frontier (and sample camera) of the sample nearest to

@@ -3,9 +3,11 @@ every camera sent to the executor as one batch, with progress and cancellation.
 
 Each search is NSGA-II (or exhaustive enumeration when the space is small) seeded from the run seed
 and the camera, starting from both ends of the space (the maximum-quality setting, error 0 by
-definition, and the cheapest one) plus its warm start. The scheduler knows cameras and settings, not
-corners or views: the sampling strategies (:mod:`.view_cubes`, :mod:`.path_samples`) decide what to
-search where.
+definition, and the cheapest one) plus its warm start. A setting whose frame time misses the run's
+target frame rate is infeasible (:func:`service.store.meets_frame_rate`): the searches rank it behind
+every setting that keeps up, and a frontier holds such settings only where none keeps up. The scheduler
+knows cameras and settings, not corners or views: the sampling strategies (:mod:`.view_cubes`,
+:mod:`.path_samples`) decide what to search where.
 """
 
 from __future__ import annotations
@@ -20,8 +22,10 @@ from typing import Any
 from service.evaluation import CameraSpec, Evaluator
 from service.nsga import NSGA2, Archive, NSGAConfig, enumerate_space
 from service.params import Indices, ParameterSpace
+from service.store import meets_frame_rate
 
-Points = list[tuple[Indices, float, float]]  # (full index vector, error, power) of a frontier
+#: A frontier: (full index vector, error, power, frame time) of each setting.
+Points = list[tuple[Indices, float, float, float]]
 
 
 class Cancelled(Exception):
@@ -111,15 +115,22 @@ class Search:
         stage_steps = self.steps(len(cameras), generations)
         if not planned:
             self.steps_planned += stage_steps
-        archives = (self._enumerate(cameras, phase) if self.exhaustive
-                    else self._nsga(cameras, warm, phase, generations))
-        found = [[(self.space.expand(x), e, p) for x, e, p in arch.frontier()] for arch in archives]
+        times: list[dict[Indices, float]] = [{} for _ in cameras]  # frame time of every evaluated setting
+        archives = (self._enumerate(cameras, phase, times) if self.exhaustive
+                    else self._nsga(cameras, warm, phase, generations, times))
+        found = [[(self.space.expand(x), e, p, t[x]) for x, e, p in arch.frontier()]
+                 for arch, t in zip(archives, times, strict=True)]
         self.state.views_done += len(cameras)
         self.steps_done = max(self.steps_done, steps_before + stage_steps)  # searches that ended early
         self.report(phase)
         return found
 
-    def _enumerate(self, cameras: Sequence[CameraSpec], phase: str) -> list[Archive]:
+    def keeps_up(self, ev: Any) -> bool:
+        """Whether an evaluation's frame time meets the run's target frame rate."""
+        return meets_frame_rate(ev.frame_time_s, self.ev.fps)
+
+    def _enumerate(self, cameras: Sequence[CameraSpec], phase: str, times: list[dict[Indices, float]]
+                   ) -> list[Archive]:
         xs = enumerate_space(self.space.free_n_values)
         archives = [Archive() for _ in cameras]
         chunk = max(1, 256 // len(cameras))
@@ -130,13 +141,14 @@ class Search:
             for j in range(len(cameras)):
                 for k, x in enumerate(part):
                     ev = res[j * len(part) + k]
-                    archives[j].add(x, (ev.error, ev.power_w))
+                    archives[j].add(x, (ev.error, ev.power_w), self.keeps_up(ev))
+                    times[j][x] = ev.frame_time_s
             self.steps_done += len(cameras)
             self.report(phase)
         return archives
 
     def _nsga(self, cameras: Sequence[CameraSpec], warm: Sequence[list[Indices]], phase: str,
-              generations: int | None) -> list[Archive]:
+              generations: int | None, times: list[dict[Indices, float]]) -> list[Archive]:
         algos = []
         for w, cam in zip(warm, cameras, strict=True):
             cfg = NSGAConfig(self.nsga.population, generations or self.nsga.generations,
@@ -156,7 +168,9 @@ class Search:
             res = self.evaluate([(cameras[j], self.space.expand(x)) for j, b in asks for x in b])
             k = 0
             for j, b in asks:
-                algos[j].tell([(r.error, r.power_w) for r in res[k:k + len(b)]])
+                part = res[k:k + len(b)]
+                algos[j].tell([(r.error, r.power_w) for r in part], [self.keeps_up(r) for r in part])
+                times[j].update((x, r.frame_time_s) for x, r in zip(b, part, strict=True))
                 k += len(b)
             self.steps_done += len(asks)
             self.report(phase)

@@ -176,8 +176,8 @@ class ViewCubeSampling:
                 k += len(fa.points)
                 pb = np.asarray([(r.error, r.power_w) for r in res[k:k + len(fb.points)]])
                 k += len(fb.points)
-                ta = np.asarray([(e, p) for _, e, p in fa.points])
-                tb = np.asarray([(e, p) for _, e, p in fb.points])
+                ta = np.asarray([(pt[1], pt[2]) for pt in fa.points])
+                tb = np.asarray([(pt[1], pt[2]) for pt in fb.points])
                 allp = np.concatenate([pa, pb, ta, tb])
                 scale = (max(float(np.ptp(allp[:, 0])), self.cfg.threshold_error),
                          max(float(np.ptp(allp[:, 1])), self.cfg.threshold_power_w))

@@ -1,9 +1,10 @@
 """The runtime Pareto store, as a small package (stdlib + numpy only: the Blender add-on carries it).
 
 - :mod:`.packing`: settings as 4-bit value indices packed in 32 bits, and the parameter descriptions;
+- :mod:`.frame_rate`: the frame-rate rule (a setting meets the store's fps, the frame rate it reaches);
 - :mod:`.frontier`: a Pareto frontier and its budget searches;
 - :mod:`.codec`: how numbers are kept (base64 arrays, 16-bit steps, direction and eye codes);
-- :mod:`.format`: the versioned JSON document (reads versions 1-3);
+- :mod:`.format`: the versioned JSON document (reads versions 1-4);
 - :mod:`.camera`: camera maths shared by every part of the project (rotations, view-cube faces,
   frustum face choice, field of view);
 - :mod:`.lookup`: camera pose + budget -> settings;
@@ -16,6 +17,7 @@ from __future__ import annotations
 from .camera import VIEW_FORWARD, VIEW_NAMES, VIEW_UP, camera_rotation, face_of, view_up
 from .codec import quantise_directions, quantise_eyes
 from .format import FORMAT_NAME, FORMAT_VERSION, READABLE_VERSIONS
+from .frame_rate import frame_rate_reached, meets_frame_rate
 from .frontier import Frontier
 from .lookup import LookupResult
 from .packing import (
@@ -34,6 +36,7 @@ from .temporal import TemporalFilter
 __all__ = [
     "BITS_PER_PARAM", "FORMAT_NAME", "FORMAT_VERSION", "MAX_PARAMS", "MAX_VALUES_PER_PARAM",
     "READABLE_VERSIONS", "VIEW_FORWARD", "VIEW_NAMES", "VIEW_UP", "Frontier", "LookupResult",
-    "ParetoStore", "StoredParameter", "TemporalFilter", "camera_rotation", "face_of", "pack_array",
-    "pack_indices", "quantise_directions", "quantise_eyes", "unpack_array", "unpack_indices", "view_up",
+    "ParetoStore", "StoredParameter", "TemporalFilter", "camera_rotation", "face_of", "frame_rate_reached",
+    "meets_frame_rate", "pack_array", "pack_indices", "quantise_directions", "quantise_eyes", "unpack_array",
+    "unpack_indices", "view_up",
 ]

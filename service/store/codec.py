@@ -1,7 +1,7 @@
-"""How a store keeps numbers: arrays as little-endian base64 blobs (``"<dtype>:<base64>"``), error and
-power as 16-bit steps, sample directions as cube-map style integer codes, sample eyes as 16-bit steps
-over the root cube. The optimiser renders with the quantised cameras, so a loaded store reports
-exactly the camera each frontier was measured at."""
+"""How a store keeps numbers: arrays as little-endian base64 blobs (``"<dtype>:<base64>"``), error,
+power and frame time as 16-bit steps, sample directions as cube-map style integer codes, sample eyes as
+16-bit steps over the root cube. The optimiser renders with the quantised cameras, so a loaded store
+reports exactly the camera each frontier was measured at."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-QMAX = 65535  # 16-bit error (over [0, 1]) and power (over [0, power_scale]) steps
+QMAX = 65535  # 16-bit error (over [0, 1]), power (over [0, power_scale]) and frame time steps
 DIR_Q = 127  # int8 per-view sample directions (version 2)
 DIR_Q16 = 32767  # int16 per-frontier sample directions (version 3, path cameras)
 EYE_Q = 65535  # uint16 sample eyes over the root cube
@@ -74,3 +74,35 @@ def decode_eyes(text: str, root_min: Any, root_size: float) -> np.ndarray:
     """Inverse of the eye codes: (F, 3) world positions."""
     return (np.asarray(root_min, dtype=np.float64)
             + decode(text).astype(np.float64).reshape(-1, 3) / EYE_Q * float(root_size))
+
+
+def frame_times(codes: np.ndarray, scale: float) -> np.ndarray:
+    """Frame times (s) of their 16-bit codes over [0, ``scale``] (the one decoding; writer and reader)."""
+    return np.asarray(codes).astype(np.float64) / QMAX * float(scale)
+
+
+def frame_time_codes(times: Any, fps: float) -> tuple[np.ndarray, float]:
+    """16-bit codes of frame times over [0, scale] (scale: the largest time) and the scale, rounded up
+    except where that would carry a frame time past the frame period 1 / ``fps``: every setting decodes
+    on its own side of the period (one that meets the store's frame rate still meets it after a round
+    trip, one that misses it still misses it, never by less than it did)."""
+    t = np.asarray(times, dtype=np.float64).reshape(-1)
+    if not (np.all(np.isfinite(t)) and np.all(t >= 0)):
+        raise ValueError("frame times must be finite and >= 0 to be stored")
+    scale = float(t.max()) if t.size and t.max() > 0 else 1.0
+    period = 1.0 / fps  # meets_frame_rate's test, vectorised
+    q = np.clip(np.rint(t / scale * QMAX), 0, QMAX).astype(np.int64)
+    q = np.minimum(q + (frame_times(q, scale) < t), QMAX)  # the smallest code at or above t (stable)
+    meets = t <= period
+    crossed = meets & ~(frame_times(q, scale) <= period)
+    if crossed.any():  # the largest code still within the period
+        k = int(np.floor(period / scale * QMAX))
+        while k > 0 and not frame_times(np.asarray(k), scale) <= period:
+            k -= 1
+        q[crossed] = k
+    while True:  # a missing frame rounded onto the period (a float edge): one step up
+        crossed = ~meets & (frame_times(q, scale) <= period)
+        if not crossed.any():
+            break
+        q[crossed] = np.minimum(q[crossed] + 1, QMAX)
+    return q.astype(np.uint16), scale

@@ -18,10 +18,16 @@ Layout (power-budget paper, sec. 4.2 and 6):
   between corners and views that inherit them: ``frontier_sizes``, indices into the unique ``settings``
   table (``frontier_settings``), error and power as 16-bit steps (error over [0, 1], power over
   [0, ``power_scale``]);
+- frame times (version 4, optional): ``frontier_frame_time``, each frontier point's modelled frame time
+  at the path's resolution as 16-bit steps over [0, ``frame_time_scale``] s, rounded so every point stays
+  on its side of the frame period 1 / ``fps`` (:func:`service.store.codec.frame_time_codes`); power is
+  what the GPU draws at the frame rate it reaches (``fps`` when the point meets it, else 1 / frame
+  time), and where any point of a frontier meets ``fps`` only such points are kept. Absent (versions
+  1-3): frame times unknown, power as priced then (P_static + E * fps even for frames that missed);
 - ``parameters`` (names, values, maximum-quality index), ``profile``, ``fps``, ``vfov``, ``aspect``
   and the optimiser's ``meta``.
 
-Arrays are little-endian base64 blobs (:mod:`service.store.codec`). Readers accept versions 1-3.
+Arrays are little-endian base64 blobs (:mod:`service.store.codec`). Readers accept versions 1-4.
 
 Adding a field: write it in :func:`to_dict` (optional fields only when set, so older readers and
 byte-identical stores are unaffected), read it in :func:`fields_from_dict` (absent -> the old
@@ -42,10 +48,10 @@ from .frontier import Frontier
 from .packing import StoredParameter
 
 FORMAT_NAME = "render-budget/pareto-store"
-FORMAT_VERSION = 3
+FORMAT_VERSION = 4
 #: Versions this reader accepts (version 1 stores have axis-aligned sample views at the corners,
-#: version 2 adds sample directions, version 3 sample eyes).
-READABLE_VERSIONS = (1, 2, 3)
+#: version 2 adds sample directions, version 3 sample eyes, version 4 frame times).
+READABLE_VERSIONS = (1, 2, 3, 4)
 
 
 def to_dict(store: Any) -> dict[str, Any]:
@@ -72,6 +78,10 @@ def to_dict(store: Any) -> dict[str, Any]:
             codec.direction_codes(store.frontier_dirs, codec.DIR_Q16).reshape(-1), "<i2")
         extra["frontier_eyes"] = codec.encode(
             codec.eye_codes(store.frontier_eyes, store.root_min, store.root_size).reshape(-1), "<u2")
+    if store.frame_times_known:
+        codes, scale = codec.frame_time_codes(np.concatenate([f.frame_time_s for f in frontiers]), store.fps)
+        extra["frontier_frame_time"] = codec.encode(codes, "<u2")
+        extra["frame_time_scale"] = scale
     return {
         "format": FORMAT_NAME,
         "version": FORMAT_VERSION,
@@ -108,6 +118,14 @@ def _frontiers(d: dict[str, Any]) -> list[Frontier]:
     idx = codec.decode(d["frontier_settings"]).astype(np.int64)
     eq = codec.decode(d["frontier_error"]).astype(np.float64) / codec.QMAX
     pq = codec.decode(d["frontier_power"]).astype(np.float64) / codec.QMAX * float(d["power_scale"])
+    tq = None
+    if d.get("version", 1) >= 4 and d.get("frontier_frame_time") is not None:
+        scale = float(d["frame_time_scale"])
+        if not (np.isfinite(scale) and scale > 0):
+            raise ValueError("frame_time_scale must be positive and finite")
+        tq = codec.frame_times(codec.decode(d["frontier_frame_time"]), scale)
+        if tq.size != idx.size:
+            raise ValueError("frontier frame times disagree in length with the frontiers")
     if not (idx.size == eq.size == pq.size == int(sizes.sum())):
         raise ValueError("frontier arrays disagree in length")
     if idx.size and idx.max() >= table.size:
@@ -116,7 +134,7 @@ def _frontiers(d: dict[str, Any]) -> list[Frontier]:
     off = 0
     for n in sizes:
         sl = slice(off, off + int(n))
-        frontiers.append(Frontier(table[idx[sl]], eq[sl], pq[sl]))
+        frontiers.append(Frontier(table[idx[sl]], eq[sl], pq[sl], None if tq is None else tq[sl]))
         off += int(n)
     return frontiers
 

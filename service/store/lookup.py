@@ -7,6 +7,11 @@ corners, the view-cube face that receives most of the camera's frustum
 that (corner, face)'s frontier. :class:`LookupIndex` precomputes what a query reads: each leaf's corner
 ids and positions, the frustum rays per field of view, each frontier as plain lists and each packed
 setting's values, so a query makes one numpy call (the face) and no other allocation of note.
+
+The frame-rate target is the store's ``fps`` (what its power was priced for): where a frontier knows its
+frame times, the budget search runs over the settings that meet it (:mod:`.frame_rate`), and only when
+none does over all of them, and the result says whether the chosen setting meets it and the frame rate
+it reaches.
 """
 
 from __future__ import annotations
@@ -21,13 +26,18 @@ from typing import Any
 import numpy as np
 
 from . import camera
+from .frame_rate import frame_rate_reached, meets_frame_rate
 from .frontier import Frontier
 from .packing import StoredParameter, settings_of, unpack_indices
 
 
 @dataclass(frozen=True)
 class LookupResult:
-    """Settings chosen for one camera and budget, with their predicted error and power and flags."""
+    """Settings chosen for one camera and budget, with their predicted error, power (at the frame rate
+    they reach), frame time and flags. ``infeasible``: no setting keeps the budget (the nearest one is
+    chosen). ``meets_fps``: the setting keeps up with the store's frame rate; False only when no setting
+    of the frontier does (the lookup never picks a missing one otherwise); None when the store does not
+    know frame times (format before 4), as are ``frame_time_s`` and ``fps`` (the frame rate reached)."""
 
     indices: tuple[int, ...]
     packed: int
@@ -39,32 +49,49 @@ class LookupResult:
     corner: int = -1
     view: int = -1
     leaf: int = -1
+    frame_time_s: float | None = None
+    fps: float | None = None
+    meets_fps: bool | None = None
 
 
 class _FrontierLists:
-    """A frontier as plain lists for :mod:`bisect` (the same answers as ``Frontier.under_power`` /
-    ``under_error``, which it defers to when the frontier is not sorted as a frontier must be)."""
+    """A frontier's points that meet the frame-rate target ``fps`` (all of them when none does or frame
+    times are unknown: ``Frontier.meeting``) as plain lists for :mod:`bisect` (the same answers as
+    ``Frontier.under_power`` / ``under_error``, which it defers to when the points are not sorted as a
+    frontier's must be), with each point's frame time, frame rate reached and whether it meets ``fps``."""
 
-    __slots__ = ("error", "frontier", "neg_error", "packed", "power", "sorted")
+    __slots__ = ("error", "fps", "fps_reached", "frame_time", "frontier", "meets", "neg_error", "packed",
+                 "power", "searched", "sorted")
 
-    def __init__(self, frontier: Frontier) -> None:
+    def __init__(self, frontier: Frontier, fps: float) -> None:
         self.frontier = frontier
-        self.power = [float(v) for v in frontier.power_w]
-        self.error = [float(v) for v in frontier.error]
-        self.neg_error = [float(v) for v in -frontier.error]
-        self.packed = [int(v) for v in frontier.packed]
+        self.fps = fps
+        self.searched = searched = frontier.meeting(fps)
+        self.power = [float(v) for v in searched.power_w]
+        self.error = [float(v) for v in searched.error]
+        self.neg_error = [float(v) for v in -searched.error]
+        self.packed = [int(v) for v in searched.packed]
         self.sorted = all(a <= b for a, b in itertools.pairwise(self.power)) and all(
             a <= b for a, b in itertools.pairwise(self.neg_error))
+        n = len(self.power)
+        if searched.frame_time_s is None:
+            self.frame_time: list[float | None] = [None] * n
+            self.fps_reached: list[float | None] = [None] * n
+            self.meets: list[bool | None] = [None] * n
+        else:
+            self.frame_time = [float(v) for v in searched.frame_time_s]
+            self.fps_reached = [frame_rate_reached(t, fps) for t in self.frame_time]  # type: ignore[arg-type]
+            self.meets = [meets_frame_rate(t, fps) for t in self.frame_time]  # type: ignore[arg-type]
 
     def under_power(self, budget: float) -> tuple[int, bool]:
         if not self.sorted:
-            return self.frontier.under_power(budget)
+            return self.searched.under_power(budget)
         i = bisect.bisect_right(self.power, budget) - 1
         return (0, True) if i < 0 else (i, False)
 
     def under_error(self, budget: float) -> tuple[int, bool]:
         if not self.sorted:
-            return self.frontier.under_error(budget)
+            return self.searched.under_error(budget)
         i = bisect.bisect_left(self.neg_error, -budget)
         return (len(self.power) - 1, True) if i >= len(self.power) else (i, False)
 
@@ -198,10 +225,10 @@ class LookupIndex:
                 best, corner = dd, c
         return corner
 
-    def frontier_lists(self, frontier_id: int, frontier: Frontier) -> _FrontierLists:
+    def frontier_lists(self, frontier_id: int, frontier: Frontier, fps: float) -> _FrontierLists:
         lists = self._frontiers.get(frontier_id)
-        if lists is None or lists.frontier is not frontier:
-            lists = self._frontiers[frontier_id] = _FrontierLists(frontier)
+        if lists is None or lists.frontier is not frontier or lists.fps != fps:
+            lists = self._frontiers[frontier_id] = _FrontierLists(frontier, fps)
         return lists
 
     def decoded(self, packed: int) -> tuple[tuple[int, ...], dict[str, Any]]:

@@ -56,6 +56,11 @@ class ParetoStore:
             raise ValueError("root_size must be positive and finite")
         if not 0 <= self.lattice_depth <= 16:
             raise ValueError("lattice_depth must be in 0..16")
+        self.fps = float(self.fps)
+        if not (math.isfinite(self.fps) and self.fps > 0):
+            raise ValueError("fps must be positive and finite")
+        if len({f.frame_time_s is None for f in self.frontiers}) > 1:
+            raise ValueError("frame times must be known for every frontier or for none")
         self.children = np.asarray(self.children, dtype=np.int64).reshape(-1)
         self.corner_coords = np.asarray(self.corner_coords, dtype=np.int64).reshape(-1, 3)
         self.corner_views = np.asarray(self.corner_views, dtype=np.int64).reshape(-1, 6)
@@ -115,6 +120,11 @@ class ParetoStore:
     @property
     def n_params(self) -> int:
         return len(self.parameters)
+
+    @property
+    def frame_times_known(self) -> bool:
+        """Whether the frontiers record frame times (stores of format 4 on; older ones do not)."""
+        return bool(self.frontiers) and self.frontiers[0].frame_time_s is not None
 
     def corner_positions(self) -> np.ndarray:
         """World positions (C, 3) of the corners."""
@@ -178,7 +188,9 @@ class ParetoStore:
                aspect: float | None = None, up: Any = None) -> LookupResult:
         """Settings for a camera at ``position`` looking along ``direction`` (or oriented by ``matrix``,
         Blender's 4x4 camera world matrix) with vertical field of view ``fov`` in radians, under exactly
-        one of ``power_budget`` (W) or ``error_budget`` (1 - SSIM)."""
+        one of ``power_budget`` (W) or ``error_budget`` (1 - SSIM), among the settings that keep up with
+        the store's frame rate ``fps`` when the store knows frame times and any does
+        (``LookupResult.meets_fps``)."""
         if (power_budget is None) == (error_budget is None):
             raise ValueError("give exactly one of power_budget or error_budget")
         budget = float(power_budget if power_budget is not None else error_budget)  # type: ignore[arg-type]
@@ -190,7 +202,7 @@ class ParetoStore:
         asp = camera.check_aspect(self.aspect if aspect is None else aspect)
         leaf, corner, view, clamped = index.locate(position, rot, vf, asp)
         fid = index.views[corner][view]
-        fr = index.frontier_lists(fid, self.frontiers[fid])
+        fr = index.frontier_lists(fid, self.frontiers[fid], self.fps)
         if power_budget is not None:
             i, infeasible = fr.under_power(budget)
         else:
@@ -198,7 +210,7 @@ class ParetoStore:
         packed = fr.packed[i]
         indices, settings = index.decoded(packed)
         return LookupResult(indices, packed, settings, fr.power[i], fr.error[i], clamped, infeasible,
-                            corner, view, leaf)
+                            corner, view, leaf, fr.frame_time[i], fr.fps_reached[i], fr.meets[i])
 
     # -- serialisation ----------------------------------------------------------------------------
 
@@ -238,4 +250,5 @@ class ParetoStore:
             "frontier_points": int(sum(len(f) for f in self.frontiers)),
             "error_step": 1.0 / codec.QMAX,
             "power_step_w": (max((float(f.power_w.max()) for f in self.frontiers), default=1.0)) / codec.QMAX,
+            "frame_times_known": self.frame_times_known,
         }

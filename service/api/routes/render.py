@@ -15,6 +15,7 @@ from sim_core.image import encode_exr, encode_png
 import sim_core
 from service.evaluation import CameraSpec, evaluate
 from service.params import ParameterSpace, default_space
+from service.store import frame_rate_reached, meets_frame_rate
 from service.store.camera import normalised_camera_matrix
 
 from ..checks import scene_or_404
@@ -96,8 +97,9 @@ def render_preview(body: RenderRequest, storage: StorageDep, scenes: ScenesDep,
              responses=_ERRORS)
 def evaluate_settings(body: EvaluateRequest, storage: StorageDep, scenes: ScenesDep,
                       settings: SettingsDep) -> EvaluateResponse:
-    """Error (1 - SSIM against the maximum-quality render of the same camera) and power of settings
-    (``{parameter: value}`` of the default space, as a store query returns them)."""
+    """Error (1 - SSIM against the maximum-quality render of the same camera), power (at the frame rate
+    reached) and frame time of settings (``{parameter: value}`` of the default space, as a store query
+    returns them)."""
     cam = body.camera
     m = camera_matrix(cam, settings.max_render_pixels)
     scene = scene_or_404(storage, scenes, body.scene_id)
@@ -110,5 +112,7 @@ def evaluate_settings(body: EvaluateRequest, storage: StorageDep, scenes: Scenes
                       threads=settings.render_threads, target_pixels=pixels)
     except ValueError as exc:
         raise ApiError(422, f"evaluate: {exc}") from exc
-    return EvaluateResponse(error=float(ev.error), power_w=float(ev.power_w),
-                            frame_time_s=float(ev.frame_time_s), breakdown=_jsonable(ev.breakdown))
+    t = float(ev.frame_time_s)
+    return EvaluateResponse(error=float(ev.error), power_w=float(ev.power_w), frame_time_s=t,
+                            fps=frame_rate_reached(t, body.fps), fps_target=float(body.fps),
+                            deadline_met=meets_frame_rate(t, body.fps), breakdown=_jsonable(ev.breakdown))

@@ -84,14 +84,16 @@ def answer_query(store: Any, body: StoreQuery) -> QueryResult:
     return QueryResult(
         settings=store.settings_of(indices) if filtered else hit.settings, indices=list(indices),
         packed=pack_indices(indices) if filtered else hit.packed, power_w=hit.power_w, error=hit.error,
-        clamped=hit.clamped, infeasible=hit.infeasible, filtered=filtered,
+        clamped=hit.clamped, infeasible=hit.infeasible, filtered=filtered, frame_time_s=hit.frame_time_s,
+        fps=hit.fps, fps_target=store.fps, meets_fps=hit.meets_fps,
     )
 
 
 async def query_store(store_id: str, body: StoreQuery, request: Request) -> QueryResult:
     """Settings for a camera pose under a power or error budget, optionally through the temporal filter
-    (Eq. 8) from the ``previous`` settings, ``elapsed_s`` after the target changed. ``power_w`` and
-    ``error`` are the predictions for the target settings."""
+    (Eq. 8) from the ``previous`` settings, ``elapsed_s`` after the target changed. ``power_w``,
+    ``error``, ``frame_time_s``, ``fps`` and ``meets_fps`` are the predictions for the target settings
+    (among those that keep up with the store's frame rate, ``fps_target``, when any does)."""
     return answer_query(request.app.state.render_budget.stores.get(store_id), body)
 
 

@@ -4,7 +4,7 @@ from . import _core
 from ._core import CacheConfig
 from .analysis import SceneAnalysis, analyze, inert_parameters
 from .camera import Camera
-from .energy import EnergyReport, Profile, list_profiles, load_profile, price
+from .energy import EnergyReport, Profile, list_profiles, load_profile, price, sustained_power
 from .geometry import smooth_normals
 from .image import load_exr
 from .render import COUNTER_NAMES, RenderResult, StereoResult, render, render_stereo, render_tiled
@@ -40,4 +40,5 @@ __all__ = [
     "render_stereo",
     "render_tiled",
     "smooth_normals",
+    "sustained_power",
 ]

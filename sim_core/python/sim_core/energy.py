@@ -2,9 +2,14 @@
 
 Like the seeds' simulators (the adaptive-sampling seed, sec. 4): each hardware block's activity counter
 times its energy per event, plus static power; cycles per block from each block's throughput; frame time
-from the slowest unit and DRAM bandwidth. Power at a fixed frame rate is P = P_static + E_frame * fps, the
-way the power-budget paper measured it. Profiles are TOML data files (``profiles/*.toml``); every constant
-there carries its source or stated assumption.
+from the slowest unit and DRAM bandwidth. Power is what the modelled GPU draws at the frame rate it
+actually reaches (:func:`sustained_power`): asked for ``fps`` frames per second, a frame that meets its
+deadline (frame time <= 1 / fps) runs at ``fps`` and the GPU idles (leaking static power) for the rest of
+the period, P = P_static + E_frame * fps, the way the power-budget paper measured power at a fixed frame
+rate; a frame that misses it runs back to back at its own rate 1 / frame time (no vsync wait: the next
+frame starts at once), P = P_static + E_frame / frame_time, the full-speed power. Power therefore never
+exceeds the full-speed power. Profiles are TOML data files (``profiles/*.toml``); every constant there
+carries its source or stated assumption.
 """
 
 from __future__ import annotations
@@ -29,6 +34,7 @@ __all__ = [
     "list_profiles",
     "load_profile",
     "price",
+    "sustained_power",
 ]
 
 _PROFILE_DIR = Path(__file__).with_name("profiles")
@@ -249,21 +255,42 @@ def comparator_stats(histogram: np.ndarray | None, energy_scale: float = 1.0) ->
     )
 
 
+def sustained_power(static_power_w: float, dynamic_energy_j: float, frame_time_s: float, fps: float
+                    ) -> tuple[float, float]:
+    """(power W, frame rate reached) of frames of ``dynamic_energy_j`` taking ``frame_time_s`` each when
+    ``fps`` frames per second are asked for: the rate reached is ``fps`` when the frame meets its
+    deadline (frame_time <= 1 / fps), else 1 / frame_time, and the power P_static + E_dynamic * that
+    rate, so it never exceeds the full-speed power P_static + E_dynamic / frame_time (the one definition
+    of power; ``price`` and the service's evaluator use it)."""
+    for name, v in (("static power", static_power_w), ("dynamic energy", dynamic_energy_j),
+                    ("frame time", frame_time_s)):
+        if not (math.isfinite(v) and v >= 0):
+            raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
+    if not (math.isfinite(fps) and fps > 0):
+        raise ValueError(f"fps must be a finite positive number, got {fps!r}")
+    if frame_time_s <= 0:
+        return static_power_w + dynamic_energy_j * fps, fps
+    if frame_time_s <= 1.0 / fps:  # the deadline is met (the same test as ``deadline_met``)
+        # min() keeps the result at or below the full-speed power even by a rounding step at the boundary
+        return static_power_w + min(dynamic_energy_j * fps, dynamic_energy_j / frame_time_s), fps
+    return static_power_w + dynamic_energy_j / frame_time_s, 1.0 / frame_time_s
+
+
 @dataclass(frozen=True)
 class EnergyReport:
-    """Energy, timing and power of one frame on one hardware profile at a target frame rate."""
+    """Energy, timing and power of one frame on one hardware profile asked for a target frame rate."""
 
     profile: str
-    fps: float
-    energy_j: dict[str, float]  # by block, plus "static" (P_static / fps); sums to total_energy_j
+    fps: float  # the target frame rate asked for
+    energy_j: dict[str, float]  # by block, plus "static" (P_static / achieved_fps); sums to total_energy_j
     cycles: dict[str, float]  # by block, in the cycles of the block's unit clock
     unit_time_s: dict[str, float]  # busy time of each unit: srp, ti, tile_buffer, dram
     bottleneck: str  # the unit that sets the frame time
     dynamic_energy_j: float
     total_energy_j: float
     frame_time_s: float
-    deadline_met: bool
-    power_w: float  # at the target frame rate: P_static + E_dynamic * fps
+    deadline_met: bool  # frame_time_s <= 1 / fps
+    power_w: float  # at the frame rate reached: P_static + E_dynamic * achieved_fps (<= power_full_speed_w)
     max_fps: float  # 1 / frame_time_s
     power_full_speed_w: float  # running flat out: P_static + E_dynamic / frame_time_s
     mrays_per_s: float  # rays_total / frame_time_s / 1e6
@@ -272,6 +299,7 @@ class EnergyReport:
     dram_bytes: int
     comparator: ComparatorStats
     blocks_used: tuple[str, ...] = field(default=())
+    achieved_fps: float = 0.0  # the frame rate reached: fps if the deadline is met, else max_fps
 
     @property
     def unit_energy_j(self) -> dict[str, float]:
@@ -385,7 +413,8 @@ def _block_costs(prof: Profile, c: Mapping[str, int], hist: np.ndarray | None, s
 
 
 def price(result: Any, profile: Profile | str | Path, fps: float, *, scene: Any = None) -> EnergyReport:
-    """Price one rendered frame: energy and cycles by block, frame time, deadline, power, perf/W.
+    """Price one rendered frame asked for at ``fps``: energy and cycles by block, frame time, deadline,
+    the frame rate reached and the power drawn at it (:func:`sustained_power`), perf/W.
 
     ``result`` is a ``RenderResult`` (its ``counters``, ``comparator_histogram`` and, when present,
     ``settings``) or a plain mapping of counter names to counts. A block whose counters are 0 costs
@@ -414,11 +443,10 @@ def price(result: Any, profile: Profile | str | Path, fps: float, *, scene: Any 
     bottleneck = max(unit_time, key=lambda u: unit_time[u])
     frame_time = unit_time[bottleneck]
     dynamic = math.fsum(energy[b] for b in BLOCKS)
-    static_e = prof.static_power_w / fps
+    power, achieved = sustained_power(prof.static_power_w, dynamic, frame_time, fps)
     energy_all = {b: energy[b] for b in BLOCKS}
-    energy_all["static"] = static_e
+    energy_all["static"] = prof.static_power_w / achieved  # leakage over one frame period at that rate
     total = math.fsum(energy_all.values())
-    power = prof.static_power_w + dynamic * fps
     rays = n("rays_total")
     if frame_time > 0:
         max_fps = 1.0 / frame_time
@@ -448,4 +476,5 @@ def price(result: Any, profile: Profile | str | Path, fps: float, *, scene: Any 
         + n("texture_dram_bytes"),
         comparator=comp,
         blocks_used=tuple(b for b in BLOCKS if energy[b] > 0),
+        achieved_fps=achieved,
     )

@@ -1,0 +1,21 @@
+"""The frame-rate rule the store, its lookup and the optimiser share.
+
+A store is priced for one target frame rate (its ``fps``). A setting *meets* it when its modelled frame
+time fits in one frame period; a setting that misses it renders back to back at its own rate, so the
+frame rate it reaches is the lower of the two (and its power is the full-speed power:
+``sim_core.sustained_power`` prices power with the same test as ``EnergyReport.deadline_met``). The
+optimiser keeps settings that meet the target ahead of those that miss it, and the lookup never picks a
+missing one while a meeting one exists.
+"""
+
+from __future__ import annotations
+
+
+def meets_frame_rate(frame_time_s: float, fps: float) -> bool:
+    """Whether a frame of ``frame_time_s`` seconds keeps up with ``fps`` frames per second."""
+    return frame_time_s <= 1.0 / fps
+
+
+def frame_rate_reached(frame_time_s: float, fps: float) -> float:
+    """The frame rate a GPU asked for ``fps`` reaches with frames of ``frame_time_s`` seconds."""
+    return fps if frame_time_s <= 1.0 / fps else 1.0 / frame_time_s
