@@ -5,7 +5,8 @@ Cycles renders them on the CPU (diffuse_bounces = 0, no denoising, black world) 
 the same light through Light.from_blender at max quality. Prints one row per case: Cycles' and the
 simulator's mean linear brightness, their ratio, and the render times. The test suite runs the same
 comparison at 32x32 with 64 samples (tests/test_cycles_reference.py). Then the world (a bundled HDRI
-with strength 1.5 and a 1.2 rad Z rotation: mean and pixel correlation) and an artist's scene (textured
+with strength 1.5 and a 1.2 rad Z rotation: mean and pixel correlation), the plane and cube lit by that
+HDRI alone (its sky and its sun; mean brightness) and an artist's scene (textured
 cube, glossy sphere, rough metal floor, area + point + sun lights, HDRI) at 320x180: mean display
 luminance ratio and 1-SSIM against Cycles (128 samples, denoised).
 
@@ -54,6 +55,12 @@ def main() -> None:
     ratio = simulated_world.mean() / cycles_world.mean()
     print(f"world {cycles_reference.WORLD_HDRI} x1.5 turned 1.2 rad: Cycles mean {cycles_world.mean():.4f}, "
           f"simulator {simulated_world.mean():.4f}, ratio {ratio:.4f}, pixel correlation {corr:.4f}")
+    for rotation in (0.0, 2.0):
+        cycles_lit, _ = cycles_reference.cycles_world_lit(0.5, rotation, args.size, args.samples)
+        simulated_lit, _ = cycles_reference.simulator_world_lit(0.5, rotation, args.size)
+        print(f"plane and cube lit by {cycles_reference.WORLD_HDRI} x0.5 turned {rotation} rad "
+              f"(sky and sun): Cycles mean {cycles_lit:.4f}, simulator {simulated_lit:.4f}, "
+              f"ratio {simulated_lit / cycles_lit:.4f}", flush=True)
     t0 = time.perf_counter()
     cycles_artist = cycles_reference.cycles_artist((320, 180), samples=128)
     t1 = time.perf_counter()

@@ -37,9 +37,10 @@ PACKAGE_DIR = Path(__file__).resolve().parent
 REPO_ROOT = PACKAGE_DIR.parent
 DEFAULT_OUT = PACKAGE_DIR / "build"
 #: What scene.rbscene depends on besides the generator: the depsgraph translator and the file format.
-TRANSLATOR_SOURCES = (REPO_ROOT / "addon" / "translate.py",
-                      REPO_ROOT / "addon" / "core" / "scene_translation.py",
-                      REPO_ROOT / "sim_core" / "python" / "sim_core" / "loaders" / "scene_file.py")
+_SCENE_FILE_PACKAGE = REPO_ROOT / "sim_core" / "python" / "sim_core" / "loaders" / "scene_file"
+TRANSLATOR_SOURCES = (REPO_ROOT / "addon" / "translate.py", REPO_ROOT / "addon" / "node_trees.py",
+                      *sorted((REPO_ROOT / "addon" / "core" / "scene_translation").glob("*.py")),
+                      *sorted(_SCENE_FILE_PACKAGE.glob("*.py")))
 SCENE_FILES = ("scene.blend", "scene.glb", "scene.rbscene", "path.json", "stats.json")
 #: The add-on's helpers the build uses (path sampling, fov, glTF export): part of every scene's hash.
 ADDON_SOURCES = tuple(REPO_ROOT / f for f in ("addon/camera_path.py", "addon/scene_export.py",

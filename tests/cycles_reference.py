@@ -85,25 +85,32 @@ def blender_light_matrix(case: dict[str, Any]) -> np.ndarray:
     return m
 
 
-def simulator_mean(name: str, size: int = 48, settings: Any = None) -> tuple[float, np.ndarray]:
-    """Mean linear brightness (and the image) of the case rendered by the simulator."""
-    from sim_core import Camera, Light, Material, RenderSettings, Scene, render
+def _simulator_plane_and_cube(size: int, settings: Any, **scene_args: Any) -> tuple[float, np.ndarray]:
+    """Mean linear brightness (and the image) of the diffuse plane and cube with ``scene_args`` (lights,
+    environment), rendered by the simulator from the cases' camera."""
+    from sim_core import Camera, Material, RenderSettings, Scene, render
 
-    case = CASES[name]
     h = PLANE_HALF
     plane = np.array([[-h, -h, 0], [h, -h, 0], [h, h, 0], [-h, h, 0]], float)
     cube_p, cube_t = _cube()
     pos = np.vstack([plane, cube_p])
     tri = np.vstack([[[0, 1, 2], [0, 2, 3]], cube_t + 4])
-    kwargs = {k: case[k] for k in _LIGHT_SETTINGS if k in case}
-    light = Light.from_blender(case["type"], blender_light_matrix(case), case["energy"], **kwargs)
     # ior 1: no specular layer, like Cycles' Diffuse BSDF.
     diffuse = Material(base_color=(ALBEDO, ALBEDO, ALBEDO), roughness=1.0, ior=1.0)
-    scene = Scene.from_arrays(pos, tri, materials=[diffuse],
-                              lights=[light], environment=(0.0, 0.0, 0.0))
+    scene = Scene.from_arrays(pos, tri, materials=[diffuse], **scene_args)
     cam = Camera.from_blender(_look_at_matrix(CAMERA_LOCATION, CAMERA_TARGET), CAMERA_FOV, size, size)
     r = render(scene, cam, settings or RenderSettings.max_quality())
     return float(r.image.mean()), r.image
+
+
+def simulator_mean(name: str, size: int = 48, settings: Any = None) -> tuple[float, np.ndarray]:
+    """Mean linear brightness (and the image) of the case rendered by the simulator."""
+    from sim_core import Light
+
+    case = CASES[name]
+    kwargs = {k: case[k] for k in _LIGHT_SETTINGS if k in case}
+    light = Light.from_blender(case["type"], blender_light_matrix(case), case["energy"], **kwargs)
+    return _simulator_plane_and_cube(size, settings, lights=[light], environment=(0.0, 0.0, 0.0))
 
 
 def _cycles_scene(size_x: int, size_y: int, samples: int) -> Any:
@@ -170,20 +177,10 @@ def _camera(sc: Any, matrix: np.ndarray, angle: float) -> None:
     sc.camera = cam
 
 
-def cycles_mean(name: str, size: int = 48, samples: int = 64) -> tuple[float, np.ndarray]:
-    """Mean linear brightness (and the image) of the case rendered by Cycles (CPU, bpy module)."""
+def _cycles_plane_and_cube(sc: Any) -> None:
+    """The diffuse plane and cube (Diffuse BSDF) and the cases' camera in ``sc``."""
     import bpy
 
-    case = CASES[name]
-    sc = _cycles_scene(size, size, samples)
-    world = bpy.data.worlds.new("black")
-    world.color = (0.0, 0.0, 0.0)
-    if world.node_tree is None:  # Blender < 5 makes the node tree on request
-        world.use_nodes = True
-    for node in world.node_tree.nodes:  # a new world's Background node is grey: make it black
-        if node.type == "BACKGROUND":
-            node.inputs["Strength"].default_value = 0.0
-    sc.world = world
     mat = bpy.data.materials.new("diffuse")
     if mat.node_tree is None:  # Blender < 5 makes the node tree on request
         mat.use_nodes = True
@@ -203,6 +200,23 @@ def cycles_mean(name: str, size: int = 48, samples: int = 64) -> tuple[float, np
         mesh.materials.append(mat)
         sc.collection.objects.link(bpy.data.objects.new(mesh_name, mesh))
     _camera(sc, _look_at_matrix(CAMERA_LOCATION, CAMERA_TARGET), CAMERA_FOV)
+
+
+def cycles_mean(name: str, size: int = 48, samples: int = 64) -> tuple[float, np.ndarray]:
+    """Mean linear brightness (and the image) of the case rendered by Cycles (CPU, bpy module)."""
+    import bpy
+
+    case = CASES[name]
+    sc = _cycles_scene(size, size, samples)
+    world = bpy.data.worlds.new("black")
+    world.color = (0.0, 0.0, 0.0)
+    if world.node_tree is None:  # Blender < 5 makes the node tree on request
+        world.use_nodes = True
+    for node in world.node_tree.nodes:  # a new world's Background node is grey: make it black
+        if node.type == "BACKGROUND":
+            node.inputs["Strength"].default_value = 0.0
+    sc.world = world
+    _cycles_plane_and_cube(sc)
     light_data = bpy.data.lights.new("light", case["type"])
     light_data.energy = case["energy"]
     for key in _LIGHT_SETTINGS:
@@ -237,9 +251,17 @@ def cycles_world(strength: float, rotation_z: float, size: tuple[int, int] = (64
                  samples: int = 16) -> np.ndarray:
     """Cycles' background: Environment Texture (Generated coordinates through a Mapping node's Z rotation)
     times ``strength``, seen by a camera at WORLD_VIEW."""
+    sc = _cycles_scene(size[0], size[1], samples)
+    sc.world = _hdri_world(strength, rotation_z)
+    _camera(sc, _look_at_matrix(*WORLD_VIEW), WORLD_FOV)
+    return cycles_render(sc)
+
+
+def _hdri_world(strength: float, rotation_z: float) -> Any:
+    """A World: the bundled HDRI as an Environment Texture (Generated coordinates through a Mapping node's
+    Z rotation) times ``strength``."""
     import bpy
 
-    sc = _cycles_scene(size[0], size[1], samples)
     world = bpy.data.worlds.new("hdri")
     if world.node_tree is None:
         world.use_nodes = True
@@ -254,21 +276,44 @@ def cycles_world(strength: float, rotation_z: float, size: tuple[int, int] = (64
     background = next(n for n in tree.nodes if n.type == "BACKGROUND")
     tree.links.new(env.outputs["Color"], background.inputs["Color"])
     background.inputs["Strength"].default_value = strength
-    sc.world = world
-    _camera(sc, _look_at_matrix(*WORLD_VIEW), WORLD_FOV)
-    return cycles_render(sc)
+    return world
+
+
+def _bundled_map() -> np.ndarray:
+    """The HDRI as the simulator reads it (load_exr clamps its negative texels)."""
+    import warnings
+
+    import sim_core
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return sim_core.load_exr(bundled_hdri())
+
+
+def cycles_world_lit(strength: float, rotation_z: float, size: int = 48,
+                     samples: int = 64) -> tuple[float, np.ndarray]:
+    """Mean linear brightness (and the image) of the diffuse plane and cube lit by the HDRI world alone
+    (its sky and its sun, the cube's shadow), rendered by Cycles."""
+    sc = _cycles_scene(size, size, samples)
+    sc.world = _hdri_world(strength, rotation_z)
+    _cycles_plane_and_cube(sc)
+    image = cycles_render(sc)
+    return float(image.mean()), image
+
+
+def simulator_world_lit(strength: float, rotation_z: float, size: int = 48,
+                        settings: Any = None) -> tuple[float, np.ndarray]:
+    """The same, rendered by the simulator (the map's sun as an environment light, the rest as ambient
+    light occluded by AO rays)."""
+    return _simulator_plane_and_cube(size, settings, environment=_bundled_map(),
+                                     environment_strength=strength, environment_rotation=rotation_z)
 
 
 def simulator_world(strength: float, rotation_z: float, size: tuple[int, int] = (64, 32)) -> np.ndarray:
     """The simulator's view of the same world (the HDRI through load_exr, which clamps negative texels)."""
-    import warnings
-
-    import sim_core
     from sim_core import Camera, RenderSettings, Scene, render
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        env = sim_core.load_exr(bundled_hdri())
+    env = _bundled_map()
     far = np.array([[0, 0, -1e3], [1e-3, 0, -1e3], [0, 1e-3, -1e3]], np.float32)  # out of view
     scene = Scene.from_arrays(far, np.array([[0, 1, 2]]), environment=env, environment_strength=strength,
                               environment_rotation=rotation_z)
@@ -396,15 +441,7 @@ def cycles_artist(size: tuple[int, int] = (320, 180), samples: int = 128, denois
         sc.collection.objects.link(obj)
         obj.location = case.get("location", (0.0, 0.0, 5.0))
         obj.rotation_euler = case.get("rotation", (0.0, 0.0, 0.0))
-    world = bpy.data.worlds.new("hdri")
-    if world.node_tree is None:
-        world.use_nodes = True
-    env = world.node_tree.nodes.new("ShaderNodeTexEnvironment")
-    env.image = bpy.data.images.load(bundled_hdri())
-    background = next(n for n in world.node_tree.nodes if n.type == "BACKGROUND")
-    world.node_tree.links.new(env.outputs["Color"], background.inputs["Color"])
-    background.inputs["Strength"].default_value = ARTIST_WORLD_STRENGTH
-    sc.world = world
+    sc.world = _hdri_world(ARTIST_WORLD_STRENGTH, 0.0)
     cam_data = bpy.data.cameras.new("camera")
     cam_data.lens = ARTIST_CAMERA["lens"]
     cam = bpy.data.objects.new("camera", cam_data)
@@ -419,9 +456,6 @@ def cycles_artist(size: tuple[int, int] = (320, 180), samples: int = 128, denois
 
 def simulator_artist(size: tuple[int, int] = (320, 180), settings: Any = None) -> Any:
     """The simulator's render (a RenderResult) of the same scene, built from the same description."""
-    import warnings
-
-    import sim_core
     from sim_core import Camera, Light, Material, RenderSettings, Scene, Texture, render
 
     pos, tri, uvs, nrm, mids = [], [], [], [], []
@@ -443,9 +477,7 @@ def simulator_artist(size: tuple[int, int] = (320, 180), settings: Any = None) -
         kwargs = {k: case[k] for k in _LIGHT_SETTINGS if k in case}
         lights.append(Light.from_blender(case["type"], blender_light_matrix(case), case["energy"], name=name,
                                          **kwargs))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # forest.exr's negative texels are clamped
-        env = sim_core.load_exr(bundled_hdri())
+    env = _bundled_map()
     mid = np.concatenate(mids)
     scene = Scene.from_arrays(np.vstack(pos), np.vstack(tri), normals=np.vstack(nrm), uvs=np.vstack(uvs),
                               textures=[Texture(CHECKER, name="checker")], materials=materials,

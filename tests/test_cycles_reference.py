@@ -1,8 +1,8 @@
 """Cycles as the reference (tests/cycles_reference.py): each Blender light type lights a diffuse plane (and
-a cube's shadow) as brightly in the simulator as in a Cycles render of the same light, and a bundled HDRI
-world with strength and rotation looks the same. Cycles renders live here (32x32 pixels, 64 samples:
-about two seconds for all cases); bench/bench_light_units.py prints the comparison at a higher
-resolution and sample count."""
+a cube's shadow) as brightly in the simulator as in a Cycles render of the same light, a bundled HDRI
+world with strength and rotation looks the same and lights the plane as brightly. Cycles renders live
+here (32x32 pixels, 64 samples: about two seconds for all cases); bench/bench_light_units.py prints the
+comparison at a higher resolution and sample count."""
 
 from __future__ import annotations
 
@@ -39,6 +39,17 @@ def test_hdri_world_matches_cycles(light_scenes, strength: float, rotation: floa
     simulated = light_scenes.simulator_world(strength, rotation)
     assert float(simulated.mean()) == pytest.approx(float(cycles.mean()), rel=0.02)
     assert np.corrcoef(cycles.ravel(), simulated.ravel())[0, 1] > 0.97
+
+
+@pytest.mark.parametrize("rotation", [0.0, 2.0])
+def test_hdri_lights_the_plane_like_cycles(light_scenes, rotation: float) -> None:
+    """The world as the only light: forest.exr's sky (SH irradiance occluded by AO rays) and its sun (an
+    environment light with shadow rays: the cube's shadow) light the diffuse plane as brightly as Cycles'
+    importance-sampled world does."""
+    cycles, _ = light_scenes.cycles_world_lit(0.5, rotation, size=32, samples=64)
+    simulated, _ = light_scenes.simulator_world_lit(0.5, rotation, size=32)
+    assert cycles > 0.2
+    assert simulated == pytest.approx(cycles, rel=0.04)
 
 
 def test_artist_scene_close_to_cycles(light_scenes) -> None:

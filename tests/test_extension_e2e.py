@@ -24,8 +24,45 @@ from tests.addon_support import kill_and_check_nothing_left
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow]
 
+WATCHER = r'''
+"""Polls the process tree below the pid given until stdin closes; writes every command line seen."""
+import json, os, select, sys
+
+
+def descendants(root):
+    parents = {}
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat") as fh:
+                    fields = fh.read().rsplit(")", 1)[1].split()
+                with open(f"/proc/{entry}/cmdline", "rb") as fh:
+                    argv = [a.decode(errors="replace") for a in fh.read().split(b"\0") if a]
+            except OSError:
+                continue
+            if fields[0] != "Z":
+                parents.setdefault(int(fields[1]), []).append((int(entry), argv))
+    out, todo = [], [root]
+    while todo:
+        for pid, argv in parents.get(todo.pop(), []):
+            out.append((pid, argv))
+            todo.append(pid)
+    return out
+
+
+root, me, seen = int(sys.argv[1]), os.getpid(), set()
+sys.stdout.write("ready\n")
+sys.stdout.flush()
+while True:
+    seen.update(tuple(argv) for pid, argv in descendants(root) if pid != me)
+    if select.select([sys.stdin], [], [], 0.02)[0]:
+        break
+with open(sys.argv[2], "w", encoding="utf-8") as fh:
+    json.dump(sorted(seen), fh)
+'''
+
 SCRIPT = r'''
-import json, os, sys, threading, time
+import json, os, subprocess, sys, threading, time
 import bpy, addon_utils
 import orbit_scene  # copied next to this script: bpy only
 
@@ -62,22 +99,22 @@ def descendants():
 
 class Watch:
     """Command lines seen below this one while a step runs (a process is first seen with its parent's
-    command line, between fork and exec: every one seen is kept)."""
+    command line, between fork and exec: every one seen is kept). The polling runs in a separate process:
+    a Python thread of this one running while bpy.ops.render.render holds Blender (the translation's
+    render) crashed Blender now and then."""
 
     def __enter__(self):
-        self.seen, self.stop = set(), threading.Event()
-        def run():
-            while not self.stop.is_set():
-                for _, argv in descendants():
-                    self.seen.add(tuple(argv))
-                time.sleep(0.02)
-        self.thread = threading.Thread(target=run, daemon=True)
-        self.thread.start()
+        self.out = os.path.abspath(f"watch-{time.monotonic_ns()}.json")
+        self.proc = subprocess.Popen([sys.executable, "-I", os.path.abspath("watcher.py"), str(os.getpid()),
+                                      self.out], stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+        assert self.proc.stdout.readline() == b"ready\n"
         return self
 
     def __exit__(self, *exc):
-        self.stop.set()
-        self.thread.join()
+        self.proc.stdin.close()
+        self.proc.wait(30)
+        with open(self.out, encoding="utf-8") as fh:
+            self.seen = {tuple(argv) for argv in json.load(fh)}
 
 
 def install():
@@ -223,6 +260,7 @@ def test_zip_in_a_bpy_only_environment_optimises_plays_back_and_leaves_nothing_r
     work = tmp_path / "work"
     work.mkdir()
     shutil.copy(Path(__file__).with_name("orbit_scene.py"), work / "orbit_scene.py")
+    (work / "watcher.py").write_text(WATCHER, encoding="utf-8")
     user = tmp_path / "user"
     out, log = bpy_venv.run_script(SCRIPT, [str(extension_zip)], user, work, timeout_s=900)
     venv_python = str(bpy_venv.python())

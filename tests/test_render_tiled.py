@@ -68,6 +68,28 @@ def test_tiled_textured_frame_equals_the_whole_frame() -> None:
     assert np.array_equal(whole.image, tiled.image) and whole.counters == tiled.counters
 
 
+def test_windows_in_both_directions_sum_to_the_whole_frame(scene: sim_core.Scene) -> None:
+    """Windows on the tile grid that read their neighbours' samples in the resolve pass (pixel filter of
+    supersampling, ambient denoiser) trace an uncounted apron: pixels and counters add up to the frame."""
+    cam = camera(96, 72)
+    settings = sim_core.RenderSettings(mode="supersample", block=2, ao_samples=2, tile_size=16)
+    whole = sim_core.render(scene, cam, settings, threads=1)
+    assert whole.counters["ambient_filter_taps"] > 0 and whole.counters["resolve_taps"] > 0
+    image = np.zeros_like(whole.image)
+    counters: dict[str, int] = {}
+    native = settings.to_native()
+    for y0, y1 in ((0, 16), (16, 48), (48, 72)):
+        for x0, x1 in ((0, 32), (32, 96)):
+            d = _core.render_frame(scene.native, cam.frame(), cam.vfov, x1 - x0, y1 - y0, native, 1, None,
+                                   32768, 64, 4, 16384, 64, 4, crop_x=x0, crop_y=y0,
+                                   full_width=96, full_height=72)
+            image[y0:y1, x0:x1] = d["image"]
+            for k, v in d["counters"].items():
+                counters[k] = counters.get(k, 0) + int(v)
+    assert np.array_equal(whole.image, image)
+    assert counters == whole.counters
+
+
 def test_progress_callback_can_stop_a_render(scene: sim_core.Scene) -> None:
     class Stop(Exception):
         pass

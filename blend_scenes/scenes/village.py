@@ -4,6 +4,8 @@ church around a square with a fountain (seed: the power-budget paper's large out
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import bpy
@@ -104,28 +106,31 @@ def tree_mesh(name: str, mats: list[bpy.types.Material], height: float, crowns: 
     return mesh
 
 
-def build(out_dir: Path) -> c.SceneSpec:
-    c.reset()
-    grass = c.principled("Meadow", (0.35, 0.42, 0.18), roughness=0.9)
-    paving = c.principled("Paving", (0.6, 0.55, 0.48), roughness=0.6)
-    walls = [c.principled(f"Plaster{i}", col, roughness=0.85) for i, col in
-             enumerate([(0.9, 0.8, 0.62), (0.85, 0.7, 0.55), (0.92, 0.88, 0.8), (0.8, 0.6, 0.45)])]
-    roof = c.principled("RoofTiles", (0.62, 0.28, 0.16), roughness=0.7)
-    window = c.principled("WindowGlass", (0.2, 0.25, 0.3), metallic=0.9, roughness=0.05)
-    wood = c.principled("Shutters", (0.25, 0.4, 0.45), roughness=0.6)
-    bark = c.principled("Bark", (0.25, 0.18, 0.12), roughness=0.9)
-    leaves = [c.principled("Olive", (0.3, 0.38, 0.2), roughness=0.8),
-              c.principled("Cypress", (0.12, 0.25, 0.1), roughness=0.8)]
-    stone = c.principled("Stone", (0.7, 0.66, 0.58), roughness=0.75)
-    water = c.principled("FountainWater", (0.6, 0.7, 0.75), roughness=0.02, transmission=1.0, ior=1.33)
-    lamp_glow = c.principled("LampGlass", (1.0, 0.9, 0.7), emission=(1.0, 0.8, 0.5), emission_strength=5.0)
-    iron = c.principled("Iron", (0.1, 0.1, 0.1), metallic=1.0, roughness=0.45)
+@dataclass(frozen=True)
+class _Materials:
+    grass: bpy.types.Material
+    paving: bpy.types.Material
+    walls: list[bpy.types.Material]
+    roof: bpy.types.Material
+    window: bpy.types.Material
+    wood: bpy.types.Material
+    bark: bpy.types.Material
+    leaves: list[bpy.types.Material]
+    stone: bpy.types.Material
+    water: bpy.types.Material
+    lamp_glow: bpy.types.Material
+    iron: bpy.types.Material
 
+
+def build(out_dir: Path) -> c.SceneSpec:
+    """The scene in the order it always was built (object order and the random draws fix its content)."""
+    c.reset()
+    mats = _materials()
     xs = np.linspace(-SIZE / 2, SIZE / 2, GRID)
     gx, gy = np.meshgrid(xs, xs)
-    c.add_object("Ground", c.grid_mesh("Ground", ground_height(gx, gy), SIZE, SIZE, grass))
+    c.add_object("Ground", c.grid_mesh("Ground", ground_height(gx, gy), SIZE, SIZE, mats.grass))
     sq_z = float(ground_height(0.0, 0.0))
-    c.box("Square", (30.0, 30.0, 0.6), (0.0, 0.0, sq_z - 0.2), paving)
+    c.box("Square", (30.0, 30.0, 0.6), (0.0, 0.0, sq_z - 0.2), mats.paving)
 
     path_eye = c.smooth_path([(-120.0, -110.0, 45.0), (-40.0, -90.0, 30.0), (30.0, -50.0, 18.0),
                               (22.0, -12.0, sq_z + 6.0), (-8.0, -16.0, sq_z + 3.5), (-20.0, 8.0, sq_z + 5.0),
@@ -141,10 +146,43 @@ def build(out_dir: Path) -> c.SceneSpec:
         return bool(np.any(near & (corridor[:, 2] < top + 2.0)))
 
     rng = np.random.default_rng(1789)
+    n_houses = _houses(rng, mats, blocks_path)
+    _trees(rng, mats, blocks_path)
+    _church_and_fountain(mats, sq_z)
+    _street_lamps(mats, sq_z)
+    c.sun_light("Sun", (0.45, -0.5, -0.55), strength=3.0, angle_deg=0.8)
+    c.world_color((0.55, 0.68, 0.88))
+
+    cam = c.animated_camera(path_eye, path_target, DURATION_S, lens_mm=28.0)
+    desc = f"Hill village: {n_houses} instanced houses, trees, church, fountain, lamps"
+    return c.SceneSpec("village", desc, cam, DURATION_S)
+
+
+def _materials() -> _Materials:
+    """Every material, created in a fixed order (their order is part of the scene)."""
+    grass = c.principled("Meadow", (0.35, 0.42, 0.18), roughness=0.9)
+    paving = c.principled("Paving", (0.6, 0.55, 0.48), roughness=0.6)
+    walls = [c.principled(f"Plaster{i}", col, roughness=0.85) for i, col in
+             enumerate([(0.9, 0.8, 0.62), (0.85, 0.7, 0.55), (0.92, 0.88, 0.8), (0.8, 0.6, 0.45)])]
+    roof = c.principled("RoofTiles", (0.62, 0.28, 0.16), roughness=0.7)
+    window = c.principled("WindowGlass", (0.2, 0.25, 0.3), metallic=0.9, roughness=0.05)
+    wood = c.principled("Shutters", (0.25, 0.4, 0.45), roughness=0.6)
+    bark = c.principled("Bark", (0.25, 0.18, 0.12), roughness=0.9)
+    leaves = [c.principled("Olive", (0.3, 0.38, 0.2), roughness=0.8),
+              c.principled("Cypress", (0.12, 0.25, 0.1), roughness=0.8)]
+    stone = c.principled("Stone", (0.7, 0.66, 0.58), roughness=0.75)
+    water = c.principled("FountainWater", (0.6, 0.7, 0.75), roughness=0.02, transmission=1.0, ior=1.33)
+    lamp_glow = c.principled("LampGlass", (1.0, 0.9, 0.7), emission=(1.0, 0.8, 0.5), emission_strength=5.0)
+    iron = c.principled("Iron", (0.1, 0.1, 0.1), metallic=1.0, roughness=0.45)
+    return _Materials(grass, paving, walls, roof, window, wood, bark, leaves, stone, water, lamp_glow, iron)
+
+
+def _houses(rng: np.random.Generator, mats: _Materials, blocks_path: Callable[..., bool]) -> int:
+    """Houses along a loose street grid around the square (skipping the square itself); returns how many."""
     variants = []
     for i, (w, d, h) in enumerate([(8, 6, 6), (10, 7, 9), (6, 6, 6), (12, 8, 9), (7, 5, 3), (9, 9, 6)]):
-        variants.append(house_mesh(f"House{i}", w, d, h, [walls[i % 4], roof, window, wood]))
-    # Houses along a loose street grid around the square (skipping the square itself).
+        slots = [mats.walls[i % 4], mats.roof, mats.window, mats.wood]
+        variants.append(house_mesh(f"House{i}", w, d, h, slots))
     n_houses = 0
     for gxi in range(-7, 8):
         for gyi in range(-7, 8):
@@ -159,9 +197,13 @@ def build(out_dir: Path) -> c.SceneSpec:
             variant = variants[int(rng.integers(0, len(variants)))]
             c.add_object(f"House{n_houses}", variant, (x, y, z), (0, 0, turn))
             n_houses += 1
+    return n_houses
 
-    olive = tree_mesh("OliveTree", [bark, leaves[0]], 6.0, 3)
-    cypress = tree_mesh("Cypress", [bark, leaves[1]], 9.0, 1)
+
+def _trees(rng: np.random.Generator, mats: _Materials, blocks_path: Callable[..., bool]) -> None:
+    """Olive trees and cypresses scattered around the village, off the square and the flight corridor."""
+    olive = tree_mesh("OliveTree", [mats.bark, mats.leaves[0]], 6.0, 3)
+    cypress = tree_mesh("Cypress", [mats.bark, mats.leaves[1]], 9.0, 1)
     for i in range(150):
         r = float(rng.uniform(20.0, 140.0))
         a = float(rng.uniform(0, 2 * math.pi))
@@ -175,24 +217,28 @@ def build(out_dir: Path) -> c.SceneSpec:
         c.add_object(f"Tree{i}", mesh, (x, y, float(ground_height(x, y)) - 0.2), (0, 0, float(a)),
                      (s, s, s * (1.6 if mesh is cypress else 1.0)))
 
-    # Church with a bell tower on the square's north side.
-    church = house_mesh("Church", 14, 24, 12, [stone, roof, window, wood])
+
+def _church_and_fountain(mats: _Materials, sq_z: float) -> None:
+    """A church with a bell tower on the square's north side, a turned stone fountain in its middle."""
+    church = house_mesh("Church", 14, 24, 12, [mats.stone, mats.roof, mats.window, mats.wood])
     c.add_object("Church", church, (0.0, 30.0, sq_z - 0.2), (0, 0, math.pi / 2))
-    c.box("BellTower", (5.0, 5.0, 26.0), (10.0, 24.0, sq_z + 12.8), stone)
-    # Fountain: a turned stone basin with water in the middle of the square.
+    c.box("BellTower", (5.0, 5.0, 26.0), (10.0, 24.0, sq_z + 12.8), mats.stone)
     basin = c.lathe("Basin", [(0.0, 0.0), (3.0, 0.0), (3.0, 0.8), (2.7, 0.8), (2.7, 0.25), (0.6, 0.25),
-                              (0.5, 1.8), (1.0, 2.0), (1.0, 2.2), (0.0, 2.3)], stone, steps=64)
+                              (0.5, 1.8), (1.0, 2.0), (1.0, 2.2), (0.0, 2.3)], mats.stone, steps=64)
     c.add_object("Fountain", basin, (0.0, 0.0, sq_z + 0.1))
-    pool = c.lathe("Pool", [(0.0, 0.2), (2.68, 0.2), (2.68, 0.65), (0.0, 0.65)], water, steps=64)
+    pool = c.lathe("Pool", [(0.0, 0.2), (2.68, 0.2), (2.68, 0.65), (0.0, 0.65)], mats.water, steps=64)
     c.add_object("Pool", pool, (0.0, 0.0, sq_z + 0.1))
-    # Street lamps around the square (emissive globes; four also cast light).
+
+
+def _street_lamps(mats: _Materials, sq_z: float) -> None:
+    """Street lamps around the square (emissive globes; four also cast light)."""
     post_profile = [(0.0, 0.0), (0.15, 0.0), (0.08, 0.3), (0.06, 3.6), (0.0, 3.6)]
-    post = c.lathe("LampPost", post_profile, iron, steps=16)
+    post = c.lathe("LampPost", post_profile, mats.iron, steps=16)
     bpy.ops.mesh.primitive_uv_sphere_add(segments=16, ring_count=8, radius=0.25)
     globe_obj = bpy.context.active_object
     globe = globe_obj.data
     globe.name = "LampGlobe"
-    globe.materials.append(lamp_glow)
+    globe.materials.append(mats.lamp_glow)
     bpy.data.objects.remove(globe_obj)
     for i in range(12):
         a = 2 * math.pi * i / 12
@@ -201,10 +247,3 @@ def build(out_dir: Path) -> c.SceneSpec:
         c.add_object(f"LampGlobe{i}", globe, (x, y, sq_z + 3.85))
         if i % 3 == 0:
             c.point_light(f"Lamp{i}", (x, y, sq_z + 3.85), watts=120.0, color=(1.0, 0.8, 0.55), radius=0.25)
-
-    c.sun_light("Sun", (0.45, -0.5, -0.55), strength=3.0, angle_deg=0.8)
-    c.world_color((0.55, 0.68, 0.88))
-
-    cam = c.animated_camera(path_eye, path_target, DURATION_S, lens_mm=28.0)
-    desc = f"Hill village: {n_houses} instanced houses, trees, church, fountain, lamps"
-    return c.SceneSpec("village", desc, cam, DURATION_S)

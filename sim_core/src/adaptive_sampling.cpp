@@ -57,7 +57,11 @@ class TileSampler {
   // Reference samples every `spacing` (and the last row/column), then the runs between them along X on
   // the reference rows, then along Y on every column.
   void trace_adaptive(int spacing);
-  // Resolves the samples to pixels and flushes the tile into the frame buffer.
+  // With a sample buffer: traces the guard sub-samples of the pixel filter just outside the frame that
+  // lie beyond this tile's edges on the frame's edges.
+  void trace_guard(FrameBuffers& fb);
+  // Flushes the tile into the frame buffer: pixels (their samples' box mean, final without a resolve
+  // pass), geometry and sample kinds, and every sample into the sample buffer when there is one.
   void flush(FrameBuffers& fb);
   // Folds the schedule's statistics into the tile's counters and `stat`.
   void finish(int spacing, TileStat* stat) const;
@@ -73,23 +77,45 @@ class TileSampler {
 
   std::size_t at(int i, int j) const { return static_cast<std::size_t>(j) * nx_ + i; }
   void trace_at(int i, int j);
+  // Traces the sample at frame sub-sample coordinates (sx, sy) (negative or past the frame: a guard sample).
+  SampleResult trace_subsample(int sx, int sy);
   // The run of `count` samples strictly between known samples ia and ib along a line: interpolated when
   // the two are similar, traced otherwise. index_of(m) / trace_of(m) address its m-th sample (1-based).
   template <class IndexOf, class TraceOf>
   void resolve_run(std::size_t ia, std::size_t ib, int count, IndexOf index_of, TraceOf trace_of);
 };
 
-void TileSampler::trace_at(int i, int j) {
-  // Seeds by position in the full frame: a window of it (Camera::crop_x/y) samples like the whole.
-  const std::uint32_t sx = static_cast<std::uint32_t>((ctx_.camera.crop_x + x0_) * k_ + i),
-                      sy = static_cast<std::uint32_t>((ctx_.camera.crop_y + y0_) * k_ + j);
-  const std::uint32_t key = sample_key(sx, sy, static_cast<std::uint32_t>(k_));
-  const float px = static_cast<float>(x0_) + (static_cast<float>(i) + 0.5f) * inv_k_;
-  const float py = static_cast<float>(y0_) + (static_cast<float>(j) + 0.5f) * inv_k_;
-  samples_[at(i, j)] = trace_sample(ctx_, px, py, key);
-  state_[at(i, j)] = kTraced;
+SampleResult TileSampler::trace_subsample(int sx, int sy) {
+  // Seeds by position in the whole frame: a window of it (Camera::crop_x/y) samples like the whole.
+  const std::uint32_t key = sample_key(static_cast<std::uint32_t>(ctx_.camera.crop_x * k_ + sx),
+                                       static_cast<std::uint32_t>(ctx_.camera.crop_y * k_ + sy),
+                                       static_cast<std::uint32_t>(k_));
   ++traced_;
   ++ctx_.counters.tile_buffer_writes;
+  return trace_sample(ctx_, (static_cast<float>(sx) + 0.5f) * inv_k_, (static_cast<float>(sy) + 0.5f) * inv_k_, key);
+}
+
+void TileSampler::trace_at(int i, int j) {
+  samples_[at(i, j)] = trace_subsample(x0_ * k_ + i, y0_ * k_ + j);
+  state_[at(i, j)] = kTraced;
+}
+
+void TileSampler::trace_guard(FrameBuffers& fb) {
+  SampleBuffer& sb = fb.samples;
+  if (sb.empty()) return;
+  const int g = sb.guard;
+  const int ix0 = x0_ * k_, iy0 = y0_ * k_, ix1 = ix0 + nx_, iy1 = iy0 + ny_;
+  // Only on the whole frame's edges (a window's inner edges read its neighbours' samples, render.h).
+  const Camera& cam = ctx_.camera;
+  const int fx0 = cam.crop_x + x0_, fy0 = cam.crop_y + y0_;
+  const int ex0 = fx0 == 0 ? ix0 - g : ix0, ex1 = fx0 + w_ == cam.frame_width() ? ix1 + g : ix1;
+  const int ey0 = fy0 == 0 ? iy0 - g : iy0, ey1 = fy0 + h_ == cam.frame_height() ? iy1 + g : iy1;
+  for (int sy = ey0; sy < ey1; ++sy)
+    for (int sx = ex0; sx < ex1; ++sx) {
+      if (sx >= ix0 && sx < ix1 && sy >= iy0 && sy < iy1) continue;  // the tile's own samples
+      const SampleResult r = trace_subsample(sx, sy);
+      sb.set(sx, sy, r.color, r.ambient, r.geom.object, r.geom.normal, r.geom.position);
+    }
 }
 
 template <class IndexOf, class TraceOf>
@@ -108,6 +134,8 @@ void TileSampler::resolve_run(std::size_t ia, std::size_t ib, int count, IndexOf
     SampleResult& s = samples_[index_of(m)];
     s.color = lerp(samples_[ia].color, samples_[ib].color, f);
     s.geom = interpolate_geometry(samples_[ia].geom, samples_[ib].geom, f);
+    const AmbientSample &a = samples_[ia].ambient, &b = samples_[ib].ambient;
+    s.ambient = {lerp(a.unoccluded, b.unoccluded, f), lerp(a.seen, b.seen, f), lerp(a.all, b.all, f)};
     state_[index_of(m)] = kInterpolated;
     ++interpolated_;
     c.tile_buffer_reads += 2;
@@ -141,6 +169,12 @@ void TileSampler::trace_adaptive(int spacing) {
 
 void TileSampler::flush(FrameBuffers& fb) {
   const float inv_n = 1.f / static_cast<float>(k_ * k_);
+  if (!fb.samples.empty())
+    for (int j = 0; j < ny_; ++j)
+      for (int i = 0; i < nx_; ++i) {
+        const SampleResult& r = samples_[at(i, j)];
+        fb.samples.set(x0_ * k_ + i, y0_ * k_ + j, r.color, r.ambient, r.geom.object, r.geom.normal, r.geom.position);
+      }
   for (int jj = 0; jj < h_; ++jj) {
     for (int ii = 0; ii < w_; ++ii) {
       Vec3 sum;
@@ -183,6 +217,7 @@ void render_tile(TileContext& ctx, FrameBuffers& fb, int x0, int y0, int w, int 
   } else {
     sampler.trace_adaptive(spacing);
   }
+  sampler.trace_guard(fb);
   sampler.flush(fb);
   sampler.finish(spacing, stat);
 }

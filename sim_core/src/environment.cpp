@@ -28,7 +28,9 @@ Environment::Environment(const float* rgb, int width, int height, float rotation
   }
   mean_ = Vec3(static_cast<float>(sum[0] / wsum), static_cast<float>(sum[1] / wsum),
                static_cast<float>(sum[2] / wsum));
-  // Order-2 SH projection of the radiance (texel solid angle sin(theta) dtheta dphi).
+  std::vector<float> residual = rgb_;
+  extract_suns(&residual);
+  // Order-2 SH projection of the radiance without the suns (texel solid angle sin(theta) dtheta dphi).
   double sh[9][3] = {};
   const double texel = (2.0 * 3.14159265358979323846 / width) * (3.14159265358979323846 / height);
   for (int row = 0; row < height; ++row) {
@@ -39,13 +41,98 @@ Environment::Environment(const float* rgb, int width, int height, float rotation
       const double basis[9] = {0.282095, 0.488603 * y, 0.488603 * z, 0.488603 * x, 1.092548 * x * y,
                                1.092548 * y * z, 0.315392 * (3.0 * z * z - 1.0), 1.092548 * x * z,
                                0.546274 * (x * x - y * y)};
-      const float* p = &rgb_[(static_cast<std::size_t>(row) * width + col) * 3];
+      const float* p = &residual[(static_cast<std::size_t>(row) * width + col) * 3];
       for (int k = 0; k < 9; ++k)
         for (int c = 0; c < 3; ++c) sh[k][c] += basis[k] * w * p[c];
     }
   }
   for (int k = 0; k < 9; ++k)
     sh_[k] = Vec3(static_cast<float>(sh[k][0]), static_cast<float>(sh[k][1]), static_cast<float>(sh[k][2]));
+}
+
+void Environment::extract_suns(std::vector<float>* residual) {
+  constexpr double kPiD = 3.14159265358979323846;
+  const int W = width_, H = height_;
+  std::vector<double> solid(static_cast<std::size_t>(H));  // solid angle of a texel of each row
+  for (int row = 0; row < H; ++row) solid[row] = std::sin((row + 0.5) / H * kPiD) * (2.0 * kPiD / W) * (kPiD / H);
+  auto at = [&](int row, int col) { return &(*residual)[(static_cast<std::size_t>(row) * W + col) * 3]; };
+  auto luminance = [](const float* p) { return 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2]; };
+  double power = 0.0;  // luminance integrated over the sphere
+  for (int row = 0; row < H; ++row)
+    for (int col = 0; col < W; ++col) power += luminance(at(row, col)) * solid[row];
+  const double threshold = kSunThreshold * power / (4.0 * kPiD);
+  if (!(threshold > 0.0)) return;
+  const double cos_radius = std::cos(static_cast<double>(kSunRadius));
+  const int row_reach = static_cast<int>(std::ceil(kSunRadius / kPiD * H)) + 1;
+  std::vector<std::uint8_t> taken(static_cast<std::size_t>(W) * H, 0);
+  for (int n = 0; n < kMaxSuns; ++n) {
+    // The brightest texel left.
+    int peak_row = -1, peak_col = -1;
+    double peak = threshold;
+    for (int row = 0; row < H; ++row)
+      for (int col = 0; col < W; ++col) {
+        const double y = luminance(at(row, col));
+        if (y > peak && !taken[static_cast<std::size_t>(row) * W + col]) { peak = y; peak_row = row; peak_col = col; }
+      }
+    if (peak_row < 0) return;
+    const Vec3 axis = equirect_direction(peak_col + 0.5f, peak_row + 0.5f, W, H);
+    // Its region: texels above the threshold within kSunRadius (rows near the peak's; every column, as the
+    // region may wrap around or reach a pole).
+    const int r0 = std::max(0, peak_row - row_reach), r1 = std::min(H - 1, peak_row + row_reach);
+    std::vector<std::pair<int, int>> region;
+    for (int row = r0; row <= r1; ++row)
+      for (int col = 0; col < W; ++col) {
+        const std::size_t i = static_cast<std::size_t>(row) * W + col;
+        if (taken[i] || !(luminance(at(row, col)) > threshold)) continue;
+        if (dot(equirect_direction(col + 0.5f, row + 0.5f, W, H), axis) < cos_radius) continue;
+        region.emplace_back(row, col);
+        taken[i] = 1;
+      }
+    // The background it sits on: the mean of the texels bordering it.
+    double bg[3] = {0.0, 0.0, 0.0}, bg_weight = 0.0;
+    for (const auto& [row, col] : region) {
+      const int nb[4][2] = {{row - 1, col}, {row + 1, col}, {row, (col + W - 1) % W}, {row, (col + 1) % W}};
+      for (const auto& q : nb) {
+        if (q[0] < 0 || q[0] >= H || taken[static_cast<std::size_t>(q[0]) * W + q[1]]) continue;
+        const float* p = at(q[0], q[1]);
+        for (int c = 0; c < 3; ++c) bg[c] += p[c] * solid[q[0]];
+        bg_weight += solid[q[0]];
+      }
+    }
+    for (double& b : bg) b = bg_weight > 0.0 ? b / bg_weight : 0.0;
+    // What rises above the background: its power, power-weighted direction and spread.
+    double e[3] = {0.0, 0.0, 0.0}, region_power = 0.0, area = 0.0;
+    Vec3 centre;
+    for (const auto& [row, col] : region) {
+      const float* p = at(row, col);
+      double excess[3];
+      for (int c = 0; c < 3; ++c) excess[c] = std::max(0.0, p[c] - bg[c]) * solid[row];
+      const double y = 0.2126 * excess[0] + 0.7152 * excess[1] + 0.0722 * excess[2];
+      centre += equirect_direction(col + 0.5f, row + 0.5f, W, H) * static_cast<float>(y);
+      region_power += y;
+      area += solid[row];
+    }
+    if (!(region_power >= kSunMinPower * power) || !(length(centre) > 0.f)) continue;  // a glint, not a sun
+    centre = normalize(centre);
+    double spread = 0.0;  // power-weighted mean squared angle from the centre
+    for (const auto& [row, col] : region) {
+      float* p = at(row, col);
+      const Vec3 d = equirect_direction(col + 0.5f, row + 0.5f, W, H);
+      const double cos_a = std::min(1.0, std::max(-1.0, static_cast<double>(dot(d, centre))));
+      double y = 0.0;
+      for (int c = 0; c < 3; ++c) {
+        const double excess = std::max(0.0, p[c] - bg[c]) * solid[row];
+        e[c] += excess * cos_a;
+        y += (c == 0 ? 0.2126 : c == 1 ? 0.7152 : 0.0722) * excess;
+        p[c] = static_cast<float>(std::min(static_cast<double>(p[c]), bg[c]));  // the background stays
+      }
+      spread += y * std::acos(cos_a) * std::acos(cos_a);
+    }
+    // A uniform disc of radius r has mean squared angle r^2 / 2; at least the region's own size.
+    const double radius = std::max(std::sqrt(2.0 * spread / region_power), std::sqrt(area / kPiD));
+    lights_.push_back({from_map(centre), Vec3(static_cast<float>(e[0]), static_cast<float>(e[1]), static_cast<float>(e[2])),
+                       static_cast<float>(radius)});
+  }
 }
 
 Vec3 Environment::sh_evaluate(const Vec3* coefficients, Vec3 direction) const {
@@ -77,30 +164,40 @@ Environment::~Environment() = default;
 Environment::Environment(Environment&& o) noexcept
     : constant_(o.constant_), mean_(o.mean_), width_(o.width_), height_(o.height_), cos_rot_(o.cos_rot_),
       sin_rot_(o.sin_rot_), rgb_(std::move(o.rgb_)) {
+  lights_ = std::move(o.lights_);
   if (!is_map()) mean_ = constant_;
   for (int k = 0; k < 9; ++k) sh_[k] = o.sh_[k];
 }
 Environment& Environment::operator=(Environment&& o) noexcept {
   constant_ = o.constant_; mean_ = o.mean_; width_ = o.width_; height_ = o.height_; rgb_ = std::move(o.rgb_);
-  cos_rot_ = o.cos_rot_; sin_rot_ = o.sin_rot_;
+  cos_rot_ = o.cos_rot_; sin_rot_ = o.sin_rot_; lights_ = std::move(o.lights_);
   for (int k = 0; k < 9; ++k) sh_[k] = o.sh_[k];
   if (!is_map()) mean_ = constant_;
   filters_[0].reset(); filters_[1].reset();
   return *this;
 }
 
-Vec3 Environment::radiance(Vec3 direction) const {
+Vec3 Environment::radiance(Vec3 direction, bool bilinear) const {
   if (!is_map()) return constant_;
   const Vec3 d = to_map(direction);
   const float len = length(d);
   const float z = std::min(1.f, std::max(-1.f, d.z / len));
   const float u = 0.5f - std::atan2(d.y, d.x) / (2.f * kPi);
   const float v = std::acos(z) / kPi;
-  int col = static_cast<int>(std::floor(u * width_)) % width_;
-  if (col < 0) col += width_;
-  const int row = std::min(height_ - 1, std::max(0, static_cast<int>(v * height_)));
-  const float* p = &rgb_[(static_cast<std::size_t>(row) * width_ + col) * 3];
-  return Vec3(p[0], p[1], p[2]);
+  auto texel = [&](int row, int col) {
+    col %= width_;
+    if (col < 0) col += width_;
+    row = std::min(height_ - 1, std::max(0, row));
+    const float* p = &rgb_[(static_cast<std::size_t>(row) * width_ + col) * 3];
+    return Vec3(p[0], p[1], p[2]);
+  };
+  if (!bilinear) return texel(static_cast<int>(v * height_), static_cast<int>(std::floor(u * width_)));
+  // Between the four nearest texel centres (wrapping around in u, clamped at the poles).
+  const float x = u * width_ - 0.5f, y = v * height_ - 0.5f;
+  const float x0 = std::floor(x), y0 = std::floor(y);
+  const float fx = x - x0, fy = y - y0;
+  const int c = static_cast<int>(x0), r = static_cast<int>(y0);
+  return lerp(lerp(texel(r, c), texel(r, c + 1), fx), lerp(texel(r + 1, c), texel(r + 1, c + 1), fx), fy);
 }
 
 const EnvironmentFilter* Environment::filter(int order) const {

@@ -1,13 +1,15 @@
 #include "sim_core/render.h"
 
 #include <algorithm>
+#include <cmath>
+#include <cstddef>
 #include <stdexcept>
 
 #include "sim_core/adaptive_sampling.h"
 
 namespace sim_core {
 
-void FrameBuffers::allocate(int w, int h) {
+void FrameBuffers::allocate(int w, int h, int k, bool ambient) {
   width = w;
   height = h;
   const std::size_t n = static_cast<std::size_t>(w) * h;
@@ -17,6 +19,8 @@ void FrameBuffers::allocate(int w, int h) {
   position.assign(n * 3, 0.f);
   object.assign(n, -1);
   kind.assign(n, 0);
+  if (k > 1 || ambient) samples.allocate(w, h, k, ambient);
+  else samples = SampleBuffer{};
 }
 
 void FrameBuffers::store(std::size_t p, Vec3 c, const SampleGeometry& g, SampleKind sample_kind) {
@@ -32,16 +36,18 @@ void FrameBuffers::store(std::size_t p, Vec3 c, const SampleGeometry& g, SampleK
 
 TileStat TileGrid::tile(std::size_t t) const {
   TileStat s;
-  s.x0 = static_cast<int>(t % static_cast<std::size_t>(tiles_x)) * tile_size;
-  s.y0 = static_cast<int>(t / static_cast<std::size_t>(tiles_x)) * tile_size;
-  s.width = std::min(tile_size, width - s.x0);
-  s.height = std::min(tile_size, height - s.y0);
+  const int ex = origin_x + static_cast<int>(t % static_cast<std::size_t>(tiles_x)) * tile_size;
+  const int ey = origin_y + static_cast<int>(t / static_cast<std::size_t>(tiles_x)) * tile_size;
+  s.x0 = std::max(0, ex);
+  s.y0 = std::max(0, ey);
+  s.width = std::min(ex + tile_size, width) - s.x0;
+  s.height = std::min(ey + tile_size, height) - s.y0;
   return s;
 }
 
 void render_tiles(const Scene& scene, const Camera& camera, const RenderSettings& settings, const CacheConfig& cache,
                   const TileGrid& grid, int threads, const TraceOptions& trace, RenderOutput* out,
-                  const TileRenderer& render, const CacheConfig& texture_cache) {
+                  const TileRenderer& render, const CacheConfig& texture_cache, const std::vector<char>* counted) {
   trace.validate();
   const std::size_t ntiles = static_cast<std::size_t>(grid.count());
   out->tiles.resize(ntiles);
@@ -66,11 +72,35 @@ void render_tiles(const Scene& scene, const Camera& camera, const RenderSettings
     }
   });
   for (std::size_t t = 0; t < ntiles; ++t) {
+    if (counted && !(*counted)[t]) continue;
     if (trace.log_rays) out->rays.insert(out->rays.end(), tile_rays[t].begin(), tile_rays[t].end());
     out->counters += out->tiles[t].counters;
     for (std::size_t i = 0; i < out->histogram.size(); ++i) out->histogram[i] += out->tiles[t].histogram[i];
   }
 }
+
+namespace {
+
+// Copies the w x h window at (x0, y0) of `src`'s pixel buffers (no sample buffer).
+FrameBuffers crop_pixels(const FrameBuffers& src, int x0, int y0, int w, int h) {
+  FrameBuffers dst;
+  dst.allocate(w, h);
+  for (int y = 0; y < h; ++y) {
+    const std::size_t from = static_cast<std::size_t>(y0 + y) * src.width + x0, to = static_cast<std::size_t>(y) * w;
+    auto copy = [&](const auto& s, auto& d, std::size_t n) {
+      std::copy(s.begin() + from * n, s.begin() + (from + w) * n, d.begin() + to * n);
+    };
+    copy(src.color, dst.color, 3);
+    copy(src.depth, dst.depth, 1);
+    copy(src.normal, dst.normal, 3);
+    copy(src.position, dst.position, 3);
+    copy(src.object, dst.object, 1);
+    copy(src.kind, dst.kind, 1);
+  }
+  return dst;
+}
+
+}  // namespace
 
 RenderOutput render_frame(const Scene& scene, const Camera& camera, const RenderSettings& settings, int threads,
                           const MultirateState* previous, const CacheConfig& cache, const TraceOptions& trace,
@@ -79,23 +109,81 @@ RenderOutput render_frame(const Scene& scene, const Camera& camera, const Render
   camera.validate();
   cache.validate();
   texture_cache.validate();
-  RenderOutput out;
-  const TileGrid grid(camera.width, camera.height, settings.tile_size);
-  out.fb.allocate(camera.width, camera.height);
-  const bool use_prev = settings.multirate && settings.adaptive() && previous &&
-                        previous->matches(grid.tiles_x, grid.tiles_y, grid.tile_size, camera.width, camera.height);
   const int k = settings.subgrid();
-  render_tiles(scene, camera, settings, cache, grid, threads, trace, &out, [&](TileContext& ctx, TileStat& stat, std::size_t t) {
+  const int ts = settings.tile_size;
+  // AO rays are traced only under a world that gives light.
+  const bool ambient = settings.ao_samples > 0 && max_component(scene.environment().mean()) > 0.f;
+  // A window that goes through the resolve pass reads samples beyond its edges: those of the pixel
+  // filter's support and the ambient filter's pool around each of them. It traces the whole tiles (on its
+  // own tile grid) that hold them, up to the frame's edges.
+  Camera traced = camera;
+  int apron = 0;
+  if ((k > 1 || ambient) && (camera.width != camera.frame_width() || camera.height != camera.frame_height())) {
+    const float reach = (k > 1 ? kPixelFilterRadius : 0.f) + (ambient ? kAmbientRadius : 0.f);
+    apron = ts * ((static_cast<int>(std::ceil(reach)) + ts - 1) / ts);
+    traced.crop_x = std::max(0, camera.crop_x - apron);
+    traced.crop_y = std::max(0, camera.crop_y - apron);
+    traced.width = std::min(camera.frame_width(), camera.crop_x + camera.width + apron) - traced.crop_x;
+    traced.height = std::min(camera.frame_height(), camera.crop_y + camera.height + apron) - traced.crop_y;
+    traced.full_width = camera.frame_width();
+    traced.full_height = camera.frame_height();
+  }
+  const int wx = camera.crop_x - traced.crop_x, wy = camera.crop_y - traced.crop_y;  // the window in `traced`
+  auto grid_origin = [&](int offset) { return offset % ts == 0 ? 0 : offset % ts - ts; };
+  const TileGrid grid(traced.width, traced.height, ts, grid_origin(wx), grid_origin(wy));
+  const TileGrid window_grid(camera.width, camera.height, ts);
+  // Tile t of `grid`: its index in the window's grid, or -1 in the apron.
+  std::vector<std::ptrdiff_t> window_tile(static_cast<std::size_t>(grid.count()), -1);
+  std::vector<char> counted(window_tile.size(), 0);
+  for (std::size_t t = 0; t < window_tile.size(); ++t) {
+    const TileStat r = grid.tile(t);
+    if (r.x0 < wx || r.y0 < wy || r.x0 >= wx + camera.width || r.y0 >= wy + camera.height) continue;
+    window_tile[t] = static_cast<std::ptrdiff_t>((r.y0 - wy) / ts) * window_grid.tiles_x + (r.x0 - wx) / ts;
+    counted[t] = 1;
+  }
+  RenderOutput out;
+  out.fb.allocate(traced.width, traced.height, k, ambient);
+  const bool use_prev = settings.multirate && settings.adaptive() && previous &&
+                        previous->matches(window_grid.tiles_x, window_grid.tiles_y, ts, camera.width, camera.height);
+  render_tiles(scene, traced, settings, cache, grid, threads, trace, &out, [&](TileContext& ctx, TileStat& stat, std::size_t t) {
     int spacing = 1;
     if (settings.adaptive()) {
       spacing = settings.block;
-      if (use_prev) spacing = multirate_block(previous->block[t], previous->ratio[t], previous->checks[t], settings);
+      if (use_prev && window_tile[t] >= 0) {
+        const auto p = static_cast<std::size_t>(window_tile[t]);
+        spacing = multirate_block(previous->block[p], previous->ratio[p], previous->checks[p], settings);
+      }
     }
     render_tile(ctx, out.fb, stat.x0, stat.y0, stat.width, stat.height, k, spacing, &stat);
-  }, texture_cache);
+  }, texture_cache, &counted);
+  if (!out.fb.samples.empty()) {
+    // Each tile of the window carries its share of the resolve pass (its pixels' filter and samples).
+    const ResolveWork work =
+        resolve_pixels(out.fb.samples, out.fb.width, out.fb.height, camera.position, out.fb.color.data(), threads);
+    for (std::size_t t = 0; t < out.tiles.size(); ++t) {
+      if (!counted[t]) continue;
+      TileStat& stat = out.tiles[t];
+      const Counters c = resolve_counters(out.fb.samples, work, out.fb.width, out.fb.height,
+                                          PixelRect{stat.x0, stat.y0, stat.width, stat.height});
+      stat.counters += c;
+      out.counters += c;
+    }
+  }
+  if (apron > 0) {
+    out.fb = crop_pixels(out.fb, wx, wy, camera.width, camera.height);
+    std::vector<TileStat> tiles(static_cast<std::size_t>(window_grid.count()));
+    for (std::size_t t = 0; t < window_tile.size(); ++t) {
+      if (window_tile[t] < 0) continue;
+      TileStat stat = out.tiles[t];
+      stat.x0 -= wx;
+      stat.y0 -= wy;
+      tiles[static_cast<std::size_t>(window_tile[t])] = stat;
+    }
+    out.tiles = std::move(tiles);
+  }
   const std::size_t ntiles = out.tiles.size();
   MultirateState& ms = out.multirate;
-  ms.tiles_x = grid.tiles_x; ms.tiles_y = grid.tiles_y; ms.tile_size = grid.tile_size;
+  ms.tiles_x = window_grid.tiles_x; ms.tiles_y = window_grid.tiles_y; ms.tile_size = ts;
   ms.width = camera.width; ms.height = camera.height;
   ms.block.resize(ntiles); ms.ratio.resize(ntiles); ms.checks.resize(ntiles);
   for (std::size_t t = 0; t < ntiles; ++t) {

@@ -139,6 +139,17 @@ Scene::Scene(const float* positions, std::size_t vertex_count, const std::uint32
     has_cutouts_ |= m.cuts_out;
   }
   lights_ = read_lights(lights, light_count);
+  for (const EnvironmentLight& e : env_.lights()) {
+    if (lights_.size() >= static_cast<std::size_t>(kMaxLights)) break;
+    Light sun;
+    sun.kind = LightKind::kSun;
+    sun.direction = -e.direction;
+    sun.color = e.irradiance;
+    sun.intensity = 1.f;
+    sun.radius = e.angular_radius;
+    sun.environment = true;
+    lights_.push_back(sun);
+  }
   std::vector<TriRecord> recs = read_triangles(positions, vertex_count, triangles, triangle_count, prim_ids,
                                                material_ids, object_ids, materials_.size(), &lo_, &hi_);
   std::vector<std::uint32_t> order;
@@ -252,6 +263,12 @@ void Scene::occluded_many(const float* origins, const float* directions, const f
                         (bvh_width == 4 ? occluded(r, rec) : occluded_binary(r, rec));
     }
   });
+}
+
+std::size_t Scene::environment_light_count() const {
+  std::size_t n = 0;
+  for (const Light& L : lights_) n += L.environment ? 1u : 0u;
+  return n;
 }
 
 }  // namespace sim_core

@@ -160,18 +160,28 @@ Vec3 area_point(const Light& L, Sample2 s) {
 
 // Where a ray sits in its sample's ray tree: bounce depth and branch code (root 1, reflection child
 // 3p + 1, refraction child 3p + 2). Random numbers hash (sample key, branch), never the tracing order.
-// `tile` (0..3) is the sample's place in a 2x2 block of the sample grid: glossy lobes are sampled with a
-// fixed stratified pattern per place, so the 2x2 block (an FSAA pixel's sub-samples, or neighbouring
-// pixels) covers 4x the lobe directions, without noise.
+// Ray sets that estimate an integral (soft-shadow points, ambient-occlusion directions, glossy lobe
+// directions) are stratified over a 4x4 block of the sample grid: the N rays of a sample are its share,
+// `place` (0..15), of one 16N-point set of the block, and the places are ordered so that each 2x2 block
+// (an FSAA pixel's sub-samples, or neighbouring pixels) holds a contiguous quarter of it. A pixel and its
+// neighbours, which the pixel filter averages, thus cover the integral 4x and 16x as densely as one
+// sample, with errors that cancel instead of adding up as independent sets' would.
 struct Branch {
   std::uint32_t key;
   std::uint32_t path;
   int depth;
-  std::uint32_t tile = 0;
+  std::uint32_t place = 0;
+  std::uint32_t block = 0;  // key of the 4x4 block
   std::uint32_t random_key() const { return hash_combine(key, path); }
+  // Rotation key of the block's stratified sets along this branch, and the index of this place's i-th
+  // of n rays in the block's set.
+  std::uint32_t block_key() const { return hash_combine(block, path); }
+  std::uint32_t stratum(int i, int n) const { return static_cast<std::uint32_t>(i + n * static_cast<int>(place)); }
+  // The same within the 2x2 block only (a set that is not rotated per block: see add_reflection).
+  std::uint32_t stratum_2x2(int i, int n) const { return static_cast<std::uint32_t>(i + n * static_cast<int>(place & 3u)); }
   // Glossy ray i of a reflection gets its own random numbers (i << 20 stays clear of depth-4 codes).
-  Branch reflected(std::uint32_t i = 0) const { return {key, (path * 3u + 1u) + (i << 20), depth + 1, tile}; }
-  Branch refracted() const { return {key, path * 3u + 2u, depth + 1, tile}; }
+  Branch reflected(std::uint32_t i = 0) const { return {key, (path * 3u + 1u) + (i << 20), depth + 1, place, block}; }
+  Branch refracted() const { return {key, path * 3u + 2u, depth + 1, place, block}; }
 };
 
 struct HitInfo {  // what the caller (primary sample) records about a ray's first hit
@@ -180,6 +190,7 @@ struct HitInfo {  // what the caller (primary sample) records about a ray's firs
   Vec3 position;
   float t = kInf;
   std::uint32_t shadow_bits = 0;
+  AmbientSample ambient;  // the hit's diffuse ambient light and its AO rays
 };
 
 // Geometry of a ray's hit, oriented towards the incoming ray, with its textured base colour and alpha.
@@ -304,18 +315,22 @@ class Shader {
   bool occluded_past_cutouts(Ray ray, TracedKind kind, std::uint32_t random_key, float cone_width);
   // Direct-light phase: every light's contribution, shadowed by shadow rays; sets one shadow bit per
   // occluded light.
-  void add_direct_light(const SurfacePoint& s, const SurfaceBrdf& brdf, std::uint32_t random_key, Vec3* color,
+  void add_direct_light(const SurfacePoint& s, const SurfaceBrdf& brdf, const Branch& branch, Vec3* color,
                         std::uint32_t* shadow_bits);
   bool light_arrival(const Light& light, const SurfacePoint& s, const SurfaceBrdf& brdf, LightArrival* out);
   bool area_arrival(const Light& light, const SurfacePoint& s, const SurfaceBrdf& brdf, LightArrival* out);
   // Fraction of shadow rays towards `light` that reach it (1 with shadows off): one ray to its centre
   // (hard), or N stratified points on its emitter (sphere disk, sun cone, area surface); counts its bit.
   float light_visibility(const Light& light, std::size_t index, const SurfacePoint& s, const LightArrival& a,
-                         std::uint32_t random_key, std::uint32_t* shadow_bits);
+                         const Branch& branch, std::uint32_t* shadow_bits);
   // Ambient phase: the environment's irradiance at the normal (SH for a map) on the diffuse term and its
   // prefiltered reflection on the rough specular share reflection rays leave out, occluded by AO rays.
-  void add_ambient_light(const SurfacePoint& s, const SurfaceBrdf& brdf, std::uint32_t random_key, Vec3* color);
-  float ambient_visibility(const SurfacePoint& s, std::uint32_t random_key, Vec3* open_radiance);
+  // `record` (may be null) receives the diffuse ambient term's parts for the resolve's denoiser.
+  void add_ambient_light(const SurfacePoint& s, const SurfaceBrdf& brdf, const Branch& branch, Vec3* color,
+                         AmbientSample* record);
+  // Open fraction of the AO rays (1 without AO rays); `seen` / `all` get the (smooth) radiance the open /
+  // all rays carry.
+  float ambient_visibility(const SurfacePoint& s, const Branch& branch, Vec3* seen, Vec3* all);
   // Secondary-ray phases (Whitted): the Fresnel split, then reflection (mirror, or a few GGX-distributed
   // glossy rays whose escapes read the cone-filtered environment) and refraction.
   SecondaryWeights secondary_weights(const SurfacePoint& s, const SurfaceBrdf& brdf) const;
@@ -371,8 +386,8 @@ Vec3 Shader::trace(const Ray& ray, RayKind kind, Branch branch, RayCone cone, co
   const SurfaceBrdf brdf(*s.mat, s.base_color, s.n_dot_v);
   Vec3 color = s.mat->emission;
   std::uint32_t shadow_bits = 0;
-  add_direct_light(s, brdf, random_key, &color, &shadow_bits);
-  add_ambient_light(s, brdf, random_key, &color);
+  add_direct_light(s, brdf, branch, &color, &shadow_bits);
+  add_ambient_light(s, brdf, branch, &color, info ? &info->ambient : nullptr);
   if (info) {
     info->object = static_cast<std::int32_t>(s.tri->object);
     info->normal = s.n;
@@ -396,7 +411,8 @@ Vec3 Shader::environment(const Ray& ray, RayKind kind, const Lobe* lobe) {
     return env.filtered(lobe->axis, lobe->half_angle, static_cast<int>(ctx_.settings.env_filter));
   }
   if (env.is_map()) ++ctx_.counters.env_lookups;  // a constant colour needs no lookup
-  return env.radiance(ray.dir);
+  // With environment filtering on, what camera and mirror rays see is interpolated between texels too.
+  return env.radiance(ray.dir, ctx_.settings.env_filter != EnvFilter::kOff);
 }
 
 Rgba Shader::texture_sample(const Material& mat, std::uint32_t tri, const Hit& hit, float cone_width,
@@ -482,7 +498,7 @@ bool Shader::occluded_past_cutouts(Ray ray, TracedKind kind, std::uint32_t rando
   return true;  // a wall of cut-out layers counts as opaque
 }
 
-void Shader::add_direct_light(const SurfacePoint& s, const SurfaceBrdf& brdf, std::uint32_t random_key,
+void Shader::add_direct_light(const SurfacePoint& s, const SurfaceBrdf& brdf, const Branch& branch,
                               Vec3* color, std::uint32_t* shadow_bits) {
   // A fully transmissive surface has no direct BRDF: no light, no shadow rays.
   const auto& lights = ctx_.scene.lights();
@@ -490,7 +506,7 @@ void Shader::add_direct_light(const SurfacePoint& s, const SurfaceBrdf& brdf, st
   for (std::size_t li = 0; li < light_count; ++li) {
     LightArrival a;
     if (!light_arrival(lights[li], s, brdf, &a)) continue;
-    const float visibility = light_visibility(lights[li], li, s, a, random_key, shadow_bits);
+    const float visibility = light_visibility(lights[li], li, s, a, branch, shadow_bits);
     if (visibility <= 0.f) continue;
     *color += (brdf.diffuse() * a.irradiance + a.specular) * visibility;
   }
@@ -521,7 +537,10 @@ bool Shader::light_arrival(const Light& L, const SurfacePoint& s, const SurfaceB
   if (max_component(irradiance) <= 0.f) return false;
   out->to_centre = to_light;
   out->irradiance = irradiance;
-  out->specular = brdf.specular(s.n, to_light, s.view, source_angle) * irradiance;
+  // A sun of the environment map: reflection rays see it in the map, so its highlight here is only the
+  // share of the specular they do not trace.
+  const float share = L.environment ? 1.f - reflection_gloss(*s.mat) : 1.f;
+  out->specular = brdf.specular(s.n, to_light, s.view, source_angle) * irradiance * share;
   return true;
 }
 
@@ -564,7 +583,7 @@ bool Shader::area_arrival(const Light& L, const SurfacePoint& s, const SurfaceBr
 }
 
 float Shader::light_visibility(const Light& L, std::size_t index, const SurfacePoint& s, const LightArrival& a,
-                               std::uint32_t random_key, std::uint32_t* shadow_bits) {
+                               const Branch& branch, std::uint32_t* shadow_bits) {
   const RenderSettings& st = ctx_.settings;
   if (st.shadow_samples <= 0) return 1.f;
   const bool area = L.kind == LightKind::kArea;
@@ -574,8 +593,9 @@ float Shader::light_visibility(const Light& L, std::size_t index, const SurfaceP
   // point (cos at the receiver x cos at the emitter / d^2): near parts of a large emitter matter more.
   float open = 0.f, total = 0.f;
   bool any_blocked = false;
-  const std::uint32_t skey = hash_combine(random_key, (static_cast<std::uint32_t>(SamplePurpose::kShadow) << 8) +
-                                                          static_cast<std::uint32_t>(index));
+  // Points on the light: this place's quarter of the block's stratified set.
+  const std::uint32_t skey = hash_combine(branch.block_key(), (static_cast<std::uint32_t>(SamplePurpose::kShadow) << 8) +
+                                                                  static_cast<std::uint32_t>(index));
   Vec3 t, b;
   onb(a.to_centre, &t, &b);
   for (int i = 0; i < ns; ++i) {
@@ -583,15 +603,15 @@ float Shader::light_visibility(const Light& L, std::size_t index, const SurfaceP
     sr.origin = s.origin_out;
     float weight = 1.f;
     if (L.kind == LightKind::kSun) {
-      sr.dir = soft ? uniform_cone(r2_sample(skey, i), a.to_centre, L.radius) : a.to_centre;
+      sr.dir = soft ? uniform_cone(r2_sample(skey, branch.stratum(i, ns)), a.to_centre, L.radius) : a.to_centre;
       sr.tmax = kInf;
     } else {
       Vec3 target = L.position;
       if (soft && area) {
-        target = area_point(L, r2_sample(skey, i));
+        target = area_point(L, r2_sample(skey, branch.stratum(i, ns)));
       } else if (soft) {
         float dx, dy;
-        concentric_disk(r2_sample(skey, i), &dx, &dy);
+        concentric_disk(r2_sample(skey, branch.stratum(i, ns)), &dx, &dy);
         target = target + t * (dx * L.radius) + b * (dy * L.radius);
       }
       sr.dir = target - sr.origin;
@@ -605,7 +625,7 @@ float Shader::light_visibility(const Light& L, std::size_t index, const SurfaceP
     ++ctx_.counters.rays_shadow;
     ++ctx_.counters.rays_total;
     total += weight;
-    if (occluded_past_cutouts(sr, TracedKind::kShadow, hash_combine(skey, static_cast<std::uint32_t>(i)),
+    if (occluded_past_cutouts(sr, TracedKind::kShadow, hash_combine(skey, branch.stratum(i, ns)),
                               s.cone_width)) {
       any_blocked = true;
     } else {
@@ -616,58 +636,64 @@ float Shader::light_visibility(const Light& L, std::size_t index, const SurfaceP
   return total > 0.f ? open / total : 0.f;
 }
 
-void Shader::add_ambient_light(const SurfacePoint& s, const SurfaceBrdf& brdf, std::uint32_t random_key,
-                               Vec3* color) {
+void Shader::add_ambient_light(const SurfacePoint& s, const SurfaceBrdf& brdf, const Branch& branch, Vec3* color,
+                               AmbientSample* record) {
   const Environment& env = ctx_.scene.environment();
   if (!(max_component(env.mean()) > 0.f)) return;
   const float rough = 1.f - reflection_gloss(*s.mat);
   const bool diffuse = max_component(brdf.diffuse_albedo) > 0.f;
   const bool specular = rough > 0.f && brdf.opaque > 0.f && max_component(brdf.f0) > 0.f;
   if (!diffuse && !specular) return;
-  // Diffuse: the environment's irradiance / pi over the directions AO rays find open (with no AO rays,
-  // unoccluded at the normal). Rough specular (the share reflection rays do not trace): the cosine-
-  // convolved environment around the mirror direction, a wide lobe's prefiltered reflection, times the
-  // open fraction.
-  Vec3 open_radiance;
-  const float open = ambient_visibility(s, random_key, &open_radiance);
-  Vec3 ambient;
+  // Diffuse: the environment's unoccluded irradiance / pi at the normal (SH for a map; its suns are
+  // lights), times the share of it that AO rays find open (1 without AO rays). Rough specular (the share
+  // reflection rays do not trace): the cosine-convolved environment around the mirror direction, a wide
+  // lobe's prefiltered reflection, times the open fraction of the AO rays.
+  Vec3 seen, all;
+  const float open = ambient_visibility(s, branch, &seen, &all);
   const bool map = env.is_map();  // a constant colour needs no SH evaluation
   if (diffuse) {
-    const bool unoccluded = ctx_.settings.ao_samples <= 0;
-    ambient += brdf.diffuse_albedo * (unoccluded ? env.diffuse_radiance(s.n) : open_radiance);
-    if (map && unoccluded) ++ctx_.counters.env_sh_evals;
+    const Vec3 unoccluded = brdf.diffuse_albedo * env.diffuse_radiance(s.n);
+    if (map) ++ctx_.counters.env_sh_evals;
+    Vec3 visible(1.f, 1.f, 1.f);
+    if (max_component(all) > 0.f)
+      for (int c = 0; c < 3; ++c) visible[c] = all[c] > 0.f ? seen[c] / all[c] : 0.f;
+    *color += unoccluded * visible;
+    if (record && max_component(all) > 0.f) *record = {unoccluded, seen, all};
   }
   if (specular) {
-    ambient += schlick(brdf.f0, s.n_dot_v) * env.diffuse_radiance(reflect(s.dir, s.n)) * (rough * brdf.opaque * open);
+    *color += schlick(brdf.f0, s.n_dot_v) * env.diffuse_radiance(reflect(s.dir, s.n)) * (rough * brdf.opaque * open);
     if (map) ++ctx_.counters.env_sh_evals;
   }
-  *color += ambient;
 }
 
-float Shader::ambient_visibility(const SurfacePoint& s, std::uint32_t random_key, Vec3* open_radiance) {
+float Shader::ambient_visibility(const SurfacePoint& s, const Branch& branch, Vec3* seen, Vec3* all) {
   const int samples = ctx_.settings.ao_samples;
   if (samples <= 0) return 1.f;
   const Environment& env = ctx_.scene.environment();
-  const std::uint32_t akey = hash_combine(random_key, static_cast<std::uint32_t>(SamplePurpose::kAo) << 8);
+  const bool map = env.is_map();
+  // Cosine-distributed directions, this place's share of the block's stratified set. Each ray carries
+  // the (smooth, SH) radiance of its direction; the share of that radiance the open rays carry is the
+  // visible share of the irradiance (a ratio estimator: exact where nothing blocks the sky, 0 where
+  // everything does, and light from bright blocked directions removed, not averaged away). For a
+  // constant world it is the open fraction.
+  const std::uint32_t akey = hash_combine(branch.block_key(), static_cast<std::uint32_t>(SamplePurpose::kAo) << 8);
   int open = 0;
-  Vec3 sum;
   for (int i = 0; i < samples; ++i) {
     Ray ar;
     ar.origin = s.origin_out;
-    ar.dir = cosine_hemisphere(r2_sample(akey, i), s.n);
+    ar.dir = cosine_hemisphere(r2_sample(akey, branch.stratum(i, samples)), s.n);
     if (dot(ar.dir, s.ng) <= 0.f) ar.dir = reflect(ar.dir, s.ng);
     ar.tmax = ctx_.ao_distance;
     ++ctx_.counters.rays_ao;
     ++ctx_.counters.rays_total;
-    if (!occluded_past_cutouts(ar, TracedKind::kAo, hash_combine(akey, static_cast<std::uint32_t>(i)), s.cone_width)) {
+    const Vec3 radiance = map ? env.smooth_radiance(ar.dir) : Vec3(1.f, 1.f, 1.f);
+    if (map) ++ctx_.counters.env_sh_evals;
+    *all += radiance;
+    if (!occluded_past_cutouts(ar, TracedKind::kAo, hash_combine(akey, branch.stratum(i, samples)), s.cone_width)) {
       ++open;
-      // Cosine-distributed directions: the mean of the (smooth) radiance over the open ones estimates
-      // the occluded irradiance / pi, light from the blocked directions removed, not scaled.
-      sum += env.smooth_radiance(ar.dir);
-      if (env.is_map()) ++ctx_.counters.env_sh_evals;
+      *seen += radiance;
     }
   }
-  *open_radiance = sum * (1.f / static_cast<float>(samples));
   return static_cast<float>(open) / static_cast<float>(samples);
 }
 
@@ -735,13 +761,13 @@ void Shader::add_reflection(const SurfacePoint& s, Vec3 weight, Branch branch, R
     const int rays = branch.depth == 0 ? kGlossyRays : 1;
     const float alpha = ggx_alpha(mat.roughness);
     next.spread += lobe_cone / std::sqrt(static_cast<float>(rays));  // one ray's share of the blur
-    // Lobe directions: a fixed stratified set (not rotated per sample: a rough reflection is smooth, not
-    // noisy), a different quarter of it at each place of the 2x2 sample block.
+    // Lobe directions: a fixed stratified set (not rotated per block: a rough reflection is smooth, not
+    // noisy), a different quarter of it at each place of the 2x2 sample block (the same in every 2x2
+    // block: no pattern repeats across pixels).
     const std::uint32_t gkey = static_cast<std::uint32_t>(SamplePurpose::kGlossy) << 8;
     const float n_v = std::max(s.n_dot_v, 1e-4f);
     for (int i = 0; i < rays; ++i) {
-      const Vec3 h = ggx_normal(r2_sample(gkey, static_cast<std::uint32_t>(i + rays * static_cast<int>(branch.tile))),
-                                s.n, alpha);
+      const Vec3 h = ggx_normal(r2_sample(gkey, branch.stratum_2x2(i, rays)), s.n, alpha);
       const Vec3 l = reflect(s.dir, h);
       const float n_l = dot(l, s.n), n_h = dot(h, s.n), v_h = dot(s.view, h);
       if (!(dot(l, s.ng) > 0.f && n_l > 0.f && n_h > 0.f && v_h > 0.f)) continue;  // below the surface
@@ -801,7 +827,7 @@ TileContext::TileContext(const Scene& s, const RenderSettings& st, const Camera&
     : scene(s), settings(st), camera(c), cache(cc), texture_cache(texture_cc), trace(options) {
   trace.validate();
   cos_threshold = st.normal_threshold_deg < 0.f ? 2.f : std::cos(st.normal_threshold_deg * kPi / 180.f);
-  ao_distance = st.ao_distance > 0.f ? st.ao_distance : 0.1f * s.diagonal();
+  ao_distance = st.ao_distance > 0.f ? st.ao_distance : kInf;
   // Per pixel of the whole frame (a window of it, Camera::crop_*, has the frame's pixels).
   pixel_spread =
       2.f * c.tan_half() / static_cast<float>(std::max(1, c.frame_height())) / static_cast<float>(st.subgrid());
@@ -828,13 +854,19 @@ SampleResult trace_sample(TileContext& ctx, float px, float py, std::uint32_t ke
   const float c = dot(ray.dir, ctx.camera.forward);
   const RayCone cone{0.f, ctx.pixel_spread * c * c};
   const int k = ctx.settings.subgrid();
-  // Sample position in the whole frame (a window of it samples like the whole).
+  // The sample's place in its 4x4 block of the sample grid and the block's key, by its position in the
+  // whole frame (a window of it samples like the whole). Coordinates may be negative: samples just outside
+  // the frame that the pixel filter reads; modulo 2^32 they keep their places and blocks.
   const float fk = static_cast<float>(k);
-  const auto sx = static_cast<std::uint32_t>(std::floor((px + static_cast<float>(ctx.camera.crop_x)) * fk));
-  const auto sy = static_cast<std::uint32_t>(std::floor((py + static_cast<float>(ctx.camera.crop_y)) * fk));
-  const Branch root{key, 1u, 0, (sx & 1u) + 2u * (sy & 1u)};
+  const auto sx = static_cast<std::uint32_t>(
+      static_cast<std::int32_t>(std::floor((px + static_cast<float>(ctx.camera.crop_x)) * fk)));
+  const auto sy = static_cast<std::uint32_t>(
+      static_cast<std::int32_t>(std::floor((py + static_cast<float>(ctx.camera.crop_y)) * fk)));
+  const std::uint32_t place = (sx & 1u) + 2u * (sy & 1u) + 4u * ((sx >> 1) & 1u) + 8u * ((sy >> 1) & 1u);
+  const Branch root{key, 1u, 0, place, sample_key(sx >> 2, sy >> 2, static_cast<std::uint32_t>(k) | 0x200u)};
   out.color = shader.trace(ray, RayKind::kPrimary, root, cone, nullptr, &info, &out.geom);
   out.geom.object = info.object;
+  out.ambient = info.ambient;
   if (info.object >= 0) {
     out.geom.normal = info.normal;
     out.geom.position = info.position;

@@ -20,7 +20,9 @@ int multirate_block(int previous_block, float previous_ratio, std::uint64_t prev
                     const RenderSettings& settings);
 
 // Renders the tile at pixel rect [x0, x0 + w) x [y0, y0 + h) into `fb` with reference spacing `spacing`
-// (1 = trace every sample) on a k x k sub-pixel grid; fills `stat`.
+// (1 = trace every sample) on a k x k sub-pixel grid; fills `stat`. With a multi-sample buffer in `fb`
+// (k > 1) the tile writes its sub-samples there, and a tile on the frame's edge also traces the guard
+// sub-samples beyond it that the pixel filter reads.
 void render_tile(TileContext& ctx, FrameBuffers& fb, int x0, int y0, int w, int h, int k, int spacing,
                  TileStat* stat);
 

@@ -5,8 +5,11 @@
 // materials, area_light_evals = unshadowed area-light evaluations (emitter polygon + representative
 // point), texture_fetches = filtered texture lookups, texel_reads = texels they read through the texture
 // cache, texture_cache_misses / texture_dram_bytes = that cache's misses and the line bytes they fetch,
-// env_sh_evals = spherical-harmonic evaluations of an environment map (ambient light: one per hit without
-// AO rays, one per open AO ray, one per rough-specular ambient term; 0 for a constant-colour world).
+// env_sh_evals = spherical-harmonic evaluations of an environment map (ambient light: one per diffuse hit,
+// one per AO ray, one per rough-specular ambient term; 0 for a constant-colour world). The resolve pass
+// (resolve.h; none for 1 spp or undersampling without AO): resolve_bytes = bytes of the frame's sample
+// buffer, written by the tiles and read back once; resolve_taps = the pixel filter's RGB multiply-adds;
+// ambient_filter_taps = neighbours the ambient denoiser weighs.
 #pragma once
 #include <cstdint>
 
@@ -19,7 +22,8 @@ namespace sim_core {
   X(framebuffer_bytes) X(gbuffer_prefetch_bytes) X(cache_accesses) X(cache_misses) X(dram_bytes_read)    \
   X(closest_hit_comparisons) X(env_lookups) X(env_filtered_lookups) X(samples_traced)                    \
   X(samples_interpolated) X(samples_reused) X(pixels) X(rays_alpha) X(alpha_tests) X(area_light_evals)  \
-  X(texture_fetches) X(texel_reads) X(texture_cache_misses) X(texture_dram_bytes) X(env_sh_evals)
+  X(texture_fetches) X(texel_reads) X(texture_cache_misses) X(texture_dram_bytes) X(env_sh_evals)       \
+  X(resolve_taps) X(resolve_bytes) X(ambient_filter_taps)
 
 struct Counters {
 #define SIM_CORE_DECLARE(name) std::uint64_t name = 0;

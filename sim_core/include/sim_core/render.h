@@ -11,6 +11,7 @@
 #include "sim_core/camera.h"
 #include "sim_core/comparator.h"
 #include "sim_core/counters.h"
+#include "sim_core/resolve.h"
 #include "sim_core/scene.h"
 #include "sim_core/settings.h"
 #include "sim_core/shader.h"
@@ -52,16 +53,21 @@ struct FrameBuffers {
   std::vector<float> position;      // H*W*3 primary hit point (world), 0 on miss
   std::vector<std::int32_t> object; // H*W, -1 on miss
   std::vector<std::uint8_t> kind;   // H*W SampleKind
-  void allocate(int w, int h);
+  SampleBuffer samples;             // what the resolve pass reads (empty: pixels are final as stored)
+  // With k > 1 sub-samples per pixel edge or AO (`ambient`), also the sample buffer the resolve reads.
+  void allocate(int w, int h, int k = 1, bool ambient = false);
   // Writes pixel p: its colour and the geometry of its (centre) sample; the normal stays 0 on a miss.
   void store(std::size_t p, Vec3 color, const SampleGeometry& g, SampleKind sample_kind);
 };
 
 // The tiles of a frame, row-major: tile t covers [x0, x0 + width) x [y0, y0 + height), clipped to the frame.
+// Tile edges lie at origin + n * tile_size; an origin in (-tile_size, 0] makes the first row/column partial
+// (a window's apron keeps the tile grid of the window it surrounds).
 struct TileGrid {
-  int width, height, tile_size, tiles_x, tiles_y;
-  TileGrid(int w, int h, int ts)
-      : width(w), height(h), tile_size(ts), tiles_x((w + ts - 1) / ts), tiles_y((h + ts - 1) / ts) {}
+  int width, height, tile_size, origin_x, origin_y, tiles_x, tiles_y;
+  TileGrid(int w, int h, int ts, int ox = 0, int oy = 0)
+      : width(w), height(h), tile_size(ts), origin_x(ox), origin_y(oy), tiles_x((w - ox + ts - 1) / ts),
+        tiles_y((h - oy + ts - 1) / ts) {}
   int count() const { return tiles_x * tiles_y; }
   TileStat tile(std::size_t t) const;  // rect set, statistics zero
 };
@@ -80,13 +86,20 @@ struct RenderOutput {
 // TileStat with the rect set; render(ctx, stat, t) traces the tile and writes its pixels. The driver then
 // folds the tile's pixels, frame-buffer flush and cache statistics into its counters and adds every tile's
 // counters and comparator histogram to `out` in tile order (the same totals for any thread count).
+// With `counted`, only tiles t with counted[t] add to the counters, histogram and ray log (the others are
+// traced for the resolve pass of a window and counted by the window they belong to).
 using TileRenderer = std::function<void(TileContext& ctx, TileStat& stat, std::size_t tile)>;
 void render_tiles(const Scene& scene, const Camera& camera, const RenderSettings& settings, const CacheConfig& cache,
                   const TileGrid& grid, int threads, const TraceOptions& trace, RenderOutput* out,
-                  const TileRenderer& render, const CacheConfig& texture_cache = kDefaultTextureCache);
+                  const TileRenderer& render, const CacheConfig& texture_cache = kDefaultTextureCache,
+                  const std::vector<char>* counted = nullptr);
 
 // Renders `camera` (already at render resolution) with `settings`. `previous` may be null. `cache` is the
-// T&I unit's node/triangle cache, `texture_cache` the shading cores' texture cache.
+// T&I unit's node/triangle cache, `texture_cache` the shading cores' texture cache. Sub-samples and AO go
+// through the resolve pass (resolve.h). A window of a larger frame (Camera::crop_*) that needs the resolve
+// pass also traces an apron of whole tiles around it (the samples its pixels' filters read, as the whole
+// frame has them), uncounted: windows that tile the frame on its tile grid sum to the whole frame's image
+// and counters.
 RenderOutput render_frame(const Scene& scene, const Camera& camera, const RenderSettings& settings, int threads,
                           const MultirateState* previous, const CacheConfig& cache,
                           const TraceOptions& trace = {}, const CacheConfig& texture_cache = kDefaultTextureCache);

@@ -59,6 +59,9 @@ struct Light {
   float size_u = 0.f, size_v = 0.f;  // area light extents (m) along axis_u and axis_v (ellipse: diameters)
   Vec3 axis_u{1.f, 0.f, 0.f};      // unit, orthogonal to direction (the light's local X)
   Vec3 axis_v{0.f, 1.f, 0.f};      // unit, axis_u x direction (the light's local Y)
+  // A sun of the environment map (Environment::lights), added by the scene after its own lights: rays
+  // that leave the scene also see it, so reflection rays carry its mirror-like share of the highlight.
+  bool environment = false;
   float area() const {
     return kind == LightKind::kArea ? size_u * size_v * (shape == AreaShape::kEllipse ? 0.25f * kPi : 1.f) : 0.f;
   }
@@ -137,7 +140,9 @@ class Scene {
   std::uint64_t texture_base(std::int32_t i) const { return texture_bases_[static_cast<std::size_t>(i)]; }
   Vec3 geometric_normal(std::uint32_t i) const;  // unit, from the winding (v1 - v0) x (v2 - v0)
   const std::vector<Material>& materials() const { return materials_; }
+  // The scene's lights, then the environment map's suns (as sun lights, while shadow bits last).
   const std::vector<Light>& lights() const { return lights_; }
+  std::size_t environment_light_count() const;
   const Environment& environment() const { return env_; }
   const Bvh& bvh() const { return bvh_; }
   const Bvh4& bvh4() const { return bvh4_; }

@@ -22,8 +22,9 @@ struct RenderSettings {
   int shadow_samples = 1;             // 0 = no shadow rays, 1 = hard, N = soft samples on the light's radius
   float resolution_scale = 1.f;       // 0.25..1: render at this fraction of the camera resolution
   EnvFilter env_filter = EnvFilter::kOff;  // glossy environment reflections: point sample, box or Bartlett SAT
+                                           // (filtering on: camera and mirror rays read the map bilinearly)
   int ao_samples = 0;                 // ambient-occlusion rays per hit (0 = off)
-  float ao_distance = 0.f;            // AO ray length; <= 0 means 0.1 x the scene's bounding-box diagonal
+  float ao_distance = 0.f;            // AO ray length; <= 0: unbounded (the world's visibility, as in Cycles)
   bool multirate = false;             // per-tile block size from the previous frame's similarity ratio
   float multirate_low = 0.5f;         // below: finer blocks next frame
   float multirate_high = 0.85f;       // at or above: coarser blocks next frame (between: keep; hysteresis)

@@ -12,6 +12,7 @@
 #include "sim_core/camera.h"
 #include "sim_core/comparator.h"
 #include "sim_core/counters.h"
+#include "sim_core/resolve.h"
 #include "sim_core/scene.h"
 #include "sim_core/settings.h"
 
@@ -33,6 +34,7 @@ struct SampleGeometry {
 struct SampleResult {
   Vec3 color;
   SampleGeometry geom;
+  AmbientSample ambient;  // the primary hit's ambient light (part of `color`), for the resolve's denoiser
 };
 
 // Texture cache of the shading cores when no hardware profile provides one (16 KiB, 64-byte lines, 4 ways).

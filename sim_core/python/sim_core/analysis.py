@@ -48,7 +48,7 @@ class SceneAnalysis:
                   "tile_buffer_reads", "tile_buffer_writes", "framebuffer_bytes", "gbuffer_prefetch_bytes",
                   "cache_accesses", "cache_misses", "dram_bytes_read", "closest_hit_comparisons",
                   "env_lookups", "samples_traced", "samples_interpolated", "samples_reused", "pixels",
-                  "rays_ao"}
+                  "rays_ao", "resolve_taps", "resolve_bytes", "ambient_filter_taps"}
         if self.lights:
             always.add("rays_shadow")
         if self.reflection:
@@ -79,19 +79,22 @@ def analyze(scene: Any) -> SceneAnalysis:
     glossy = any((m.metallic > 0.0 or m.roughness < 0.5) and m.roughness > 0.0 for m in mats)
     refraction = any(m.transmission > 0.0 for m in mats)
     emission = any(max(m.emission) > 0.0 for m in mats)
-    soft = any(light.radius > 0.0 or light.kind == "area" for light in lights)
+    # The environment map's suns light the scene as soft sun lights (after the scene's own lights).
+    sun_count = int(stats.get("environment_lights", 0))
+    soft = any(light.radius > 0.0 or light.kind == "area" for light in lights) or sun_count > 0
     effects = tuple(stats.get("effects", ()))
     env_map = "environment_map" in effects
     area = any(light.kind == "area" for light in lights)
     textures = "textures" in effects
     cutouts = "alpha_cutouts" in effects
-    flags = ((bool(lights), "shadows"), (soft, "soft_shadows"), (reflection, "reflection"),
+    flags = ((bool(lights) or sun_count > 0, "shadows"), (soft, "soft_shadows"), (reflection, "reflection"),
              (glossy, "glossy_reflection"), (refraction, "refraction"), (emission, "emission"),
              (env_map, "environment_map"), (area, "area_lights"), (textures, "textures"),
              (cutouts, "alpha_cutouts"))
     eff = [name for on, name in flags if on]
     return SceneAnalysis(
-        triangles=int(stats.get("triangles", 0)), lights=len(lights), shadow_bits=len(lights),
+        triangles=int(stats.get("triangles", 0)), lights=len(lights) + sun_count,
+        shadow_bits=len(lights) + sun_count,
         reflection=reflection, glossy=glossy, refraction=refraction, emission=emission, soft_shadows=soft,
         environment_map=env_map, effects=tuple(eff), area_lights=area, textures=textures,
         alpha_cutouts=cutouts,

@@ -61,6 +61,7 @@ COUNTERS: tuple[str, ...] = (
     "closest_hit_comparisons", "env_lookups", "env_filtered_lookups", "samples_traced",
     "samples_interpolated", "samples_reused", "pixels", "rays_alpha", "alpha_tests", "area_light_evals",
     "texture_fetches", "texel_reads", "texture_cache_misses", "texture_dram_bytes", "env_sh_evals",
+    "resolve_taps", "resolve_bytes", "ambient_filter_taps",
 )
 
 # Which hardware unit each block runs on (units run concurrently; blocks on one unit add up, except the
@@ -68,9 +69,11 @@ COUNTERS: tuple[str, ...] = (
 BLOCK_UNIT: dict[str, str] = {
     "raygen": "srp", "shading": "srp", "similarity": "srp", "interpolation": "srp",
     "reprojection": "srp", "env_filter": "srp", "area_lights": "srp", "alpha_test": "srp", "texture": "srp",
+    "resolve": "srp",
     "traversal": "ti", "intersection": "ti", "comparator": "ti", "cache": "ti",
     "tile_buffer": "tile_buffer",
     "dram": "dram", "framebuffer_dma": "dram", "gbuffer_prefetch": "dram", "texture_dram": "dram",
+    "resolve_dram": "dram",
 }
 BLOCKS: tuple[str, ...] = tuple(BLOCK_UNIT)
 
@@ -80,7 +83,8 @@ _SECTIONS: dict[str, tuple[str, ...]] = {
                    "cache_line_accesses_per_cycle", "tile_buffer_accesses_per_cycle", "dram_bytes_per_s",
                    "texels_per_cycle"),
     "ops": ("raygen", "shading", "similarity", "interpolation", "reprojection", "env_lookup",
-            "env_filtered_lookup", "env_sh_eval", "texture_filter", "alpha_test", "area_light"),
+            "env_filtered_lookup", "env_sh_eval", "texture_filter", "alpha_test", "area_light", "resolve_tap",
+            "ambient_filter_tap"),
     "energy_pj": ("srp_op", "traversal_step", "triangle_test", "tile_buffer_access", "cache_line_access",
                   "env_texel_read", "texel_read", "dram_read_byte", "dram_write_byte", "dma_byte"),
     "comparator": ("energy_scale",),
@@ -339,6 +343,12 @@ def _filtered_reads_per_lookup(settings: Any) -> int:
     return 9 * 3  # Bartlett, or settings unknown (a plain counter mapping): price the dearer lookup
 
 
+def _reads_per_lookup(settings: Any) -> int:
+    """Texel reads of one unfiltered environment lookup: the nearest texel with environment filtering off,
+    else the four a bilinear lookup interpolates (settings unknown: the dearer)."""
+    return 1 if str(getattr(settings, "env_filter", "")).lower() == "off" else 4
+
+
 def _block_costs(prof: Profile, c: Mapping[str, int], hist: np.ndarray | None, settings: Any, scene: Any
                  ) -> tuple[dict[str, float], dict[str, float], ComparatorStats]:
     """Energy (J) and cycles of every block for the counted events (the first half of :func:`price`)."""
@@ -362,7 +372,8 @@ def _block_costs(prof: Profile, c: Mapping[str, int], hist: np.ndarray | None, s
     srp_block("reprojection", n("reprojections"), ops["reprojection"])
     env_map = scene is None or "environment_map" in (getattr(scene, "stats", {}) or {}).get("effects", ())
     lookups = n("env_lookups") if env_map else 0
-    env_reads = lookups + n("env_filtered_lookups") * _filtered_reads_per_lookup(settings)
+    env_reads = (lookups * _reads_per_lookup(settings)
+                 + n("env_filtered_lookups") * _filtered_reads_per_lookup(settings))
     env_ops = (lookups * ops["env_lookup"] + n("env_filtered_lookups") * ops["env_filtered_lookup"]
                + n("env_sh_evals") * ops["env_sh_eval"])
     energy["env_filter"] = (env_ops * e["srp_op"] + env_reads * e["env_texel_read"]) * pj
@@ -376,6 +387,12 @@ def _block_costs(prof: Profile, c: Mapping[str, int], hist: np.ndarray | None, s
     energy["texture"] += n("texel_reads") * e["texel_read"] * pj
     # The filter arithmetic overlaps the texel reads; the slower of the two sets the block's time.
     cycles["texture"] = max(cycles["texture"], n("texel_reads") / thr["texels_per_cycle"])
+    # The resolve pass (sub-samples, or AO to denoise): the pixel filter's taps and the ambient filter's,
+    # and the sample buffer written to DRAM by the tiles and read back once.
+    energy["resolve"] = (n("resolve_taps") * ops["resolve_tap"]
+                         + n("ambient_filter_taps") * ops["ambient_filter_tap"]) * e["srp_op"] * pj
+    cycles["resolve"] = (n("resolve_taps") * ops["resolve_tap"]
+                         + n("ambient_filter_taps") * ops["ambient_filter_tap"]) / thr["srp_ops_per_cycle"]
 
     # One node visit is one step of the 4-wide tree: four ray-box tests (and the ordering of the hit
     # children), priced per step; the unit's box testers set the step rate.
@@ -404,6 +421,9 @@ def _block_costs(prof: Profile, c: Mapping[str, int], hist: np.ndarray | None, s
     cycles["gbuffer_prefetch"] = n("gbuffer_prefetch_bytes") / bytes_per_srp_cycle
     energy["texture_dram"] = n("texture_dram_bytes") * e["dram_read_byte"] * pj
     cycles["texture_dram"] = n("texture_dram_bytes") / bytes_per_srp_cycle
+    energy["resolve_dram"] = n("resolve_bytes") * (e["dram_write_byte"] + e["dram_read_byte"]
+                                                   + 2 * e["dma_byte"]) * pj
+    cycles["resolve_dram"] = 2 * n("resolve_bytes") / bytes_per_srp_cycle
 
     for k, v in energy.items():
         if not math.isfinite(v):
@@ -438,7 +458,7 @@ def price(result: Any, profile: Profile | str | Path, fps: float, *, scene: Any 
         "ti": max(cycles["traversal"], cycles["intersection"], cycles["cache"]) / clk["ti_hz"],
         "tile_buffer": cycles["tile_buffer"] / clk["srp_hz"],
         "dram": (n("dram_bytes_read") + n("framebuffer_bytes") + n("gbuffer_prefetch_bytes")
-                 + n("texture_dram_bytes")) / thr["dram_bytes_per_s"],
+                 + n("texture_dram_bytes") + 2 * n("resolve_bytes")) / thr["dram_bytes_per_s"],
     }
     bottleneck = max(unit_time, key=lambda u: unit_time[u])
     frame_time = unit_time[bottleneck]
@@ -473,7 +493,7 @@ def price(result: Any, profile: Profile | str | Path, fps: float, *, scene: Any 
         perf_per_watt=perf_per_watt,
         rays_total=rays,
         dram_bytes=n("dram_bytes_read") + n("framebuffer_bytes") + n("gbuffer_prefetch_bytes")
-        + n("texture_dram_bytes"),
+        + n("texture_dram_bytes") + 2 * n("resolve_bytes"),
         comparator=comp,
         blocks_used=tuple(b for b in BLOCKS if energy[b] > 0),
         achieved_fps=achieved,

@@ -61,6 +61,9 @@ COUNTER_NAMES: tuple[str, ...] = (
     "texture_cache_misses",
     "texture_dram_bytes",
     "env_sh_evals",
+    "resolve_taps",
+    "resolve_bytes",
+    "ambient_filter_taps",
 )
 
 

@@ -93,11 +93,12 @@ def _triangle_ids(values: Any, name: str, n_tri: int) -> np.ndarray:
     return ids.astype(np.uint32)
 
 
-def _effects(mats: Sequence[Material], lights: Sequence[Light], environment_map: bool, cutouts: bool
-             ) -> list[str]:
-    """What the scene's content can show (``stats["effects"]``)."""
+def _effects(mats: Sequence[Material], lights: Sequence[Light], environment_lights: int,
+             environment_map: bool, cutouts: bool) -> list[str]:
+    """What the scene's content can show (``stats["effects"]``); the environment map's suns light it as
+    soft sun lights."""
     effects = []
-    if lights:
+    if lights or environment_lights:
         effects.append("direct_light")
     if any(m.is_reflective for m in mats):
         effects.append("reflection")
@@ -107,7 +108,7 @@ def _effects(mats: Sequence[Material], lights: Sequence[Light], environment_map:
         effects.append("refraction")
     if any(max(m.emission) > 0 for m in mats):
         effects.append("emission")
-    if any(light.radius > 0 or light.kind == "area" for light in lights):
+    if any(light.radius > 0 or light.kind == "area" for light in lights) or environment_lights:
         effects.append("soft_shadows")
     if any(light.kind == "area" for light in lights):
         effects.append("area_lights")
@@ -306,13 +307,16 @@ class Scene:
             else:
                 h.update(str(arr.shape).encode())
                 h.update(np.ascontiguousarray(arr).tobytes())
+        # The environment map's suns, lit like sun lamps (Environment::lights in the native core).
+        env_lights = len(native.environment_lights)
         stats = {
             "triangles": int(np.count_nonzero(keep)),
             "degenerate_dropped": dropped,
             "materials": len(mats),
             "lights": len(lts),
+            "environment_lights": env_lights,
             "objects": int(np.unique(oid[keep]).size),
-            "effects": _effects(mats, lts, env_map is not None, native.has_cutouts),
+            "effects": _effects(mats, lts, env_lights, env_map is not None, native.has_cutouts),
         }
         scene = cls(native, stats, h.hexdigest(), mats, lts, list(cameras or []), source)
         scene.object_names = [str(n) for n in object_names] if object_names else []
@@ -396,7 +400,8 @@ class Scene:
 
     @property
     def stats(self) -> dict[str, Any]:
-        """triangles, degenerate_dropped, materials, lights, objects, effects."""
+        """triangles, degenerate_dropped, materials, lights, environment_lights (the map's suns, lit as sun
+        lights), objects, effects."""
         return dict(self._stats)
 
     @property

@@ -32,16 +32,20 @@ class RenderSettings:
 
     mode: "1spp" (one ray per pixel), "fsaa" (block x block rays per pixel), "undersample" (reference
       pixels every `block` pixels, the rest interpolated where neighbours are similar, else traced),
-      "supersample" (block x block sub-pixel grid, reference every `block` sub-pixels, then averaged).
+      "supersample" (block x block sub-pixel grid, reference every `block` sub-pixels). The sub-pixel
+      modes resolve their sub-samples with Cycles' default pixel filter (Blackman-Harris, 1.5 px wide).
     block: 2..4, the reference spacing / sub-pixel grid.
     normal_threshold_deg: similarity test angle; a negative value makes every test fail (full rate).
     max_depth: reflection/refraction bounces (0..4).
     shadow_samples: 0 = no shadow rays, 1 = hard shadows, N = N samples over each light's radius.
     resolution_scale: render at this fraction of the camera resolution (0.25..1), upscaled bilinearly.
     env_filter: glossy reflections of an environment map: "off" (one point-sampled ray in the lobe),
-      "box" / "bartlett" (mirror ray, then a summed-area-table filtered lookup over the lobe's cone).
-    ao_samples: ambient-occlusion rays per hit (0 = unoccluded ambient light).
-    ao_distance: AO ray length in scene units; 0 = 10 % of the scene's bounding-box diagonal.
+      "box" / "bartlett" (a summed-area-table filtered lookup over the lobe's cone); with filtering on,
+      camera and mirror rays also read the map bilinearly instead of at the nearest texel.
+    ao_samples: ambient-occlusion rays per hit (0 = unoccluded ambient light); the resolve pass denoises
+      their estimate over neighbouring samples of the same surface.
+    ao_distance: AO ray length in scene units; 0 = unbounded (the world's visibility: a closed room gets
+      no sky light, as in Cycles); a positive length gives a classic ambient-occlusion look.
     multirate: per-tile block size chosen from the previous frame's similarity ratio
       (adaptive modes only; inert otherwise) with thresholds multirate_low < multirate_high (hysteresis).
     tile_size: tile edge in pixels, the unit of work and of the on-chip tile buffer.
@@ -93,8 +97,9 @@ class RenderSettings:
 
     @classmethod
     def max_quality(cls) -> RenderSettings:
-        """The reference configuration (error 0 by definition): FSAA 2x2, 3 bounces, 16 soft-shadow and
-        16 AO samples, full resolution, Bartlett-filtered glossy environment, no adaptive shortcuts."""
+        """The reference configuration (error 0 by definition): FSAA 2x2 (Blackman-Harris pixel filter), 3
+        bounces, 16 soft-shadow and 16 unbounded AO samples, full resolution, Bartlett-filtered glossy
+        environment, no adaptive shortcuts."""
         return cls(
             mode="fsaa",
             block=2,

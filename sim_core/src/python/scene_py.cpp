@@ -164,6 +164,22 @@ void bind_scene(nb::module_& m) {
       .def_prop_ro("has_textures", &Scene::has_textures, "Some material samples a base-colour texture.")
       .def_prop_ro("has_cutouts", &Scene::has_cutouts,
                    "Some material can be cut out by its alpha (its hits and shadow rays run alpha tests).")
+      .def_prop_ro(
+          "environment_lights",
+          [](const Scene& s) {
+            nb::list out;
+            for (const Light& L : s.lights()) {
+              if (!L.environment) continue;
+              nb::dict d;
+              d["direction"] = nb::make_tuple(-L.direction.x, -L.direction.y, -L.direction.z);
+              d["irradiance"] = nb::make_tuple(L.color.x, L.color.y, L.color.z);
+              d["angular_radius"] = L.radius;
+              out.append(d);
+            }
+            return out;
+          },
+          "The environment map's suns the shader lights with (after the scene's lights, one shadow bit "
+          "each): direction towards the sun, irradiance (W/m^2 per channel), angular radius (radians).")
       .def_prop_ro("bvh_node_count", [](const Scene& s) { return s.bvh().nodes.size(); })
       .def_prop_ro("bvh_depth", [](const Scene& s) { return s.bvh().depth; })
       .def_prop_ro("bvh_leaf_count", [](const Scene& s) { return s.bvh().leaf_count; })

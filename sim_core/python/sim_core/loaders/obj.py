@@ -103,8 +103,6 @@ def _parse_simple(lines: list[str]) -> tuple[np.ndarray, np.ndarray] | None:
     return verts.reshape(-1, 3), idx.reshape(-1, 3) - 1
 
 
-# Long: one pass over the file's lines whose face, object and material state (a dozen running lists) is
-# local to that pass; split into parts it would only be handed around.
 def load_obj(path: str | os.PathLike[str], *, up_axis: Literal["Y", "Z"] = "Y") -> SceneData:
     """Load an OBJ into flat arrays in the project's Z-up world frame.
 
@@ -125,118 +123,166 @@ def load_obj(path: str | os.PathLike[str], *, up_axis: Literal["Y", "Z"] = "Y") 
     lines = text.splitlines()
     simple = _parse_simple(lines)
     if simple is not None:
-        positions, tris = simple
-        if not np.all(np.isfinite(positions)):
-            raise ValueError(f"{p}: vertex positions contain NaN or Inf")
-        if up_axis == "Y":
-            positions = positions @ _Y_TO_Z.T
-        return SceneData(
-            positions=positions.astype(np.float32),
-            triangles=tris.astype(np.uint32),
-            material_ids=np.zeros(tris.shape[0], dtype=np.uint32),
-            object_ids=np.zeros(tris.shape[0], dtype=np.uint32),
-            materials=[Material(name="default")],
-            source=str(p),
-            object_names=[p.stem],
-        )
+        return _simple_scene(p, *simple, up_axis)
+    parser = _Parser(p)
+    parser.parse(lines)
+    return parser.scene_data(up_axis)
 
-    verts: list[list[float]] = []
-    vnormals: list[list[float]] = []
-    corners_v: list[int] = []  # triangle corners: position index (0-based)
-    corners_n: list[int] = []  # normal index or -1
-    tri_mat: list[int] = []
-    tri_obj: list[int] = []
-    materials: list[Material] = []
-    mat_index: dict[str, int] = {}
-    library: dict[str, Material] = {}
-    current_mat = -1
-    object_names: list[str] = []
-    current_obj = -1
 
-    def resolve(token: str, count: int, lineno: int, kind: str) -> int:
+def _simple_scene(p: Path, positions: np.ndarray, tris: np.ndarray, up_axis: str) -> SceneData:
+    """The scene of a plain file (:func:`_parse_simple`): one object, one default material."""
+    if not np.all(np.isfinite(positions)):
+        raise ValueError(f"{p}: vertex positions contain NaN or Inf")
+    if up_axis == "Y":
+        positions = positions @ _Y_TO_Z.T
+    return SceneData(
+        positions=positions.astype(np.float32),
+        triangles=tris.astype(np.uint32),
+        material_ids=np.zeros(tris.shape[0], dtype=np.uint32),
+        object_ids=np.zeros(tris.shape[0], dtype=np.uint32),
+        materials=[Material(name="default")],
+        source=str(p),
+        object_names=[p.stem],
+    )
+
+
+class _Parser:
+    """The general parser: one pass over the lines, keeping the running face, object and material state."""
+
+    def __init__(self, p: Path) -> None:
+        self.p = p
+        self.verts: list[list[float]] = []
+        self.vnormals: list[list[float]] = []
+        self.corners_v: list[int] = []  # triangle corners: position index (0-based)
+        self.corners_n: list[int] = []  # normal index or -1
+        self.tri_mat: list[int] = []
+        self.tri_obj: list[int] = []
+        self.materials: list[Material] = []
+        self.mat_index: dict[str, int] = {}
+        self.library: dict[str, Material] = {}
+        self.current_mat = -1
+        self.object_names: list[str] = []
+        self.current_obj = -1
+
+    def parse(self, lines: list[str]) -> None:
+        p = self.p
+        for lineno, line in enumerate(lines, 1):
+            if not line or line[0] == "#":
+                continue
+            parts = line.split()
+            if not parts:
+                continue
+            key = parts[0]
+            if key == "v":
+                self.verts.append(_floats(parts[1:], 3, "v", lineno, p))
+            elif key == "vn":
+                self.vnormals.append(_floats(parts[1:], 3, "vn", lineno, p))
+            elif key == "f":
+                self._face(parts, line, lineno)
+            elif key in ("o", "g"):
+                name = " ".join(parts[1:]) or f"object_{len(self.object_names)}"
+                self.current_obj = len(self.object_names)
+                self.object_names.append(name)
+            elif key == "mtllib":
+                for lib in parts[1:]:
+                    try:
+                        mtl = confined_path(p.parent, lib)
+                    except ValueError as exc:
+                        raise ValueError(f"{p}:{lineno}: material library {exc}") from None
+                    self.library.update(_parse_mtl(mtl))
+            elif key == "usemtl":
+                name = " ".join(parts[1:])
+                if name not in self.mat_index:
+                    self.mat_index[name] = len(self.materials)
+                    self.materials.append(self.library.get(name, Material(name=name)))
+                self.current_mat = self.mat_index[name]
+
+    def _face(self, parts: list[str], line: str, lineno: int) -> None:
+        """One 'f' line: fan-triangulated, as Blender's importer does for convex faces."""
+        p = self.p
+        if len(parts) < 4:
+            raise ValueError(f"{p}:{lineno}: face needs at least 3 vertices")
+        if self.current_obj < 0:
+            self.object_names.append(p.stem)
+            self.current_obj = 0
+        if self.current_mat < 0:
+            self.current_mat = len(self.materials)
+            self.mat_index[""] = self.current_mat
+            self.materials.append(Material(name="default"))
+        nv = len(self.verts)
+        if len(parts) == 4 and "/" not in line:  # fast path: a plain triangle "f a b c"
+            try:
+                a, b, cc = int(parts[1]), int(parts[2]), int(parts[3])
+            except ValueError:
+                raise ValueError(f"{p}:{lineno}: malformed face index in {line.strip()!r}") from None
+            if 0 < a <= nv and 0 < b <= nv and 0 < cc <= nv:
+                self.corners_v.extend((a - 1, b - 1, cc - 1))
+                self.corners_n.extend((-1, -1, -1))
+                self.tri_mat.append(self.current_mat)
+                self.tri_obj.append(self.current_obj)
+                return
+        fv, fn = [], []
+        for tok in parts[1:]:
+            sub = tok.split("/")
+            fv.append(self._resolve(sub[0], nv, lineno, "vertex"))
+            fn.append(self._resolve(sub[2], len(self.vnormals), lineno, "normal") if len(sub) > 2 and sub[2]
+                      else -1)
+        for k in range(1, len(fv) - 1):
+            self.corners_v.extend((fv[0], fv[k], fv[k + 1]))
+            self.corners_n.extend((fn[0], fn[k], fn[k + 1]))
+            self.tri_mat.append(self.current_mat)
+            self.tri_obj.append(self.current_obj)
+
+    def _resolve(self, token: str, count: int, lineno: int, kind: str) -> int:
         try:
             i = int(token)
         except ValueError:
-            raise ValueError(f"{p}:{lineno}: malformed face index {token!r}") from None
+            raise ValueError(f"{self.p}:{lineno}: malformed face index {token!r}") from None
         j = i - 1 if i > 0 else count + i
         if i == 0 or not 0 <= j < count:
-            raise ValueError(f"{p}:{lineno}: {kind} index {i} out of range (have {count})")
+            raise ValueError(f"{self.p}:{lineno}: {kind} index {i} out of range (have {count})")
         return j
 
-    for lineno, line in enumerate(lines, 1):
-        if not line or line[0] == "#":
-            continue
-        parts = line.split()
-        if not parts:
-            continue
-        key = parts[0]
-        if key == "v":
-            verts.append(_floats(parts[1:], 3, "v", lineno, p))
-        elif key == "vn":
-            vnormals.append(_floats(parts[1:], 3, "vn", lineno, p))
-        elif key == "f":
-            if len(parts) < 4:
-                raise ValueError(f"{p}:{lineno}: face needs at least 3 vertices")
-            if current_obj < 0:
-                object_names.append(p.stem)
-                current_obj = 0
-            if current_mat < 0:
-                current_mat = len(materials)
-                mat_index[""] = current_mat
-                materials.append(Material(name="default"))
-            nv = len(verts)
-            if len(parts) == 4 and "/" not in line:  # fast path: a plain triangle "f a b c"
-                try:
-                    a, b, cc = int(parts[1]), int(parts[2]), int(parts[3])
-                except ValueError:
-                    raise ValueError(f"{p}:{lineno}: malformed face index in {line.strip()!r}") from None
-                if 0 < a <= nv and 0 < b <= nv and 0 < cc <= nv:
-                    corners_v.extend((a - 1, b - 1, cc - 1))
-                    corners_n.extend((-1, -1, -1))
-                    tri_mat.append(current_mat)
-                    tri_obj.append(current_obj)
-                    continue
-            fv, fn = [], []
-            for tok in parts[1:]:
-                sub = tok.split("/")
-                fv.append(resolve(sub[0], nv, lineno, "vertex"))
-                fn.append(resolve(sub[2], len(vnormals), lineno, "normal") if len(sub) > 2 and sub[2] else -1)
-            for k in range(1, len(fv) - 1):  # fan triangulation, as Blender's importer does for convex faces
-                corners_v.extend((fv[0], fv[k], fv[k + 1]))
-                corners_n.extend((fn[0], fn[k], fn[k + 1]))
-                tri_mat.append(current_mat)
-                tri_obj.append(current_obj)
-        elif key in ("o", "g"):
-            name = " ".join(parts[1:]) or f"object_{len(object_names)}"
-            current_obj = len(object_names)
-            object_names.append(name)
-        elif key == "mtllib":
-            for lib in parts[1:]:
-                try:
-                    mtl = confined_path(p.parent, lib)
-                except ValueError as exc:
-                    raise ValueError(f"{p}:{lineno}: material library {exc}") from None
-                library.update(_parse_mtl(mtl))
-        elif key == "usemtl":
-            name = " ".join(parts[1:])
-            if name not in mat_index:
-                mat_index[name] = len(materials)
-                materials.append(library.get(name, Material(name=name)))
-            current_mat = mat_index[name]
+    def scene_data(self, up_axis: str) -> SceneData:
+        p = self.p
+        if not self.corners_v:
+            raise ValueError(f"{p}: the file contains no faces (empty scene)")
+        positions = np.asarray(self.verts, dtype=np.float64)
+        if not np.all(np.isfinite(positions)):
+            raise ValueError(f"{p}: vertex positions contain NaN or Inf")
+        cv = np.asarray(self.corners_v, dtype=np.int64)
+        cn = np.asarray(self.corners_n, dtype=np.int64)
+        normals: np.ndarray | None = None
+        if (cn >= 0).any():
+            positions, normals, tris = self._split_by_normals(positions, cv, cn)
+        else:
+            tris = cv.reshape(-1, 3)
+        # Drop objects without faces (an 'o' line followed by another 'o') and renumber the rest.
+        obj = np.asarray(self.tri_obj, dtype=np.int64)
+        used = np.unique(obj)
+        remap = np.full(len(self.object_names), -1, dtype=np.int64)
+        remap[used] = np.arange(used.size)
+        if up_axis == "Y":
+            positions = positions @ _Y_TO_Z.T
+            if normals is not None:
+                normals = normals @ _Y_TO_Z.T
+        return SceneData(
+            positions=positions.astype(np.float32),
+            triangles=tris.astype(np.uint32),
+            normals=None if normals is None else normals.astype(np.float32),
+            material_ids=np.asarray(self.tri_mat, dtype=np.uint32),
+            object_ids=remap[obj].astype(np.uint32),
+            materials=self.materials,
+            source=str(p),
+            object_names=[self.object_names[i] for i in used],
+        )
 
-    if not corners_v:
-        raise ValueError(f"{p}: the file contains no faces (empty scene)")
-    positions = np.asarray(verts, dtype=np.float64)
-    if not np.all(np.isfinite(positions)):
-        raise ValueError(f"{p}: vertex positions contain NaN or Inf")
-    cv = np.asarray(corners_v, dtype=np.int64)
-    cn = np.asarray(corners_n, dtype=np.int64)
-    normals: np.ndarray | None = None
-    if (cn >= 0).any():
-        nrm = np.asarray(vnormals, dtype=np.float64)
+    def _split_by_normals(self, positions: np.ndarray, cv: np.ndarray, cn: np.ndarray
+                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """One output vertex per (position, normal) pair: (positions, unit normals, triangles)."""
+        nrm = np.asarray(self.vnormals, dtype=np.float64)
         if not np.all(np.isfinite(nrm)):
-            raise ValueError(f"{p}: vertex normals contain NaN or Inf")
-        # Split positions that carry several normals: one output vertex per (position, normal) pair.
+            raise ValueError(f"{self.p}: vertex normals contain NaN or Inf")
         pairs = np.stack([cv, cn], axis=1)
         uniq, inverse = np.unique(pairs, axis=0, return_inverse=True)
         inverse = inverse.reshape(-1)
@@ -249,25 +295,4 @@ def load_obj(path: str | os.PathLike[str], *, up_axis: Literal["Y", "Z"] = "Y") 
             out_nrm[~has_n] = smooth_normals(out_pos, tris)[~has_n]
         length = np.linalg.norm(out_nrm, axis=1, keepdims=True)
         out_nrm = np.where(length > 0, out_nrm / np.where(length > 0, length, 1.0), 0.0)
-        positions, normals = out_pos, out_nrm
-    else:
-        tris = cv.reshape(-1, 3)
-    # Drop objects without faces (an 'o' line followed by another 'o') and renumber the rest.
-    obj = np.asarray(tri_obj, dtype=np.int64)
-    used = np.unique(obj)
-    remap = np.full(len(object_names), -1, dtype=np.int64)
-    remap[used] = np.arange(used.size)
-    if up_axis == "Y":
-        positions = positions @ _Y_TO_Z.T
-        if normals is not None:
-            normals = normals @ _Y_TO_Z.T
-    return SceneData(
-        positions=positions.astype(np.float32),
-        triangles=tris.astype(np.uint32),
-        normals=None if normals is None else normals.astype(np.float32),
-        material_ids=np.asarray(tri_mat, dtype=np.uint32),
-        object_ids=remap[obj].astype(np.uint32),
-        materials=materials,
-        source=str(p),
-        object_names=[object_names[i] for i in used],
-    )
+        return out_pos, out_nrm, tris

@@ -1,27 +1,8 @@
-"""Durable state of the REST service: content-addressed scene files plus SQLite (WAL) tables.
-
-Everything lives under one data directory so a restart (or a SIGKILL) loses nothing that was committed:
-
-- ``scenes/<sha256>.glb`` or ``.rbscene``: uploaded scenes (glTF binaries or render-budget scene files),
-  named by the hash of their bytes (never by a client name);
-- ``service.sqlite3``: tables ``scenes``, ``jobs``, ``job_events`` (the ordered progress stream served
-  as server-sent events) and ``stores`` (Pareto stores, keyed by the hash of their JSON);
-- ``eval_cache.sqlite3``: the optimiser's evaluation cache (its own file, so its writes never wait on
-  the job tables' and vice versa);
-- ``tmp/``: uploads and previews in flight (emptied at start).
-
-Lifecycle: scenes, jobs and stores are listed newest first, a page at a time (:class:`Page`), and
-deleted on request, never while something still needs them (a scene with queued or running jobs, a
-running job: :class:`Conflict`); a finished job keeps only its last progress event.
-
-Connections are per thread (SQLite objects must not cross threads); WAL lets the API read while the job
-runner writes.
-"""
+"""The service's data directory: content-addressed scene files and the SQLite tables (scenes, jobs and
+their events, stores), with per-thread connections and one writer at a time."""
 
 from __future__ import annotations
 
-import base64
-import binascii
 import hashlib
 import json
 import os
@@ -32,148 +13,24 @@ import time
 import uuid
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Generic, TypeVar
+from typing import Any
 
-SCHEMA_VERSION = 1
-DB_NAME = "service.sqlite3"
-EVAL_CACHE_NAME = "eval_cache.sqlite3"
-
-#: Stored scene files: glTF binaries and render-budget scene files (sim_core.loaders.scene_file).
-SCENE_SUFFIXES = (".glb", ".rbscene")
-JOB_STATES = ("queued", "running", "done", "failed", "cancelled")
-TERMINAL_STATES = frozenset({"done", "failed", "cancelled"})
-
-_SCHEMA = """
-CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
-CREATE TABLE IF NOT EXISTS scenes (
-    id TEXT PRIMARY KEY,
-    size INTEGER NOT NULL,
-    content_hash TEXT NOT NULL,
-    stats TEXT NOT NULL,
-    inert TEXT NOT NULL,
-    cameras INTEGER NOT NULL,
-    created REAL NOT NULL
-);
-CREATE TABLE IF NOT EXISTS jobs (
-    id TEXT PRIMARY KEY,
-    scene_id TEXT NOT NULL REFERENCES scenes(id),
-    spec TEXT NOT NULL,
-    state TEXT NOT NULL,
-    progress TEXT NOT NULL DEFAULT '{}',
-    error TEXT,
-    store_id TEXT,
-    cancel_requested INTEGER NOT NULL DEFAULT 0,
-    attempts INTEGER NOT NULL DEFAULT 0,
-    created REAL NOT NULL,
-    started REAL,
-    finished REAL,
-    elapsed_s REAL NOT NULL DEFAULT 0
-);
-CREATE INDEX IF NOT EXISTS jobs_state ON jobs(state);
-CREATE INDEX IF NOT EXISTS jobs_scene ON jobs(scene_id);
-CREATE INDEX IF NOT EXISTS jobs_created ON jobs(created, id);
-CREATE INDEX IF NOT EXISTS scenes_created ON scenes(created, id);
-CREATE TABLE IF NOT EXISTS job_events (
-    job_id TEXT NOT NULL REFERENCES jobs(id),
-    seq INTEGER NOT NULL,
-    kind TEXT NOT NULL,
-    data TEXT NOT NULL,
-    created REAL NOT NULL,
-    PRIMARY KEY (job_id, seq)
-);
-CREATE TABLE IF NOT EXISTS stores (
-    id TEXT PRIMARY KEY,
-    scene_id TEXT NOT NULL,
-    job_id TEXT NOT NULL,
-    body TEXT NOT NULL,
-    size INTEGER NOT NULL,
-    created REAL NOT NULL
-);
-CREATE INDEX IF NOT EXISTS stores_created ON stores(created, id);
-"""
-
-
-class Conflict(Exception):
-    """The operation would take away something that is still in use (the message says what)."""
-
-
-T = TypeVar("T")
-
-
-@dataclass(frozen=True)
-class Page(Generic[T]):
-    """One page of a listing, newest first; ``next_cursor`` asks for the following page (None: last)."""
-
-    items: list[T]
-    next_cursor: str | None
-
-
-def _encode_cursor(created: float, item_id: str) -> str:
-    return base64.urlsafe_b64encode(json.dumps([created, item_id]).encode()).decode().rstrip("=")
-
-
-def decode_cursor(cursor: str) -> tuple[float, str]:
-    """The position a cursor stands for; ValueError for anything this module did not make."""
-    try:
-        created, item_id = json.loads(base64.urlsafe_b64decode(cursor + "=" * (-len(cursor) % 4)))
-        if isinstance(created, bool) or not isinstance(created, int | float) or not isinstance(item_id, str):
-            raise ValueError
-        return float(created), item_id
-    except (ValueError, TypeError, binascii.Error, UnicodeDecodeError):
-        raise ValueError("invalid cursor (use the next_cursor of a previous page)") from None
-
-
-@dataclass(frozen=True)
-class SceneRecord:
-    id: str
-    size: int
-    content_hash: str
-    stats: dict[str, Any]
-    inert: dict[str, str]
-    cameras: int
-    created: float
-
-
-@dataclass(frozen=True)
-class JobRecord:
-    id: str
-    scene_id: str
-    spec: dict[str, Any]
-    state: str
-    progress: dict[str, Any]
-    error: str | None
-    store_id: str | None
-    cancel_requested: bool
-    attempts: int
-    created: float
-    started: float | None
-    finished: float | None
-    elapsed_s: float
-
-    @property
-    def terminal(self) -> bool:
-        return self.state in TERMINAL_STATES
-
-
-@dataclass(frozen=True)
-class JobEvent:
-    job_id: str
-    seq: int
-    kind: str
-    data: dict[str, Any]
-    created: float
-
-
-@dataclass(frozen=True)
-class StoreRecord:
-    id: str
-    scene_id: str
-    job_id: str
-    body: str
-    size: int
-    created: float
+from .records import (
+    JOB_STATES,
+    SCENE_SUFFIXES,
+    TERMINAL_STATES,
+    Conflict,
+    JobEvent,
+    JobRecord,
+    Page,
+    SceneRecord,
+    StoreRecord,
+    decode_cursor,
+    encode_cursor,
+    is_hex_id,
+)
+from .schema import ACTIVE_SCENE_HASHES, DB_NAME, EVAL_CACHE_NAME, SCHEMA, SCHEMA_VERSION
 
 
 def _dumps(value: object) -> str:
@@ -204,7 +61,7 @@ class Storage:
         self._write_lock = threading.Lock()
         with self._write_lock:
             conn = self._connection()
-            conn.executescript(_SCHEMA)  # runs in its own transaction
+            conn.executescript(SCHEMA)  # runs in its own transaction
             conn.execute(
                 "INSERT OR IGNORE INTO meta(key, value) VALUES ('schema_version', ?)", (str(SCHEMA_VERSION),)
             )
@@ -310,7 +167,7 @@ class Storage:
         rows = self._connection().execute(sql, (*params, limit + 1)).fetchall()
         more = len(rows) > limit
         rows = rows[:limit]
-        return rows, (_encode_cursor(rows[-1]["created"], rows[-1]["id"]) if more else None)
+        return rows, (encode_cursor(rows[-1]["created"], rows[-1]["id"]) if more else None)
 
     @staticmethod
     def _scene(row: sqlite3.Row) -> SceneRecord:
@@ -406,7 +263,7 @@ class Storage:
 
     def active_scene_hashes(self) -> list[str]:
         """Content hashes of the scenes of queued or running jobs (their evaluations must be kept)."""
-        return [r[0] for r in self._connection().execute(_ACTIVE_SCENE_HASHES).fetchall()]
+        return [r[0] for r in self._connection().execute(ACTIVE_SCENE_HASHES).fetchall()]
 
     def count_jobs(self) -> dict[str, int]:
         rows = self._connection().execute("SELECT state, COUNT(*) FROM jobs GROUP BY state").fetchall()
@@ -544,25 +401,3 @@ class Storage:
         """Delete a store (jobs that made it keep its id, and answer 404 for it from then on)."""
         with self._write_lock, self._conn() as conn:
             return conn.execute("DELETE FROM stores WHERE id = ?", (store_id,)).rowcount == 1
-
-
-_ACTIVE_SCENE_HASHES = ("SELECT DISTINCT s.content_hash FROM jobs j JOIN scenes s ON s.id = j.scene_id "
-                        "WHERE j.state IN ('queued', 'running')")
-
-
-def read_active_scene_hashes(data_dir: Path) -> list[str]:
-    """:meth:`Storage.active_scene_hashes` of a data directory a service may be using right now, read
-    without side effects (opening a :class:`Storage` would empty its tmp/)."""
-    path = Path(data_dir) / DB_NAME
-    if not path.is_file():
-        return []
-    conn = sqlite3.connect(f"file:{path}?mode=ro", uri=True, timeout=30.0)
-    try:
-        return [r[0] for r in conn.execute(_ACTIVE_SCENE_HASHES).fetchall()]
-    finally:
-        conn.close()
-
-
-def is_hex_id(value: str, length: int) -> bool:
-    """True for exactly ``length`` lowercase hex digits (ids are never paths)."""
-    return len(value) == length and all(c in "0123456789abcdef" for c in value)
