@@ -306,7 +306,6 @@ class Light:
         if power < 0:
             raise ValueError(f"light energy must be >= 0, got {energy}")
         direction = -m[:3, 2]
-        tangent = m[:3, 0]
         rgb = tuple(np.asarray(color, dtype=np.float64)[:3])
         common: dict[str, Any] = dict(position=tuple(m[:3, 3]), color=rgb, name=name)
         if np.linalg.norm(direction) == 0:
@@ -324,13 +323,19 @@ class Light:
                 spot_blend=float(spot_blend),
                 **common,
             )
-        blender_shape = str(shape).upper()
+        return cls._area_from_blender(m, power, str(shape).upper(), float(size), float(size_y), common)
+
+    @classmethod
+    def _area_from_blender(cls, m: np.ndarray, power: float, blender_shape: str, size: float, size_y: float,
+                           common: dict[str, Any]) -> Light:
+        """An area light: a Lambertian emitter of radiance power / (pi * area), sized by its scale."""
+        name = common["name"]
         shapes = {"SQUARE": "square", "RECTANGLE": "rectangle", "DISK": "disk", "ELLIPSE": "ellipse"}
         if blender_shape not in shapes:
-            raise ValueError(f"area light shape must be one of {sorted(shapes)}, got {shape!r}")
+            raise ValueError(f"area light shape must be one of {sorted(shapes)}, got {blender_shape!r}")
         sx, sy = float(np.linalg.norm(m[:3, 0])), float(np.linalg.norm(m[:3, 1]))
-        u_size = float(size) * sx
-        v_size = (float(size_y) if blender_shape in ("RECTANGLE", "ELLIPSE") else float(size)) * sy
+        u_size = size * sx
+        v_size = (size_y if blender_shape in ("RECTANGLE", "ELLIPSE") else size) * sy
         native_shape = "rectangle" if blender_shape in ("SQUARE", "RECTANGLE") else "ellipse"
         area = u_size * v_size * (math.pi / 4 if native_shape == "ellipse" else 1.0)
         if not area > 0:
@@ -340,8 +345,8 @@ class Light:
             )
         return cls(
             kind="area",
-            direction=tuple(direction),
-            tangent=tuple(tangent),
+            direction=tuple(-m[:3, 2]),
+            tangent=tuple(m[:3, 0]),
             intensity=power / (math.pi * area),
             shape=native_shape,  # type: ignore[arg-type]
             size=u_size,
@@ -386,3 +391,4 @@ class SceneData:
     textures: list[Texture] = field(default_factory=list)
     environment_strength: float = 1.0
     environment_rotation: float = 0.0
+
