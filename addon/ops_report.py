@@ -59,11 +59,12 @@ def evaluate_scene(scene: bpy.types.Scene, client: ServiceClient | LocalClient, 
     props, path = _store_and_path(scene)
     budgets = validate_budget("ERROR", props.error_budget), validate_budget("POWER", props.power_budget)
     info = upload_scene_info(scene, client)
+    searched_at = option_schema.eval_resolution(props.eval_width or None, props.eval_height,
+                                                path.frames[0].aspect)
+    measured_at, power_at = campaign.measurement_sizes(props.store_text.as_string(), searched_at, path)
     spec = campaign.CampaignSpec(
-        scene_id=str(info["id"]), profile=props.profile or None,
-        resolution=option_schema.eval_resolution(props.eval_width or None, props.eval_height,
-                                                 path.frames[0].aspect),
-        power_resolution=path.frames[0].resolution,
+        scene_id=str(info["id"]), profile=props.profile or None, resolution=measured_at,
+        power_resolution=power_at,
         frame_step=frame_step or props.report_frame_step, filter_period_s=props.filter_period,
         error_budget=budgets[0], power_budget=budgets[1], samples=3 if samples else 0)
     name = Path(bpy.data.filepath).stem or "untitled"

@@ -139,3 +139,30 @@ def test_reports_show_fps_per_mode_and_which_presets_are_real_time(tmp_path: Pat
         report.FrameRow(0, 0.0, "max", 1.0, 0.0, fps=0.0)
     with pytest.raises(ValueError, match="frame rate"):
         report.FrameRow(0, 0.0, "ours_power", 1.0, 0.0, predicted_fps=math.inf)
+
+
+def test_a_store_priced_at_a_display_size_is_measured_there_and_labelled() -> None:
+    """Table 3 checks what the store promises: renders and power at the size its figures are for; a store
+    with preview figures is measured at its search size with power scaled to the path's."""
+    import dataclasses
+
+    import numpy as np
+
+    from service.camera_path import CameraFrame, CameraPath
+    from tests.test_pareto_store import _store
+
+    path = CameraPath((CameraFrame(0.0, np.eye(4), 0.8, (1280, 720)),), fps=30.0)
+    store = _store()
+    preview = dataclasses.replace(store, meta={"display_pricing": "preview", "figures_resolution": [64, 36]})
+    display = dataclasses.replace(store, meta={"display_pricing": "full:ssim",
+                                               "figures_resolution": [320, 180]})
+    assert campaign.measurement_sizes(preview.to_json(), (64, 36), path) == ((64, 36), (1280, 720))
+    assert campaign.measurement_sizes(store.to_json(), (64, 36), path) == ((64, 36), (1280, 720))
+    assert campaign.measurement_sizes(display.to_json(), (64, 36), path) == ((320, 180), (320, 180))
+
+    def note(resolution: tuple[int, int], power: tuple[int, int]) -> str:
+        return campaign.size_note(campaign.CampaignSpec("s", resolution, power_resolution=power), path)
+
+    assert "preview resolution" in note((64, 36), (1280, 720))
+    assert "1280x720 is not measured here" in note((320, 180), (320, 180))
+    assert "the path's own size" in note((1280, 720), (1280, 720))

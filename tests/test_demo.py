@@ -117,6 +117,10 @@ def test_demo_end_to_end_tiny(tmp_path: Path) -> None:
 
     # the store's figures were priced at the stated display size, and verified there
     assert summary["store"]["meta"]["figures_resolution"] == [64, 36]
+    # ... and Table 3 measured there too: renders and power at that size, never a preview scaled up
+    assert summary["store"]["meta"]["display_pricing"] != "preview"
+    assert summary["resolution"] == summary["power_resolution"] == [64, 36]
+    assert "Evaluated at 64x36 (the display size the store is priced for" in report_md
     verify = json.loads((out / "verify.json").read_text())
     assert verify["resolution"] == [64, 36] and len(verify["frames"]) == 2
     assert verify["summary"]["within_budget"] == sum(f["measured_error"] <= eb for f in verify["frames"])

@@ -197,9 +197,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                          timeout_s=args.job_timeout)
         opt = clock.stop("optimise", t)
         store_text = client.store_text(job["store_id"])
+        measured_at, power_at = campaign.measurement_sizes(store_text, resolution, path)
         spec = campaign.CampaignSpec(
-            scene_id=info["id"], resolution=resolution,
-            power_resolution=tuple(int(v) for v in path.frames[0].resolution),
+            scene_id=info["id"], resolution=measured_at, power_resolution=power_at,
             frame_step=campaign.frame_step(len(path), args.frames), filter_period_s=args.filter_period,
             error_budget=args.error_budget, power_budget=args.power_budget,
             power_budget_from=args.power_budget_from, power_fraction=args.power_fraction,

@@ -368,21 +368,46 @@ def table2_row(pre: Preprocessing, store: ParetoStore, path: CameraPath) -> tupl
             f"{path_duration(path):.0f} s")
 
 
+def measurement_sizes(store_text: str, eval_resolution: tuple[int, int],
+                      path: CameraPath) -> tuple[tuple[int, int], tuple[int, int]]:
+    """(evaluation size, power size) for a campaign on a store: a store priced at a display size is
+    measured there, renders and power at that size, so Table 3 checks the figures the store promises; a
+    store with preview figures is measured as it was searched (``eval_resolution``), power scaled to the
+    path's size."""
+    meta = ParetoStore.from_json(store_text).meta
+    figures = meta.get("figures_resolution")
+    if meta.get("display_pricing", "preview") != "preview" and figures:
+        size = (int(figures[0]), int(figures[1]))
+        return size, size
+    return eval_resolution, tuple(int(v) for v in path.frames[0].resolution)
+
+
 def path_duration(path: CameraPath) -> float:
     return path.frames[-1].time - path.frames[0].time + 1.0 / path.fps
 
 
-def notes(measured: Measured, spec: CampaignSpec, path: CameraPath, store: ParetoStore) -> list[str]:
-    """What the report's figures mean: budgets, sizes, frames, presets, 'budget kept'."""
+def size_note(spec: CampaignSpec, path: CameraPath) -> str:
+    """Which size the report's figures belong to, said plainly (a preview figure is never the result)."""
     w, h = spec.resolution
     pw, ph = spec.power_resolution or (w, h)
+    rw, rh = path.frames[0].resolution
+    if (w, h) == (pw, ph):
+        where = "the path's own size" if (w, h) == (rw, rh) else (
+            f"the display size the store is priced for; the path's own {rw}x{rh} is not measured here")
+        return (f"Evaluated at {w}x{h} ({where}): error and power from renders at that size, power asked for "
+                f"{path.fps:g} fps and drawn at the frame rate reached.")
+    return (f"Evaluated at {w}x{h} (preview resolution); power is the simulator's for the path's "
+            f"{pw}x{ph} asked for {path.fps:g} fps (static power plus dynamic energy and frame time scaled "
+            "by the pixel count, as the store predicts it), drawn at the frame rate reached.")
+
+
+def notes(measured: Measured, spec: CampaignSpec, path: CameraPath, store: ParetoStore) -> list[str]:
+    """What the report's figures mean: budgets, sizes, frames, presets, 'budget kept'."""
     step, n = spec.frame_step, len(measured.frames)
     fixed = ", ".join(store.meta.get("fixed_parameters") or {}) or "none"
     return [
         measured.power_reason + ".", measured.error_reason + ": issue 7's target error.",
-        f"Evaluated at {w}x{h} (preview resolution); power is the simulator's for the path's {pw}x{ph} "
-        f"asked for {path.fps:g} fps (static power plus dynamic energy and frame time scaled by the pixel "
-        "count, as the store predicts it), drawn at the frame rate reached.",
+        size_note(spec, path),
         f"Frames: {n} of {len(path)} path frames evaluated (every {step}th, {step / path.fps:.2f} s apart); "
         f"the temporal filter (T = {spec.filter_period_s:g} s) runs over the evaluated frames in path order. "
         "`frame` in per_frame.csv and in the sample file names is the index into the camera path.",
@@ -480,7 +505,8 @@ def run(client: ServiceClient, store_text: str, path: CameraPath, spec: Campaign
     clock.stop("report", t)
     clock.stop("total", clock.started)
     summary = {
-        "scene": pre.name, "resolution": [w, h], "path_resolution": [pw, ph],
+        "scene": pre.name, "resolution": [w, h], "power_resolution": [pw, ph],
+        "path_image_resolution": [int(v) for v in path.frames[0].resolution],
         "frames_evaluated": len(measured.frames), "frame_step": spec.frame_step, "path_frames": len(path),
         "power_budget_w": measured.power_budget, "error_budget": measured.error_budget,
         "budget_choice": measured.power_reason, "store": {**store.stats(), "meta": dict(store.meta)},
