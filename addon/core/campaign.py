@@ -484,7 +484,7 @@ def run(client: ServiceClient, store_text: str, path: CameraPath, spec: Campaign
     n = len(range(0, len(path), spec.frame_step))
     say("== evaluate the path through the service (POST /evaluate)")
     say(f"  {n} of {len(path)} frames (every {spec.frame_step}th, {spec.frame_step / path.fps:.2f} s apart), "
-        f"{w}x{h}, power scaled to {pw}x{ph}")
+        f"{w}x{h}, " + ("power at that size" if (w, h) == (pw, ph) else f"power scaled to {pw}x{ph}"))
     t = clock.start()
     measured = measure(client, store, path, spec, progress=progress, say=say)
     clock.stop("evaluate", t)
