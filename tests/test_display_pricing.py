@@ -17,7 +17,7 @@ import sim_core
 from service.camera_path import CameraPath
 from service.display_pricing import (
     DisplayPricing,
-    _rects,
+    cover_rects,
     inclusion_probabilities,
     price_camera,
     serpentine,
@@ -73,7 +73,7 @@ def test_systematic_sample_draws_each_block_with_its_probability(nbx, nby, seed,
 def test_rectangles_cover_a_mask_exactly(h, w, seed) -> None:
     mask = np.random.default_rng(seed).random((h, w)) < 0.5
     cover = np.zeros((h, w), dtype=np.int64)
-    for x0, y0, x1, y1 in _rects(mask):
+    for x0, y0, x1, y1 in cover_rects(mask):
         cover[y0:y1, x0:x1] += 1
     assert np.array_equal(cover, mask.astype(np.int64))
 

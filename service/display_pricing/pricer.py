@@ -1,0 +1,84 @@
+"""The driver the octree builder calls: display-resolution pricing through the evaluation cache and
+the executor, one task per camera."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from service.display_pricing.camera import price_camera
+from service.display_pricing.config import DisplayPricing
+from service.eval_cache import CacheKey, Evaluation
+from service.evaluation import PIPELINE_VERSION, CameraSpec, Evaluator, SceneHandle, space_fingerprint
+from service.params import Indices, ParameterSpace
+
+
+@dataclass(frozen=True)
+class _TaskContext:
+    """What every pricing task of a batch shares (sent once per worker and batch)."""
+
+    scene: SceneHandle
+    space: ParameterSpace
+    profile: str
+    fps: float
+    metric: str
+    pricing: DisplayPricing
+    threads: int | None
+
+
+def _price_task(ctx: _TaskContext, item: tuple[CameraSpec, list[Indices]]) -> list[Evaluation]:
+    camera, settings = item
+    return price_camera(ctx.scene.get(), camera, settings, ctx.space, profile=ctx.profile, fps=ctx.fps,
+                        metric=ctx.metric, pricing=ctx.pricing, threads=ctx.threads,
+                        scene_hash=ctx.scene.content_hash)
+
+
+class DisplayPricer:
+    """Prices (display-resolution camera, settings) at display resolution for an :class:`Evaluator`'s
+    scene, space, profile, frame rate and metric, through its evaluation cache and executor: one task
+    per camera (its reference is traced once for all its settings), cached per setting under a key
+    that names the display resolution and the estimator."""
+
+    def __init__(self, evaluator: Evaluator, pricing: DisplayPricing) -> None:
+        self.ev = evaluator
+        self.pricing = pricing
+        ctx = evaluator.ctx
+        self.ctx = _TaskContext(evaluator.scene, evaluator.space, ctx.profile, ctx.fps, ctx.metric, pricing,
+                                ctx.threads)
+        self.metric_key = (f"{ctx.metric}:{PIPELINE_VERSION}:{space_fingerprint(evaluator.space)}:"
+                           f"display={pricing.key(ctx.metric)}")
+        self.evaluations = 0  # settings actually priced
+        self.cameras = 0  # camera tasks run
+
+    def _key(self, camera: CameraSpec) -> CacheKey:
+        return CacheKey(self.ev.scene.content_hash, camera.key(), self.metric_key, self.ctx.profile,
+                        camera.width, camera.height, self.ctx.fps)
+
+    def price(self, requests: Sequence[tuple[CameraSpec, Sequence[Indices]]]) -> list[list[Evaluation]]:
+        """Evaluations of every request's settings, in order; cached ones are not priced again."""
+        space = self.ev.space
+        reqs = [(cam, [tuple(int(i) for i in x) for x in xs]) for cam, xs in requests]
+        found: dict[tuple[str, int], Evaluation] = {}
+        todo: dict[str, tuple[CameraSpec, list[Indices]]] = {}
+        for cam, xs in reqs:
+            packs = {space.pack(x): x for x in xs}
+            hit = self.ev.cache.get_many(self._key(cam), list(packs))
+            self.ev.cache_hits += len(hit)
+            for p, e in hit.items():
+                found[(cam.key(), p)] = e
+            missing = [x for p, x in packs.items() if p not in hit and (cam.key(), p) not in found]
+            if missing:
+                entry = todo.setdefault(cam.key(), (cam, []))
+                entry[1].extend(x for x in missing if x not in entry[1])
+        if todo:
+            items = list(todo.values())
+            results = self.ev.executor.map(_price_task, self.ctx, items)
+            self.cameras += len(items)
+            for (cam, xs), evs in zip(items, results, strict=True):
+                pairs = [(space.pack(x), e) for x, e in zip(xs, evs, strict=True)]
+                self.evaluations += len(pairs)
+                self.ev.evaluations += len(pairs)
+                for p, e in pairs:
+                    found[(cam.key(), p)] = e
+                self.ev.cache.put_many(self._key(cam), pairs)
+        return [[found[(cam.key(), space.pack(x))] for x in xs] for cam, xs in reqs]

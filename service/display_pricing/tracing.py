@@ -1,0 +1,99 @@
+"""Tracing for the tile estimator: whole frames, small-tiled auxiliary frames, and the windows of the
+display frame that the sampled blocks need."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from sim_core.image import linear_to_srgb, source_span, upsample_bilinear
+from sim_core.render import COUNTER_NAMES
+
+import sim_core
+from service.display_pricing.sampling import CameraDesign, block_of, cover_rects
+
+#: Tile side of the auxiliary frames: small, so that their tiles fall into single blocks.
+AUX_TILE = 4
+
+
+class Renderer:
+    """The scene and thread count one pricing task renders with."""
+
+    def __init__(self, scene: Any, threads: int | None) -> None:
+        self.scene, self.threads = scene, threads
+
+    def frame(self, camera: Any, settings: Any) -> Any:
+        return sim_core.render(self.scene, camera, settings, threads=self.threads)
+
+    def aux_frame(self, camera: Any, settings: Any) -> Any:
+        """An auxiliary frame: small tiles, so that per-tile counters say where the work is."""
+        return self.frame(camera, dataclasses.replace(settings, tile_size=AUX_TILE))
+
+    def windows(self, camera: Any, settings: Any, blocks: Sequence[int], d: CameraDesign
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, tuple[int, int]]:
+        """Trace what the sampled ``blocks`` need at display resolution: the traced-resolution canvas
+        (only the needed pixels filled), and the counters and histograms of the tiles whose centre lies
+        in a sampled block (rows), with those tiles' blocks."""
+        s = settings
+        w, h = sim_core.render_size(camera, s)
+        ts = s.tile_size
+        ntx, nty = -(-w // ts), -(-h // ts)
+        need = np.zeros((h, w), dtype=bool)  # traced pixels the regions read
+        for b in blocks:
+            x0, y0, x1, y1 = d.regions[b]
+            sx0, sx1 = source_span(d.W, w, x0, x1)
+            sy0, sy1 = source_span(d.H, h, y0, y1)
+            need[sy0:sy1, sx0:sx1] = True
+        # tiles whose centre lies in a sampled block: their counters are the sample's
+        tx, ty = np.meshgrid(np.arange(ntx), np.arange(nty))
+        tw = np.minimum(ts, w - tx * ts)
+        th = np.minimum(ts, h - ty * ts)
+        cx = tx * ts + 0.5 * tw
+        cy = ty * ts + 0.5 * th
+        owner = block_of(cx.ravel(), cy.ravel(), d.W / w, d.H / h, d.B, d.nbx, d.nby).reshape(nty, ntx)
+        counted = np.isin(owner, np.asarray(blocks))
+        per_pixel = s.mode in ("1spp", "fsaa")
+        tiles = counted.copy()
+        if not per_pixel:  # adaptive modes: every needed pixel's whole tile
+            tiles |= np.add.reduceat(np.add.reduceat(need.astype(np.int32), np.arange(0, h, ts), axis=0),
+                                     np.arange(0, w, ts), axis=1) > 0
+        canvas = np.zeros((h, w, 3), dtype=np.float32)
+        covered = np.zeros((h, w), dtype=bool)
+        rows_c: list[np.ndarray] = []
+        rows_h: list[np.ndarray] = []
+        rows_b: list[np.ndarray] = []
+        for tx0, ty0, tx1, ty1 in cover_rects(tiles):
+            x, y = tx0 * ts, ty0 * ts
+            win = (x, y, min(tx1 * ts, w) - x, min(ty1 * ts, h) - y)
+            r = sim_core.render_window(self.scene, camera, s, win, threads=self.threads)
+            canvas[y:y + win[3], x:x + win[2]] = r.image
+            covered[y:y + win[3], x:x + win[2]] = True
+            keep = np.asarray([counted[t["y0"] // ts, t["x0"] // ts] for t in r.tile_stats], dtype=bool)
+            if keep.any():
+                rows_c.append(r.tile_counters[keep])
+                rows_h.append(r.tile_histograms[keep])
+                rows_b.append(np.asarray([owner[t["y0"] // ts, t["x0"] // ts] for t in r.tile_stats])[keep])
+        if per_pixel:  # the margins' pixels alone (a per-pixel mode has the frame's pixels anywhere)
+            for x0, y0, x1, y1 in cover_rects(need & ~covered):
+                r = sim_core.render_window(self.scene, camera, s, (x0, y0, x1 - x0, y1 - y0),
+                                           threads=self.threads)
+                canvas[y0:y1, x0:x1] = r.image
+                covered[y0:y1, x0:x1] = True
+        if not covered[need].all():
+            raise RuntimeError("tile estimator: a needed pixel was not traced")
+        nc = len(COUNTER_NAMES)
+        return (canvas, np.concatenate(rows_c) if rows_c else np.zeros((0, nc), np.uint64),
+                np.concatenate(rows_h) if rows_h else np.zeros((0, 25), np.uint64),
+                np.concatenate(rows_b) if rows_b else np.zeros(0, np.int64), (w, h))
+
+
+def display_patches(canvas: np.ndarray, size: tuple[int, int], d: CameraDesign, blocks: Sequence[int]
+                    ) -> dict[int, np.ndarray]:
+    """Display-transformed display pixels over every sampled block's region (bit for bit the whole
+    frame's upsampling)."""
+    out = {}
+    for b in blocks:
+        out[b] = linear_to_srgb(upsample_bilinear(canvas, d.H, d.W, window=d.regions[b]))
+    return out
