@@ -18,7 +18,7 @@ from service import options as option_schema
 
 from . import service_process
 from .camera_path import load_path
-from .core import campaign
+from .core import campaign, campaign_targets
 from .core import report as report_data
 from .core.client import ServiceClient
 from .core.local_jobs import LocalClient
@@ -68,7 +68,7 @@ def evaluate_scene(scene: bpy.types.Scene, client: ServiceClient | LocalClient, 
         frame_step=frame_step or props.report_frame_step, filter_period_s=props.filter_period,
         error_budget=budgets[0], power_budget=budgets[1], samples=3 if samples else 0)
     name = Path(bpy.data.filepath).stem or "untitled"
-    pre = campaign.Preprocessing(f"{name} / {scene.name}", (info.get("stats") or {}).get("triangles"))
+    pre = campaign_targets.Preprocessing(f"{name} / {scene.name}", (info.get("stats") or {}).get("triangles"))
     outcome = campaign.run(client, props.store_text.as_string(), path, spec, out_dir, title=pre.name, pre=pre,
                            progress=None if progress is None else lambda _label, d, t: progress(d, t),
                            say=log.info)

@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from addon.core import campaign, report
+from addon.core import campaign, campaign_targets, report
 
 
 def test_parse_size_accepts_wxh_and_reports_bad_text() -> None:
@@ -83,13 +83,13 @@ def test_budget_from_presets_lies_between_min_and_max() -> None:
 
 
 def test_targets_follow_the_measured_summaries() -> None:
-    targets = campaign.check_targets(report.summarise(_rows()))
+    targets = campaign_targets.check_targets(report.summarise(_rows()))
     assert targets["error_budget_saving"] == pytest.approx(0.6)
     assert targets["error_budget_saving_met"] is True
     assert targets["power_budget_error_ratio_vs_min"] == pytest.approx(15.0)
     assert targets["power_budget_kept"] == pytest.approx(0.75) and targets["power_budget_kept_met"] is False
     assert targets["all_met"] is False
-    lines = campaign.target_lines(targets, 50 * 1024)
+    lines = campaign_targets.target_lines(targets, 50 * 1024)
     assert len(lines) == 4 and lines[2].endswith("MISSED") and lines[3].endswith("MISSED")
     assert "60.0 % power saved" in lines[0] and lines[0].endswith("met")
 

@@ -33,7 +33,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from addon.core import campaign, report
+from addon.core import campaign, campaign_targets, report
 from addon.core.job_runner import JobRequest, follow_job
 from addon.core.local_service import LocalService, free_port
 from service import options as option_schema
@@ -61,7 +61,7 @@ def parser() -> argparse.ArgumentParser:
                          "--eval-height; default: height 36, width from the path's aspect)")
     ap.add_argument("--frames", type=int, default=90,
                     help="evaluate about this many path frames, evenly spaced (default 90; 0 = all)")
-    ap.add_argument("--error-budget", type=float, default=campaign.TARGET_ERROR)
+    ap.add_argument("--error-budget", type=float, default=campaign_targets.TARGET_ERROR)
     ap.add_argument("--power-budget", type=float, default=None,
                     help="watts (default: automatic, see --power-budget-from)")
     ap.add_argument("--power-budget-from", choices=("presets", "store"), default="presets",
@@ -180,7 +180,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         say(f"  scene {info['id'][:12]}: {info['stats'].get('triangles')} triangles; inert: "
             + (", ".join(info.get("inert_parameters") or {}) or "none"))
 
-        say(f"== optimise the path ({len(path)} frames, {campaign.path_duration(path):.1f} s) at "
+        say(f"== optimise the path ({len(path)} frames, {campaign_targets.path_duration(path):.1f} s) at "
             f"{resolution[0]}x{resolution[1]} through the service")
         t = clock.start()
         job = client.submit_job(request.payload(info["id"], path_doc))
@@ -211,7 +211,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                 marks.add(10 * done // max(1, total))
                 say(f"  {label}: {done}/{total} renders")
 
-        pre = campaign.Preprocessing(args.scene, stats.get("triangles"), opt["wall_s"], opt["cpu_s"])
+        pre = campaign_targets.Preprocessing(args.scene, stats.get("triangles"), opt["wall_s"], opt["cpu_s"])
         outcome = campaign.run(client, store_text, path, spec, out, title=args.scene, pre=pre, clock=clock,
                                progress=progress, say=say)
         summarise(outcome, out)
@@ -251,7 +251,7 @@ def summarise(outcome: campaign.Outcome, out: Path) -> None:
         f"{st['views']} views, {meta.get('evaluations')} renders ({meta.get('cache_hits')} cache hits)")
     say("")
     say(report.table3_markdown(outcome.summaries, title=f"Table 3: {s['scene']}"))
-    for line in campaign.target_lines(outcome.targets, st["size_bytes"]):
+    for line in campaign_targets.target_lines(outcome.targets, st["size_bytes"]):
         say(line)
     for line in s.get("real_time_notes", ()):
         say(f"- {line}")
