@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from . import _core
+from .comparator import COMPARATOR_TABLE, ComparatorStats, comparator_stats
 
 __all__ = [
     "COMPARATOR_TABLE",
@@ -38,19 +39,6 @@ __all__ = [
 ]
 
 _PROFILE_DIR = Path(__file__).with_name("profiles")
-
-# Thesis Table 4.1 (24-bit comparator, 0.18 um TSMC, 1.8 V): compute chain (bits examined after the MSB)
-# -> (sync delay ns, sync energy pJ, async delay ns, async energy pJ). Rows between are interpolated
-# linearly; the measured points are exactly these.
-COMPARATOR_TABLE: tuple[tuple[int, float, float, float, float], ...] = (
-    (0, 0.59, 17.36, 0.55, 1.40),
-    (4, 1.23, 18.16, 1.69, 3.23),
-    (8, 1.85, 18.95, 2.87, 5.36),
-    (12, 2.46, 19.74, 4.04, 7.39),
-    (16, 3.08, 20.53, 5.20, 9.37),
-    (20, 3.69, 21.32, 6.37, 11.40),
-    (23, 4.16, 22.00, 7.24, 12.89),
-)
 
 # Counters the model prices (ARCHITECTURE.md); a missing counter counts as 0.
 COUNTERS: tuple[str, ...] = (
@@ -205,60 +193,6 @@ def load_profile(name_or_path: str | Path) -> Profile:
     return Profile.from_dict(data, source=str(p))
 
 
-@dataclass(frozen=True)
-class ComparatorStats:
-    """Closest-hit comparisons priced with the synchronous and the asynchronous comparator (Table 4.1)."""
-
-    histogram: np.ndarray  # comparisons per compute-chain length 0..24 (24: equal over all 24 bits)
-    comparisons: int
-    average_chain_length: float
-    sync_energy_j: float
-    async_energy_j: float
-    async_to_sync_energy: float  # 0 comparisons -> nan
-    sync_delay_s: float  # total comparator latency if run back to back
-    async_delay_s: float
-
-
-def _table_columns() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    t = np.asarray(COMPARATOR_TABLE, dtype=np.float64)
-    return t[:, 0], t[:, 1], t[:, 2], t[:, 3], t[:, 4]
-
-
-def comparator_stats(histogram: np.ndarray | None, energy_scale: float = 1.0) -> ComparatorStats:
-    """Price a chain-length histogram with Table 4.1 (J, scaled by ``energy_scale`` for the process)."""
-    bits = int(_core.COMPARATOR_BITS)
-    if histogram is None:
-        h = np.zeros(bits + 1, dtype=np.int64)
-    else:
-        h = np.asarray(histogram)
-        if h.ndim != 1 or h.shape[0] != bits + 1:
-            raise ValueError(f"comparator histogram must have {bits + 1} entries, got shape {h.shape}")
-        if not np.issubdtype(h.dtype, np.integer) or (h < 0).any():
-            raise ValueError("comparator histogram must hold non-negative integer counts")
-        h = h.astype(np.int64)
-    n = int(h.sum())
-    lengths = np.arange(bits + 1, dtype=np.float64)
-    # Table 4.1 stops at 23 bits after the MSB (all 24 examined); "equal over all bits" costs the same.
-    chain = np.minimum(lengths, 23.0)
-    k, sd, se, ad, ae = _table_columns()
-    sync_e = np.interp(chain, k, se) * 1e-12 * energy_scale
-    async_e = np.interp(chain, k, ae) * 1e-12 * energy_scale
-    async_d = np.interp(chain, k, ad) * 1e-9
-    # The synchronous comparator's delay is its worst case whatever the operands (clock period, Table 4.1).
-    sync_total_e = float(h @ sync_e)
-    async_total_e = float(h @ async_e)
-    return ComparatorStats(
-        histogram=h,
-        comparisons=n,
-        average_chain_length=float(h @ lengths) / n if n else float("nan"),
-        sync_energy_j=sync_total_e,
-        async_energy_j=async_total_e,
-        async_to_sync_energy=async_total_e / sync_total_e if n else float("nan"),
-        sync_delay_s=n * float(sd[-1]) * 1e-9,
-        async_delay_s=float(h @ async_d),
-    )
-
-
 def sustained_power(static_power_w: float, dynamic_energy_j: float, frame_time_s: float, fps: float
                     ) -> tuple[float, float]:
     """(power W, frame rate reached) of frames of ``dynamic_energy_j`` taking ``frame_time_s`` each when
@@ -351,15 +285,34 @@ def _reads_per_lookup(settings: Any) -> int:
 
 def _block_costs(prof: Profile, c: Mapping[str, int], hist: np.ndarray | None, settings: Any, scene: Any
                  ) -> tuple[dict[str, float], dict[str, float], ComparatorStats]:
-    """Energy (J) and cycles of every block for the counted events (the first half of :func:`price`)."""
+    """Energy (J) and cycles of every block for the counted events (the first half of :func:`price`),
+    unit by unit: the shading processor, the traversal and intersection unit, the memories."""
 
     def n(name: str) -> int:
         return c.get(name, 0)
 
-    ops, e, thr, clk = prof.ops, prof.energy_pj, prof.throughput, prof.clock
-    pj = 1e-12
     energy: dict[str, float] = {}
     cycles: dict[str, float] = {}
+    _srp_costs(prof, n, settings, scene, energy, cycles)
+    comp = _ti_costs(prof, n, hist, energy, cycles)
+    _memory_costs(prof, n, energy, cycles)
+
+    for k, v in energy.items():
+        if not math.isfinite(v):
+            raise ValueError(f"energy of block {k!r} is not finite")
+
+    return energy, cycles, comp
+
+
+#: Joules in a picojoule (the profile prices events in pJ).
+_PJ = 1e-12
+
+
+def _srp_costs(prof: Profile, n: Callable[[str], int], settings: Any, scene: Any, energy: dict[str, float],
+               cycles: dict[str, float]) -> None:
+    """The shading processor's blocks: programmable work priced per op, texel reads, the resolve pass."""
+    ops, e, thr = prof.ops, prof.energy_pj, prof.throughput
+    pj = _PJ
 
     def srp_block(block: str, events: int, ops_per_event: float) -> None:
         energy[block] = events * ops_per_event * e["srp_op"] * pj
@@ -394,6 +347,14 @@ def _block_costs(prof: Profile, c: Mapping[str, int], hist: np.ndarray | None, s
     cycles["resolve"] = (n("resolve_taps") * ops["resolve_tap"]
                          + n("ambient_filter_taps") * ops["ambient_filter_tap"]) / thr["srp_ops_per_cycle"]
 
+
+def _ti_costs(prof: Profile, n: Callable[[str], int], hist: np.ndarray | None, energy: dict[str, float],
+              cycles: dict[str, float]) -> ComparatorStats:
+    """The traversal and intersection unit's blocks: tree steps, triangle tests, the closest-hit
+    comparator (from its histogram) and the node cache."""
+    e, thr = prof.energy_pj, prof.throughput
+    pj = _PJ
+
     # One node visit is one step of the 4-wide tree: four ray-box tests (and the ordering of the hit
     # children), priced per step; the unit's box testers set the step rate.
     energy["traversal"] = n("bvh_node_visits") * e["traversal_step"] * pj
@@ -407,6 +368,14 @@ def _block_costs(prof: Profile, c: Mapping[str, int], hist: np.ndarray | None, s
     cycles["comparator"] = 0.0  # inside the intersection pipeline; its latency is hidden there
     energy["cache"] = n("cache_accesses") * e["cache_line_access"] * pj
     cycles["cache"] = n("cache_accesses") / thr["cache_line_accesses_per_cycle"]
+    return comp
+
+
+def _memory_costs(prof: Profile, n: Callable[[str], int], energy: dict[str, float],
+                  cycles: dict[str, float]) -> None:
+    """The tile buffer and DRAM traffic: bytes read and written, with the DMA that moves them."""
+    e, thr, clk = prof.energy_pj, prof.throughput, prof.clock
+    pj = _PJ
 
     tb = n("tile_buffer_reads") + n("tile_buffer_writes")
     energy["tile_buffer"] = tb * e["tile_buffer_access"] * pj
@@ -424,12 +393,6 @@ def _block_costs(prof: Profile, c: Mapping[str, int], hist: np.ndarray | None, s
     energy["resolve_dram"] = n("resolve_bytes") * (e["dram_write_byte"] + e["dram_read_byte"]
                                                    + 2 * e["dma_byte"]) * pj
     cycles["resolve_dram"] = 2 * n("resolve_bytes") / bytes_per_srp_cycle
-
-    for k, v in energy.items():
-        if not math.isfinite(v):
-            raise ValueError(f"energy of block {k!r} is not finite")
-
-    return energy, cycles, comp
 
 
 def price(result: Any, profile: Profile | str | Path, fps: float, *, scene: Any = None) -> EnergyReport:
