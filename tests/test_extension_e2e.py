@@ -25,7 +25,8 @@ from tests.addon_support import kill_and_check_nothing_left
 pytestmark = [pytest.mark.blender, pytest.mark.slow]
 
 WATCHER = r'''
-"""Polls the process tree below the pid given until stdin closes; writes every command line seen."""
+"""Polls the process tree below the pid given until stdin closes; writes every command line seen. The
+test script imports its descendants()."""
 import json, os, select, sys
 
 
@@ -50,21 +51,23 @@ def descendants(root):
     return out
 
 
-root, me, seen = int(sys.argv[1]), os.getpid(), set()
-sys.stdout.write("ready\n")
-sys.stdout.flush()
-while True:
-    seen.update(tuple(argv) for pid, argv in descendants(root) if pid != me)
-    if select.select([sys.stdin], [], [], 0.02)[0]:
-        break
-with open(sys.argv[2], "w", encoding="utf-8") as fh:
-    json.dump(sorted(seen), fh)
+if __name__ == "__main__":
+    root, me, seen = int(sys.argv[1]), os.getpid(), set()
+    sys.stdout.write("ready\n")
+    sys.stdout.flush()
+    while True:
+        seen.update(tuple(argv) for pid, argv in descendants(root) if pid != me)
+        if select.select([sys.stdin], [], [], 0.02)[0]:
+            break
+    with open(sys.argv[2], "w", encoding="utf-8") as fh:
+        json.dump(sorted(seen), fh)
 '''
 
 SCRIPT = r'''
 import json, os, subprocess, sys, threading, time
 import bpy, addon_utils
 import orbit_scene  # copied next to this script: bpy only
+import watcher  # written next to this script: the process tree, stdlib only
 
 ZIP = sys.argv[1]
 MOD = "bl_ext.user_default.render_budget"
@@ -77,24 +80,7 @@ def ext(name):
 
 def descendants():
     """Live processes below this one: (pid, argv)."""
-    parents = {}
-    for entry in os.listdir("/proc"):
-        if entry.isdigit():
-            try:
-                with open(f"/proc/{entry}/stat") as fh:
-                    fields = fh.read().rsplit(")", 1)[1].split()
-                with open(f"/proc/{entry}/cmdline", "rb") as fh:
-                    argv = [a.decode(errors="replace") for a in fh.read().split(b"\0") if a]
-            except OSError:
-                continue
-            if fields[0] != "Z":
-                parents.setdefault(int(fields[1]), []).append((int(entry), argv))
-    out, todo = [], [os.getpid()]
-    while todo:
-        for pid, argv in parents.get(todo.pop(), []):
-            out.append((pid, argv))
-            todo.append(pid)
-    return out
+    return watcher.descendants(os.getpid())
 
 
 class Watch:
@@ -313,6 +299,7 @@ def test_killing_blender_mid_job_leaves_no_process(extension_zip: Path, tmp_path
     work.mkdir()
     shutil.copy(Path(__file__).with_name("orbit_scene.py"), work / "orbit_scene.py")
     (work / "script.py").write_text(SCRIPT, encoding="utf-8")
+    (work / "watcher.py").write_text(WATCHER, encoding="utf-8")
     blender = subprocess.Popen([str(bpy_venv.python()), "script.py", str(extension_zip), "--killed-mid-job"],
                                cwd=work, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
                                env=bpy_venv.clean_env(BLENDER_USER_RESOURCES=str(tmp_path / "user")))
