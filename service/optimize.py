@@ -121,8 +121,11 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, config: O
     vfov = float(np.median([f.vfov for f in frames]))
     aspect = float(np.median([f.aspect for f in frames]))
     width, height = options.eval_resolution(config.eval_width, config.eval_height, aspect)
-    target_pixels = int(np.median([f.resolution[0] * f.resolution[1] for f in frames]))
     display = display_resolution(path, config.display_height)
+    # Power and frame time (so which settings keep up with the frame rate) are judged for the size the
+    # store's figures are for: the display size when the store is priced there, else the path's own.
+    target_pixels = (display[0] * display[1] if config.display_estimator != "preview" else
+                     int(np.median([f.resolution[0] * f.resolution[1] for f in frames])))
     evaluator = Evaluator(handle, space, cache=cache, executor=executor, profile=config.profile,
                           fps=config.fps, metric=config.metric, threads=config.threads,
                           target_pixels=target_pixels if config.power_at_path_resolution else None)

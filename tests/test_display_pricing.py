@@ -254,3 +254,19 @@ def test_tile_estimated_store_keeps_a_few_points_per_frontier(scene) -> None:
     assert "tile estimator" in store.meta["display_pricing_label"]
     for fr in store.frontiers:
         assert 1 <= len(fr.packed) <= 3 and float(fr.error.min()) == 0.0  # max quality always kept
+
+
+@pytest.mark.slow
+def test_a_stated_display_size_is_where_power_and_the_frame_rate_are_judged(scene) -> None:
+    """A store priced at a stated smaller display judges power, and so which settings keep up with the
+    frame rate, for that size during the search too (a search priced for the path's larger size would keep
+    only the settings real time there, and its figures would not be the display's); a preview store keeps
+    pricing for the path's own size."""
+    path = _orbit_path(4, (192, 144))
+    shown = optimize_path(scene, path, SUBSPACE, _options(display_estimator="full", display_height=36,
+                                                          display_points=2),
+                          cache=EvalCache(), executor=InProcessExecutor())
+    assert shown.meta["figures_resolution"] == [48, 36] and shown.meta["power_pixels"] == 48 * 36
+    preview = optimize_path(scene, path, SUBSPACE, _options(display_estimator="preview", display_height=36),
+                            cache=EvalCache(), executor=InProcessExecutor())
+    assert preview.meta["power_pixels"] == 192 * 144
