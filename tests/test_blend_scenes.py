@@ -17,26 +17,27 @@ pytestmark = pytest.mark.blender
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 
-#: Runs a scene generator in a fresh Blender process and prints one digest of every mesh it made (vertex
-#: positions, face corners, faces, loop triangles): what the translation and the glTF export triangulate.
+#: Runs scene generators in a fresh Blender process and prints, per scene, one digest of every mesh it made
+#: (vertex positions, face corners, faces, loop triangles): what the translation and the glTF export read.
 _MESH_DIGEST = """
 import hashlib, sys, tempfile
+from importlib import import_module
 from pathlib import Path
 import bpy, numpy as np
-from importlib import import_module
-import_module("blend_scenes.scenes." + sys.argv[1]).build(Path(tempfile.mkdtemp()))
-h = hashlib.sha256()
-for m in sorted(bpy.data.meshes, key=lambda m: m.name):
-    m.calc_loop_triangles()
-    h.update(m.name.encode())
-    for items, attr, dtype, width in ((m.vertices, "co", np.float32, 3),
-                                      (m.loops, "vertex_index", np.int32, 1),
-                                      (m.polygons, "loop_start", np.int32, 1),
-                                      (m.loop_triangles, "vertices", np.int32, 3)):
-        a = np.zeros(len(items) * width, dtype)
-        items.foreach_get(attr, a)
-        h.update(a.tobytes())
-print("digest", h.hexdigest())
+for name in sys.argv[1:]:
+    import_module("blend_scenes.scenes." + name).build(Path(tempfile.mkdtemp()))
+    h = hashlib.sha256()
+    for m in sorted(bpy.data.meshes, key=lambda m: m.name):
+        m.calc_loop_triangles()
+        h.update(m.name.encode())
+        for items, attr, dtype, width in ((m.vertices, "co", np.float32, 3),
+                                          (m.loops, "vertex_index", np.int32, 1),
+                                          (m.polygons, "loop_start", np.int32, 1),
+                                          (m.loop_triangles, "vertices", np.int32, 3)):
+            a = np.zeros(len(items) * width, dtype)
+            items.foreach_get(attr, a)
+            h.update(a.tobytes())
+    print("digest", name, h.hexdigest())
 """
 
 
@@ -126,27 +127,30 @@ def test_build_is_deterministic(teapot_build: tuple[Path, dict], tmp_path: Path)
         assert (tmp_path / "teapot" / name).read_bytes() == (out / "teapot" / name).read_bytes(), name
 
 
-def test_village_geometry_is_the_same_in_every_build_process() -> None:
-    """Blender's UV-sphere operator ordered the lamp globes' faces by memory address, so the village's
-    triangle arrays changed from one build process to the next (one in two or three processes agreed):
-    three fresh processes must now make the same meshes."""
+def test_uv_sphere_scenes_make_the_same_meshes_in_every_build_process() -> None:
+    """Blender's UV-sphere operator ordered its faces by memory address, so the village's lamp globes and
+    the artist's glass spheres (and their scene files) changed from one build process to the next (one
+    process in two or three agreed): three fresh processes must now make the same meshes."""
     pytest.importorskip("bpy")
-    digests = set()
+    digests: dict[str, set[str]] = {"village": set(), "artist": set()}
     for _ in range(3):
-        run = subprocess.run([sys.executable, "-c", _MESH_DIGEST, "village"], cwd=REPO_ROOT,
+        run = subprocess.run([sys.executable, "-c", _MESH_DIGEST, *digests], cwd=REPO_ROOT,
                              capture_output=True, text=True, timeout=300, check=True)
-        digests |= {line.split()[1] for line in run.stdout.splitlines() if line.startswith("digest ")}
-    assert len(digests) == 1, digests
+        for line in run.stdout.splitlines():
+            if line.startswith("digest "):
+                _, name, digest = line.split()
+                digests[name].add(digest)
+    assert all(len(d) == 1 for d in digests.values()), digests
 
 
-def test_village_lamp_globe_is_a_closed_outward_uv_sphere() -> None:
+def test_uv_sphere_is_closed_and_wound_outwards() -> None:
     pytest.importorskip("bpy")
     import bpy
 
-    from blend_scenes.scenes.village import globe_mesh
+    from blend_scenes.common import uv_sphere_mesh
 
-    glow = bpy.data.materials.new("GlobeTest")
-    mesh = globe_mesh("GlobeTest", glow, segments=16, rings=8, radius=0.25)
+    glow = bpy.data.materials.new("SphereTest")
+    mesh = uv_sphere_mesh("SphereTest", segments=16, rings=8, radius=0.25, material=glow, smooth=True)
     try:
         mesh.calc_loop_triangles()
         co = np.zeros(len(mesh.vertices) * 3, np.float32)
@@ -157,18 +161,17 @@ def test_village_lamp_globe_is_a_closed_outward_uv_sphere() -> None:
         # Blender's UV sphere of the same parameters: 2 poles + 7 rings of 16, 32 fan triangles + 96 quads.
         assert p.shape == (2 + 7 * 16, 3) and t.shape == (32 + 2 * 96, 3) and len(mesh.polygons) == 128
         assert np.allclose(np.linalg.norm(p, axis=1), 0.25, atol=1e-6)
-        assert list(mesh.materials) == [glow]
-        # Closed (every edge in two triangles) and wound outwards: positive volume, every face normal
-        # pointing away from the centre.
+        assert list(mesh.materials) == [glow] and all(poly.use_smooth for poly in mesh.polygons)
+        # Closed (every edge in two triangles) and wound outwards: every face normal points away from the
+        # centre, and the volume is a little under the sphere's.
         edges = np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1)
         assert np.all(np.unique(edges, axis=0, return_counts=True)[1] == 2)
         a, b, c = p[t[:, 0]], p[t[:, 1]], p[t[:, 2]]
-        normals = np.cross(b - a, c - a)
-        assert np.all(np.einsum("ij,ij->i", normals, (a + b + c) / 3) > 0)
+        assert np.all(np.einsum("ij,ij->i", np.cross(b - a, c - a), (a + b + c) / 3) > 0)
         volume = np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0
         assert 0.9 * 4 / 3 * math.pi * 0.25**3 < volume < 4 / 3 * math.pi * 0.25**3
         with pytest.raises(ValueError, match="segments"):
-            globe_mesh("Bad", glow, segments=2, rings=8, radius=0.25)
+            uv_sphere_mesh("Bad", segments=2, rings=8, radius=0.25)
     finally:
         bpy.data.meshes.remove(mesh)
         bpy.data.materials.remove(glow)

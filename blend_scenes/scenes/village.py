@@ -230,35 +230,11 @@ def _church_and_fountain(mats: _Materials, sq_z: float) -> None:
     c.add_object("Pool", pool, (0.0, 0.0, sq_z + 0.1))
 
 
-def globe_mesh(name: str, material: bpy.types.Material, segments: int, rings: int,
-               radius: float) -> bpy.types.Mesh:
-    """A UV sphere in closed form: a triangle fan at each pole, quads between the rings (flat shaded).
-    Not Blender's UV-sphere operator: its BMesh spin and merge leave the faces in an order that depends on
-    memory addresses, so the triangle arrays (and scene.rbscene) differed from one build process to the
-    next."""
-    if segments < 3 or rings < 2:
-        raise ValueError(f"a UV sphere needs >= 3 segments and >= 2 rings, got {segments} and {rings}")
-    polar = np.pi * np.arange(1, rings) / rings
-    azimuth = 2 * np.pi * np.arange(segments) / segments
-    ring_verts = np.stack([np.outer(np.sin(polar), np.cos(azimuth)), np.outer(np.sin(polar), np.sin(azimuth)),
-                           np.repeat(np.cos(polar)[:, None], segments, axis=1)], axis=-1).reshape(-1, 3)
-    verts = radius * np.concatenate([[[0.0, 0.0, 1.0]], ring_verts, [[0.0, 0.0, -1.0]]])
-    top, bottom = 0, len(verts) - 1
-    ring = np.arange(1, 1 + (rings - 1) * segments).reshape(rings - 1, segments)
-    nxt = np.roll(ring, -1, axis=1)  # the next vertex around each ring (counter-clockwise seen from +Z)
-    faces: list[tuple[int, ...]] = [(top, int(a), int(b)) for a, b in zip(ring[0], nxt[0], strict=True)]
-    for k in range(rings - 2):  # quads between ring k and ring k + 1, outward facing
-        faces += [(int(a), int(c), int(d), int(b))
-                  for a, b, c, d in zip(ring[k], nxt[k], ring[k + 1], nxt[k + 1], strict=True)]
-    faces += [(bottom, int(b), int(a)) for a, b in zip(ring[-1], nxt[-1], strict=True)]
-    return c.mesh_from_arrays(name, verts, faces, material)
-
-
 def _street_lamps(mats: _Materials, sq_z: float) -> None:
     """Street lamps around the square (emissive globes; four also cast light)."""
     post_profile = [(0.0, 0.0), (0.15, 0.0), (0.08, 0.3), (0.06, 3.6), (0.0, 3.6)]
     post = c.lathe("LampPost", post_profile, mats.iron, steps=16)
-    globe = globe_mesh("LampGlobe", mats.lamp_glow, segments=16, rings=8, radius=0.25)
+    globe = c.uv_sphere_mesh("LampGlobe", segments=16, rings=8, radius=0.25, material=mats.lamp_glow)
     for i in range(12):
         a = 2 * math.pi * i / 12
         x, y = 13.5 * math.cos(a), 13.5 * math.sin(a)
