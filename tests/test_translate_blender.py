@@ -394,3 +394,117 @@ def test_geometry_nodes_instances_text_holdouts_and_camera_visibility(scene):
     assert "Held" in names and "Ghost" not in names
     notes = t.notes_text(limit=50)
     assert "'Held': holdout" in notes and "'Ghost': invisible to camera" in notes
+
+
+# -- incremental translation (the viewport's view_update) ------------------------------------------------
+class ViewportUpdates:
+    """What the render engine's view_update does on each depsgraph update, run from Blender's
+    depsgraph_update_post handler (view_update itself needs a GUI): the incremental translation through
+    one cache, next to a fresh full translation of the same depsgraph to compare with."""
+
+    def __init__(self) -> None:
+        from addon.translate import TranslationCache
+
+        self.cache = TranslationCache()
+        self.incremental = None
+        self.fresh = None
+        self.changes = []
+
+    def __enter__(self):
+        bpy.app.handlers.depsgraph_update_post.append(self.on_update)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        bpy.app.handlers.depsgraph_update_post.remove(self.on_update)
+
+    def on_update(self, _scene, depsgraph) -> None:
+        from addon.translate import depsgraph_updates, translate_update
+
+        self.changes = depsgraph_updates(depsgraph)
+        self.incremental = translate_update(depsgraph, self.cache, force=not self.cache.meshes)
+        self.fresh = translate(depsgraph, camera=False)
+
+    def edit(self, change) -> tuple[object, int]:
+        """Apply ``change()``, let the depsgraph evaluate it; (the incremental translation or None, meshes
+        it extracted)."""
+        before = self.cache.extractions
+        self.incremental, self.fresh = "none yet", None
+        change()
+        bpy.context.evaluated_depsgraph_get().update()
+        assert self.fresh is not None, "the depsgraph reported no update"
+        return self.incremental, self.cache.extractions - before
+
+
+def assert_same_translation(got, want) -> None:
+    a, b = got.scene_data, want.scene_data
+    for name in ("positions", "normals", "triangles", "material_ids", "object_ids", "uvs"):
+        x, y = getattr(a, name), getattr(b, name)
+        assert (x is None) == (y is None), name
+        if x is not None:
+            np.testing.assert_array_equal(x, y, err_msg=name)
+    assert a.object_names == b.object_names
+    assert a.materials == b.materials and a.lights == b.lights
+    assert a.environment == b.environment and a.environment_strength == b.environment_strength
+    assert got.pass_indices == want.pass_indices
+    assert [str(n) for n in got.notes] == [str(n) for n in want.notes]
+
+
+def test_incremental_translation_reads_only_what_an_edit_changed(scene):
+    shared = cube_mesh("Shared")
+    a = add(scene, "A", shared, (-3, 0, 0))
+    b = add(scene, "B", shared, (0, 0, 0))  # a linked duplicate: one extracted mesh for both
+    c = add(scene, "C", sphere_mesh("Ball"), (3, 0, 0))
+    c.modifiers.new("Subdivision", "SUBSURF").levels = 1
+    red, blue = emissive("Red", (1, 0, 0)), emissive("Blue", (0, 0, 1))
+    shared.materials.append(red)
+    c.data.materials.append(blue)
+    lamp = add(scene, "Lamp", bpy.data.lights.new("Lamp", "POINT"), (0, -4, 4))
+    with ViewportUpdates() as vp:
+        first, reads = vp.edit(lambda: setattr(a, "location", (-3, 0, 0.5)))
+        assert reads == 2 and first.stats["unique_meshes"] == 2  # the first translation reads everything
+        assert_same_translation(first, vp.fresh)
+
+        # moving an object: every mesh reused, only its instance transformed again
+        moved, reads = vp.edit(lambda: setattr(a, "location", (-3, 1, 0.5)))
+        assert reads == 0 and moved.stats["mesh_reuses"] == 2
+        assert_same_translation(moved, vp.fresh)
+        assert not np.array_equal(moved.scene_data.positions, first.scene_data.positions)
+
+        # the camera moving changes nothing the simulator sees (it is read at every draw)
+        still, reads = vp.edit(lambda: setattr(scene.camera, "location", (0.0, -11.0, 0.0)))
+        assert still is None and reads == 0
+
+        # a material edit: materials read again, no mesh
+        def recolour():
+            blue.node_tree.nodes["Principled BSDF"].inputs["Emission Strength"].default_value = 9.0
+        recoloured, reads = vp.edit(recolour)
+        assert reads == 0
+        assert_same_translation(recoloured, vp.fresh)
+        assert recoloured.scene_data.materials != moved.scene_data.materials
+
+        # a light edit: no mesh
+        lit, reads = vp.edit(lambda: setattr(lamp.data, "energy", 321.0))
+        assert reads == 0
+        assert_same_translation(lit, vp.fresh)
+
+        # a geometry edit of one object: exactly its mesh is read again
+        def reshape():
+            c.data.vertices[0].co.z += 0.25
+            c.data.update()
+        reshaped, reads = vp.edit(reshape)
+        assert reads == 1 and reshaped.stats["mesh_reuses"] == 1
+        assert_same_translation(reshaped, vp.fresh)
+
+        # hiding and deleting objects: gone from the scene, their cached meshes dropped
+        hidden, _ = vp.edit(lambda: setattr(c, "hide_viewport", True))
+        assert "C" not in hidden.scene_data.object_names
+        assert_same_translation(hidden, vp.fresh)
+        assert len(vp.cache.meshes) == 1
+        gone, _ = vp.edit(lambda: bpy.data.objects.remove(b))
+        assert gone.scene_data.object_names == ["A"]
+        assert_same_translation(gone, vp.fresh)
+
+        # an object added: read once, the others reused
+        added, reads = vp.edit(lambda: add(scene, "D", cube_mesh("New"), (0, 2, 0)))
+        assert reads == 1 and set(added.scene_data.object_names) == {"A", "D"}
+        assert_same_translation(added, vp.fresh)

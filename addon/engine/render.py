@@ -30,12 +30,12 @@ from .. import preferences
 from ..camera_path import camera_vfov, render_resolution, scene_fps
 from ..core.engine_frame import PASSES, AnimationLog, CameraView, FrameOutput, RenderCancelled, render_frame
 from ..core.engine_frame import animation_csv_path as csv_path_of
-from ..core.engine_scene import SceneCache, Update, needs_translation
+from ..core.engine_scene import SceneCache
 from ..core.engine_settings import Budget, FrameSettings, SettingsChooser, manual_indices, space
 from ..core.viewport import ViewportRenderer
 from ..handlers import add_handler, remove_handler
 from ..playback import scene_time, store_of
-from ..translate import translate
+from ..translate import translate, translate_update
 from .properties import manual_identifiers
 
 ENGINE_ID = "RENDER_BUDGET"
@@ -298,8 +298,9 @@ class RenderBudgetEngine(bpy.types.RenderEngine):
             return
         vp = self._viewport_renderer(depsgraph.scene)
         try:
-            if vp.scene is None or needs_translation(updates(depsgraph)):
-                translation = translate(depsgraph, camera=False)
+            # incremental: only what the edit changed is read from Blender again
+            translation = translate_update(depsgraph, vp.translation_cache, force=vp.scene is None)
+            if translation is not None:
                 vp.set_scene(translation.scene_data, translation.pass_indices)
             self._viewport_error = None
         except Exception as exc:  # shown in the viewport's status; the last good scene stays
@@ -344,16 +345,6 @@ class RenderBudgetEngine(bpy.types.RenderEngine):
         draw_texture_2d(self._texture, (0, 0), width, height)
         self.unbind_display_space_shader()
         gpu.state.blend_set("NONE")
-
-
-def updates(depsgraph: bpy.types.Depsgraph) -> list[Update]:
-    """The depsgraph's updates as :func:`addon.core.engine_scene.needs_translation` reads them."""
-    out = []
-    for u in depsgraph.updates:
-        idb = u.id
-        out.append(Update(idb.id_type, getattr(idb, "type", "") if idb.id_type == "OBJECT" else "",
-                          u.is_updated_geometry, u.is_updated_transform, u.is_updated_shading))
-    return out
 
 
 def _blender_rows(image: np.ndarray) -> np.ndarray:
