@@ -4,9 +4,11 @@ Power pass, the animation CSV, the scene cache and the progressive viewport driv
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import threading
 import time
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -265,6 +267,14 @@ def test_tiles_priced_one_by_one_sum_to_the_frame(scene: sim_core.Scene) -> None
     frame = sim_core.price(result, prof, 30.0, scene=scene)
     tiles = engine_frame.tile_energy(result.tile_stats, prof, 30.0, settings, scene)
     assert np.all(tiles >= 0) and tiles.sum() == pytest.approx(frame.dynamic_energy_j, rel=1e-9)
+    # all tiles priced at once equal each tile priced alone through price() (the previous computation)
+    for style in ("sync", "async"):
+        p = dataclasses.replace(prof, comparator_style=style)
+        one_by_one = [sim_core.price(SimpleNamespace(counters=t["counters"], settings=settings,
+                                                     comparator_histogram=t["comparator_histogram"]),
+                                     p, 30.0, scene=scene).dynamic_energy_j for t in result.tile_stats]
+        np.testing.assert_allclose(engine_frame.tile_energy(result.tile_stats, p, 30.0, settings, scene),
+                                   one_by_one, rtol=1e-12, atol=0)
 
 
 @settings(max_examples=60, deadline=None)
