@@ -136,17 +136,22 @@ def translate_for_render(scene: bpy.types.Scene | None = None,
             except BaseException as exc:  # Blender swallows errors raised here: carry it out
                 outcome["error"] = exc
 
+    from .core.progressive import workers_paused  # lazy: it loads the native core
+
     saved = (scene.render.engine, scene.render.use_compositing, scene.render.use_sequencer)
-    bpy.utils.register_class(RENDER_BUDGET_translate_engine)
-    try:
-        scene.render.engine = RENDER_BUDGET_translate_engine.bl_idname
-        scene.render.use_compositing = False
-        scene.render.use_sequencer = False
-        with bpy.context.temp_override(scene=scene, view_layer=layer):
-            result = bpy.ops.render.render(layer=layer.name, scene=scene.name)
-    finally:
-        scene.render.engine, scene.render.use_compositing, scene.render.use_sequencer = saved
-        bpy.utils.unregister_class(RENDER_BUDGET_translate_engine)
+    # No other Python thread may run while a render engine type is registered and Blender renders with
+    # it (a viewport worker running then coincided with a crash inside Blender): hold them still.
+    with workers_paused():
+        bpy.utils.register_class(RENDER_BUDGET_translate_engine)
+        try:
+            scene.render.engine = RENDER_BUDGET_translate_engine.bl_idname
+            scene.render.use_compositing = False
+            scene.render.use_sequencer = False
+            with bpy.context.temp_override(scene=scene, view_layer=layer):
+                result = bpy.ops.render.render(layer=layer.name, scene=scene.name)
+        finally:
+            scene.render.engine, scene.render.use_compositing, scene.render.use_sequencer = saved
+            bpy.utils.unregister_class(RENDER_BUDGET_translate_engine)
     if "error" in outcome:
         raise outcome["error"]
     if "FINISHED" not in result:

@@ -441,6 +441,40 @@ def test_close_cancels_in_flight_work() -> None:
         drv.update(progressive.ViewRequest("b", 8, 8))
 
 
+def test_workers_paused_stops_every_worker_and_resumes_their_requests() -> None:
+    """Held still while the main thread runs Blender's render operator: the level in flight stops, no
+    render starts (not even for a request made meanwhile), and afterwards the stopped request renders."""
+    gates = [Gate(), Gate()]
+    drivers = [progressive.ProgressiveDriver(g, (1.0,)) for g in gates]
+    try:
+        drivers[0].update(progressive.ViewRequest("a", 8, 8, "A"))
+        gates[0].started.acquire(timeout=5)  # A is rendering
+        with progressive.workers_paused():
+            assert all(not d._active for d in drivers)  # out of every render
+            drivers[1].update(progressive.ViewRequest("b", 8, 8, "B"))
+            time.sleep(0.1)
+            assert [p for p, _, _ in gates[1].calls] == [] and drivers[0].cancelled == 1
+            assert drivers[0].busy and drivers[1].busy  # kept for later
+        for g in gates:
+            g.release.release()
+        assert all(d.wait_idle() for d in drivers)
+        assert [p for p, _, _ in gates[0].calls] == ["A", "A"] and drivers[0].latest().key == "a"
+        assert drivers[1].latest().key == "b"
+        # a worker that does not stop in time: an error, and the workers resume
+        late = Gate()
+        drivers.append(progressive.ProgressiveDriver(lambda p, w, h, stop: late(p, w, h, lambda: False),
+                                                     (1.0,)))
+        drivers[2].update(progressive.ViewRequest("c", 8, 8, "C"))
+        late.started.acquire(timeout=5)
+        with pytest.raises(TimeoutError), progressive.workers_paused(timeout=0.2):
+            pass
+        late.release.release()
+        assert drivers[2].wait_idle() and drivers[2].latest().key == "c" and not progressive._paused()
+    finally:
+        for d in drivers:
+            d.close()
+
+
 def test_render_errors_are_reported_and_the_driver_recovers() -> None:
     def render(payload, w, h, should_stop):
         if payload == "bad":

@@ -508,3 +508,51 @@ def test_incremental_translation_reads_only_what_an_edit_changed(scene):
         added, reads = vp.edit(lambda: add(scene, "D", cube_mesh("New"), (0, 2, 0)))
         assert reads == 1 and set(added.scene_data.object_names) == {"A", "D"}
         assert_same_translation(added, vp.fresh)
+
+
+def test_translation_render_holds_viewport_workers_still(scene):
+    """translate_for_render runs Blender's render operator with a render engine it registers for the
+    purpose: no viewport worker may run Python meanwhile. A worker busy rendering is stopped before and
+    resumed after; between Blender's render_pre and render_post it never ran."""
+    import threading
+    import time
+
+    from addon.core.engine_frame import RenderCancelled
+    from addon.core.progressive import ProgressiveDriver, ViewRequest
+
+    add(scene, "Cube", cube_mesh("C"), (0, 0, 0))
+    ticks: list[float] = []
+    window: dict[str, float] = {}
+    started = threading.Event()
+
+    def busy_render(payload, w, h, should_stop):
+        started.set()
+        for _ in range(4000):  # about 8 s of bands unless stopped
+            ticks.append(time.monotonic())
+            if should_stop():
+                raise RenderCancelled
+            time.sleep(0.002)
+        return np.zeros((h, w, 4), np.float32), payload
+
+    def pre(*_args):
+        window["pre"] = time.monotonic()
+
+    def post(*_args):
+        window["post"] = time.monotonic()
+
+    driver = ProgressiveDriver(busy_render, (1.0,))
+    bpy.app.handlers.render_pre.append(pre)
+    bpy.app.handlers.render_post.append(post)
+    try:
+        driver.update(ViewRequest("view", 8, 8))
+        assert started.wait(5)
+        translate_for_render(scene)
+        assert "pre" in window and "post" in window
+        assert not [t for t in ticks if window["pre"] <= t <= window["post"]]
+        time.sleep(0.1)
+        assert ticks[-1] > window["post"]  # the stopped render started again afterwards
+        assert driver.cancelled >= 1
+    finally:
+        bpy.app.handlers.render_pre.remove(pre)
+        bpy.app.handlers.render_post.remove(post)
+        driver.close()

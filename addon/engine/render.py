@@ -280,17 +280,8 @@ class RenderBudgetEngine(bpy.types.RenderEngine):
     def _viewport_renderer(self, scene: bpy.types.Scene) -> ViewportRenderer:
         vp = _viewports.get(id(self))
         if vp is None:
-            engine = weakref.ref(self)  # the worker must not keep a freed engine alive
-
-            def redraw(_frame: Any) -> None:
-                e = engine()
-                if e is not None:
-                    try:
-                        e.tag_redraw()
-                    except ReferenceError:  # Blender freed the engine meanwhile
-                        pass
-
-            vp = _viewports[id(self)] = ViewportRenderer(on_frame=redraw, threads=_threads(scene))
+            vp = _viewports[id(self)] = ViewportRenderer(threads=_threads(scene))
+            bpy.app.timers.register(_redraw_poller(weakref.ref(self), vp), first_interval=_REDRAW_POLL_S)
         return vp
 
     def view_update(self, context: bpy.types.Context, depsgraph: bpy.types.Depsgraph) -> None:
@@ -345,6 +336,33 @@ class RenderBudgetEngine(bpy.types.RenderEngine):
         draw_texture_2d(self._texture, (0, 0), width, height)
         self.unbind_display_space_shader()
         gpu.state.blend_set("NONE")
+
+
+#: How often the main thread looks for a new viewport image to draw (s).
+_REDRAW_POLL_S = 1.0 / 30.0
+
+
+def _redraw_poller(engine: weakref.ref[RenderBudgetEngine], vp: ViewportRenderer
+                   ) -> Callable[[], float | None]:
+    """A timer (Blender's main thread) that asks for a redraw when the worker published a new image: the
+    worker thread itself never calls into Blender (not even ``tag_redraw``), so it never runs against
+    the interface's own use of Blender's data. Ends with the engine or its viewport renderer."""
+    seen = [0]
+
+    def poll() -> float | None:
+        e = engine()
+        if e is None or not vp.driver.alive:
+            return None
+        frames = vp.driver.frames
+        if frames != seen[0]:
+            seen[0] = frames
+            try:
+                e.tag_redraw()
+            except ReferenceError:  # Blender freed the engine meanwhile
+                return None
+        return _REDRAW_POLL_S
+
+    return poll
 
 
 def _blender_rows(image: np.ndarray) -> np.ndarray:
