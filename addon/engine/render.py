@@ -8,8 +8,9 @@ Normal, Object Index, Sample Kind and Power passes and the settings, predicted a
 error as image metadata; an animation also writes a per-frame CSV beside its frames.
 
 The viewport (Rendered shading) is :class:`addon.core.viewport.ViewportRenderer` (a worker thread,
-coarse to fine); ``view_update`` / ``view_draw`` here only read Blender's state and draw the latest
-image with the ``gpu`` module, and do nothing in background mode.
+coarse to fine); ``view_update`` here reads only what an edit changed (``translate_update``: incremental,
+nothing for a camera move) and ``view_draw`` draws the latest image with the ``gpu`` module; both do
+nothing in background mode. The worker never calls into Blender: a main-thread timer tags redraws.
 """
 
 from __future__ import annotations
