@@ -12,9 +12,8 @@ own activity counters and closest-hit comparisons (they sum to the frame's), the
 all tiles at once (``sim_core.price_tiles``: ``price`` on arrays; energy is linear in the counts, so the
 tiles' energies sum to the frame's), and a pixel holds its tile's power at the frame rate the GPU
 reaches (the scene's when the frame keeps up, else its own lower rate: ``sim_core.sustained_power``)
-spread evenly over the tile's
-pixels, in microwatts: the pass sums to the frame's dynamic power (static power is the same everywhere
-and left out).
+spread evenly over the tile's pixels, in microwatts: the pass sums to the frame's dynamic power (static
+power is the same everywhere and left out).
 """
 
 from __future__ import annotations
