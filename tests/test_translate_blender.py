@@ -444,7 +444,17 @@ def assert_same_translation(got, want) -> None:
             np.testing.assert_array_equal(x, y, err_msg=name)
     assert a.object_names == b.object_names
     assert a.materials == b.materials and a.lights == b.lights
-    assert a.environment == b.environment and a.environment_strength == b.environment_strength
+    assert isinstance(a.environment, np.ndarray) == isinstance(b.environment, np.ndarray)
+    if isinstance(a.environment, np.ndarray):
+        np.testing.assert_array_equal(a.environment, b.environment)
+    else:
+        assert a.environment == b.environment
+    assert a.environment_strength == b.environment_strength
+    assert a.environment_rotation == b.environment_rotation
+    assert len(a.textures) == len(b.textures)
+    for ta, tb in zip(a.textures, b.textures, strict=True):
+        np.testing.assert_array_equal(ta.image, tb.image)
+        assert (ta.colorspace, ta.wrap_u, ta.wrap_v) == (tb.colorspace, tb.wrap_u, tb.wrap_v)
     assert got.pass_indices == want.pass_indices
     assert [str(n) for n in got.notes] == [str(n) for n in want.notes]
 
@@ -508,6 +518,73 @@ def test_incremental_translation_reads_only_what_an_edit_changed(scene):
         added, reads = vp.edit(lambda: add(scene, "D", cube_mesh("New"), (0, 2, 0)))
         assert reads == 1 and set(added.scene_data.object_names) == {"A", "D"}
         assert_same_translation(added, vp.fresh)
+
+
+def test_incremental_translation_of_instances_and_modifiers(scene):
+    """Collection instances share their source's mesh (read once) and moving an instancer re-reads
+    nothing; an edited modifier re-reads exactly its object's mesh; a source edit updates every
+    instance. Each step equals a fresh translation."""
+    visibility_scene(scene)
+    ball = add(scene, "Ball", sphere_mesh("BallMesh"), (0, 0, 2))
+    sub = ball.modifiers.new("Subdivision", "SUBSURF")
+    sub.levels = 1
+    instancer = bpy.data.objects["Instancer0"]
+    source = bpy.data.objects["Source"]
+    with ViewportUpdates() as vp:
+        first, reads = vp.edit(lambda: setattr(ball, "location", (0, 0, 2.5)))
+        # Shown, HiddenRender (shown in the viewport), the source (once for both instances), the ball
+        assert reads == 4 and first.stats["instances"] == 5
+        assert_same_translation(first, vp.fresh)
+        moved, reads = vp.edit(lambda: setattr(instancer, "location", (3, 1, 0)))
+        assert reads == 0
+        assert_same_translation(moved, vp.fresh)
+        finer, reads = vp.edit(lambda: setattr(sub, "levels", 2))
+        assert reads == 1 and finer.stats["triangles"] > moved.stats["triangles"]
+        assert_same_translation(finer, vp.fresh)
+
+        def grow():
+            source.data.vertices[0].co.z += 0.5
+            source.data.update()
+        grown, reads = vp.edit(grow)
+        assert reads == 1  # one mesh behind both instances
+        assert_same_translation(grown, vp.fresh)
+
+
+def test_incremental_translation_keeps_images_and_the_world_until_they_change(scene):
+    """Image pixels and the world are kept across edits (their notes reported again each time); a
+    material edit re-reads materials (not the image), a world edit the world."""
+    import bmesh
+
+    mat, _px = checker_material()
+    image = mat.node_tree.nodes["Image Texture"].image
+    image.colorspace_settings.name = "Linear Rec.2020"  # read as linear, with a note
+    me = bpy.data.meshes.new("Box")
+    bm = bmesh.new()
+    bm.loops.layers.uv.new("UVMap")
+    bmesh.ops.create_cube(bm, size=2.0, calc_uvs=True)
+    bm.to_mesh(me)
+    bm.free()
+    me.materials.append(mat)
+    box = add(scene, "Box", me, (0, 0, 0))
+    hdri_world(strength=1.5, rotation_z=0.6)
+    with ViewportUpdates() as vp:
+        first, _ = vp.edit(lambda: setattr(box, "location", (0, 0, 0.1)))
+        assert any("colour space" in n.message for n in first.notes)
+        assert_same_translation(first, vp.fresh)
+        images = dict(vp.cache.images)
+
+        def rougher():
+            mat.node_tree.nodes["Principled BSDF"].inputs["Roughness"].default_value = 0.8
+        rough, reads = vp.edit(rougher)
+        assert reads == 0 and vp.cache.images == images  # the image was not read again
+        assert_same_translation(rough, vp.fresh)
+        assert rough.scene_data.materials[0].roughness == pytest.approx(0.8)
+
+        def brighter():
+            scene.world.node_tree.nodes["Background"].inputs["Strength"].default_value = 3.0
+        bright, reads = vp.edit(brighter)
+        assert reads == 0 and bright.scene_data.environment_strength == pytest.approx(3.0)
+        assert_same_translation(bright, vp.fresh)
 
 
 def test_translation_render_holds_viewport_workers_still(scene):

@@ -85,8 +85,9 @@ class TranslationCache:
     """Everything one viewport keeps between translations (see the module docstring).
 
     ``meshes``: extracted meshes by evaluated-mesh key; ``materials``: material inputs by material key;
-    ``images``: image pixels by image name (the node-tree reader's table); ``world``: (world key, the
-    world's reading); ``transforms``: each instance's world-space arrays by (mesh key, matrix bytes).
+    ``images``: image pixels by image name with their reading's notes (the node-tree reader's table);
+    ``world``: (world key, the world's reading); ``transforms``: each instance's world-space arrays by
+    (mesh key, matrix bytes).
     ``dirty_objects``: objects (original names) whose geometry changed since the last translation.
     ``extractions`` / ``reuses``: meshes read from Blender / taken from here, over the cache's life.
     """
