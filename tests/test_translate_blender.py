@@ -253,18 +253,23 @@ def hdri_world(strength: float, rotation_z: float):
     return common.world_exr(Path(bundled_hdri()), strength, rotation_z)
 
 
-def test_textures_area_lights_and_the_hdri_are_carried(scene):
+def uv_box_mesh(name: str, material):
+    """A 2 m cube with Blender's own UV map, wearing ``material``."""
     import bmesh
 
-    mat, px = checker_material()
-    me = bpy.data.meshes.new("Box")
+    me = bpy.data.meshes.new(name)
     bm = bmesh.new()
     bm.loops.layers.uv.new("UVMap")
     bmesh.ops.create_cube(bm, size=2.0, calc_uvs=True)
     bm.to_mesh(me)
     bm.free()
-    me.materials.append(mat)
-    add(scene, "Box", me, (0, 0, 0))
+    me.materials.append(material)
+    return me
+
+
+def test_textures_area_lights_and_the_hdri_are_carried(scene):
+    mat, px = checker_material()
+    add(scene, "Box", uv_box_mesh("Box", mat), (0, 0, 0))
     plain = add(scene, "NoUVs", cube_mesh("NoUVsMesh"), (4, 0, 0))  # bmesh's cube has no UV map
     plain.data.materials.append(mat)
     shapes = {"SQUARE": (1.0, 0.0), "RECTANGLE": (2.0, 0.5), "DISK": (1.5, 0.0), "ELLIPSE": (1.0, 3.0)}
@@ -553,19 +558,10 @@ def test_incremental_translation_of_instances_and_modifiers(scene):
 def test_incremental_translation_keeps_images_and_the_world_until_they_change(scene):
     """Image pixels and the world are kept across edits (their notes reported again each time); a
     material edit re-reads materials (not the image), a world edit the world."""
-    import bmesh
-
     mat, _px = checker_material()
     image = mat.node_tree.nodes["Image Texture"].image
     image.colorspace_settings.name = "Linear Rec.2020"  # read as linear, with a note
-    me = bpy.data.meshes.new("Box")
-    bm = bmesh.new()
-    bm.loops.layers.uv.new("UVMap")
-    bmesh.ops.create_cube(bm, size=2.0, calc_uvs=True)
-    bm.to_mesh(me)
-    bm.free()
-    me.materials.append(mat)
-    box = add(scene, "Box", me, (0, 0, 0))
+    box = add(scene, "Box", uv_box_mesh("Box", mat), (0, 0, 0))
     hdri_world(strength=1.5, rotation_z=0.6)
     with ViewportUpdates() as vp:
         first, _ = vp.edit(lambda: setattr(box, "location", (0, 0, 0.1)))
