@@ -294,7 +294,7 @@ class RenderBudgetEngine(bpy.types.RenderEngine):
             translation = translate_update(depsgraph, vp.translation_cache, force=vp.scene is None)
             if translation is not None:
                 vp.set_scene(translation.scene_data, translation.pass_indices)
-            self._viewport_error = None
+                self._viewport_error = None  # (an update that changes nothing keeps a failure shown)
         except Exception as exc:  # shown in the viewport's status; the last good scene stays
             self._viewport_error = str(exc)
 
