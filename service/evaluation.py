@@ -199,19 +199,20 @@ class Reference:
 
     image: np.ndarray
     activity: SimpleNamespace
+    display: np.ndarray  # the image through the display transform (what SSIM compares), made once
 
     @property
     def nbytes(self) -> int:
-        return int(self.image.nbytes)
+        return int(self.image.nbytes + self.display.nbytes)
 
 
 # worker-process state: the few most recent scenes by content hash (a long-lived worker sees many jobs),
 # profiles by name, references (64x36 ones are ~27 KB: a whole lockstep batch of samples fits; 320x180
-# ones ~0.7 MB: a path's evaluated frames fit under the byte cap)
+# ones ~2 MB with their display transform: a path's evaluated frames fit under the byte cap)
 _LOCK = threading.Lock()  # one scene load at a time
 _SCENES: LRUCache[str, Any] = LRUCache(8)
 _PROFILES: dict[str, Any] = {}
-REFERENCE_CACHE_BYTES = 256 * 1024**2
+REFERENCE_CACHE_BYTES = 512 * 1024**2
 _REFS: LRUCache[tuple[str, ...], Reference] = LRUCache(512, weigh=lambda r: r.nbytes,
                                                        max_weight=REFERENCE_CACHE_BYTES)
 _REF_LOCKS: dict[tuple[str, ...], threading.Lock] = {}  # references being rendered, by key
@@ -241,7 +242,11 @@ def image_error(metric: str, reference: np.ndarray, image: np.ndarray) -> float:
     """The error of ``image`` against the maximum-quality ``reference`` (linear RGB; a smaller image is
     upsampled to the reference's size) by ``metric`` on display values, in [0, 1]: what a store's
     errors mean, for anyone who measures one (the render engine's Measure Error)."""
-    ref = linear_to_srgb(reference)
+    return _display_error(metric, linear_to_srgb(reference), image)
+
+
+def _display_error(metric: str, ref: np.ndarray, image: np.ndarray) -> float:
+    """:func:`image_error` against a reference already through the display transform."""
     img = linear_to_srgb(upsample_bilinear(image, ref.shape[0], ref.shape[1]))
     if metric == "ssim":
         e = 1.0 - ssim(ref, img, data_range=1.0)
@@ -288,9 +293,10 @@ def reference(scene: Any, scene_hash: str, camera: CameraSpec, space: ParameterS
             ref = _REFS.get(key)
             if ref is None:
                 result = _render(scene, camera, space.to_settings(idx), threads)
-                ref = Reference(_image(result), SimpleNamespace(
+                image = _image(result)
+                ref = Reference(image, SimpleNamespace(
                     counters=dict(result.counters), comparator_histogram=result.comparator_histogram,
-                    settings=result.settings))
+                    settings=result.settings), linear_to_srgb(image))
                 _REFS.put(key, ref)
     finally:
         with _REF_LOCKS_GUARD:
@@ -322,7 +328,7 @@ def evaluate(scene: Any, camera: CameraSpec, indices: Sequence[int], space: Para
         activity, err = ref.activity, 0.0
     else:
         activity = _render(scene, camera, space.to_settings(idx), threads)
-        err = image_error(metric, ref.image, _image(activity))
+        err = _display_error(metric, ref.display, _image(activity))
     ratio = 1.0 if target_pixels is None else float(target_pixels) / (camera.width * camera.height)
     power, frame_time, breakdown = _price(activity, profile, fps, ratio)
     return Evaluation(err, power, frame_time, breakdown)
