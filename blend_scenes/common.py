@@ -2,8 +2,9 @@
 camera path and the glTF export are the add-on's own (``addon.camera_path``, ``addon.scene_export``).
 
 Everything here is deterministic: geometry comes from closed-form functions or seeded numpy generators,
-never from Blender's random operators. Generators import this module, so changing it rebuilds every scene
-(build.py hashes it together with each generator).
+never from Blender's random operators, nor from operators whose output order depends on memory addresses
+(the UV-sphere primitive: use ``uv_sphere_mesh``). Generators import this module, so changing it rebuilds
+every scene (build.py hashes it together with each generator).
 """
 
 from __future__ import annotations
@@ -153,6 +154,30 @@ def grid_mesh(name: str, heights: np.ndarray, size_x: float, size_y: float,
     idx = np.arange(nx * ny).reshape(ny, nx)
     quads = np.stack([idx[:-1, :-1], idx[:-1, 1:], idx[1:, 1:], idx[1:, :-1]], axis=-1).reshape(-1, 4)
     return mesh_from_arrays(name, verts, quads, material, smooth=smooth)
+
+
+def uv_sphere_mesh(name: str, segments: int, rings: int, radius: float,
+                   material: bpy.types.Material | None = None, smooth: bool = False) -> bpy.types.Mesh:
+    """A UV sphere centred on the origin in closed form: a triangle fan at each pole, quads between the
+    rings, wound outwards. Not Blender's UV-sphere operator (``primitive_uv_sphere_add``,
+    ``bmesh.ops.create_uvsphere``): its spin and merge leave the faces in an order that depends on memory
+    addresses, so the triangle arrays (and scene.rbscene) differed from one build process to the next."""
+    if segments < 3 or rings < 2:
+        raise ValueError(f"a UV sphere needs >= 3 segments and >= 2 rings, got {segments} and {rings}")
+    polar = np.pi * np.arange(1, rings) / rings
+    azimuth = 2 * np.pi * np.arange(segments) / segments
+    ring_verts = np.stack([np.outer(np.sin(polar), np.cos(azimuth)), np.outer(np.sin(polar), np.sin(azimuth)),
+                           np.repeat(np.cos(polar)[:, None], segments, axis=1)], axis=-1).reshape(-1, 3)
+    verts = radius * np.concatenate([[[0.0, 0.0, 1.0]], ring_verts, [[0.0, 0.0, -1.0]]])
+    top, bottom = 0, len(verts) - 1
+    ring = np.arange(1, 1 + (rings - 1) * segments).reshape(rings - 1, segments)
+    nxt = np.roll(ring, -1, axis=1)  # the next vertex around each ring (counter-clockwise seen from +Z)
+    faces: list[tuple[int, ...]] = [(top, int(a), int(b)) for a, b in zip(ring[0], nxt[0], strict=True)]
+    for k in range(rings - 2):  # quads between ring k and ring k + 1
+        faces += [(int(a), int(c), int(d), int(b))
+                  for a, b, c, d in zip(ring[k], nxt[k], ring[k + 1], nxt[k + 1], strict=True)]
+    faces += [(bottom, int(b), int(a)) for a, b in zip(ring[-1], nxt[-1], strict=True)]
+    return mesh_from_arrays(name, verts, faces, material, smooth=smooth)
 
 
 def lathe(name: str, profile: Sequence[tuple[float, float]], material: bpy.types.Material,

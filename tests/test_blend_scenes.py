@@ -6,12 +6,39 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 pytestmark = pytest.mark.blender
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+
+#: Runs scene generators in a fresh Blender process and prints, per scene, one digest of every mesh it made
+#: (vertex positions, face corners, faces, loop triangles): what the translation and the glTF export read.
+_MESH_DIGEST = """
+import hashlib, sys, tempfile
+from importlib import import_module
+from pathlib import Path
+import bpy, numpy as np
+for name in sys.argv[1:]:
+    import_module("blend_scenes.scenes." + name).build(Path(tempfile.mkdtemp()))
+    h = hashlib.sha256()
+    for m in sorted(bpy.data.meshes, key=lambda m: m.name):
+        m.calc_loop_triangles()
+        h.update(m.name.encode())
+        for items, attr, dtype, width in ((m.vertices, "co", np.float32, 3),
+                                          (m.loops, "vertex_index", np.int32, 1),
+                                          (m.polygons, "loop_start", np.int32, 1),
+                                          (m.loop_triangles, "vertices", np.int32, 3)):
+            a = np.zeros(len(items) * width, dtype)
+            items.foreach_get(attr, a)
+            h.update(a.tobytes())
+    print("digest", name, h.hexdigest())
+"""
 
 
 @pytest.fixture(scope="module")
@@ -98,6 +125,56 @@ def test_build_is_deterministic(teapot_build: tuple[Path, dict], tmp_path: Path)
     build(["teapot"], tmp_path, force=True)
     for name in ("scene.glb", "scene.rbscene", "path.json"):
         assert (tmp_path / "teapot" / name).read_bytes() == (out / "teapot" / name).read_bytes(), name
+
+
+def test_uv_sphere_scenes_make_the_same_meshes_in_every_build_process() -> None:
+    """Blender's UV-sphere operator ordered its faces by memory address, so the village's lamp globes and
+    the artist's glass spheres (and their scene files) changed from one build process to the next (one
+    process in two or three agreed): three fresh processes must now make the same meshes."""
+    pytest.importorskip("bpy")
+    digests: dict[str, set[str]] = {"village": set(), "artist": set()}
+    for _ in range(3):
+        run = subprocess.run([sys.executable, "-c", _MESH_DIGEST, *digests], cwd=REPO_ROOT,
+                             capture_output=True, text=True, timeout=300, check=True)
+        for line in run.stdout.splitlines():
+            if line.startswith("digest "):
+                _, name, digest = line.split()
+                digests[name].add(digest)
+    assert all(len(d) == 1 for d in digests.values()), digests
+
+
+def test_uv_sphere_is_closed_and_wound_outwards() -> None:
+    pytest.importorskip("bpy")
+    import bpy
+
+    from blend_scenes.common import uv_sphere_mesh
+
+    glow = bpy.data.materials.new("SphereTest")
+    mesh = uv_sphere_mesh("SphereTest", segments=16, rings=8, radius=0.25, material=glow, smooth=True)
+    try:
+        mesh.calc_loop_triangles()
+        co = np.zeros(len(mesh.vertices) * 3, np.float32)
+        mesh.vertices.foreach_get("co", co)
+        tris = np.zeros(len(mesh.loop_triangles) * 3, np.int32)
+        mesh.loop_triangles.foreach_get("vertices", tris)
+        p, t = co.reshape(-1, 3).astype(np.float64), tris.reshape(-1, 3)
+        # Blender's UV sphere of the same parameters: 2 poles + 7 rings of 16, 32 fan triangles + 96 quads.
+        assert p.shape == (2 + 7 * 16, 3) and t.shape == (32 + 2 * 96, 3) and len(mesh.polygons) == 128
+        assert np.allclose(np.linalg.norm(p, axis=1), 0.25, atol=1e-6)
+        assert list(mesh.materials) == [glow] and all(poly.use_smooth for poly in mesh.polygons)
+        # Closed (every edge in two triangles) and wound outwards: every face normal points away from the
+        # centre, and the volume is a little under the sphere's.
+        edges = np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1)
+        assert np.all(np.unique(edges, axis=0, return_counts=True)[1] == 2)
+        a, b, c = p[t[:, 0]], p[t[:, 1]], p[t[:, 2]]
+        assert np.all(np.einsum("ij,ij->i", np.cross(b - a, c - a), (a + b + c) / 3) > 0)
+        volume = np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0
+        assert 0.9 * 4 / 3 * math.pi * 0.25**3 < volume < 4 / 3 * math.pi * 0.25**3
+        with pytest.raises(ValueError, match="segments"):
+            uv_sphere_mesh("Bad", segments=2, rings=8, radius=0.25)
+    finally:
+        bpy.data.meshes.remove(mesh)
+        bpy.data.materials.remove(glow)
 
 
 @pytest.mark.parametrize("name", ["teapot", "chess"])

@@ -89,9 +89,8 @@ def build(out_dir: Path) -> c.SceneSpec:
     cube_mesh.materials.append(checker)
     c.add_object("CheckerCube", cube_mesh, (-1.6, 0.4, 0.6), (0.0, 0.0, math.radians(20)))
 
-    sphere_mesh = bm_mesh("GlassSphere", lambda bm: bmesh.ops.create_uvsphere(
-        bm, u_segments=16, v_segments=8, radius=0.6), smooth=True)
-    sphere_mesh.materials.append(glass)
+    sphere_mesh = c.uv_sphere_mesh("GlassSphere", segments=16, rings=8, radius=0.6, material=glass,
+                                   smooth=True)
     for name, location in (("GlassSphere", (0.9, -0.6, 0.6)), ("GlassSphere.Linked", (2.3, 1.4, 0.6))):
         sphere = c.add_object(name, sphere_mesh, location)  # the second shares the mesh: Alt+D
         sub = sphere.modifiers.new("Subdivision", "SUBSURF")

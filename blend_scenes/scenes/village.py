@@ -234,12 +234,7 @@ def _street_lamps(mats: _Materials, sq_z: float) -> None:
     """Street lamps around the square (emissive globes; four also cast light)."""
     post_profile = [(0.0, 0.0), (0.15, 0.0), (0.08, 0.3), (0.06, 3.6), (0.0, 3.6)]
     post = c.lathe("LampPost", post_profile, mats.iron, steps=16)
-    bpy.ops.mesh.primitive_uv_sphere_add(segments=16, ring_count=8, radius=0.25)
-    globe_obj = bpy.context.active_object
-    globe = globe_obj.data
-    globe.name = "LampGlobe"
-    globe.materials.append(mats.lamp_glow)
-    bpy.data.objects.remove(globe_obj)
+    globe = c.uv_sphere_mesh("LampGlobe", segments=16, rings=8, radius=0.25, material=mats.lamp_glow)
     for i in range(12):
         a = 2 * math.pi * i / 12
         x, y = 13.5 * math.cos(a), 13.5 * math.sin(a)
