@@ -22,7 +22,7 @@ from service.store import TemporalFilter, pack_indices, unpack_indices
 from service.store.frame_rate import power_at_rate
 from service.store.temporal import blend
 from tests.addon_support import synthetic_store
-from tests.api_support import teapot_scene_glb
+from tests.api_support import teapot_scene_file
 
 N_PARAMS = 3
 setting = st.tuples(*[st.integers(0, 5)] * N_PARAMS)
@@ -161,9 +161,7 @@ def test_budget_points_are_the_frontier_points_within_the_budget() -> None:
 @pytest.fixture(scope="module")
 def real_store(tmp_path_factory: pytest.TempPathFactory):
     d = tmp_path_factory.mktemp("filter")
-    scene_file = d / "teapot.glb"
-    scene_file.write_bytes(teapot_scene_glb())
-    scene = sim_core.Scene.from_gltf(str(scene_file))
+    scene = sim_core.Scene.from_gltf(str(teapot_scene_file(d)))
     ang = np.linspace(-1.2, 1.6, 40)
     pos = [(6.0 * np.sin(a), -6.0 * np.cos(a), 1.5 + 1.5 * np.sin(3 * a)) for a in ang]
     dirs = [(-x, -y, 0.6 - z) for x, y, z in pos]
