@@ -13,6 +13,7 @@ import bpy
 import numpy as np
 
 from .core.scene_translation import ImageData, MaterialInputs, Notes, WorldInputs
+from .core.scene_translation.cache import Cached
 
 _OUTPUT_TARGETS = ("ALL", "CYCLES")
 _WRAPS = {"REPEAT": "repeat", "EXTEND": "clamp", "CLIP": "clamp", "MIRROR": "mirror"}
@@ -23,7 +24,9 @@ class NodeTreeReader:
 
     def __init__(self, notes: Notes) -> None:
         self.notes = notes
-        self.images: dict[str, ImageData | None] = {}
+        # image pixels by image name, with the notes reading them made (replayed on each use, so a table
+        # kept across translations, as the viewport's is, gives the same notes as a fresh read)
+        self.images: dict[str, Cached[ImageData | None]] = {}
 
     # materials ----------------------------------------------------------------------------------------
     def material_inputs(self, mat: bpy.types.Material) -> MaterialInputs:
@@ -128,8 +131,17 @@ class NodeTreeReader:
 
     def image(self, image: bpy.types.Image, subject: str) -> ImageData | None:
         key = image.name_full
-        if key in self.images:
-            return self.images[key]
+        cached = self.images.get(key)
+        if cached is None:
+            outer, self.notes = self.notes, Notes()
+            try:
+                cached = Cached(self._read_image(image, subject), tuple(self.notes))
+            finally:
+                self.notes = outer
+            self.images[key] = cached
+        return cached.replay(self.notes)
+
+    def _read_image(self, image: bpy.types.Image, subject: str) -> ImageData | None:
         width, height = int(image.size[0]), int(image.size[1])
         data: ImageData | None
         if width * height == 0 or image.channels == 0:
@@ -149,7 +161,6 @@ class NodeTreeReader:
                                              f"{colorspace}")
                 data = ImageData(image.name, np.ascontiguousarray(np.round(px * 255.0).astype(np.uint8)),
                                  colorspace)
-        self.images[key] = data
         return data
 
     def color_input(self, socket: bpy.types.NodeSocket, subject: str, label: str

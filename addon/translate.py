@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from functools import partial
 from typing import Any
 
@@ -33,36 +34,46 @@ from .core.scene_translation import (
     environment_from_inputs,
     light_from_inputs,
 )
+from .core.scene_translation.cache import Cached, TranslationCache, Update, needs_translation
 from .node_trees import NodeTreeReader
 
-__all__ = ["Translation", "translate", "translate_for_render"]
+__all__ = ["Translation", "TranslationCache", "depsgraph_updates", "translate", "translate_for_render",
+           "translate_update"]
 
 #: Object types Cycles reads geometry from through the object itself; curves and text reach the depsgraph
 #: as separate mesh instances (their evaluated geometry), so they are not read twice.
 _TO_MESH_TYPES = {"SURFACE", "META"}
 
 
-def translate(depsgraph: bpy.types.Depsgraph, *, camera: bool = True) -> Translation:
+def translate(depsgraph: bpy.types.Depsgraph, *, camera: bool = True,
+              cache: TranslationCache | None = None) -> Translation:
     """Translate an evaluated depsgraph (render or viewport) into scene data plus notes.
 
     Reads every object instance the depsgraph shows (meshes once per evaluated mesh, then each instance's
     matrix), materials through their active Cycles output, lights, the world and, with ``camera``, the
     scene camera at the depsgraph's frame. Must run on Blender's main thread (or inside a render engine's
     ``render``/``view_update``, where the depsgraph is valid). Raises ValueError if nothing is visible.
+
+    ``cache`` (the viewport's, told of each update's changes by ``TranslationCache.invalidate``): reuse
+    the meshes, materials, world and instance transforms an edit did not change; the result equals a
+    fresh translation's.
     """
     start = time.perf_counter()
-    reader = _Reader(depsgraph)
+    reader = _Reader(depsgraph, cache)
     reader.read_instances()
     reader.read_world()
     if camera:
         reader.read_camera()
-    data = reader.assembler.build(source="")
+    data = reader.assembler.build(source="", transforms=None if cache is None else cache.transforms)
+    if cache is not None:
+        cache.keep_only(reader.assembler.meshes, reader.material_keys)
     stats = {
         "mode": str(depsgraph.mode),
         "frame": int(depsgraph.scene_eval.frame_current),
         "instances": len(data.object_names),
         "unique_meshes": len(reader.assembler.meshes),
         "mesh_reads": reader.mesh_reads,
+        "mesh_reuses": reader.mesh_reuses,
         "triangles": int(data.triangles.shape[0]),
         "materials": len(data.materials),
         "lights": len(data.lights),
@@ -72,6 +83,29 @@ def translate(depsgraph: bpy.types.Depsgraph, *, camera: bool = True) -> Transla
     }
     return Translation(scene_data=data, notes=reader.assembler.notes.as_list(), stats=stats,
                        pass_indices=list(reader.assembler.pass_indices))
+
+
+def depsgraph_updates(depsgraph: bpy.types.Depsgraph) -> list[Update]:
+    """The depsgraph's updates (what changed since the last evaluation) as plain values."""
+    out = []
+    for u in depsgraph.updates:
+        idb = u.id
+        out.append(Update(idb.id_type, getattr(idb, "type", "") if idb.id_type == "OBJECT" else "",
+                          u.is_updated_geometry, u.is_updated_transform, u.is_updated_shading,
+                          idb.original.name_full))
+    return out
+
+
+def translate_update(depsgraph: bpy.types.Depsgraph, cache: TranslationCache, *, force: bool = False
+                     ) -> Translation | None:
+    """The viewport's translation after a depsgraph update: None when the update changes nothing the
+    simulator sees (a camera moving, a selection), else the scene translated incrementally through
+    ``cache`` (``force``: translate even then, e.g. when the viewport has no scene yet)."""
+    changes = depsgraph_updates(depsgraph)
+    cache.invalidate(changes)
+    if not (force or needs_translation(changes)):
+        return None
+    return translate(depsgraph, camera=False, cache=cache)
 
 
 def translate_for_render(scene: bpy.types.Scene | None = None,
@@ -102,17 +136,22 @@ def translate_for_render(scene: bpy.types.Scene | None = None,
             except BaseException as exc:  # Blender swallows errors raised here: carry it out
                 outcome["error"] = exc
 
+    from .core.progressive import workers_paused  # lazy: it loads the native core
+
     saved = (scene.render.engine, scene.render.use_compositing, scene.render.use_sequencer)
-    bpy.utils.register_class(RENDER_BUDGET_translate_engine)
-    try:
-        scene.render.engine = RENDER_BUDGET_translate_engine.bl_idname
-        scene.render.use_compositing = False
-        scene.render.use_sequencer = False
-        with bpy.context.temp_override(scene=scene, view_layer=layer):
-            result = bpy.ops.render.render(layer=layer.name, scene=scene.name)
-    finally:
-        scene.render.engine, scene.render.use_compositing, scene.render.use_sequencer = saved
-        bpy.utils.unregister_class(RENDER_BUDGET_translate_engine)
+    # No other Python thread may run while a render engine type is registered and Blender renders with
+    # it (a viewport worker running then coincided with a crash inside Blender): hold them still.
+    with workers_paused():
+        bpy.utils.register_class(RENDER_BUDGET_translate_engine)
+        try:
+            scene.render.engine = RENDER_BUDGET_translate_engine.bl_idname
+            scene.render.use_compositing = False
+            scene.render.use_sequencer = False
+            with bpy.context.temp_override(scene=scene, view_layer=layer):
+                result = bpy.ops.render.render(layer=layer.name, scene=scene.name)
+        finally:
+            scene.render.engine, scene.render.use_compositing, scene.render.use_sequencer = saved
+            bpy.utils.unregister_class(RENDER_BUDGET_translate_engine)
     if "error" in outcome:
         raise outcome["error"]
     if "FINISHED" not in result:
@@ -126,16 +165,33 @@ def translate_for_render(scene: bpy.types.Scene | None = None,
 
 # -- reading -------------------------------------------------------------------------------------------
 class _Reader:
-    def __init__(self, depsgraph: bpy.types.Depsgraph) -> None:
+    def __init__(self, depsgraph: bpy.types.Depsgraph, cache: TranslationCache | None = None) -> None:
         self.depsgraph = depsgraph
         self.scene = depsgraph.scene_eval
         self.view_layer = depsgraph.view_layer_eval
         self.assembler = SceneAssembler()
         self.notes: Notes = self.assembler.notes
         self.node_trees = NodeTreeReader(self.notes)
+        self.cache = cache
+        if cache is not None:
+            self.node_trees.images = cache.images  # image pixels survive edits that leave images alone
         self.mesh_reads = 0
+        self.mesh_reuses = 0
+        self.material_keys: set[Any] = set()
         self._temporary = 0
         self._names: dict[str, int] = {}
+
+    def _recorded(self, read: Callable[[], Any]) -> Cached[Any]:
+        """``read()``'s value with the notes it made (also added to this translation's notes)."""
+        outer, inner = self.notes, Notes()
+        self.notes = self.node_trees.notes = inner
+        try:
+            value = read()
+        finally:
+            self.notes = self.node_trees.notes = outer
+        cached = Cached(value, tuple(inner))
+        cached.replay(outer)
+        return cached
 
     # objects ------------------------------------------------------------------------------------------
     def read_instances(self) -> None:
@@ -191,23 +247,46 @@ class _Reader:
         return base if n == 0 else f"{base} #{n + 1}"
 
     def read_mesh(self, obj: bpy.types.Object) -> Any:
-        """Key of the object's evaluated mesh in the assembler, reading it the first time it is seen."""
+        """Key of the object's evaluated mesh in the assembler, reading it the first time it is seen (in
+        this translation, or with a cache, since the depsgraph last evaluated it)."""
         if obj.type == "MESH":
             mesh = obj.data
-            key = ("mesh", mesh.as_pointer())
+            # the session id changes whenever the depsgraph evaluates the mesh again: with the address and
+            # the element counts, a key of the mesh's content
+            key = ("mesh", mesh.as_pointer(), mesh.session_uid, len(mesh.vertices), len(mesh.loops),
+                   len(mesh.loop_triangles))
             if key not in self.assembler.meshes:
-                self.assembler.add_mesh(key, self._mesh_arrays(mesh, obj))
+                self.assembler.add_mesh(key, self._cached_mesh(key, mesh, obj))
             return key
         mesh = obj.to_mesh()  # metaballs and NURBS surfaces: a temporary mesh, read now and freed
         try:
             if mesh is None:
                 return None
             self._temporary += 1
-            key = ("temporary", self._temporary)
-            self.assembler.add_mesh(key, self._mesh_arrays(mesh, obj))
+            # unique among the cache's translations too (its transforms are keyed by mesh)
+            key = ("temporary", self._temporary, 0 if self.cache is None else self.cache.extractions)
+            self.assembler.add_mesh(key, self._extract(mesh, obj).value)
             return key
         finally:
             obj.to_mesh_clear()
+
+    def _cached_mesh(self, key: Any, mesh: bpy.types.Mesh, obj: bpy.types.Object) -> Any:
+        cache = self.cache
+        if cache is not None and obj.original.name_full not in cache.dirty_objects:
+            cached = cache.meshes.get(key)
+            if cached is not None:
+                self.mesh_reuses += 1
+                cache.reuses += 1
+                return cached.replay(self.notes)
+        cached = self._extract(mesh, obj)
+        if cache is not None:
+            cache.meshes[key] = cached
+        return cached.value
+
+    def _extract(self, mesh: bpy.types.Mesh, obj: bpy.types.Object) -> Cached[Any]:
+        if self.cache is not None:
+            self.cache.extractions += 1
+        return self._recorded(partial(self._mesh_arrays, mesh, obj))
 
     def _mesh_arrays(self, mesh: bpy.types.Mesh, obj: bpy.types.Object) -> Any:
         self.mesh_reads += 1
@@ -247,9 +326,20 @@ class _Reader:
                 out.append(self.assembler.default_material())
                 continue
             key = ("material", mat.original.name_full)
-            out.append(self.assembler.principled_index(key, partial(self.node_trees.material_inputs, mat),
+            self.material_keys.add(key)
+            out.append(self.assembler.principled_index(key, partial(self._material_inputs, key, mat),
                                                        uvs=has_uvs))
         return out
+
+    def _material_inputs(self, key: Any, mat: bpy.types.Material) -> Any:
+        cache = self.cache
+        cached = None if cache is None else cache.materials.get(key)
+        if cached is not None:
+            return cached.replay(self.notes)
+        cached = self._recorded(partial(self.node_trees.material_inputs, mat))
+        if cache is not None:
+            cache.materials[key] = cached
+        return cached.value
 
     # lights -------------------------------------------------------------------------------------------
     def read_light(self, obj: bpy.types.Object, matrix: np.ndarray) -> None:
@@ -278,8 +368,17 @@ class _Reader:
         if world is None:
             self.assembler.environment = (0.0, 0.0, 0.0)  # Cycles renders a scene without a world black
             return
-        inputs = self.node_trees.world_inputs(world)
-        env, strength, rotation = environment_from_inputs(inputs, self.notes)
+        key = world.original.name_full
+        cache = self.cache
+        if cache is not None and cache.world is not None and cache.world[0] == key:
+            cached = cache.world[1]
+            cached.replay(self.notes)
+        else:
+            cached = self._recorded(lambda: environment_from_inputs(self.node_trees.world_inputs(world),
+                                                                    self.notes))
+            if cache is not None:
+                cache.world = (key, cached)
+        env, strength, rotation = cached.value
         self.assembler.environment = env
         self.assembler.environment_strength = strength
         self.assembler.environment_rotation = rotation

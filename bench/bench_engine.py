@@ -68,7 +68,7 @@ def viewport_restart(data, frame, settings: FrameSettings, w: int, h: int) -> tu
 
     vp = ViewportRenderer(on_frame=on_frame)
     vp.set_scene(data)
-    vp.scenes.scene_for(data)  # the BVH exists already (built on the first view_update)
+    vp.scenes.scene_for(data, vp.scene.key)  # the BVH exists already (built on the first view_update)
     draws = []
     try:
         proj = projection(w, h, frame["vfov"])
@@ -91,7 +91,7 @@ def playback(data, frames: list[dict], settings: list[FrameSettings], w: int, h:
     imaged: set[int] = set()
     vp = ViewportRenderer(on_frame=lambda f: imaged.add(f.key[1]))
     vp.set_scene(data)
-    vp.scenes.scene_for(data)
+    vp.scenes.scene_for(data, vp.scene.key)
     try:
         start = time.perf_counter()
         for k, (fr, fs) in enumerate(zip(frames, settings, strict=True)):

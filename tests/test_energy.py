@@ -3,6 +3,7 @@ test_energy_render.py)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from pathlib import Path
@@ -229,3 +230,49 @@ def test_pricing_invariants_hold_for_any_counters(counters: dict[str, int], fps:
     scaled = price({k: v * scale for k, v in counters.items()}, "mobile", fps)
     assert scaled.dynamic_energy_j == pytest.approx(scale * r.dynamic_energy_j, rel=1e-9, abs=1e-18)
     assert scaled.frame_time_s == pytest.approx(scale * r.frame_time_s, rel=1e-9, abs=1e-18)
+
+
+@pytest.mark.parametrize("style", ["sync", "async"])
+@settings(max_examples=40, deadline=None)
+@given(tiles=st.lists(st.tuples(st.dictionaries(st.sampled_from(energy.COUNTERS), _counts, max_size=14),
+                                st.lists(st.integers(0, 10**6), min_size=25, max_size=25)),
+                      min_size=1, max_size=6),
+       env=st.sampled_from(["box", "bartlett", "off"]))
+def test_tiles_priced_at_once_equal_each_tile_priced_alone(style: str, tiles, env: str) -> None:
+    """price_tiles is price's arithmetic on arrays: every tile's dynamic energy equal to rounding, for any
+    counters (missing ones count 0), histograms, comparator style and environment filter."""
+    from types import SimpleNamespace
+
+    prof = dataclasses.replace(load_profile("mobile"), comparator_style=style)
+    settings_ = SimpleNamespace(env_filter=env)
+    rows = []
+    for counters, hist in tiles:
+        h = np.asarray(hist, dtype=np.int64)
+        if h.sum() == 0:
+            counters = {k: v for k, v in counters.items() if k != "closest_hit_comparisons"}
+        rows.append((counters, h))
+    alone = [price(SimpleNamespace(counters=c, comparator_histogram=h, settings=settings_), prof,
+                   30.0).dynamic_energy_j for c, h in rows]
+    names = sorted({k for c, _ in rows for k in c})
+    columns = {k: np.array([c.get(k, 0) for c, _ in rows], dtype=np.uint64) for k in names}
+    if not columns:
+        columns = {"pixels": np.zeros(len(rows), dtype=np.uint64)}
+    at_once = energy.price_tiles(columns, np.stack([h for _, h in rows]), prof, settings=settings_)
+    np.testing.assert_allclose(at_once, alone, rtol=1e-12, atol=0)
+
+
+def test_price_tiles_rejects_bad_input() -> None:
+    one = {"rays_total": np.array([1, 2], dtype=np.uint64)}
+    with pytest.raises(ValueError, match="one count per tile"):
+        energy.price_tiles({**one, "pixels": np.array([1])}, None, "mobile")
+    with pytest.raises(ValueError, match="integers"):
+        energy.price_tiles({"rays_total": np.array([1.5, 2.0])}, None, "mobile")
+    with pytest.raises(ValueError, match="negative"):
+        energy.price_tiles({"rays_total": np.array([1, -2])}, None, "mobile")
+    with pytest.raises(ValueError, match="histograms"):
+        energy.price_tiles(one, np.zeros((3, 25), np.int64), "mobile")
+    with pytest.raises(ValueError, match="no comparator histogram"):
+        energy.price_tiles({"closest_hit_comparisons": np.array([0, 5])}, np.zeros((2, 25), np.int64),
+                           "mobile")
+    with pytest.raises(ValueError, match="at least one"):
+        energy.price_tiles({}, None, "mobile")

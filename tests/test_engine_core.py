@@ -4,9 +4,11 @@ Power pass, the animation CSV, the scene cache and the progressive viewport driv
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import threading
 import time
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -265,6 +267,14 @@ def test_tiles_priced_one_by_one_sum_to_the_frame(scene: sim_core.Scene) -> None
     frame = sim_core.price(result, prof, 30.0, scene=scene)
     tiles = engine_frame.tile_energy(result.tile_stats, prof, 30.0, settings, scene)
     assert np.all(tiles >= 0) and tiles.sum() == pytest.approx(frame.dynamic_energy_j, rel=1e-9)
+    # all tiles priced at once equal each tile priced alone through price() (the previous computation)
+    for style in ("sync", "async"):
+        p = dataclasses.replace(prof, comparator_style=style)
+        one_by_one = [sim_core.price(SimpleNamespace(counters=t["counters"], settings=settings,
+                                                     comparator_histogram=t["comparator_histogram"]),
+                                     p, 30.0, scene=scene).dynamic_energy_j for t in result.tile_stats]
+        np.testing.assert_allclose(engine_frame.tile_energy(result.tile_stats, p, 30.0, settings, scene),
+                                   one_by_one, rtol=1e-12, atol=0)
 
 
 @settings(max_examples=60, deadline=None)
@@ -431,6 +441,40 @@ def test_close_cancels_in_flight_work() -> None:
         drv.update(progressive.ViewRequest("b", 8, 8))
 
 
+def test_workers_paused_stops_every_worker_and_resumes_their_requests() -> None:
+    """Held still while the main thread runs Blender's render operator: the level in flight stops, no
+    render starts (not even for a request made meanwhile), and afterwards the stopped request renders."""
+    gates = [Gate(), Gate()]
+    drivers = [progressive.ProgressiveDriver(g, (1.0,)) for g in gates]
+    try:
+        drivers[0].update(progressive.ViewRequest("a", 8, 8, "A"))
+        gates[0].started.acquire(timeout=5)  # A is rendering
+        with progressive.workers_paused():
+            assert all(not d._active for d in drivers)  # out of every render
+            drivers[1].update(progressive.ViewRequest("b", 8, 8, "B"))
+            time.sleep(0.1)
+            assert [p for p, _, _ in gates[1].calls] == [] and drivers[0].cancelled == 1
+            assert drivers[0].busy and drivers[1].busy  # kept for later
+        for g in gates:
+            g.release.release()
+        assert all(d.wait_idle() for d in drivers)
+        assert [p for p, _, _ in gates[0].calls] == ["A", "A"] and drivers[0].latest().key == "a"
+        assert drivers[1].latest().key == "b"
+        # a worker that does not stop in time: an error, and the workers resume
+        late = Gate()
+        drivers.append(progressive.ProgressiveDriver(lambda p, w, h, stop: late(p, w, h, lambda: False),
+                                                     (1.0,)))
+        drivers[2].update(progressive.ViewRequest("c", 8, 8, "C"))
+        late.started.acquire(timeout=5)
+        with pytest.raises(TimeoutError), progressive.workers_paused(timeout=0.2):
+            pass
+        late.release.release()
+        assert drivers[2].wait_idle() and drivers[2].latest().key == "c" and not progressive._paused()
+    finally:
+        for d in drivers:
+            d.close()
+
+
 def test_render_errors_are_reported_and_the_driver_recovers() -> None:
     def render(payload, w, h, should_stop):
         if payload == "bad":
@@ -462,7 +506,7 @@ def test_viewport_renders_progressively_and_restarts_on_scene_updates() -> None:
         fs = FrameSettings("manual", CHEAP)
         with pytest.raises(RuntimeError, match="no scene"):
             vp.show(look((1, -4, 2)), region_projection(80, 48), 80, 48, fs, profile="mobile", fps=30)
-        assert vp.set_scene(two_boxes(), [1, 2]) and not vp.set_scene(two_boxes(), [1, 2])
+        vp.set_scene(two_boxes(), [1, 2])
         assert vp.show(look((1, -4, 2)), region_projection(80, 48), 80, 48, fs, profile="mobile", fps=30)
         assert vp.driver.wait_idle(60)
         assert [f.image.shape for f in frames] == [(12, 20, 4), (48, 80, 4)]
@@ -473,7 +517,7 @@ def test_viewport_renders_progressively_and_restarts_on_scene_updates() -> None:
         # a shaded box in front of the sky: some pixels hit, some do not
         assert first.image[..., :3].std() > 0.01
         # the box moves: the depsgraph reports it, the viewport restarts with the new scene
-        assert vp.set_scene(two_boxes(shift=1.0), [1, 2])
+        vp.set_scene(two_boxes(shift=1.0), [1, 2])
         assert vp.show(look((1, -4, 2)), region_projection(80, 48), 80, 48, fs, profile="mobile", fps=30)
         assert vp.driver.wait_idle(60)
         assert len(frames) == 4 and not np.array_equal(frames[-1].image, first.image)

@@ -121,6 +121,45 @@ def test_assembler_shares_mesh_arrays_between_instances():
     assert np.allclose(data.positions[4:] - data.positions[:4], [5, 0, 0])
 
 
+def test_assembler_reuses_instance_transforms_and_equals_a_fresh_build(monkeypatch):
+    """With a transforms table (the viewport's), an instance whose mesh and matrix are unchanged is not
+    transformed again; the arrays equal a build without the table, and the table follows the scene."""
+    from addon.core.scene_translation import assembler as assembler_module
+
+    co, cv, cn, tc = quad_corners()
+    quad = corner_mesh(co, cv, cn, tc, np.array([0, 1]))
+    calls = []
+    real = assembler_module.transform_mesh
+    monkeypatch.setattr(assembler_module, "transform_mesh", lambda m, x: calls.append(1) or real(m, x))
+
+    def scene(shift: float, table):
+        asm = SceneAssembler()
+        asm.add_mesh("quad", quad)
+        asm.add_mesh("quad2", quad)
+        m2, m3 = np.eye(4), np.eye(4)
+        m2[:3, 3] = [5, 0, 0]
+        m3[:3, 3] = [0, shift, 0]
+        asm.add_instance("quad", np.eye(4), [0], "a")
+        asm.add_instance("quad", m2, [0], "b")
+        asm.add_instance("quad2", m3, [0, 1], "c")
+        asm.materials = [material_from_inputs(MaterialInputs(n, (1, 1, 1)), asm.notes) for n in "xy"]
+        return asm.build(transforms=table)
+
+    table: dict = {}
+    first = scene(1.0, table)
+    assert len(calls) == 3 and len(table) == 3
+    moved = scene(2.0, table)  # only "c" moved
+    assert len(calls) == 4 and len(table) == 3
+    calls.clear()
+    fresh = scene(2.0, None)
+    assert len(calls) == 3
+    for name in ("positions", "normals", "triangles", "material_ids", "object_ids"):
+        np.testing.assert_array_equal(getattr(moved, name), getattr(fresh, name))
+        assert getattr(moved, name).dtype == getattr(fresh, name).dtype
+    assert not np.array_equal(first.positions, moved.positions)
+    assert moved.material_ids.tolist() == [0, 0, 0, 0, 0, 1]
+
+
 def test_assembler_without_geometry_says_so():
     with pytest.raises(ValueError, match="no visible geometry"):
         SceneAssembler().build()
@@ -222,3 +261,55 @@ def test_constant_alpha_is_cycles_stochastic_alpha():
     m = material_from_inputs(MaterialInputs("veil", alpha=0.3), notes)
     assert (m.alpha, m.alpha_mode) == (0.3, "hashed")
     assert material_from_inputs(MaterialInputs("solid"), notes).alpha_mode == "opaque"
+
+
+# -- what the viewport's incremental translation keeps ------------------------------------------------
+def test_translation_cache_forgets_exactly_what_an_update_changed() -> None:
+    from addon.core.scene_translation.cache import Cached, TranslationCache, Update
+
+    def filled() -> TranslationCache:
+        c = TranslationCache()
+        c.meshes = {"m": Cached("mesh")}
+        c.materials = {"mat": Cached("inputs")}
+        c.images = {"img": Cached("pixels")}
+        c.world = ("World", Cached("env"))
+        return c
+
+    c = filled()
+    c.invalidate([Update("OBJECT", "MESH", transform=True, name="Cube"), Update("SCENE"),
+                  Update("CAMERA", name="Cam"), Update("COLLECTION", geometry=True), Update("LIGHT")])
+    assert c.meshes and c.materials and c.images and c.world and not c.dirty_objects  # nothing to forget
+    c.invalidate([Update("OBJECT", "MESH", geometry=True, name="Cube"), Update("MESH", geometry=True)])
+    assert c.dirty_objects == {"Cube"} and c.meshes and c.materials and c.world  # re-read by object
+    c = filled()
+    c.invalidate([Update("MATERIAL", shading=True, name="Red")])
+    assert not c.materials and c.images and c.world is not None
+    c = filled()
+    c.invalidate([Update("WORLD", name="World")])
+    assert c.world is None and c.materials and c.images
+    c = filled()
+    c.invalidate([Update("IMAGE", name="Checker")])
+    assert not c.images and not c.materials and c.world is None
+    c = filled()
+    c.invalidate([Update("SOMETHING_NEW")])  # an ID type this translator does not know
+    assert not c.materials and c.world is None and c.meshes
+    c = filled()
+    c.dirty_objects.add("Cube")
+    c.meshes["n"] = Cached("other")
+    c.keep_only(["n"], [])
+    assert list(c.meshes) == ["n"] and not c.materials and not c.dirty_objects
+    c.clear()
+    assert not (c.meshes or c.materials or c.images or c.transforms) and c.world is None
+
+
+def test_cached_notes_are_reported_again_on_reuse() -> None:
+    from addon.core.scene_translation import Notes
+    from addon.core.scene_translation.cache import Cached
+
+    first = Notes()
+    first.warn("image 'A'", "could not be loaded")
+    cached = Cached(None, tuple(first))
+    again = Notes()
+    assert cached.replay(again) is None and [str(n) for n in again] == [str(n) for n in first]
+    cached.replay(again)
+    assert len(again) == 1  # the same note about the same thing is kept once

@@ -253,18 +253,23 @@ def hdri_world(strength: float, rotation_z: float):
     return common.world_exr(Path(bundled_hdri()), strength, rotation_z)
 
 
-def test_textures_area_lights_and_the_hdri_are_carried(scene):
+def uv_box_mesh(name: str, material):
+    """A 2 m cube with Blender's own UV map, wearing ``material``."""
     import bmesh
 
-    mat, px = checker_material()
-    me = bpy.data.meshes.new("Box")
+    me = bpy.data.meshes.new(name)
     bm = bmesh.new()
     bm.loops.layers.uv.new("UVMap")
     bmesh.ops.create_cube(bm, size=2.0, calc_uvs=True)
     bm.to_mesh(me)
     bm.free()
-    me.materials.append(mat)
-    add(scene, "Box", me, (0, 0, 0))
+    me.materials.append(material)
+    return me
+
+
+def test_textures_area_lights_and_the_hdri_are_carried(scene):
+    mat, px = checker_material()
+    add(scene, "Box", uv_box_mesh("Box", mat), (0, 0, 0))
     plain = add(scene, "NoUVs", cube_mesh("NoUVsMesh"), (4, 0, 0))  # bmesh's cube has no UV map
     plain.data.materials.append(mat)
     shapes = {"SQUARE": (1.0, 0.0), "RECTANGLE": (2.0, 0.5), "DISK": (1.5, 0.0), "ELLIPSE": (1.0, 3.0)}
@@ -394,3 +399,233 @@ def test_geometry_nodes_instances_text_holdouts_and_camera_visibility(scene):
     assert "Held" in names and "Ghost" not in names
     notes = t.notes_text(limit=50)
     assert "'Held': holdout" in notes and "'Ghost': invisible to camera" in notes
+
+
+# -- incremental translation (the viewport's view_update) ------------------------------------------------
+class ViewportUpdates:
+    """What the render engine's view_update does on each depsgraph update, run from Blender's
+    depsgraph_update_post handler (view_update itself needs a GUI): the incremental translation through
+    one cache, next to a fresh full translation of the same depsgraph to compare with."""
+
+    def __init__(self) -> None:
+        from addon.translate import TranslationCache
+
+        self.cache = TranslationCache()
+        self.incremental = None
+        self.fresh = None
+        self.changes = []
+
+    def __enter__(self):
+        bpy.app.handlers.depsgraph_update_post.append(self.on_update)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        bpy.app.handlers.depsgraph_update_post.remove(self.on_update)
+
+    def on_update(self, _scene, depsgraph) -> None:
+        from addon.translate import depsgraph_updates, translate_update
+
+        self.changes = depsgraph_updates(depsgraph)
+        self.incremental = translate_update(depsgraph, self.cache, force=not self.cache.meshes)
+        self.fresh = translate(depsgraph, camera=False)
+
+    def edit(self, change) -> tuple[object, int]:
+        """Apply ``change()``, let the depsgraph evaluate it; (the incremental translation or None, meshes
+        it extracted)."""
+        before = self.cache.extractions
+        self.incremental, self.fresh = "none yet", None
+        change()
+        bpy.context.evaluated_depsgraph_get().update()
+        assert self.fresh is not None, "the depsgraph reported no update"
+        return self.incremental, self.cache.extractions - before
+
+
+def assert_same_translation(got, want) -> None:
+    a, b = got.scene_data, want.scene_data
+    for name in ("positions", "normals", "triangles", "material_ids", "object_ids", "uvs"):
+        x, y = getattr(a, name), getattr(b, name)
+        assert (x is None) == (y is None), name
+        if x is not None:
+            np.testing.assert_array_equal(x, y, err_msg=name)
+    assert a.object_names == b.object_names
+    assert a.materials == b.materials and a.lights == b.lights
+    assert isinstance(a.environment, np.ndarray) == isinstance(b.environment, np.ndarray)
+    if isinstance(a.environment, np.ndarray):
+        np.testing.assert_array_equal(a.environment, b.environment)
+    else:
+        assert a.environment == b.environment
+    assert a.environment_strength == b.environment_strength
+    assert a.environment_rotation == b.environment_rotation
+    assert len(a.textures) == len(b.textures)
+    for ta, tb in zip(a.textures, b.textures, strict=True):
+        np.testing.assert_array_equal(ta.image, tb.image)
+        assert (ta.colorspace, ta.wrap_u, ta.wrap_v) == (tb.colorspace, tb.wrap_u, tb.wrap_v)
+    assert got.pass_indices == want.pass_indices
+    assert [str(n) for n in got.notes] == [str(n) for n in want.notes]
+
+
+def test_incremental_translation_reads_only_what_an_edit_changed(scene):
+    shared = cube_mesh("Shared")
+    a = add(scene, "A", shared, (-3, 0, 0))
+    b = add(scene, "B", shared, (0, 0, 0))  # a linked duplicate: one extracted mesh for both
+    c = add(scene, "C", sphere_mesh("Ball"), (3, 0, 0))
+    c.modifiers.new("Subdivision", "SUBSURF").levels = 1
+    red, blue = emissive("Red", (1, 0, 0)), emissive("Blue", (0, 0, 1))
+    shared.materials.append(red)
+    c.data.materials.append(blue)
+    lamp = add(scene, "Lamp", bpy.data.lights.new("Lamp", "POINT"), (0, -4, 4))
+    with ViewportUpdates() as vp:
+        first, reads = vp.edit(lambda: setattr(a, "location", (-3, 0, 0.5)))
+        assert reads == 2 and first.stats["unique_meshes"] == 2  # the first translation reads everything
+        assert_same_translation(first, vp.fresh)
+
+        # moving an object: every mesh reused, only its instance transformed again
+        moved, reads = vp.edit(lambda: setattr(a, "location", (-3, 1, 0.5)))
+        assert reads == 0 and moved.stats["mesh_reuses"] == 2
+        assert_same_translation(moved, vp.fresh)
+        assert not np.array_equal(moved.scene_data.positions, first.scene_data.positions)
+
+        # the camera moving changes nothing the simulator sees (it is read at every draw)
+        still, reads = vp.edit(lambda: setattr(scene.camera, "location", (0.0, -11.0, 0.0)))
+        assert still is None and reads == 0
+
+        # a material edit: materials read again, no mesh
+        def recolour():
+            blue.node_tree.nodes["Principled BSDF"].inputs["Emission Strength"].default_value = 9.0
+        recoloured, reads = vp.edit(recolour)
+        assert reads == 0
+        assert_same_translation(recoloured, vp.fresh)
+        assert recoloured.scene_data.materials != moved.scene_data.materials
+
+        # a light edit: no mesh
+        lit, reads = vp.edit(lambda: setattr(lamp.data, "energy", 321.0))
+        assert reads == 0
+        assert_same_translation(lit, vp.fresh)
+
+        # a geometry edit of one object: exactly its mesh is read again
+        def reshape():
+            c.data.vertices[0].co.z += 0.25
+            c.data.update()
+        reshaped, reads = vp.edit(reshape)
+        assert reads == 1 and reshaped.stats["mesh_reuses"] == 1
+        assert_same_translation(reshaped, vp.fresh)
+
+        # hiding and deleting objects: gone from the scene, their cached meshes dropped
+        hidden, _ = vp.edit(lambda: setattr(c, "hide_viewport", True))
+        assert "C" not in hidden.scene_data.object_names
+        assert_same_translation(hidden, vp.fresh)
+        assert len(vp.cache.meshes) == 1
+        gone, _ = vp.edit(lambda: bpy.data.objects.remove(b))
+        assert gone.scene_data.object_names == ["A"]
+        assert_same_translation(gone, vp.fresh)
+
+        # an object added: read once, the others reused
+        added, reads = vp.edit(lambda: add(scene, "D", cube_mesh("New"), (0, 2, 0)))
+        assert reads == 1 and set(added.scene_data.object_names) == {"A", "D"}
+        assert_same_translation(added, vp.fresh)
+
+
+def test_incremental_translation_of_instances_and_modifiers(scene):
+    """Collection instances share their source's mesh (read once) and moving an instancer re-reads
+    nothing; an edited modifier re-reads exactly its object's mesh; a source edit updates every
+    instance. Each step equals a fresh translation."""
+    visibility_scene(scene)
+    ball = add(scene, "Ball", sphere_mesh("BallMesh"), (0, 0, 2))
+    sub = ball.modifiers.new("Subdivision", "SUBSURF")
+    sub.levels = 1
+    instancer = bpy.data.objects["Instancer0"]
+    source = bpy.data.objects["Source"]
+    with ViewportUpdates() as vp:
+        first, reads = vp.edit(lambda: setattr(ball, "location", (0, 0, 2.5)))
+        # Shown, HiddenRender (shown in the viewport), the source (once for both instances), the ball
+        assert reads == 4 and first.stats["instances"] == 5
+        assert_same_translation(first, vp.fresh)
+        moved, reads = vp.edit(lambda: setattr(instancer, "location", (3, 1, 0)))
+        assert reads == 0
+        assert_same_translation(moved, vp.fresh)
+        finer, reads = vp.edit(lambda: setattr(sub, "levels", 2))
+        assert reads == 1 and finer.stats["triangles"] > moved.stats["triangles"]
+        assert_same_translation(finer, vp.fresh)
+
+        def grow():
+            source.data.vertices[0].co.z += 0.5
+            source.data.update()
+        grown, reads = vp.edit(grow)
+        assert reads == 1  # one mesh behind both instances
+        assert_same_translation(grown, vp.fresh)
+
+
+def test_incremental_translation_keeps_images_and_the_world_until_they_change(scene):
+    """Image pixels and the world are kept across edits (their notes reported again each time); a
+    material edit re-reads materials (not the image), a world edit the world."""
+    mat, _px = checker_material()
+    image = mat.node_tree.nodes["Image Texture"].image
+    image.colorspace_settings.name = "Linear Rec.2020"  # read as linear, with a note
+    box = add(scene, "Box", uv_box_mesh("Box", mat), (0, 0, 0))
+    hdri_world(strength=1.5, rotation_z=0.6)
+    with ViewportUpdates() as vp:
+        first, _ = vp.edit(lambda: setattr(box, "location", (0, 0, 0.1)))
+        assert any("colour space" in n.message for n in first.notes)
+        assert_same_translation(first, vp.fresh)
+        images = dict(vp.cache.images)
+
+        def rougher():
+            mat.node_tree.nodes["Principled BSDF"].inputs["Roughness"].default_value = 0.8
+        rough, reads = vp.edit(rougher)
+        assert reads == 0 and vp.cache.images == images  # the image was not read again
+        assert_same_translation(rough, vp.fresh)
+        assert rough.scene_data.materials[0].roughness == pytest.approx(0.8)
+
+        def brighter():
+            scene.world.node_tree.nodes["Background"].inputs["Strength"].default_value = 3.0
+        bright, reads = vp.edit(brighter)
+        assert reads == 0 and bright.scene_data.environment_strength == pytest.approx(3.0)
+        assert_same_translation(bright, vp.fresh)
+
+
+def test_translation_render_holds_viewport_workers_still(scene):
+    """translate_for_render runs Blender's render operator with a render engine it registers for the
+    purpose: no viewport worker may run Python meanwhile. A worker busy rendering is stopped before and
+    resumed after; between Blender's render_pre and render_post it never ran."""
+    import threading
+    import time
+
+    from addon.core.engine_frame import RenderCancelled
+    from addon.core.progressive import ProgressiveDriver, ViewRequest
+
+    add(scene, "Cube", cube_mesh("C"), (0, 0, 0))
+    ticks: list[float] = []
+    window: dict[str, float] = {}
+    started = threading.Event()
+
+    def busy_render(payload, w, h, should_stop):
+        started.set()
+        for _ in range(4000):  # about 8 s of bands unless stopped
+            ticks.append(time.monotonic())
+            if should_stop():
+                raise RenderCancelled
+            time.sleep(0.002)
+        return np.zeros((h, w, 4), np.float32), payload
+
+    def pre(*_args):
+        window["pre"] = time.monotonic()
+
+    def post(*_args):
+        window["post"] = time.monotonic()
+
+    driver = ProgressiveDriver(busy_render, (1.0,))
+    bpy.app.handlers.render_pre.append(pre)
+    bpy.app.handlers.render_post.append(post)
+    try:
+        driver.update(ViewRequest("view", 8, 8))
+        assert started.wait(5)
+        translate_for_render(scene)
+        assert "pre" in window and "post" in window
+        assert not [t for t in ticks if window["pre"] <= t <= window["post"]]
+        time.sleep(0.1)
+        assert ticks[-1] > window["post"]  # the stopped render started again afterwards
+        assert driver.cancelled >= 1
+    finally:
+        bpy.app.handlers.render_pre.remove(pre)
+        bpy.app.handlers.render_post.remove(post)
+        driver.close()

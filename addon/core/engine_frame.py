@@ -9,11 +9,11 @@ and Power.
 
 The Power pass shows where the frame's dynamic power goes, tile by tile: the tracer reports every tile's
 own activity counters and closest-hit comparisons (they sum to the frame's), the energy model prices
-each tile's activity (``sim_core.price``; its energy is linear in them, so the tiles' energies sum to the
-frame's), and a pixel holds its tile's power at the frame rate the GPU reaches (the scene's when the
-frame keeps up, else its own lower rate: ``sim_core.sustained_power``) spread evenly over the tile's
-pixels, in microwatts: the pass sums to the frame's dynamic power (static power is the same everywhere
-and left out).
+all tiles at once (``sim_core.price_tiles``: ``price`` on arrays; energy is linear in the counts, so the
+tiles' energies sum to the frame's), and a pixel holds its tile's power at the frame rate the GPU
+reaches (the scene's when the frame keeps up, else its own lower rate: ``sim_core.sustained_power``)
+spread evenly over the tile's pixels, in microwatts: the pass sums to the frame's dynamic power (static
+power is the same everywhere and left out).
 """
 
 from __future__ import annotations
@@ -25,7 +25,6 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -154,13 +153,21 @@ class FrameOutput:
 def tile_energy(tile_stats: Sequence[Mapping[str, Any]], profile: Any, fps: float, settings: Any = None,
                 scene: Any = None) -> np.ndarray:
     """Dynamic energy (J) of each tile: its counters and comparator histogram priced by the energy model
-    as a frame's are (same profile, frame rate, settings and scene)."""
-    out = np.empty(len(tile_stats), dtype=np.float64)
-    for i, t in enumerate(tile_stats):
-        activity = SimpleNamespace(counters=t["counters"], comparator_histogram=t["comparator_histogram"],
-                                   settings=settings)
-        out[i] = sim_core.price(activity, profile, fps, scene=scene).dynamic_energy_j
-    return out
+    as a frame's are (same profile, settings and scene; all tiles at once, ``sim_core.price_tiles``).
+    ``fps`` is checked but does not change energy."""
+    if not (isinstance(fps, int | float) and math.isfinite(fps) and fps > 0):
+        raise ValueError(f"fps must be a positive number, got {fps!r}")
+    if not tile_stats:
+        return np.zeros(0, dtype=np.float64)
+    names = list(tile_stats[0]["counters"])
+    if all(list(t["counters"]) == names for t in tile_stats):  # the tracer's tiles: one table at once
+        table = np.array([list(t["counters"].values()) for t in tile_stats], dtype=np.uint64)
+    else:
+        names = sorted({k for t in tile_stats for k in t["counters"]})
+        table = np.array([[t["counters"].get(k, 0) for k in names] for t in tile_stats], dtype=np.uint64)
+    counters = dict(zip(names, table.T, strict=True))
+    histograms = np.stack([np.asarray(t["comparator_histogram"]) for t in tile_stats])
+    return sim_core.price_tiles(counters, histograms, profile, settings=settings, scene=scene)
 
 
 def _edges(n_out: int, n_in: int) -> np.ndarray:

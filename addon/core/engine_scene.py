@@ -13,43 +13,15 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import threading
-from collections.abc import Iterable
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 import sim_core
 
-# ID types whose change never alters what the simulator sees (the scene's own ID changes on every frame
-# change; actions change through the transforms they drive, which arrive as object updates).
-_IGNORED_ID_TYPES = frozenset({"SCENE", "ACTION", "TEXT", "WINDOWMANAGER", "WORKSPACE", "SCREEN", "BRUSH",
-                               "PALETTE", "LINESTYLE"})
+from .scene_translation.cache import Update, needs_translation
 
-
-@dataclass(frozen=True)
-class Update:
-    """One depsgraph update as :func:`needs_translation` reads it."""
-
-    id_type: str  # ID.id_type: "OBJECT", "MESH", "MATERIAL", ...
-    object_type: str = ""  # Object.type for objects: "MESH", "CAMERA", ...
-    geometry: bool = False
-    transform: bool = False
-    shading: bool = False
-
-
-def needs_translation(updates: Iterable[Update]) -> bool:
-    """Whether the depsgraph updates change the translated scene. Cameras moving or changing lens do
-    not (the camera is read at every draw); everything else that can reach the simulator does."""
-    for u in updates:
-        if u.id_type in _IGNORED_ID_TYPES or u.id_type == "CAMERA":
-            continue
-        if u.id_type == "OBJECT" and u.object_type == "CAMERA":
-            continue
-        if u.id_type == "OBJECT" and not (u.geometry or u.transform or u.shading):
-            continue  # selection or other non-evaluated state
-        return True
-    return False
+__all__ = ["NOT_RENDERED", "SceneCache", "Update", "fingerprint", "needs_translation"]
 
 
 def _feed(h: Any, value: Any) -> None:

@@ -8,13 +8,19 @@ cancelled at its next band, but a request's first (coarsest) level always comple
 of requests (playback, an object being dragged) still shows a new image per coarse render instead of
 cancelling every one; requests that arrive meanwhile are skipped, the newest wins. ``close()`` cancels
 everything and ends the thread.
+
+:func:`workers_paused` holds every driver's worker still (the level in flight cancelled at its next
+band, then re-rendered afterwards) for main-thread work during which no other Python thread may run:
+Blender's render operator, which the scene translation for a job uses.
 """
 
 from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable, Hashable
+import weakref
+from collections.abc import Callable, Hashable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
@@ -58,6 +64,36 @@ class ViewFrame:
         return self.level == self.levels - 1
 
 
+_drivers: weakref.WeakSet[ProgressiveDriver] = weakref.WeakSet()
+_pause_lock = threading.Lock()
+_pauses = 0  # nesting depth of workers_paused()
+
+
+def _paused() -> bool:
+    return _pauses > 0
+
+
+@contextmanager
+def workers_paused(timeout: float = 10.0) -> Iterator[None]:
+    """While the block runs, no driver's worker runs Python: each stops its render at the next band and
+    waits (in a lock, the GIL released) until the block ends, then renders its request again. Raises
+    TimeoutError (and resumes them) if a worker is still busy after ``timeout`` seconds."""
+    global _pauses
+    with _pause_lock:
+        _pauses += 1
+    try:
+        deadline = time.monotonic() + timeout
+        for driver in list(_drivers):
+            if not driver.wait_parked(max(0.0, deadline - time.monotonic())):
+                raise TimeoutError("a viewport render did not stop in time; try again")
+        yield
+    finally:
+        with _pause_lock:
+            _pauses -= 1
+        for driver in list(_drivers):
+            driver.wake()
+
+
 class ProgressiveDriver:
     """One worker thread rendering the newest request coarse to fine (see the module docstring)."""
 
@@ -79,6 +115,7 @@ class ProgressiveDriver:
         self.frames = 0  # images published
         self.cancelled = 0  # levels stopped before they finished
         self._thread = threading.Thread(target=self._run, name="render-budget-viewport", daemon=True)
+        _drivers.add(self)
         self._thread.start()
 
     # -- caller side ---------------------------------------------------------------------------------
@@ -129,12 +166,28 @@ class ProgressiveDriver:
     def alive(self) -> bool:
         return self._thread.is_alive()
 
+    def wait_parked(self, timeout: float) -> bool:
+        """Under :func:`workers_paused`: block until the worker is out of any render (True), or the
+        timeout passes (False)."""
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while self._active is not None:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                self._cond.wait(left)
+            return True
+
+    def wake(self) -> None:
+        with self._cond:
+            self._cond.notify_all()
+
     # -- worker side ---------------------------------------------------------------------------------
     def _run(self) -> None:
         while True:
             with self._cond:
-                while self._pending is None and not self._closed:
-                    self._cond.wait()
+                while (self._pending is None or _paused()) and not self._closed:
+                    self._cond.wait(0.5 if _paused() else None)  # woken by wake(); the timeout a safety net
                 if self._closed:
                     self._active = None
                     self._cond.notify_all()
@@ -150,13 +203,21 @@ class ProgressiveDriver:
 
     def _stop_level(self, level: int) -> bool:
         # Read without the lock: a stale answer only delays the stop by one band.
-        return self._closed or (level > 0 and self._pending is not None)
+        return self._closed or _paused() or (level > 0 and self._pending is not None)
+
+    def _requeue_if_paused(self, serial: int, request: ViewRequest) -> None:
+        """A render stopped by workers_paused() starts again afterwards (unless a newer one waits)."""
+        if _paused():
+            with self._cond:
+                if self._pending is None and not self._closed:
+                    self._pending = (serial, request)
 
     def _render_levels(self, serial: int, request: ViewRequest) -> None:
         levels = len(self.scales)
         for level, scale in enumerate(self.scales):
             if self._stop_level(level):
                 self.cancelled += 1
+                self._requeue_if_paused(serial, request)
                 return
             w = max(1, round(request.width * scale))
             h = max(1, round(request.height * scale))
@@ -164,6 +225,7 @@ class ProgressiveDriver:
                 image, info = self._render(request.payload, w, h, lambda lv=level: self._stop_level(lv))
             except RenderCancelled:
                 self.cancelled += 1
+                self._requeue_if_paused(serial, request)
                 return
             except Exception as exc:  # shown by the engine; the worker keeps serving new requests
                 self.error = f"{type(exc).__name__}: {exc}"

@@ -22,9 +22,10 @@ import sim_core
 from service.store import camera as camera_maths
 
 from .engine_frame import CameraView, render_frame
-from .engine_scene import SceneCache, fingerprint
+from .engine_scene import SceneCache
 from .engine_settings import FrameSettings
 from .progressive import ProgressiveDriver, ViewFrame, ViewRequest
+from .scene_translation.cache import TranslationCache
 
 Matrix = tuple[tuple[float, ...], ...]
 
@@ -35,8 +36,8 @@ def _rows(m: Sequence[Sequence[float]]) -> Matrix:
 
 @dataclass(frozen=True)
 class ViewScene:
-    """A translated scene as the viewport holds it: its content hash, the data and each object's
-    pass index."""
+    """A translated scene as the viewport holds it: its key (one per translation), the data and each
+    object's pass index."""
 
     key: str
     data: Any
@@ -84,17 +85,18 @@ class ViewportRenderer:
     def __init__(self, on_frame: Callable[[ViewFrame], None] | None = None,
                  scales: tuple[float, ...] = (0.25, 0.5, 1.0), threads: int | None = None) -> None:
         self.threads = threads
+        self.translation_cache = TranslationCache()  # what view_update's translations reuse
         self.scenes = SceneCache()
         self.scene: ViewScene | None = None
+        self._scene_serial = 0
         self.driver = ProgressiveDriver(self._render, scales, on_frame)
 
-    def set_scene(self, data: Any, object_pass_index: Sequence[float] = ()) -> bool:
-        """A newly translated scene; returns whether its content differs from the one shown."""
-        key = fingerprint(data)
-        if self.scene is not None and self.scene.key == key:
-            return False
-        self.scene = ViewScene(key, data, tuple(float(v) for v in object_pass_index))
-        return True
+    def set_scene(self, data: Any, object_pass_index: Sequence[float] = ()) -> None:
+        """A newly translated scene (the translator decides when the scene changed: the content is not
+        hashed here, on the interface's thread; its BVH is built on the worker)."""
+        self._scene_serial += 1
+        self.scene = ViewScene(f"scene-{self._scene_serial}", data,
+                               tuple(float(v) for v in object_pass_index))
 
     def show(self, matrix_world: Sequence[Sequence[float]], projection: Sequence[Sequence[float]],
              width: int, height: int, settings: FrameSettings, *, profile: str, fps: float,
@@ -121,6 +123,7 @@ class ViewportRenderer:
     def close(self, wait: bool = True) -> None:
         self.driver.close(wait)
         self.scenes.clear()
+        self.translation_cache.clear()
 
     def _render(self, payload: ViewPayload, width: int, height: int,
                 should_stop: Callable[[], bool]) -> tuple[np.ndarray, ViewInfo]:

@@ -8,8 +8,9 @@ Normal, Object Index, Sample Kind and Power passes and the settings, predicted a
 error as image metadata; an animation also writes a per-frame CSV beside its frames.
 
 The viewport (Rendered shading) is :class:`addon.core.viewport.ViewportRenderer` (a worker thread,
-coarse to fine); ``view_update`` / ``view_draw`` here only read Blender's state and draw the latest
-image with the ``gpu`` module, and do nothing in background mode.
+coarse to fine); ``view_update`` here reads only what an edit changed (``translate_update``: incremental,
+nothing for a camera move) and ``view_draw`` draws the latest image with the ``gpu`` module; both do
+nothing in background mode. The worker never calls into Blender: a main-thread timer tags redraws.
 """
 
 from __future__ import annotations
@@ -30,12 +31,12 @@ from .. import preferences
 from ..camera_path import camera_vfov, render_resolution, scene_fps
 from ..core.engine_frame import PASSES, AnimationLog, CameraView, FrameOutput, RenderCancelled, render_frame
 from ..core.engine_frame import animation_csv_path as csv_path_of
-from ..core.engine_scene import SceneCache, Update, needs_translation
+from ..core.engine_scene import SceneCache
 from ..core.engine_settings import Budget, FrameSettings, SettingsChooser, manual_indices, space
 from ..core.viewport import ViewportRenderer
 from ..handlers import add_handler, remove_handler
 from ..playback import scene_time, store_of
-from ..translate import translate
+from ..translate import translate, translate_update
 from .properties import manual_identifiers
 
 ENGINE_ID = "RENDER_BUDGET"
@@ -280,17 +281,8 @@ class RenderBudgetEngine(bpy.types.RenderEngine):
     def _viewport_renderer(self, scene: bpy.types.Scene) -> ViewportRenderer:
         vp = _viewports.get(id(self))
         if vp is None:
-            engine = weakref.ref(self)  # the worker must not keep a freed engine alive
-
-            def redraw(_frame: Any) -> None:
-                e = engine()
-                if e is not None:
-                    try:
-                        e.tag_redraw()
-                    except ReferenceError:  # Blender freed the engine meanwhile
-                        pass
-
-            vp = _viewports[id(self)] = ViewportRenderer(on_frame=redraw, threads=_threads(scene))
+            vp = _viewports[id(self)] = ViewportRenderer(threads=_threads(scene))
+            bpy.app.timers.register(_redraw_poller(weakref.ref(self), vp), first_interval=_REDRAW_POLL_S)
         return vp
 
     def view_update(self, context: bpy.types.Context, depsgraph: bpy.types.Depsgraph) -> None:
@@ -298,10 +290,11 @@ class RenderBudgetEngine(bpy.types.RenderEngine):
             return
         vp = self._viewport_renderer(depsgraph.scene)
         try:
-            if vp.scene is None or needs_translation(updates(depsgraph)):
-                translation = translate(depsgraph, camera=False)
+            # incremental: only what the edit changed is read from Blender again
+            translation = translate_update(depsgraph, vp.translation_cache, force=vp.scene is None)
+            if translation is not None:
                 vp.set_scene(translation.scene_data, translation.pass_indices)
-            self._viewport_error = None
+                self._viewport_error = None  # (an update that changes nothing keeps a failure shown)
         except Exception as exc:  # shown in the viewport's status; the last good scene stays
             self._viewport_error = str(exc)
 
@@ -346,14 +339,31 @@ class RenderBudgetEngine(bpy.types.RenderEngine):
         gpu.state.blend_set("NONE")
 
 
-def updates(depsgraph: bpy.types.Depsgraph) -> list[Update]:
-    """The depsgraph's updates as :func:`addon.core.engine_scene.needs_translation` reads them."""
-    out = []
-    for u in depsgraph.updates:
-        idb = u.id
-        out.append(Update(idb.id_type, getattr(idb, "type", "") if idb.id_type == "OBJECT" else "",
-                          u.is_updated_geometry, u.is_updated_transform, u.is_updated_shading))
-    return out
+#: How often the main thread looks for a new viewport image to draw (s).
+_REDRAW_POLL_S = 1.0 / 30.0
+
+
+def _redraw_poller(engine: weakref.ref[RenderBudgetEngine], vp: ViewportRenderer
+                   ) -> Callable[[], float | None]:
+    """A timer (Blender's main thread) that asks for a redraw when the worker published a new image: the
+    worker thread itself never calls into Blender (not even ``tag_redraw``), so it never runs against
+    the interface's own use of Blender's data. Ends with the engine or its viewport renderer."""
+    seen = [0]
+
+    def poll() -> float | None:
+        e = engine()
+        if e is None or not vp.driver.alive:
+            return None
+        frames = vp.driver.frames
+        if frames != seen[0]:
+            seen[0] = frames
+            try:
+                e.tag_redraw()
+            except ReferenceError:  # Blender freed the engine meanwhile
+                return None
+        return _REDRAW_POLL_S
+
+    return poll
 
 
 def _blender_rows(image: np.ndarray) -> np.ndarray:

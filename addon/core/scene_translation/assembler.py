@@ -99,33 +99,36 @@ class SceneAssembler:
         if light is not None:
             self.lights.append(light)
 
-    def build(self, source: str = "") -> SceneData:
-        """World-space arrays of every instance (one object id each, in instance order)."""
+    def build(self, source: str = "", transforms: dict[Any, Any] | None = None) -> SceneData:
+        """World-space arrays of every instance (one object id each, in instance order).
+
+        ``transforms`` (an incremental translation's table, by mesh key and matrix): instances found there
+        are not transformed again; afterwards it holds exactly this scene's instances. Mesh keys must then
+        name a mesh's content (a re-read mesh gets a new key)."""
         from sim_core.scene_data import SceneData  # lazy: the native core loads on first use
 
-        positions, normals, uvs, triangles, material_ids, object_ids, names = [], [], [], [], [], [], []
+        parts: list[tuple[np.ndarray, np.ndarray, np.ndarray, MeshArrays, np.ndarray]] = []
+        names: list[str] = []
         pass_indices: list[int] = []
-        offset = 0
+        used: dict[Any, Any] = {}
         for inst in self.instances:
             mesh = self.meshes[inst.mesh_key]
             if mesh.triangle_count == 0:
                 continue
+            key = (inst.mesh_key, inst.matrix.tobytes())
             try:
-                p, n, t = transform_mesh(mesh, inst.matrix)
+                p, n, t = used[key] = (transforms.get(key) if transforms is not None else None) \
+                    or used.get(key) or transform_mesh(mesh, inst.matrix)
             except ValueError as exc:
                 self.notes.warn(f"object {inst.name!r}", f"{exc}; left out")
                 continue
             table = np.asarray(inst.slot_materials or (self.default_material(),), dtype=np.uint32)
-            slots = np.clip(mesh.slots, 0, len(table) - 1)
-            positions.append(p)
-            normals.append(n)
-            uvs.append(mesh.uvs if mesh.uvs is not None else np.zeros((p.shape[0], 2), np.float32))
-            triangles.append(t.astype(np.int64) + offset)
-            material_ids.append(table[slots])
-            object_ids.append(np.full(t.shape[0], len(names), dtype=np.uint32))
+            parts.append((p, n, t, mesh, table))
             names.append(inst.name)
             pass_indices.append(inst.pass_index)
-            offset += p.shape[0]
+        if transforms is not None:
+            transforms.clear()
+            transforms.update(used)
         if not names:
             raise ValueError("nothing to render: the scene has no visible geometry for rendering")
         self.pass_indices = pass_indices
@@ -134,12 +137,27 @@ class SceneAssembler:
             self.notes.warn("lights", f"{len(self.lights)} lights, the simulator takes 32: kept the 32 "
                                       "strongest")
             self.lights = kept
+        # one concatenation per array, offsets and material tables applied per triangle at once
+        tri_counts = np.array([t.shape[0] for _, _, t, _, _ in parts], dtype=np.int64)
+        vertex_counts = np.array([p.shape[0] for p, _, _, _, _ in parts], dtype=np.int64)
+        vertex_offsets = np.concatenate(([0], np.cumsum(vertex_counts)[:-1]))
+        triangles = np.concatenate([t for _, _, t, _, _ in parts]).astype(np.uint32, copy=False)
+        triangles = triangles + np.repeat(vertex_offsets, tri_counts).astype(np.uint32)[:, None]
+        table_sizes = np.array([len(table) for *_, table in parts], dtype=np.int64)
+        table_starts = np.concatenate(([0], np.cumsum(table_sizes)[:-1]))
+        slots = np.concatenate([mesh.slots for _, _, _, mesh, _ in parts]).astype(np.int64)
+        slots = (np.clip(slots, 0, np.repeat(table_sizes - 1, tri_counts))
+                 + np.repeat(table_starts, tri_counts))
+        uvs = None
+        if self.textures:
+            uvs = np.concatenate([mesh.uvs if mesh.uvs is not None else np.zeros((p.shape[0], 2), np.float32)
+                                  for p, _, _, mesh, _ in parts]).astype(np.float32, copy=False)
         return SceneData(
-            positions=np.concatenate(positions).astype(np.float32),
-            triangles=np.concatenate(triangles).astype(np.uint32),
-            normals=np.concatenate(normals).astype(np.float32),
-            material_ids=np.concatenate(material_ids).astype(np.uint32),
-            object_ids=np.concatenate(object_ids).astype(np.uint32),
+            positions=np.concatenate([p for p, *_ in parts]).astype(np.float32, copy=False),
+            triangles=triangles,
+            normals=np.concatenate([n for _, n, *_ in parts]).astype(np.float32, copy=False),
+            material_ids=np.concatenate([table for *_, table in parts])[slots],
+            object_ids=np.repeat(np.arange(len(parts), dtype=np.uint32), tri_counts),
             materials=list(self.materials) or [self._fallback_material()],
             lights=list(self.lights),
             cameras=list(self.cameras),
@@ -148,7 +166,7 @@ class SceneAssembler:
             environment_rotation=self.environment_rotation,
             source=source,
             object_names=names,
-            uvs=np.concatenate(uvs).astype(np.float32) if self.textures else None,
+            uvs=uvs,
             textures=list(self.textures),
         )
 

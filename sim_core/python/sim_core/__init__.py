@@ -4,7 +4,7 @@ from . import _core
 from ._core import CacheConfig
 from .analysis import SceneAnalysis, analyze, inert_parameters
 from .camera import Camera
-from .energy import EnergyReport, Profile, list_profiles, load_profile, price, sustained_power
+from .energy import EnergyReport, Profile, list_profiles, load_profile, price, price_tiles, sustained_power
 from .geometry import smooth_normals
 from .image import load_exr
 from .render import (
@@ -45,6 +45,7 @@ __all__ = [
     "load_exr",
     "load_profile",
     "price",
+    "price_tiles",
     "render",
     "render_size",
     "render_stereo",

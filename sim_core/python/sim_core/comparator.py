@@ -42,6 +42,16 @@ def _table_columns() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np
     return t[:, 0], t[:, 1], t[:, 2], t[:, 3], t[:, 4]
 
 
+def chain_energies(energy_scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """(synchronous, asynchronous) energy (J) of one comparison by compute-chain length 0..24: a
+    histogram's energy is its dot product with these (Table 4.1, scaled by ``energy_scale``)."""
+    bits = int(_core.COMPARATOR_BITS)
+    # Table 4.1 stops at 23 bits after the MSB (all 24 examined); "equal over all bits" costs the same.
+    chain = np.minimum(np.arange(bits + 1, dtype=np.float64), 23.0)
+    k, _sd, se, _ad, ae = _table_columns()
+    return np.interp(chain, k, se) * 1e-12 * energy_scale, np.interp(chain, k, ae) * 1e-12 * energy_scale
+
+
 def comparator_stats(histogram: np.ndarray | None, energy_scale: float = 1.0) -> ComparatorStats:
     """Price a chain-length histogram with Table 4.1 (J, scaled by ``energy_scale`` for the process)."""
     bits = int(_core.COMPARATOR_BITS)
@@ -56,12 +66,9 @@ def comparator_stats(histogram: np.ndarray | None, energy_scale: float = 1.0) ->
         h = h.astype(np.int64)
     n = int(h.sum())
     lengths = np.arange(bits + 1, dtype=np.float64)
-    # Table 4.1 stops at 23 bits after the MSB (all 24 examined); "equal over all bits" costs the same.
-    chain = np.minimum(lengths, 23.0)
-    k, sd, se, ad, ae = _table_columns()
-    sync_e = np.interp(chain, k, se) * 1e-12 * energy_scale
-    async_e = np.interp(chain, k, ae) * 1e-12 * energy_scale
-    async_d = np.interp(chain, k, ad) * 1e-9
+    sync_e, async_e = chain_energies(energy_scale)
+    k, sd, _se, ad, _ae = _table_columns()
+    async_d = np.interp(np.minimum(lengths, 23.0), k, ad) * 1e-9
     # The synchronous comparator's delay is its worst case whatever the operands (clock period, Table 4.1).
     sync_total_e = float(h @ sync_e)
     async_total_e = float(h @ async_e)

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from . import _core
-from .comparator import COMPARATOR_TABLE, ComparatorStats, comparator_stats
+from .comparator import COMPARATOR_TABLE, ComparatorStats, chain_energies, comparator_stats
 
 __all__ = [
     "COMPARATOR_TABLE",
@@ -35,6 +35,7 @@ __all__ = [
     "list_profiles",
     "load_profile",
     "price",
+    "price_tiles",
     "sustained_power",
 ]
 
@@ -283,22 +284,26 @@ def _reads_per_lookup(settings: Any) -> int:
     return 1 if str(getattr(settings, "env_filter", "")).lower() == "off" else 4
 
 
-def _block_costs(prof: Profile, c: Mapping[str, int], hist: np.ndarray | None, settings: Any, scene: Any
-                 ) -> tuple[dict[str, float], dict[str, float], ComparatorStats]:
+def _block_costs(prof: Profile, c: Mapping[str, Any], hist: np.ndarray | None, settings: Any, scene: Any
+                 ) -> tuple[dict[str, Any], dict[str, Any], ComparatorStats | None]:
     """Energy (J) and cycles of every block for the counted events (the first half of :func:`price`),
-    unit by unit: the shading processor, the traversal and intersection unit, the memories."""
+    unit by unit: the shading processor, the traversal and intersection unit, the memories.
 
-    def n(name: str) -> int:
+    Counts are integers (one frame) or equal-length integer arrays with ``hist`` one histogram row each
+    (many tiles at once, :func:`price_tiles`): the same arithmetic, element by element; no comparator
+    statistics then (None)."""
+
+    def n(name: str) -> Any:
         return c.get(name, 0)
 
-    energy: dict[str, float] = {}
-    cycles: dict[str, float] = {}
+    energy: dict[str, Any] = {}
+    cycles: dict[str, Any] = {}
     _srp_costs(prof, n, settings, scene, energy, cycles)
     comp = _ti_costs(prof, n, hist, energy, cycles)
     _memory_costs(prof, n, energy, cycles)
 
     for k, v in energy.items():
-        if not math.isfinite(v):
+        if not np.all(np.isfinite(v)):
             raise ValueError(f"energy of block {k!r} is not finite")
 
     return energy, cycles, comp
@@ -308,8 +313,8 @@ def _block_costs(prof: Profile, c: Mapping[str, int], hist: np.ndarray | None, s
 _PJ = 1e-12
 
 
-def _srp_costs(prof: Profile, n: Callable[[str], int], settings: Any, scene: Any, energy: dict[str, float],
-               cycles: dict[str, float]) -> None:
+def _srp_costs(prof: Profile, n: Callable[[str], Any], settings: Any, scene: Any, energy: dict[str, Any],
+               cycles: dict[str, Any]) -> None:
     """The shading processor's blocks: programmable work priced per op, texel reads, the resolve pass."""
     ops, e, thr = prof.ops, prof.energy_pj, prof.throughput
     pj = _PJ
@@ -339,7 +344,9 @@ def _srp_costs(prof: Profile, n: Callable[[str], int], settings: Any, scene: Any
     srp_block("texture", n("texture_fetches"), ops["texture_filter"])
     energy["texture"] += n("texel_reads") * e["texel_read"] * pj
     # The filter arithmetic overlaps the texel reads; the slower of the two sets the block's time.
-    cycles["texture"] = max(cycles["texture"], n("texel_reads") / thr["texels_per_cycle"])
+    texel_cycles = n("texel_reads") / thr["texels_per_cycle"]
+    cycles["texture"] = (np.maximum(cycles["texture"], texel_cycles) if isinstance(texel_cycles, np.ndarray)
+                         else max(cycles["texture"], texel_cycles))  # arrays: price_tiles
     # The resolve pass (sub-samples, or AO to denoise): the pixel filter's taps and the ambient filter's,
     # and the sample buffer written to DRAM by the tiles and read back once.
     energy["resolve"] = (n("resolve_taps") * ops["resolve_tap"]
@@ -348,8 +355,8 @@ def _srp_costs(prof: Profile, n: Callable[[str], int], settings: Any, scene: Any
                          + n("ambient_filter_taps") * ops["ambient_filter_tap"]) / thr["srp_ops_per_cycle"]
 
 
-def _ti_costs(prof: Profile, n: Callable[[str], int], hist: np.ndarray | None, energy: dict[str, float],
-              cycles: dict[str, float]) -> ComparatorStats:
+def _ti_costs(prof: Profile, n: Callable[[str], Any], hist: np.ndarray | None, energy: dict[str, Any],
+              cycles: dict[str, Any]) -> ComparatorStats | None:
     """The traversal and intersection unit's blocks: tree steps, triangle tests, the closest-hit
     comparator (from its histogram) and the node cache."""
     e, thr = prof.energy_pj, prof.throughput
@@ -361,18 +368,27 @@ def _ti_costs(prof: Profile, n: Callable[[str], int], hist: np.ndarray | None, e
     cycles["traversal"] = n("bvh_node_visits") * int(_core.BVH_NODE_BOXES) / thr["ti_box_tests_per_cycle"]
     energy["intersection"] = n("triangle_tests") * e["triangle_test"] * pj
     cycles["intersection"] = n("triangle_tests") / thr["ti_triangle_tests_per_cycle"]
-    comp = comparator_stats(hist, prof.comparator_energy_scale)
-    if comp.comparisons == 0 and n("closest_hit_comparisons") > 0:
-        raise ValueError("closest_hit_comparisons > 0 but the render carries no comparator histogram")
-    energy["comparator"] = comp.async_energy_j if prof.comparator_style == "async" else comp.sync_energy_j
+    comparisons = n("closest_hit_comparisons")
+    if hist is not None and np.ndim(hist) == 2:  # many tiles: one histogram row each
+        sync_e, async_e = chain_energies(prof.comparator_energy_scale)
+        per_chain = async_e if prof.comparator_style == "async" else sync_e
+        if np.any((hist.sum(axis=1) == 0) & (comparisons > 0)):
+            raise ValueError("closest_hit_comparisons > 0 but a tile carries no comparator histogram")
+        energy["comparator"] = hist.astype(np.float64) @ per_chain
+        comp = None
+    else:
+        comp = comparator_stats(hist, prof.comparator_energy_scale)
+        if comp.comparisons == 0 and comparisons > 0:
+            raise ValueError("closest_hit_comparisons > 0 but the render carries no comparator histogram")
+        energy["comparator"] = comp.async_energy_j if prof.comparator_style == "async" else comp.sync_energy_j
     cycles["comparator"] = 0.0  # inside the intersection pipeline; its latency is hidden there
     energy["cache"] = n("cache_accesses") * e["cache_line_access"] * pj
     cycles["cache"] = n("cache_accesses") / thr["cache_line_accesses_per_cycle"]
     return comp
 
 
-def _memory_costs(prof: Profile, n: Callable[[str], int], energy: dict[str, float],
-                  cycles: dict[str, float]) -> None:
+def _memory_costs(prof: Profile, n: Callable[[str], Any], energy: dict[str, Any],
+                  cycles: dict[str, Any]) -> None:
     """The tile buffer and DRAM traffic: bytes read and written, with the DMA that moves them."""
     e, thr, clk = prof.energy_pj, prof.throughput, prof.clock
     pj = _PJ
@@ -393,6 +409,44 @@ def _memory_costs(prof: Profile, n: Callable[[str], int], energy: dict[str, floa
     energy["resolve_dram"] = n("resolve_bytes") * (e["dram_write_byte"] + e["dram_read_byte"]
                                                    + 2 * e["dma_byte"]) * pj
     cycles["resolve_dram"] = 2 * n("resolve_bytes") / bytes_per_srp_cycle
+
+
+def price_tiles(counters: Mapping[str, Any], histograms: np.ndarray | None, profile: Profile | str | Path, *,
+                settings: Any = None, scene: Any = None) -> np.ndarray:
+    """Dynamic energy (J) of many tiles at once: what :func:`price` gives each tile's counters and
+    comparator histogram (``dynamic_energy_j``), the same arithmetic on arrays (equal to rounding).
+
+    ``counters``: counter name -> one non-negative integer count per tile (a render's ``tile_counters``
+    columns); ``histograms``: (tiles, 25) comparator histograms or None; ``settings`` / ``scene`` as
+    :func:`price` reads them from a render. Dynamic energy does not depend on the frame rate."""
+    prof = load_profile(profile) if not isinstance(profile, Profile) else profile
+    cols: dict[str, np.ndarray] = {}
+    length = None
+    for k, v in counters.items():
+        arr = np.asarray(v)
+        if arr.ndim != 1 or (length is not None and arr.shape[0] != length):
+            raise ValueError(f"counter {k!r} must be one count per tile ({length} tiles), got {arr.shape}")
+        if arr.size and not np.issubdtype(arr.dtype, np.integer):
+            raise ValueError(f"counter {k!r} must hold integers, got {arr.dtype}")
+        if arr.size and np.issubdtype(arr.dtype, np.signedinteger) and (arr < 0).any():
+            raise ValueError(f"counter {k!r} has a negative count")
+        length = arr.shape[0]
+        cols[str(k)] = arr.astype(np.int64)
+    if length is None:
+        raise ValueError("price_tiles needs at least one counter")
+    for k in COUNTERS:  # a missing counter counts 0 (as in price), as a column: every block is an array
+        cols.setdefault(k, np.zeros(length, dtype=np.int64))
+    bins = int(_core.COMPARATOR_BITS) + 1
+    hist = np.zeros((length, bins), np.int64) if histograms is None else np.asarray(histograms)
+    if hist.shape != (length, bins) or not np.issubdtype(hist.dtype, np.integer) or (hist < 0).any():
+        raise ValueError(f"comparator histograms must be ({length}, {bins}) non-negative integers, got "
+                         f"{hist.shape}")
+    hist = hist.astype(np.int64)
+    energy, _cycles, _comp = _block_costs(prof, cols, hist, settings, scene)
+    total = np.zeros(length, dtype=np.float64)
+    for b in BLOCKS:  # in price()'s order
+        total += energy[b]
+    return total
 
 
 def price(result: Any, profile: Profile | str | Path, fps: float, *, scene: Any = None) -> EnergyReport:
