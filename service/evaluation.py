@@ -16,7 +16,8 @@ power would otherwise hide every difference between settings.
 
 :class:`Evaluator` is the driver side: it answers batches of (camera, settings) from the persistent
 cache and sends only the misses, as one batch, to an executor; workers keep their scene and each
-camera's reference image, so a reference is rendered once per worker and camera.
+camera's reference render, so a reference is rendered once per worker and camera (once per process
+however many threads evaluate at that camera at once), and maximum quality itself is priced from it.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -49,7 +51,8 @@ from service.store.camera import check_fov
 #: miss their deadline).
 PIPELINE_VERSION = "v2"
 
-__all__ = ["METRICS", "CameraSpec", "Evaluation", "Evaluator", "SceneHandle", "evaluate", "image_error"]
+__all__ = ["METRICS", "CameraSpec", "Evaluation", "Evaluator", "Reference", "SceneHandle", "evaluate",
+           "image_error", "reference"]
 
 
 @dataclass(frozen=True)
@@ -187,12 +190,33 @@ def load_scene(path: str | Path, *, ship_bytes: bool = False) -> SceneHandle:
     return SceneHandle(path=path, ship_bytes=ship_bytes)
 
 
+@dataclass(frozen=True)
+class Reference:
+    """A camera's maximum-quality render as evaluations keep it: the image every error at that camera
+    is measured against, and what the energy model prices (counters, comparator histogram, settings),
+    so that evaluating maximum quality itself prices this render instead of rendering the same image
+    again."""
+
+    image: np.ndarray
+    activity: SimpleNamespace
+    display: np.ndarray  # the image through the display transform (what SSIM compares), made once
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.image.nbytes + self.display.nbytes)
+
+
 # worker-process state: the few most recent scenes by content hash (a long-lived worker sees many jobs),
-# profiles by name, reference images (64x36 references are ~27 KB: a whole lockstep batch of samples fits)
+# profiles by name, references (64x36 ones are ~27 KB: a whole lockstep batch of samples fits; 320x180
+# ones ~2 MB with their display transform: a path's evaluated frames fit under the byte cap)
 _LOCK = threading.Lock()  # one scene load at a time
 _SCENES: LRUCache[str, Any] = LRUCache(8)
 _PROFILES: dict[str, Any] = {}
-_REFS: LRUCache[tuple[str, ...], np.ndarray] = LRUCache(512)
+REFERENCE_CACHE_BYTES = 512 * 1024**2
+_REFS: LRUCache[tuple[str, ...], Reference] = LRUCache(512, weigh=lambda r: r.nbytes,
+                                                       max_weight=REFERENCE_CACHE_BYTES)
+_REF_LOCKS: dict[tuple[str, ...], threading.Lock] = {}  # references being rendered, by key
+_REF_LOCKS_GUARD = threading.Lock()
 
 
 def _profile(name: str) -> Any:
@@ -218,7 +242,11 @@ def image_error(metric: str, reference: np.ndarray, image: np.ndarray) -> float:
     """The error of ``image`` against the maximum-quality ``reference`` (linear RGB; a smaller image is
     upsampled to the reference's size) by ``metric`` on display values, in [0, 1]: what a store's
     errors mean, for anyone who measures one (the render engine's Measure Error)."""
-    ref = linear_to_srgb(reference)
+    return _display_error(metric, linear_to_srgb(reference), image)
+
+
+def _display_error(metric: str, ref: np.ndarray, image: np.ndarray) -> float:
+    """:func:`image_error` against a reference already through the display transform."""
     img = linear_to_srgb(upsample_bilinear(image, ref.shape[0], ref.shape[1]))
     if metric == "ssim":
         e = 1.0 - ssim(ref, img, data_range=1.0)
@@ -248,22 +276,42 @@ def _price(result: Any, profile: str, fps: float, pixel_ratio: float = 1.0
     return power, frame_time, breakdown
 
 
-def _reference(scene: Any, scene_hash: str, camera: CameraSpec, space: ParameterSpace,
-               threads: int | None) -> np.ndarray:
-    mq = space.max_quality_indices()
-    key = (scene_hash, camera.key(), repr(sorted(space.fields_of(mq).items())))
+def reference(scene: Any, scene_hash: str, camera: CameraSpec, space: ParameterSpace,
+              indices: Indices | None = None, threads: int | None = None) -> Reference:
+    """The reference render of ``indices`` (default: the space's maximum quality) at ``camera``, rendered
+    once per process: concurrent evaluations at one camera (the service answers requests on several
+    threads) wait for one render instead of each rendering the same image."""
+    idx = space.max_quality_indices() if indices is None else tuple(int(i) for i in indices)
+    key = (scene_hash, camera.key(), repr(sorted(space.fields_of(idx).items())))
     ref = _REFS.get(key)
-    if ref is None:
-        ref = _image(_render(scene, camera, space.to_settings(mq), threads))
-        _REFS.put(key, ref)
+    if ref is not None:
+        return ref
+    with _REF_LOCKS_GUARD:
+        lock = _REF_LOCKS.setdefault(key, threading.Lock())
+    try:
+        with lock:
+            ref = _REFS.get(key)
+            if ref is None:
+                result = _render(scene, camera, space.to_settings(idx), threads)
+                image = _image(result)
+                ref = Reference(image, SimpleNamespace(
+                    counters=dict(result.counters), comparator_histogram=result.comparator_histogram,
+                    settings=result.settings), linear_to_srgb(image))
+                _REFS.put(key, ref)
+    finally:
+        with _REF_LOCKS_GUARD:
+            if _REF_LOCKS.get(key) is lock:
+                del _REF_LOCKS[key]
     return ref
 
 
 def evaluate(scene: Any, camera: CameraSpec, indices: Sequence[int], space: ParameterSpace, *,
              profile: str = "mobile", fps: float = 30.0, metric: str = "ssim", threads: int | None = None,
-             reference: np.ndarray | None = None, target_pixels: int | None = None) -> Evaluation:
-    """Render ``indices`` at ``camera``, compare with the max-quality reference, price the frame
-    (power and frame time for ``target_pixels`` pixels when given, else for the camera's own)."""
+             reference_indices: Indices | None = None, target_pixels: int | None = None) -> Evaluation:
+    """Render ``indices`` at ``camera``, compare with the reference (the render of ``reference_indices``,
+    default the space's maximum quality), price the frame (power and frame time for ``target_pixels``
+    pixels when given, else for the camera's own). The reference settings themselves are priced from the
+    reference render: error 0, no second render."""
     if isinstance(scene, SceneHandle):
         handle_hash, scene = scene.content_hash, scene.get()
     else:
@@ -272,12 +320,17 @@ def evaluate(scene: Any, camera: CameraSpec, indices: Sequence[int], space: Para
         raise ValueError(f"unknown metric {metric!r} (choose from {METRICS})")
     idx = tuple(int(i) for i in indices)
     space.validate(idx)
-    if reference is None:
-        reference = _reference(scene, handle_hash, camera, space, threads)
-    result = _render(scene, camera, space.to_settings(idx), threads)
-    err = 0.0 if idx == space.max_quality_indices() else image_error(metric, reference, _image(result))
+    ref_idx = space.max_quality_indices() if reference_indices is None else tuple(
+        int(i) for i in reference_indices)
+    space.validate(ref_idx)
+    ref = reference(scene, handle_hash, camera, space, ref_idx, threads)
+    if idx == ref_idx:
+        activity, err = ref.activity, 0.0
+    else:
+        activity = _render(scene, camera, space.to_settings(idx), threads)
+        err = _display_error(metric, ref.display, _image(activity))
     ratio = 1.0 if target_pixels is None else float(target_pixels) / (camera.width * camera.height)
-    power, frame_time, breakdown = _price(result, profile, fps, ratio)
+    power, frame_time, breakdown = _price(activity, profile, fps, ratio)
     return Evaluation(err, power, frame_time, breakdown)
 
 

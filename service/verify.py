@@ -18,7 +18,6 @@ from typing import Any
 
 import numpy as np
 
-import sim_core
 from service.camera_path import CameraPath
 from service.evaluation import CameraSpec, evaluate
 from service.params import default_space
@@ -159,8 +158,7 @@ def verify_store(scene: Any, store: ParetoStore, path: CameraPath, *, error_budg
     space = default_space()
     # the store's own maximum quality is the reference its errors were measured against (parameters
     # it does not carry at the default space's best, as in its lookups' settings)
-    best = store.settings_of([p.max_quality for p in store.parameters])
-    reference = space.to_settings(space.indices_of(best))
+    best = space.indices_of(store.settings_of([p.max_quality for p in store.parameters]))
     numbers = sample_frames(len(path), frames)
     checks: list[FrameCheck] = []
     size = None
@@ -171,9 +169,8 @@ def verify_store(scene: Any, store: ParetoStore, path: CameraPath, *, error_budg
                          power_budget=power_budget)
         size = (rw, rh) if resolution is not None else tuple(f.resolution)
         cam = CameraSpec(tuple(m[:3, 3]), tuple(-m[:3, 2]), tuple(m[:3, 1]), f.vfov, *size)
-        ref = sim_core.render(scene, cam.to_camera(), reference, threads=threads).image
         ev = evaluate(scene, cam, space.indices_of(r.settings), space, profile=store.profile, fps=store.fps,
-                      metric=metric, threads=threads, reference=ref)
+                      metric=metric, threads=threads, reference_indices=best)
         within = ev.error <= value if mode == "error" else ev.power_w <= value
         checks.append(FrameCheck(number, float(f.time), dict(r.settings), float(r.error), float(r.power_w),
                                  float(ev.error), float(ev.power_w), float(ev.frame_time_s), bool(within),

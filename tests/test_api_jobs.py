@@ -305,6 +305,62 @@ def test_evaluate_reference_and_cheap_settings(client: httpx.Client, scene: dict
     assert r.status_code == 404
 
 
+def test_evaluate_renders_each_image_once(client: httpx.Client, scene: dict[str, Any],
+                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    """What a path evaluation sends (several settings per camera, two requests in flight, then the same
+    settings again under another mode): the requests render at the same time, the camera's reference
+    once, maximum quality from that reference, and a repeated request comes from the evaluation cache
+    with the same answer. (The server runs in this process, so its renders can be counted.)"""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from service import evaluation
+
+    real = evaluation._render
+    rendered: list[Any] = []
+    in_flight, most = [0], [0]
+    lock = threading.Lock()
+    both = threading.Barrier(2, timeout=30)
+
+    def counting(scene_: Any, cam: Any, settings: Any, threads: Any) -> Any:
+        if (cam.width, cam.height) != (40, 30):  # anything else the server renders meanwhile
+            return real(scene_, cam, settings, threads)
+        with lock:
+            rendered.append(settings)
+            in_flight[0] += 1
+            most[0] = max(most[0], in_flight[0])
+        try:
+            if settings.mode != "fsaa":  # the two cheap settings: each waits until the other renders too
+                both.wait()
+            return real(scene_, cam, settings, threads)
+        finally:
+            with lock:
+                in_flight[0] -= 1
+
+    monkeypatch.setattr(evaluation, "_render", counting)
+    cam = camera(40, 30)  # a size no other test evaluates: its reference is not cached yet
+    cheap = [{"sampling": "undersample_4x4", "ao_samples": 0}, {"sampling": "1spp", "shadow_samples": 1}]
+
+    def ask(settings: dict[str, Any]) -> dict[str, Any]:
+        r = client.post("/evaluate", json={"scene_id": scene["id"], "camera": cam, "settings": settings,
+                                           "power_resolution": [320, 240]})
+        assert r.status_code == 200, r.text
+        return r.json()
+
+    with ThreadPoolExecutor(2) as pool:
+        first = list(pool.map(ask, cheap))
+    assert most[0] == 2  # both evaluations rendered at once
+    assert len(rendered) == 3 and sum(s.mode == "fsaa" for s in rendered) == 1  # one reference
+    best = ask({})
+    assert best["error"] == 0.0 and len(rendered) == 3  # maximum quality: the reference render, priced
+    monkeypatch.setattr(evaluation, "_render", real)  # (a fresh render, to compare with)
+    r = client.post("/render", json={"scene_id": scene["id"], "camera": cam, "fps": 30.0})
+    pixel_ratio = 320 * 240 / (40 * 30)
+    assert r.json()["energy"]["frame_time_s"] * pixel_ratio == pytest.approx(best["frame_time_s"], rel=1e-12)
+    monkeypatch.setattr(evaluation, "_render", counting)
+    again = [ask(s) for s in cheap]
+    assert again == first and len(rendered) == 3  # the evaluation cache answered
+
+
 def test_query_answers_like_the_store_and_fails_like_every_route(client: httpx.Client,
                                                                   finished: dict[str, Any]) -> None:
     """The one query route (served without FastAPI's parameter solving) gives the lookup's answers and

@@ -3,13 +3,16 @@ exhaustive enumeration against brute force, NSGA-II against the exact frontier."
 
 from __future__ import annotations
 
+import threading
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 import pytest
 from sim_core.image import linear_to_srgb, upsample_bilinear
 from tracer_scenes import teapot_scene
 
 import sim_core
-from service import nsga
+from service import evaluation, nsga
 from service.eval_cache import EvalCache
 from service.evaluation import CameraSpec, Evaluator, SceneHandle, evaluate
 from service.executors import DaskExecutor, InProcessExecutor, ProcessPoolExecutor
@@ -73,6 +76,63 @@ def test_error_and_power(scene) -> None:
         evaluate(scene, _cam(), mq, sp, metric="nope")
     with pytest.raises(ValueError):
         evaluate(scene, _cam(), (99,) * 8, sp)
+
+
+class _CountingRender:
+    """``service.evaluation._render`` that counts renders by settings and can hold chosen ones at a
+    barrier (the renders that must be in flight together)."""
+
+    def __init__(self, real, hold=(), barrier=None) -> None:
+        self.real, self.hold, self.barrier = real, hold, barrier
+        self.calls: list[object] = []
+        self.lock = threading.Lock()
+
+    def __call__(self, scene, camera, settings, threads):
+        with self.lock:
+            self.calls.append(settings)
+        if settings in self.hold:
+            self.barrier.wait()
+        return self.real(scene, camera, settings, threads)
+
+
+def test_max_quality_is_priced_from_its_reference_render(scene, monkeypatch) -> None:
+    """Evaluating maximum quality costs no render beyond the camera's reference, and gives exactly what
+    pricing a render of its own gives (the tracer is deterministic)."""
+    sp = default_space()
+    mq = sp.max_quality_indices()
+    cam = _cam(24, 16)
+    evaluation._REFS.clear()
+    counting = _CountingRender(evaluation._render)
+    monkeypatch.setattr(evaluation, "_render", counting)
+    best = evaluate(scene, cam, mq, sp, target_pixels=320 * 180)
+    assert counting.calls == [sp.to_settings(mq)]  # the reference, once
+    again = evaluate(scene, cam, mq, sp, target_pixels=320 * 180)
+    assert len(counting.calls) == 1 and again == best
+    fresh = sim_core.render(scene, cam.to_camera(), sp.to_settings(mq))
+    power, frame_time, breakdown = evaluation._price(fresh, "mobile", 30.0, 320 * 180 / (24 * 16))
+    assert (best.error, best.power_w, best.frame_time_s) == (0.0, power, frame_time)
+    assert best.breakdown == breakdown
+
+
+def test_concurrent_evaluations_at_one_camera_render_its_reference_once(scene, monkeypatch) -> None:
+    """Two evaluations at one camera in two threads: both renders of their settings are in flight at
+    once (the tracer releases the GIL; a barrier holds each until the other has started), and the
+    reference both need is rendered once."""
+    sp = default_space()
+    mq = sp.max_quality_indices()
+    cam = _cam(24, 16)
+    a = tuple(0 for _ in mq)
+    b = tuple(v // 2 for v in mq)
+    evaluation._REFS.clear()
+    counting = _CountingRender(evaluation._render, hold=(sp.to_settings(a), sp.to_settings(b)),
+                               barrier=threading.Barrier(2, timeout=30))
+    monkeypatch.setattr(evaluation, "_render", counting)
+    with ThreadPoolExecutor(2) as pool:
+        got = list(pool.map(lambda x: evaluate(scene, cam, x, sp), (a, b)))
+    assert sorted(map(repr, counting.calls)) == sorted(map(repr, [sp.to_settings(x) for x in (mq, a, b)]))
+    counting.hold = ()
+    serial = [evaluate(scene, cam, x, sp) for x in (a, b)]  # the reference from the cache now
+    assert got == serial and len(counting.calls) == 5
 
 
 def test_cache_answers_repeats_and_persists(scene, tmp_path) -> None:

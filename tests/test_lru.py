@@ -47,3 +47,18 @@ def test_rejects_no_capacity_and_is_safe_across_threads() -> None:
     for t in threads:
         t.join()
     assert len(cache) == 50 and all(key in cache for key in cache)
+
+
+@given(sizes=st.lists(st.tuples(st.integers(0, 5), st.integers(1, 40)), max_size=40))
+def test_weighted_cache_keeps_under_its_weight_and_the_newest_entry(sizes: list[tuple[int, int]]) -> None:
+    cache: LRUCache[int, bytes] = LRUCache(4, weigh=len, max_weight=50)
+    for key, size in sizes:
+        cache.put(key, b"x" * size)
+        held = [cache._items[k] for k in cache]
+        assert cache.weight == sum(map(len, held))
+        assert cache.weight <= 50 or len(held) == 1  # one entry over the limit is kept: the newest
+        assert cache.get(key) == b"x" * size and len(held) <= 4
+    cache.clear()
+    assert cache.weight == 0 and len(cache) == 0
+    with pytest.raises(ValueError):
+        LRUCache(3, weigh=len)

@@ -161,7 +161,9 @@ class OctreeBuilder:
         search.steps_planned += weight * len(requests)
         search.check_cancel()
         search.report("price at display resolution")
-        chunk = max(2, 2 * int(getattr(self.pricer.ev.executor, "workers", 1) or 1))
+        # cameras per batch: several per worker, so that a batch's last camera (whose cost varies with
+        # its points) leaves the other workers idle for a small share of the batch only
+        chunk = max(2, 8 * int(getattr(self.pricer.ev.executor, "workers", 1) or 1))
         results: list[list[Any]] = []
         for start in range(0, len(requests), chunk):
             search.check_cancel()

@@ -13,13 +13,13 @@ from fastapi import APIRouter
 from sim_core.image import encode_exr, encode_png
 
 import sim_core
-from service.evaluation import CameraSpec, evaluate
+from service.evaluation import CameraSpec, Evaluator
 from service.params import ParameterSpace, default_space
 from service.store import frame_rate_reached, meets_frame_rate
 from service.store.camera import normalised_camera_matrix
 
 from ..checks import scene_or_404
-from ..deps import ScenesDep, SettingsDep, StorageDep
+from ..deps import JobsDep, ScenesDep, SettingsDep, StorageDep
 from ..errors import ApiError, error_responses
 from ..schemas import CameraIn, EvaluateRequest, EvaluateResponse, RenderRequest, RenderResponse
 
@@ -95,11 +95,13 @@ def render_preview(body: RenderRequest, storage: StorageDep, scenes: ScenesDep,
 
 @router.post("/evaluate", response_model=EvaluateResponse, operation_id="evaluate_settings",
              responses=_ERRORS)
-def evaluate_settings(body: EvaluateRequest, storage: StorageDep, scenes: ScenesDep,
+def evaluate_settings(body: EvaluateRequest, storage: StorageDep, scenes: ScenesDep, jobs: JobsDep,
                       settings: SettingsDep) -> EvaluateResponse:
     """Error (1 - SSIM against the maximum-quality render of the same camera), power (at the frame rate
     reached) and frame time of settings (``{parameter: value}`` of the default space, as a store query
-    returns them)."""
+    returns them). Answered from the service's evaluation cache when the same camera, settings, size,
+    profile, frame rate and power resolution were evaluated before (by a job or a request); requests
+    run concurrently, and the camera's reference is rendered once for all of them."""
     cam = body.camera
     m = camera_matrix(cam, settings.max_render_pixels)
     scene = scene_or_404(storage, scenes, body.scene_id)
@@ -108,8 +110,9 @@ def evaluate_settings(body: EvaluateRequest, storage: StorageDep, scenes: Scenes
         spec = CameraSpec(eye=tuple(m[:3, 3]), forward=tuple(-m[:3, 2]), up=tuple(m[:3, 1]), vfov=cam.vfov,
                           width=cam.width, height=cam.height)
         pixels = None if body.power_resolution is None else math.prod(body.power_resolution)
-        ev = evaluate(scene, spec, indices, space, profile=body.profile, fps=body.fps,
-                      threads=settings.render_threads, target_pixels=pixels)
+        evaluator = Evaluator(scene, space, cache=jobs.eval_cache(), profile=body.profile, fps=body.fps,
+                              threads=settings.render_threads, target_pixels=pixels)
+        [ev] = evaluator.evaluate([(spec, indices)])
     except ValueError as exc:
         raise ApiError(422, f"evaluate: {exc}") from exc
     t = float(ev.frame_time_s)
