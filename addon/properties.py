@@ -85,7 +85,7 @@ class RENDER_BUDGET_PG_scene(bpy.types.PropertyGroup):
     predicted_error: FloatProperty(name="Predicted error", precision=4)  # type: ignore
     predicted_fps: FloatProperty(  # type: ignore
         name="Predicted frame rate (fps)",
-        description="The frame rate the target settings reach on the store's hardware profile, at which the "
+        description="The frame rate the active settings reach on the store's hardware profile, at which the "
                     "predicted power is drawn (0: the store predates frame times)")
     slower_than_fps: BoolProperty(  # type: ignore
         name="Slower than the store's frame rate",

@@ -28,12 +28,10 @@ from typing import Any
 
 import numpy as np
 
+from .options import FPS_MAX, FPS_MIN
 from .store import camera
 
 PATH_VERSION = 1
-#: Frame rates a path may have (frames per second).
-FPS_MIN = 0.01
-FPS_MAX = 1000.0
 
 
 def _finite(a: np.ndarray, what: str) -> np.ndarray:

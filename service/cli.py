@@ -108,6 +108,7 @@ def build_parser() -> argparse.ArgumentParser:
     b = q.add_mutually_exclusive_group(required=True)
     b.add_argument("--power-budget", type=_finite, metavar="W")
     b.add_argument("--error-budget", type=_finite, metavar="E")
+    options.add_argument(q, options.QUERY_FPS)
     q.add_argument("--json", action="store_true", help="print JSON")
 
     v = sub.add_parser("verify", help="render sampled path frames with the store's settings at the path's "
@@ -209,10 +210,11 @@ def _query(args: argparse.Namespace) -> int:
         matrix = [args.matrix[i * 4:(i + 1) * 4] for i in range(4)]
     fov = math.radians(args.fov) if args.fov is not None else None
     r = store.lookup(args.position, direction=args.direction, matrix=matrix, fov=fov,
-                     power_budget=args.power_budget, error_budget=args.error_budget)
+                     power_budget=args.power_budget, error_budget=args.error_budget, fps=args.fps)
+    target = r.fps_target
     out = {"settings": r.settings, "indices": list(r.indices), "packed": r.packed, "power_w": r.power_w,
            "error": r.error, "clamped": r.clamped, "infeasible": r.infeasible, "corner": r.corner,
-           "view": r.view, "frame_time_s": r.frame_time_s, "fps": r.fps, "fps_target": store.fps,
+           "view": r.view, "frame_time_s": r.frame_time_s, "fps": r.fps, "fps_target": target,
            "meets_fps": r.meets_fps}
     if args.json:
         print(json.dumps(out))
@@ -222,12 +224,12 @@ def _query(args: argparse.Namespace) -> int:
         print(f"{'predicted power':>22}: {r.power_w:.4f} W")
         print(f"{'predicted error':>22}: {r.error:.5f} (1 - SSIM)")
         if r.fps is None:
-            print(f"{'frame rate':>22}: unknown (the store predates frame times; target {store.fps:g} fps)")
+            print(f"{'frame rate':>22}: unknown (the store predates frame times; target {target:g} fps)")
         else:
-            print(f"{'frame rate':>22}: {r.fps:.1f} of {store.fps:g} fps ({1e3 * r.frame_time_s:.1f} ms a "
+            print(f"{'frame rate':>22}: {r.fps:.1f} of {target:g} fps ({1e3 * r.frame_time_s:.1f} ms a "
                   "frame)")
         if r.meets_fps is False:
-            print(f"{'note':>22}: no setting of this view keeps up with {store.fps:g} fps; the power is "
+            print(f"{'note':>22}: no setting of this view keeps up with {target:g} fps; the power is "
                   "drawn at the frame rate shown")
         if r.clamped:
             print(f"{'note':>22}: clamped: camera outside the optimised region")

@@ -169,6 +169,8 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, config: O
         "display_cameras": builder.display_cameras,
         "display_points": builder.display_points,
         "metric": config.metric,
+        # the power figures include it: a lookup at another frame rate reprices power from it
+        "static_power_w": sim_core.load_profile(config.profile).static_power_w,
         "view_sampling": config.view_sampling,
         "path_resolution": config.path_resolution,
         "guard_frames": config.guard_frames,

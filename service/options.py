@@ -187,6 +187,16 @@ OPTIONS: tuple[Option, ...] = (
            "store's unless display_estimator is preview", public=False),
 )
 
+#: The store lookup's frame-rate target (not an optimiser option: a query's): declared here so that the
+#: lookup (``ParetoStore.lookup``), ``render-budget query --fps``, ``POST /stores/{id}/query``'s ``fps``
+#: and the add-on's playback property share its bounds and help.
+FPS_MIN, FPS_MAX = 0.01, 1000.0  # the frame rates a camera path or a store query may have
+QUERY_FPS = Option("fps", float, None, "Frame rate",
+                   "frame rate the chosen settings must keep up with (default: the store's own, what its "
+                   "power was priced for); power is predicted at the rate each setting reaches, and a "
+                   "setting that misses the rate is never chosen while one that meets it exists",
+                   minimum=FPS_MIN, maximum=FPS_MAX, optional=True, metavar="FPS", group="Playback")
+
 BY_NAME: dict[str, Option] = {o.name: o for o in OPTIONS}
 PUBLIC: tuple[Option, ...] = tuple(o for o in OPTIONS if o.public)
 GROUPS: tuple[str, ...] = tuple(dict.fromkeys(o.group for o in PUBLIC))
@@ -242,11 +252,16 @@ def add_arguments(parser: argparse.ArgumentParser | Any, *, with_defaults: bool 
     """One argument per public option (``dest`` = the option name). ``with_defaults=False`` leaves
     every default None, so the caller can tell which options were given (overrides only)."""
     for o in PUBLIC:
-        default = o.default if with_defaults else None
-        shown = "" if o.default is None else f" (default {o.default})"  # optional: the help says it
-        parser.add_argument(o.cli_flag, *(f"--{a}" for a in o.aliases), dest=o.name, default=default,
-                            type=None if o.choices else _arg_type(o), choices=o.choices or None,
-                            metavar=o.metavar, help=o.help + shown)
+        add_argument(parser, o, with_default=with_defaults)
+
+
+def add_argument(parser: argparse.ArgumentParser | Any, opt: Option, *, with_default: bool = True) -> None:
+    """The command-line argument of one option (``dest`` = its name), validated by :meth:`Option.check`."""
+    default = opt.default if with_default else None
+    shown = "" if opt.default is None else f" (default {opt.default})"  # optional: the help says it
+    parser.add_argument(opt.cli_flag, *(f"--{a}" for a in opt.aliases), dest=opt.name, default=default,
+                        type=None if opt.choices else _arg_type(opt), choices=opt.choices or None,
+                        metavar=opt.metavar, help=opt.help + shown)
 
 
 def from_arguments(args: argparse.Namespace) -> dict[str, Any]:

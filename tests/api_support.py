@@ -123,6 +123,13 @@ def teapot_scene_glb() -> bytes:
     return glb_bytes([teapot_mesh(), plane()], lights=[{"position": (2.0, -2.0, 3.0), "intensity": 8000.0}])
 
 
+def teapot_scene_file(directory: Path) -> Path:
+    """The teapot scene written as ``directory/teapot.glb``."""
+    path = directory / "teapot.glb"
+    path.write_bytes(teapot_scene_glb())
+    return path
+
+
 def box_scene_glb() -> bytes:
     return glb_bytes([box(), plane()], lights=[{"position": (2.0, -2.0, 3.0), "intensity": 8000.0}])
 

@@ -286,12 +286,18 @@ def test_budget_change_during_playback_goes_through_the_filter(scene, tmp_path) 
     bpy.ops.render_budget.record_path_animation()
     _load_store(tmp_path)
     props = sc.render_budget
-    props.budget_mode, props.power_budget, props.filter_period = "POWER", 10.0, 1.0
+    props.budget_mode, props.power_budget, props.filter_period = "POWER", 1.7, 1.0
     sc.frame_set(1)
-    generous = props.target_indices
-    props.power_budget = 1.7
+    tight = props.target_indices
+    assert props.predicted_power <= 1.7
+    # a looser budget: a new target, reached along the frontier (the cheap settings stay at first) ...
+    props.power_budget = 10.0
     sc.frame_set(2)
-    assert props.target_indices != generous and props.active_indices != props.target_indices
+    assert props.target_indices != tight and props.active_indices != props.target_indices
+    assert props.playback_status == "blending" and props.predicted_power <= 10.0
+    # ... a tighter one than the settings on screen: the filter goes at once to a point that keeps it
+    props.power_budget = 1.7
+    sc.frame_set(3)
     assert props.predicted_power <= 1.7
     sc.frame_set(2 + 26)  # more than T = 1 s later (24 fps)
     assert props.playback_status in ("on target", "blending")

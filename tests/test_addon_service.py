@@ -118,7 +118,7 @@ def test_optimize_end_to_end_store_in_blend_and_playback_matches_query(optimized
     targets = [s[1] for s in seen]
     assert len(set(targets)) >= 2, "settings should change along the orbit"
     assert any(a != t for a, t, *_ in seen), "the temporal filter blends at target changes"
-    # the filter follows Eq. 8 on scene time: same answers as the pure driver on the same poses
+    # the filter (Eq. 8's pace along the frontier) on scene time: the pure driver's answers on the same poses
     from addon.core.playback_logic import PlaybackDriver
 
     drv = PlaybackDriver(store, props.filter_period)
@@ -132,12 +132,14 @@ def test_optimize_end_to_end_store_in_blend_and_playback_matches_query(optimized
     client = ServiceClient(service.url)
     cli = Path(sys.executable).parent / "render-budget"
     vfov = m("camera_path").camera_vfov(sc.camera, sc)
-    for _active, target, power, error, mat, _ in seen[:: max(1, FRAMES // 4)]:
+    for active, target, power, error, mat, _ in seen[:: max(1, FRAMES // 4)]:
         pos, direction = mat[:3, 3], -mat[:3, 2]
         q = client.query(props.store_id, {"position": pos.tolist(), "matrix": mat.tolist(), "fov": vfov,
                                           "error_budget": budget})
         assert " ".join(map(str, q["indices"])) == target
-        assert q["power_w"] == pytest.approx(power, rel=1e-6) and q["error"] == pytest.approx(error, abs=1e-6)
+        if active == target:  # playback shows the predictions of the settings it shows
+            assert q["power_w"] == pytest.approx(power, rel=1e-6)
+            assert q["error"] == pytest.approx(error, abs=1e-6)
         def nums(a: np.ndarray) -> list[str]:
             # positional notation: argparse would take "-1e-08" for an option
             return [np.format_float_positional(float(v), trim="-") for v in np.asarray(a).reshape(-1)]
@@ -149,7 +151,7 @@ def test_optimize_end_to_end_store_in_blend_and_playback_matches_query(optimized
             assert out.returncode == 0, out.stderr
             doc = json.loads(out.stdout)
             assert " ".join(map(str, doc["indices"])) == target, (orient[0], doc)
-            assert doc["power_w"] == pytest.approx(power, rel=1e-6)
+            assert doc["power_w"] == pytest.approx(q["power_w"], rel=1e-6)
 
 
 def test_gui_path_worker_thread_and_queue(ext) -> None:

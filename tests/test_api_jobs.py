@@ -18,6 +18,7 @@ from api_support import camera_path, look_at_matrix, server_thread, sse_events, 
 
 from service.api import Settings
 from service.store import ParetoStore
+from service.store.temporal import blend
 
 pytestmark = pytest.mark.service
 
@@ -116,6 +117,14 @@ def test_job_end_to_end_events_store_and_query(client: httpx.Client, finished: d
     assert (rich["frame_time_s"], rich["fps"], rich["meets_fps"]) == (direct.frame_time_s, direct.fps,
                                                                       direct.meets_fps)
     assert rich["frame_time_s"] > 0 and rich["fps"] <= store.fps
+    # Another frame rate: the store's lookup at that rate (power repriced, slower settings left out).
+    fast = client.post(f"/stores/{job['store_id']}/query",
+                       json={**query, "power_budget_w": 1e4, "fps": 2 * store.fps}).json()
+    at = store.lookup(m[:3, 3], matrix=m, fov=frame["vfov"], power_budget=1e4, fps=2 * store.fps)
+    assert fast["fps_target"] == 2 * store.fps and fast["indices"] == list(at.indices)
+    assert (fast["power_w"], fast["meets_fps"], fast["fps"]) == (at.power_w, at.meets_fps, at.fps)
+    assert client.post(f"/stores/{job['store_id']}/query",
+                       json={**query, "power_budget_w": 1.0, "fps": 0}).status_code == 422
     wide = client.post(f"/stores/{job['store_id']}/query",
                        json={**query, "aspect": 3.0, "power_budget_w": 0.5}).json()
     assert wide["packed"] == store.lookup(m[:3, 3], matrix=m, fov=frame["vfov"], power_budget=0.5,
@@ -127,14 +136,19 @@ def test_job_end_to_end_events_store_and_query(client: httpx.Client, finished: d
                           json={"position": [100.0, 0.0, 0.0], "direction": [-1, 0, 0], "error_budget": 0.5})
     assert outside.status_code == 200 and outside.json()["clamped"] is True
 
-    # Temporal filter: half-way through the period from the cheap to the rich settings.
+    # Temporal filter: half-way through the period from the cheap to the rich settings, along the
+    # frontier (every point keeps a 1e4 W budget): the point nearest Eq. 8's blend, with its predictions.
     prev = {"indices": cheap["indices"], "elapsed_s": 1.0, "period_s": 2.0}
     mid = client.post(f"/stores/{job['store_id']}/query",
                       json={**query, "power_budget_w": 1e4, "previous": prev}).json()
-    expect = [int(np.floor(0.5 * a + 0.5 * b + 0.5)) for a, b in zip(cheap["indices"], rich["indices"],
-                                                                      strict=True)]
-    assert mid["indices"] == expect
-    assert mid["filtered"] == (expect != rich["indices"])
+    hit = store.lookup(m[:3, 3], matrix=m, fov=frame["vfov"], power_budget=1e4)
+    points = {p.indices: p for p in store.budget_points(hit)}
+    at_start = blend(cheap["indices"], rich["indices"], 0.0, list(points))
+    bound = sum(abs(a - b) for a, b in zip(at_start, rich["indices"], strict=True))
+    expect = blend(cheap["indices"], rich["indices"], 0.5, list(points), bound)
+    assert mid["indices"] == list(expect) and mid["target_indices"] == rich["indices"]
+    assert mid["filtered"] == (list(expect) != rich["indices"])
+    assert (mid["power_w"], mid["error"]) == (points[expect].power_w, points[expect].error)
     late = client.post(f"/stores/{job['store_id']}/query",
                        json={**query, "power_budget_w": 1e4, "previous": {**prev, "elapsed_s": 5.0}}).json()
     assert late["indices"] == rich["indices"] and late["filtered"] is False

@@ -13,7 +13,7 @@ from service import cli
 from service.store import Frontier, ParetoStore, StoredParameter, pack_indices
 
 
-def _store_file(tmp_path, frame_times=None):
+def _store_file(tmp_path, frame_times=None, static_power_w=None):
     params = (StoredParameter("max_depth", (0, 1, 2, 3), 3),
               StoredParameter("shadow_samples", (0, 1, 4, 16), 3))
     fr = [Frontier.from_points([pack_indices([k, k]) for k in range(4)], [0.3, 0.1, 0.02, 0.0],
@@ -23,7 +23,8 @@ def _store_file(tmp_path, frame_times=None):
     corners = np.array([[(k & 1), (k >> 1) & 1, (k >> 2) & 1] for k in range(8)])
     views = np.tile(np.arange(6), (8, 1))
     store = ParetoStore(params, np.zeros(3), 4.0, 0, np.array([-1]), corners, views, fr,
-                        vfov=math.radians(40), aspect=1.5)
+                        vfov=math.radians(40), aspect=1.5,
+                        meta={} if static_power_w is None else {"static_power_w": static_power_w})
     f = tmp_path / "store.json"
     f.write_text(store.to_json())
     return f
@@ -138,3 +139,26 @@ def test_cache_stats_and_prune(tmp_path, capsys) -> None:
         assert c.stats()["scenes"] == 1 and len(c) == 800  # only the busy scene's evaluations are left
     assert cli.main(["cache", "stats", "--cache", str(tmp_path / "none.sqlite")]) == 1
     assert "no evaluation cache" in capsys.readouterr().err
+
+
+def test_query_at_another_frame_rate(tmp_path, capsys) -> None:
+    """--fps 60: the 20 ms setting misses 60 fps, so the error budget it alone kept is given up for the
+    10 ms one (marked infeasible), its power repriced for 60 fps; a store without the static power
+    refuses another rate with a clear message."""
+    f = _store_file(tmp_path, frame_times=[0.005, 0.01, 0.02, 0.1], static_power_w=0.5)
+    args = ["query", str(f), "--position", "1", "1", "1", "--direction", "0", "0", "-1", "--error-budget",
+            "0.03", "--json"]
+    assert cli.main(args) == 0
+    at30 = json.loads(capsys.readouterr().out)
+    assert at30["settings"] == {"max_depth": 2, "shadow_samples": 4} and not at30["infeasible"]
+    assert cli.main([*args, "--fps", "60"]) == 0
+    at60 = json.loads(capsys.readouterr().out)
+    assert at60["settings"] == {"max_depth": 1, "shadow_samples": 1} and at60["infeasible"]
+    assert at60["fps_target"] == 60.0 and at60["fps"] == 60.0 and at60["meets_fps"] is True
+    assert at60["power_w"] == pytest.approx(0.5 + (6.5 - 0.5) * 2, rel=1e-3)  # view 5: 1.5 + 5 W at 30 fps
+    with pytest.raises(SystemExit):
+        cli.main([*args, "--fps", "0"])
+    (tmp_path / "old").mkdir()
+    old = _store_file(tmp_path / "old", frame_times=[0.005, 0.01, 0.02, 0.1])
+    assert cli.main(["query", str(old), *args[2:], "--fps", "60"]) != 0
+    assert "static power" in capsys.readouterr().err

@@ -293,12 +293,15 @@ def test_an_animation_follows_the_store_under_the_budget(scene, tmp_path) -> Non
         assert {k: row[k] for k in want} == {k: str(v) for k, v in want.items()}
         assert float(row["predicted_power_w"]) == pytest.approx(frame.predicted_power_w, rel=1e-5)
         assert float(row["simulated_power_w"]) > 0
-        assert 0.0 < float(row["measured_error"]) < 0.5  # the store's settings are never the reference's
+        # measured against the reference: 0 where the frontier point shown renders this small scene
+        # exactly as the maximum-quality settings do
+        assert 0.0 <= float(row["measured_error"]) < 0.5
         info = Image.open(tmp_path / "frames" / f"shot_{f:04d}.png").info
         assert info["render_budget.source"] == "store"
         assert float(info["render_budget.predicted_power_w"]) == pytest.approx(frame.predicted_power_w,
                                                                               rel=1e-5)
     assert len({(r["max_depth"], r["resolution_scale"], r["shadow_samples"]) for r in rows}) > 1
+    assert any(float(r["measured_error"]) > 0.0 for r in rows)
     # simulated power follows the settings: frames traced at a larger resolution scale cost more
     by_scale: dict[float, list[float]] = {}
     for r in rows:

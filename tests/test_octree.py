@@ -338,7 +338,8 @@ def _digest(store: ParetoStore) -> str:
 
     d = store.to_dict()
     # (meta keys added after the recording, saying where the figures were measured, left out)
-    d["meta"] = {k: v for k, v in d["meta"].items() if k != "elapsed_s" and k not in DISPLAY_META}
+    d["meta"] = {k: v for k, v in d["meta"].items() if k != "elapsed_s" and k not in DISPLAY_META
+                 and k != "static_power_w"}  # (recorded since queries may ask for another frame rate)
     return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()
 
 

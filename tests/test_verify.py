@@ -18,7 +18,7 @@ from service.metrics import ssim
 from service.optimize import OptimizeConfig, optimize_path
 from service.params import default_space
 from service.verify import sample_frames, verify_store
-from tests.api_support import teapot_scene_glb
+from tests.api_support import teapot_scene_file
 
 SPACE = default_space().subset(["sampling", "max_depth", "resolution_scale"])
 
@@ -33,8 +33,7 @@ def _orbit_path(n: int, resolution: tuple[int, int]) -> CameraPath:
 @pytest.fixture(scope="module")
 def setup(tmp_path_factory: pytest.TempPathFactory):
     d = tmp_path_factory.mktemp("verify")
-    scene_file = d / "teapot.glb"
-    scene_file.write_bytes(teapot_scene_glb())
+    scene_file = teapot_scene_file(d)
     scene = sim_core.Scene.from_gltf(str(scene_file))
     path = _orbit_path(10, (96, 72))
     opts = OptimizeConfig(threshold_power_w=0.01, threshold_error=0.005, max_depth=3, population=6,

@@ -104,7 +104,7 @@ class FrameSettings:
 
     source: str  # "store" or "manual"
     indices: Indices  # into the engine's space
-    predicted_power_w: float | None = None  # the store's prediction of its target (None: manual)
+    predicted_power_w: float | None = None  # the store's prediction of these settings (None: manual)
     predicted_error: float | None = None
     target_indices: Indices | None = None  # the store's target before the temporal filter
     clamped: bool = False  # camera outside the store's space

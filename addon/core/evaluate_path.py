@@ -76,8 +76,8 @@ def evaluate_path(client: ServiceClient, store: pareto_store.ParetoStore, path: 
                 pf = driver.step(f.matrix_world, f.vfov, f.aspect, f.time, spec.budget_mode,
                                  spec.budget_value)
                 settings = pf.active_settings
-                if not pf.in_transition:  # the store predicts its target settings only
-                    predicted = (pf.predicted_power_w, pf.predicted_error, pf.predicted_fps)
+                # the filter shows frontier points only: the store predicts them, in transition too
+                predicted = (pf.predicted_power_w, pf.predicted_error, pf.predicted_fps)
             else:
                 settings = presets[mode]
             jobs.append((number, f, mode, settings, predicted))

@@ -1,4 +1,6 @@
-"""Per-frame playback logic: store lookup for a camera pose and budget, then the temporal filter.
+"""Per-frame playback logic: store lookup for a camera pose and budget, then the temporal filter (along
+the frontier: every shown setting is a point of the frame's frontier that keeps the budget whenever the
+target does, :mod:`service.store.temporal`).
 
 Pure (no bpy); the Blender handler in `playback.py` only reads the camera and writes the result.
 """
@@ -33,15 +35,16 @@ def validate_budget(mode: str, value: float) -> float:
 class PlaybackFrame:
     """What the handler writes for one frame."""
 
-    active_indices: tuple[int, ...]  # after the temporal filter: what is applied
+    active_indices: tuple[int, ...]  # after the temporal filter: what is applied (a frontier point)
     target_indices: tuple[int, ...]  # the store's choice for this pose and budget
     active_settings: dict[str, Any]
-    predicted_power_w: float  # of the target settings (the store knows frontier points only)
+    predicted_power_w: float  # of the active settings (a point of this frame's frontier)
     predicted_error: float
     clamped: bool
     infeasible: bool
-    predicted_fps: float | None = None  # the frame rate the target settings reach (None: store predates it)
-    meets_fps: bool | None = None  # they keep up with the store's frame rate (False: no setting does)
+    predicted_fps: float | None = None  # the frame rate the active settings reach (None: store predates it)
+    meets_fps: bool | None = None  # they keep up with the frame-rate target (False: no setting does)
+    fps_target: float | None = None  # the frame rate asked for (the store's unless the caller gave one)
 
     @property
     def in_transition(self) -> bool:
@@ -54,8 +57,9 @@ class PlaybackFrame:
 class PlaybackDriver:
     """Holds one parsed store and one temporal filter; `step()` is called once per frame change.
 
-    Store lookups are memoised on their exact inputs (camera matrix, fov, aspect, budget): the lookup is
-    a pure function of them, and playback replays the same poses over and over (loops, scrubbing), so a
+    Store lookups (with the frontier points that keep the budget, the settings the filter may show) are
+    memoised on their exact inputs (camera matrix, fov, aspect, budget, frame rate): the lookup is a
+    pure function of them, and playback replays the same poses over and over (loops, scrubbing), so a
     replayed frame costs a dictionary hit instead of a frustum/octree query. The filter always runs.
     """
 
@@ -77,25 +81,30 @@ class PlaybackDriver:
             self.filter = pareto_store.TemporalFilter(period_s)
 
     def step(self, matrix_world: Sequence[Sequence[float]], vfov: float, aspect: float, now_s: float,
-             budget_mode: str, budget_value: float) -> PlaybackFrame:
+             budget_mode: str, budget_value: float, fps: float | None = None) -> PlaybackFrame:
+        """The settings of one frame; ``fps``: the frame-rate target (default: the store's)."""
         budget = validate_budget(budget_mode, budget_value)
         rows = tuple(tuple(float(v) for v in matrix_world[r]) for r in range(3))
-        key = (rows, float(vfov), float(aspect), budget_mode, budget)
-        hit = self._memo.get(key)
-        if hit is None:
+        key = (rows, float(vfov), float(aspect), budget_mode, budget, fps)
+        memo = self._memo.get(key)
+        if memo is None:
             kwargs = {"power_budget": budget} if budget_mode == "POWER" else {"error_budget": budget}
             m = (*rows, (0.0, 0.0, 0.0, 1.0))
             hit = self.store.lookup((rows[0][3], rows[1][3], rows[2][3]), matrix=m, fov=vfov, aspect=aspect,
-                                    **kwargs)
+                                    fps=fps, **kwargs)
+            points = {p.indices: p for p in self.store.budget_points(hit)}
+            memo = (hit, points, list(points))
             if len(self._memo) >= self.MEMO_LIMIT:
                 self._memo.clear()
-            self._memo[key] = hit
+            self._memo[key] = memo
         else:
             self.memo_hits += 1
-        active = self.filter.update(hit.indices, now_s)
+        hit, points, allowed = memo
+        active = self.filter.update(hit.indices, now_s, allowed)
+        shown = points[active]
         settings = hit.settings if active == hit.indices else self.store.settings_of(active)
-        return PlaybackFrame(active, tuple(hit.indices), settings, hit.power_w, hit.error, hit.clamped,
-                             hit.infeasible, hit.fps, hit.meets_fps)
+        return PlaybackFrame(active, tuple(hit.indices), settings, shown.power_w, shown.error, hit.clamped,
+                             hit.infeasible, shown.fps, shown.meets_fps, hit.fps_target)
 
 
 class StoreCache:

@@ -41,11 +41,11 @@ class FrameRow:
     error: float
     settings: str = ""  # human-readable or packed settings, for the CSV
     budget_kept: bool | None = None  # only meaningful for budget-driven modes
-    predicted_power_w: float | None = None  # the store's prediction (budget-driven modes, on target)
+    predicted_power_w: float | None = None  # the store's, of the shown settings (budget-driven modes)
     predicted_error: float | None = None
     fps: float | None = None  # the frame rate reached (None: not measured, e.g. an older CSV)
     deadline_met: bool | None = None  # the frame keeps up with the path's frame rate
-    predicted_fps: float | None = None  # the store's (budget-driven modes on target, stores with frame times)
+    predicted_fps: float | None = None  # the store's (budget-driven modes, stores with frame times)
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.power_w) and math.isfinite(self.error)):
@@ -211,7 +211,7 @@ def prediction_notes(rows: Sequence[FrameRow]) -> list[str]:
         gap = sum(abs((r.predicted_error or 0.0) - r.error) for r in rs) / len(rs)
         notes.append(f"{MODE_LABELS.get(mode, mode)}: the store predicted mean error {pe:.4f} and power "
                      f"{pp:.3f} W; measured at the path's cameras: {me:.4f} and {mp:.3f} W "
-                     f"({len(rs)} frames on target; power within 10 % on {close}, mean |error predicted - "
+                     f"({len(rs)} frames; power within 10 % on {close}, mean |error predicted - "
                      f"measured| {gap:.4f}){rate}")
     return notes
 

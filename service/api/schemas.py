@@ -306,7 +306,8 @@ class StorePage(BaseModel):
 
 
 class PreviousSettings(StrictModel):
-    """The settings in use and how long ago the target changed, for the temporal filter (Eq. 8)."""
+    """The settings shown when the target changed and how long ago that was, for the temporal filter
+    (Eq. 8's pace along the frontier: :mod:`service.store.temporal`)."""
 
     indices: Annotated[list[Annotated[int, Field(strict=True, ge=0, le=15)]],
                        Field(min_length=1, max_length=8)]
@@ -330,6 +331,7 @@ class StoreQuery(StrictModel):
     power_budget_w: Annotated[float, Field(strict=True, gt=0.0, le=1e4)] | None = None
     error_budget: Annotated[float, Field(strict=True, ge=0.0, le=1.0)] | None = None
     previous: PreviousSettings | None = None
+    fps: Fps | None = Field(default=None, description=options.QUERY_FPS.help)
 
     @model_validator(mode="after")
     def _one_budget(self) -> StoreQuery:
@@ -348,20 +350,23 @@ class QueryResult(BaseModel):
     settings: dict[str, Any]
     indices: list[int]
     packed: int
-    power_w: float = Field(description="predicted power of the target settings at the frame rate they reach")
-    error: float
+    power_w: float = Field(description="predicted power of the returned settings (a point of the view's "
+                                       "frontier, also when filtered) at the frame rate they reach")
+    error: float = Field(description="predicted error of the returned settings")
     clamped: bool
     infeasible: bool
     filtered: bool = Field(description="indices come from the temporal filter, not the raw target")
+    target_indices: list[int] = Field(description="the lookup's target before the temporal filter")
     frame_time_s: float | None = Field(
-        default=None, description="predicted frame time of the target settings (null: the store predates "
+        default=None, description="predicted frame time of the returned settings (null: the store predates "
                                   "frame times)")
-    fps: float | None = Field(default=None, description="the frame rate the target settings reach: "
+    fps: float | None = Field(default=None, description="the frame rate the returned settings reach: "
                                                         "fps_target when they keep up, else 1 / frame_time_s")
-    fps_target: float = Field(description="the store's frame rate (what its power was priced for)")
+    fps_target: float = Field(description="the frame rate asked for (the query's fps, else the store's: what "
+                                          "its power was priced for)")
     meets_fps: bool | None = Field(
-        default=None, description="the target settings keep up with fps_target; false only when no setting "
-                                  "of this view does (null: unknown)")
+        default=None, description="the returned settings keep up with fps_target; false only when no "
+                                  "setting of this view does (null: unknown)")
 
 
 # -- render and evaluate -----------------------------------------------------------------------------

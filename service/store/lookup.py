@@ -8,10 +8,16 @@ that (corner, face)'s frontier. :class:`LookupIndex` precomputes what a query re
 ids and positions, the frustum rays per field of view, each frontier as plain lists and each packed
 setting's values, so a query makes one numpy call (the face) and no other allocation of note.
 
-The frame-rate target is the store's ``fps`` (what its power was priced for): where a frontier knows its
-frame times, the budget search runs over the settings that meet it (:mod:`.frame_rate`), and only when
-none does over all of them, and the result says whether the chosen setting meets it and the frame rate
-it reaches.
+The frame-rate target is the store's ``fps`` (what its power was priced for) unless a query asks for
+another rate: then each point's power is repriced for that rate (:func:`.frame_rate.power_at_rate`, from
+the store's static power) and the frontier pruned again. Where a frontier knows its frame times, the
+budget search runs over the settings that meet the target (:mod:`.frame_rate`), and only when none does
+over all of them, and the result says whether the chosen setting meets it and the frame rate it reaches.
+A store keeps, per view, only the points on its frontier at its own ``fps``: a lower rate chooses among
+those (a setting dropped because it missed the store's rate is not there to be found).
+
+:meth:`LookupIndex.budget_points` lists the points of the frontier a result came from that keep its
+budget: the settings the temporal filter (:mod:`.temporal`) may show while it moves to the target.
 """
 
 from __future__ import annotations
@@ -26,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from . import camera
-from .frame_rate import frame_rate_reached, meets_frame_rate
+from .frame_rate import frame_rate_reached, meets_frame_rate, power_at_rate
 from .frontier import Frontier
 from .packing import StoredParameter, settings_of, unpack_indices
 
@@ -52,6 +58,24 @@ class LookupResult:
     frame_time_s: float | None = None
     fps: float | None = None
     meets_fps: bool | None = None
+    fps_target: float | None = None
+    frontier: int = -1
+    rank: int = -1
+    budget_mode: str = ""
+    budget: float = math.nan
+
+
+@dataclass(frozen=True)
+class FrontierPoint:
+    """One point of a frontier with its predictions for the frame rate a query asked for."""
+
+    indices: tuple[int, ...]
+    packed: int
+    power_w: float
+    error: float
+    frame_time_s: float | None
+    fps: float | None
+    meets_fps: bool | None
 
 
 class _FrontierLists:
@@ -61,7 +85,7 @@ class _FrontierLists:
     frontier's must be), with each point's frame time, frame rate reached and whether it meets ``fps``."""
 
     __slots__ = ("error", "fps", "fps_reached", "frame_time", "frontier", "meets", "neg_error", "packed",
-                 "power", "searched", "sorted")
+                 "points", "power", "searched", "sorted")
 
     def __init__(self, frontier: Frontier, fps: float) -> None:
         self.frontier = frontier
@@ -82,6 +106,13 @@ class _FrontierLists:
             self.frame_time = [float(v) for v in searched.frame_time_s]
             self.fps_reached = [frame_rate_reached(t, fps) for t in self.frame_time]  # type: ignore[arg-type]
             self.meets = [meets_frame_rate(t, fps) for t in self.frame_time]  # type: ignore[arg-type]
+        self.points: list[FrontierPoint] | None = None  # decoded on first use
+
+    def within(self, mode: str, budget: float) -> list[int]:
+        """Ranks of the points that keep a budget (``mode`` "power": power <= budget, "error": error <=
+        budget), in frontier order."""
+        values = self.power if mode == "power" else self.error
+        return [k for k, v in enumerate(values) if v <= budget]
 
     def under_power(self, budget: float) -> tuple[int, bool]:
         if not self.sorted:
@@ -123,6 +154,7 @@ class LookupIndex:
         self._frustum_cache: dict[tuple[float, float], tuple[np.ndarray, np.ndarray]] = {}
         self._last_frustum: tuple[float, float, tuple[np.ndarray, np.ndarray]] | None = None
         self._frontiers: dict[int, _FrontierLists] = {}
+        self._other_rates: dict[tuple[int, float], _FrontierLists] = {}
         self._decoded: dict[int, tuple[tuple[int, ...], dict[str, Any], bool]] = {}
 
     def _walk(self, children: np.ndarray, corner_coords: np.ndarray) -> None:
@@ -226,10 +258,53 @@ class LookupIndex:
         return corner
 
     def frontier_lists(self, frontier_id: int, frontier: Frontier, fps: float) -> _FrontierLists:
+        """The lists of a stored frontier at the store's own rate ``fps``."""
         lists = self._frontiers.get(frontier_id)
         if lists is None or lists.frontier is not frontier or lists.fps != fps:
             lists = self._frontiers[frontier_id] = _FrontierLists(frontier, fps)
         return lists
+
+    def frontier_lists_at(self, frontier_id: int, frontier: Frontier, priced_fps: float, fps: float,
+                          static_power_w: float) -> _FrontierLists:
+        """The lists of a stored frontier (priced for ``priced_fps``) repriced for another rate ``fps``
+        and pruned again (kept per (frontier, fps); a few rates at a time)."""
+        key = (frontier_id, fps)
+        lists = self._other_rates.get(key)
+        if lists is None or lists.frontier is not frontier:
+            if len(self._other_rates) > 4096:
+                self._other_rates.clear()
+            assert frontier.frame_time_s is not None
+            power = [power_at_rate(float(p), float(t), priced_fps, fps, static_power_w)
+                     for p, t in zip(frontier.power_w, frontier.frame_time_s, strict=True)]
+            repriced = Frontier.from_points(frontier.packed.tolist(), frontier.error.tolist(), power,
+                                            frontier.frame_time_s.tolist(), fps)
+            lists = _FrontierLists(repriced, fps)
+            lists.frontier = frontier  # the stored frontier it was derived from (the cache's check)
+            self._other_rates[key] = lists
+        return lists
+
+    def lists_of(self, hit: LookupResult) -> _FrontierLists:
+        """The lists ``hit`` was chosen from (its frontier at the rate it was asked for)."""
+        lists = self._frontiers.get(hit.frontier)
+        if lists is not None and lists.fps == hit.fps_target:
+            return lists
+        lists = self._other_rates.get((hit.frontier, hit.fps_target))
+        if lists is None:
+            raise ValueError("the lookup result's frontier is no longer cached: look the camera up again")
+        return lists
+
+    def budget_points(self, hit: LookupResult) -> list[FrontierPoint]:
+        """The points of ``hit``'s frontier (at its frame-rate target, among those the budget search ran
+        over) that keep its budget, in frontier order (power ascending); only ``hit``'s own point when
+        none does (``hit.infeasible``)."""
+        lists = self.lists_of(hit)
+        if lists.points is None:
+            lists.points = [FrontierPoint(self.decoded(pk)[0], pk, lists.power[k], lists.error[k],
+                                          lists.frame_time[k], lists.fps_reached[k], lists.meets[k])
+                            for k, pk in enumerate(lists.packed)]
+        if hit.infeasible:
+            return [lists.points[hit.rank]]
+        return [lists.points[k] for k in lists.within(hit.budget_mode, hit.budget)]
 
     def decoded(self, packed: int) -> tuple[tuple[int, ...], dict[str, Any]]:
         """Value indices and a fresh ``{name: value}`` of a packed setting (decoded once per setting;

@@ -13,10 +13,11 @@ from typing import Any
 
 import numpy as np
 
+from ..options import QUERY_FPS
 from . import camera, codec, format
 from .camera import VIEW_FORWARD, VIEW_UP, view_up
 from .frontier import Frontier
-from .lookup import LookupIndex, LookupResult
+from .lookup import FrontierPoint, LookupIndex, LookupResult
 from .packing import MAX_PARAMS, MAX_VALUES_PER_PARAM, StoredParameter, settings_of
 
 
@@ -183,26 +184,55 @@ class ParetoStore:
         _, corner, view, _ = self._index.locate(position, rot, vf, asp)
         return corner, view
 
+    @property
+    def static_power_w(self) -> float | None:
+        """The profile's static power the store's figures include (``meta``; None: not recorded, stores
+        made before queries could ask for another frame rate)."""
+        v = self.meta.get("static_power_w")
+        return None if v is None else float(v)
+
+    def check_fps(self, fps: float | None) -> float:
+        """The frame-rate target of a query: the store's ``fps`` when ``fps`` is None, else ``fps``
+        validated (:data:`service.options.QUERY_FPS`) and usable with this store (another rate needs
+        frame times and the static power)."""
+        if fps is None:
+            return self.fps
+        rate = float(QUERY_FPS.check(fps))
+        if rate == self.fps:
+            return rate
+        if not self.frame_times_known:
+            raise ValueError(f"this store predates frame times: it can only answer for its own "
+                             f"{self.fps:g} fps")
+        if self.static_power_w is None:
+            raise ValueError(f"this store does not record the static power its figures include: it can "
+                             f"only answer for its own {self.fps:g} fps (optimise it again)")
+        return rate
+
     def lookup(self, position: Any, direction: Any = None, matrix: Any = None, fov: float | None = None,
                power_budget: float | None = None, error_budget: float | None = None,
-               aspect: float | None = None, up: Any = None) -> LookupResult:
+               aspect: float | None = None, up: Any = None, fps: float | None = None) -> LookupResult:
         """Settings for a camera at ``position`` looking along ``direction`` (or oriented by ``matrix``,
         Blender's 4x4 camera world matrix) with vertical field of view ``fov`` in radians, under exactly
         one of ``power_budget`` (W) or ``error_budget`` (1 - SSIM), among the settings that keep up with
-        the store's frame rate ``fps`` when the store knows frame times and any does
-        (``LookupResult.meets_fps``)."""
+        the frame rate ``fps`` (default: the store's) when the store knows frame times and any does
+        (``LookupResult.meets_fps``); power is predicted at the frame rate reached for ``fps``."""
         if (power_budget is None) == (error_budget is None):
             raise ValueError("give exactly one of power_budget or error_budget")
         budget = float(power_budget if power_budget is not None else error_budget)  # type: ignore[arg-type]
         if not math.isfinite(budget):
             raise ValueError("budget must be finite")
+        rate = self.check_fps(fps)
         index = self._index
         rot = camera.rotation_floats(direction, matrix, up)
         vf = camera.check_fov(self.vfov if fov is None else fov)
         asp = camera.check_aspect(self.aspect if aspect is None else aspect)
         leaf, corner, view, clamped = index.locate(position, rot, vf, asp)
         fid = index.views[corner][view]
-        fr = index.frontier_lists(fid, self.frontiers[fid], self.fps)
+        if rate == self.fps:
+            fr = index.frontier_lists(fid, self.frontiers[fid], rate)
+        else:
+            fr = index.frontier_lists_at(fid, self.frontiers[fid], self.fps, rate,
+                                         self.static_power_w)  # type: ignore[arg-type]
         if power_budget is not None:
             i, infeasible = fr.under_power(budget)
         else:
@@ -210,7 +240,14 @@ class ParetoStore:
         packed = fr.packed[i]
         indices, settings = index.decoded(packed)
         return LookupResult(indices, packed, settings, fr.power[i], fr.error[i], clamped, infeasible,
-                            corner, view, leaf, fr.frame_time[i], fr.fps_reached[i], fr.meets[i])
+                            corner, view, leaf, fr.frame_time[i], fr.fps_reached[i], fr.meets[i], rate,
+                            fid, i, "power" if power_budget is not None else "error", budget)
+
+    def budget_points(self, hit: LookupResult) -> list[FrontierPoint]:
+        """The points of the frontier ``hit`` came from that keep its budget (power ascending), with
+        their predictions at ``hit``'s frame-rate target: the settings the temporal filter may show on
+        that frame (``hit``'s own point alone when nothing keeps the budget)."""
+        return self._index.budget_points(hit)
 
     # -- serialisation ----------------------------------------------------------------------------
 

@@ -9,7 +9,7 @@ from fastapi import APIRouter, Query, Request, Response, status
 
 from service.camera_path import CameraPath
 from service.storage import StoreRecord
-from service.store import TemporalFilter, pack_indices
+from service.store import TemporalFilter
 from service.verify import verify_store
 
 from ..checks import deleted, scene_or_404
@@ -88,41 +88,48 @@ def answer_query(store: Any, body: StoreQuery) -> QueryResult:
     try:  # the lookup's camera maths is scale-free: huge or tiny but finite orientations are fine
         hit = store.lookup(body.position, direction=body.direction, matrix=body.matrix, fov=body.fov,
                            power_budget=body.power_budget_w, error_budget=body.error_budget,
-                           aspect=body.aspect)
+                           aspect=body.aspect, fps=body.fps)
     except ValueError as exc:
         raise ApiError(422, str(exc)) from exc
     except ArithmeticError as exc:  # extreme but finite numbers the lookup could not handle
         raise ApiError(422, f"camera pose cannot be looked up: {type(exc).__name__}: {exc}") from exc
-    indices = tuple(hit.indices)
-    filtered = False
+    target = tuple(hit.indices)
+    shown = target
     if body.previous is not None:
         prev = tuple(body.previous.indices)
-        if len(prev) != len(indices):
-            raise ApiError(422, f"previous.indices has {len(prev)} entries, the store has {len(indices)} "
+        if len(prev) != len(target):
+            raise ApiError(422, f"previous.indices has {len(prev)} entries, the store has {len(target)} "
                                 "parameters")
         for i, (v, p) in enumerate(zip(prev, store.parameters, strict=True)):
             if v >= len(p.values):
                 raise ApiError(422, f"previous.indices[{i}] = {v} is out of range for parameter {p.name!r} "
                                     f"({len(p.values)} values)")
+        points = {pt.indices: pt for pt in store.budget_points(hit)}
         tf = TemporalFilter(period_s=body.previous.period_s)
         tf.update(prev, 0.0)  # the settings shown when the target changed ...
-        tf.update(indices, 0.0)  # ... the new target at that moment ...
-        shown = tf.update(indices, body.previous.elapsed_s)  # ... and what Eq. 8 shows elapsed_s later
-        filtered = shown != indices
-        indices = tuple(shown)
+        tf.update(target, 0.0, list(points))  # ... the new target at that moment ...
+        shown = tf.update(target, body.previous.elapsed_s, list(points))  # ... and what it shows later
+    if shown == target:
+        return QueryResult(
+            settings=hit.settings, indices=list(target), packed=hit.packed, power_w=hit.power_w,
+            error=hit.error, clamped=hit.clamped, infeasible=hit.infeasible, filtered=False,
+            target_indices=list(target), frame_time_s=hit.frame_time_s, fps=hit.fps,
+            fps_target=hit.fps_target, meets_fps=hit.meets_fps)
+    pt = points[shown]
     return QueryResult(
-        settings=store.settings_of(indices) if filtered else hit.settings, indices=list(indices),
-        packed=pack_indices(indices) if filtered else hit.packed, power_w=hit.power_w, error=hit.error,
-        clamped=hit.clamped, infeasible=hit.infeasible, filtered=filtered, frame_time_s=hit.frame_time_s,
-        fps=hit.fps, fps_target=store.fps, meets_fps=hit.meets_fps,
-    )
+        settings=store.settings_of(shown), indices=list(shown), packed=pt.packed, power_w=pt.power_w,
+        error=pt.error, clamped=hit.clamped, infeasible=hit.infeasible, filtered=True,
+        target_indices=list(target), frame_time_s=pt.frame_time_s, fps=pt.fps, fps_target=hit.fps_target,
+        meets_fps=pt.meets_fps)
 
 
 async def query_store(store_id: str, body: StoreQuery, request: Request) -> QueryResult:
     """Settings for a camera pose under a power or error budget, optionally through the temporal filter
-    (Eq. 8) from the ``previous`` settings, ``elapsed_s`` after the target changed. ``power_w``,
-    ``error``, ``frame_time_s``, ``fps`` and ``meets_fps`` are the predictions for the target settings
-    (among those that keep up with the store's frame rate, ``fps_target``, when any does)."""
+    from the ``previous`` settings, ``elapsed_s`` after the target changed: Eq. 8's pace, but always a
+    point of this view's frontier that keeps the budget (when the target does). ``fps`` asks for another
+    frame rate than the store's (power repriced for it; settings that miss it are never chosen while one
+    meets it). ``power_w``, ``error``, ``frame_time_s``, ``fps`` and ``meets_fps`` are the predictions
+    for the returned settings."""
     return answer_query(request.app.state.render_budget.stores.get(store_id), body)
 
 
