@@ -215,3 +215,27 @@ def test_playback_on_a_real_store_keeps_every_budget_it_can(real_store) -> None:
                 assert pf.active_indices == pf.target_indices
     assert transitions > 0  # the path did change targets mid-way ...
     assert off_frontier_eq8 > 0  # ... where Eq. 8 alone shows settings no frontier predicts
+
+
+@pytest.mark.slow
+def test_the_evaluation_shows_what_playback_shows_on_its_sampled_frames(real_store) -> None:
+    """The evaluation campaign samples every n-th path frame but its temporal filter must run at
+    playback's pace: its settings on a sampled frame equal those of a driver stepped over every frame
+    (stepping the filter over the samples alone restarts a transition at nearly every sample)."""
+    from addon.core.evaluate_path import filtered_frames
+
+    store, path = real_store
+    powers = sorted({float(p) for f in store.frontiers for p in f.power_w})
+    budget, step, period = powers[len(powers) // 2], 4, 1.0
+    numbers = range(0, len(path), step)
+    shown = filtered_frames(store, path, numbers, "POWER", budget, period)
+    every, sampled_only = PlaybackDriver(store, period), PlaybackDriver(store, period)
+    differs = 0
+    for k, f in enumerate(path.frames):
+        pf = every.step(f.matrix_world, f.vfov, f.aspect, f.time, "POWER", budget)
+        if k % step == 0:
+            assert shown[k].active_indices == pf.active_indices
+            alone = sampled_only.step(f.matrix_world, f.vfov, f.aspect, f.time, "POWER", budget)
+            differs += alone.active_indices != pf.active_indices
+    assert sorted(shown) == list(numbers)
+    assert differs > 0  # the test path has transitions the sampled-only stepping shows differently

@@ -3,7 +3,7 @@ min) and with the store's budget-driven settings (temporal filter included), as 
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
@@ -14,7 +14,7 @@ from service import camera_path
 from service import store as pareto_store
 
 from .client import ServiceClient
-from .playback_logic import PlaybackDriver, validate_budget
+from .playback_logic import PlaybackDriver, PlaybackFrame, validate_budget
 from .report import PRESET_LEVELS, FrameRow, preset_indices
 
 
@@ -54,6 +54,23 @@ def budget_kept(mode: str, value: float, power_w: float, error: float) -> bool:
     return power_w <= value if mode == "POWER" else error <= value
 
 
+def filtered_frames(store: pareto_store.ParetoStore, path: camera_path.CameraPath, numbers: Iterable[int],
+                    budget_mode: str, budget_value: float, period_s: float) -> dict[int, PlaybackFrame]:
+    """What playback shows at the path frames ``numbers`` under a budget: the playback driver stepped
+    over *every* path frame up to the last of them, as during playback, so the temporal filter moves at
+    its real pace between sampled frames (stepping it over the sampled frames alone would restart a
+    transition at nearly every sample and keep the filter near its starting settings)."""
+    wanted = set(numbers)
+    driver = PlaybackDriver(store, period_s)
+    out: dict[int, PlaybackFrame] = {}
+    for number in range(max(wanted, default=-1) + 1):
+        f = path.frames[number]
+        pf = driver.step(f.matrix_world, f.vfov, f.aspect, f.time, budget_mode, budget_value)
+        if number in wanted:
+            out[number] = pf
+    return out
+
+
 def evaluate_path(client: ServiceClient, store: pareto_store.ParetoStore, path: camera_path.CameraPath,
                   spec: EvalSpec, *, progress: Callable[[int, int], None] | None = None,
                   concurrency: int = 4) -> list[FrameRow]:
@@ -61,20 +78,22 @@ def evaluate_path(client: ServiceClient, store: pareto_store.ParetoStore, path: 
     service, not predicted. A row's ``frame`` is the index into the path.
 
     The settings of every frame are decided first (the budget-driven mode runs the temporal filter over
-    the path in order, exactly as playback does); the evaluations then go out `concurrency` at a time.
+    every path frame in order, exactly as playback does: :func:`filtered_frames`); the evaluations then
+    go out `concurrency` at a time.
     """
     validate_budget(spec.budget_mode, spec.budget_value)
     presets = preset_settings(store)
-    driver = PlaybackDriver(store, spec.filter_period_s)
+    numbers = range(0, len(path), max(1, spec.frame_step))
+    shown = filtered_frames(store, path, numbers, spec.budget_mode, spec.budget_value,
+                            spec.filter_period_s) if "ours" in spec.modes else {}
     Job = tuple[int, camera_path.CameraFrame, str, dict[str, Any], tuple[float, float, float | None] | None]
     jobs: list[Job] = []
-    for number in range(0, len(path), max(1, spec.frame_step)):
+    for number in numbers:
         f = path.frames[number]
         for mode in spec.modes:
             predicted = None
             if mode == "ours":
-                pf = driver.step(f.matrix_world, f.vfov, f.aspect, f.time, spec.budget_mode,
-                                 spec.budget_value)
+                pf = shown[number]
                 settings = pf.active_settings
                 # the filter shows frontier points only: the store predicts them, in transition too
                 predicted = (pf.predicted_power_w, pf.predicted_error, pf.predicted_fps)
