@@ -26,18 +26,15 @@ T = TypeVar("T")
 _MATERIAL_ID_TYPES = frozenset({"MATERIAL", "NODETREE", "IMAGE", "TEXTURE"})
 #: ID types whose update changes the world's reading.
 _WORLD_ID_TYPES = frozenset({"WORLD", "NODETREE", "IMAGE"})
-#: ID types that change neither materials nor the world (instances and lights are read on every
-#: translation anyway; geometry goes by the object's own flag).
-_NEUTRAL_ID_TYPES = frozenset({"OBJECT", "MESH", "CURVE", "CURVES", "METABALL", "FONT", "LATTICE",
-                               "POINTCLOUD", "VOLUME", "GREASEPENCIL", "LIGHT", "CAMERA", "COLLECTION",
-                               "SCENE", "ACTION", "TEXT", "WINDOWMANAGER", "WORKSPACE", "SCREEN", "BRUSH",
-                               "PALETTE", "LINESTYLE", "ARMATURE", "SPEAKER", "LIGHT_PROBE"})
-
-
 # ID types whose change never alters what the simulator sees (the scene's own ID changes on every frame
 # change; actions change through the transforms they drive, which arrive as object updates).
 _IGNORED_ID_TYPES = frozenset({"SCENE", "ACTION", "TEXT", "WINDOWMANAGER", "WORKSPACE", "SCREEN", "BRUSH",
                                "PALETTE", "LINESTYLE"})
+#: ID types that change neither materials nor the world (instances and lights are read on every
+#: translation anyway; geometry goes by the object's own flag).
+_NEUTRAL_ID_TYPES = _IGNORED_ID_TYPES | frozenset({
+    "OBJECT", "MESH", "CURVE", "CURVES", "METABALL", "FONT", "LATTICE", "POINTCLOUD", "VOLUME",
+    "GREASEPENCIL", "LIGHT", "CAMERA", "COLLECTION", "ARMATURE", "SPEAKER", "LIGHT_PROBE"})
 
 
 @dataclass(frozen=True)
