@@ -197,6 +197,18 @@ QUERY_FPS = Option("fps", float, None, "Frame rate",
                    "setting that misses the rate is never chosen while one that meets it exists",
                    minimum=FPS_MIN, maximum=FPS_MAX, optional=True, metavar="FPS", group="Playback")
 
+#: What a lookup keeps when no stored setting keeps both the budget and the frame rate (a query option,
+#: declared here for the same reason as :data:`QUERY_FPS`): "frame_rate" (the issue's rule: a setting
+#: that misses the rate is never chosen while one that meets it exists, so the budget gives way) or
+#: "budget" (the settings within the budget first, those that keep up preferred among them, so the frame
+#: rate gives way and the lookup says so).
+PRIORITIES = ("frame_rate", "budget")
+QUERY_PRIORITY = Option("priority", str, "frame_rate", "Priority",
+                        "when no setting keeps both the budget and the frame rate: keep the frame rate "
+                        "(the budget is broken) or keep the budget (the frame rate is missed)",
+                        choices=PRIORITIES, choice_labels=("Frame rate first", "Budget first"),
+                        group="Playback")
+
 BY_NAME: dict[str, Option] = {o.name: o for o in OPTIONS}
 PUBLIC: tuple[Option, ...] = tuple(o for o in OPTIONS if o.public)
 GROUPS: tuple[str, ...] = tuple(dict.fromkeys(o.group for o in PUBLIC))
