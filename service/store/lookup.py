@@ -22,7 +22,10 @@ searched:
   power budget; ``meets_fps`` False). Only when no point of either tier keeps the budget is the result
   infeasible, with the same fallback as under ``"frame_rate"``.
 
-The result says whether the chosen setting meets the target and the frame rate it reaches.
+The result says whether the chosen setting meets the target and the frame rate it reaches. A store
+keeps, per view, the points of its two tiers at its own ``fps``: another rate chooses among those (at a
+higher rate, a setting the store dropped because it missed its own rate and was less accurate than a
+real-time one is not there to be found).
 
 :meth:`LookupIndex.budget_points` lists the points of the tier a result came from that keep its budget:
 the settings the temporal filter (:mod:`.temporal`) may show while it moves to the target.
