@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from ..options import QUERY_FPS
+from ..options import QUERY_FPS, QUERY_PRIORITY
 from . import camera, codec, format
 from .camera import VIEW_FORWARD, VIEW_UP, view_up
 from .frontier import Frontier
@@ -210,12 +210,16 @@ class ParetoStore:
 
     def lookup(self, position: Any, direction: Any = None, matrix: Any = None, fov: float | None = None,
                power_budget: float | None = None, error_budget: float | None = None,
-               aspect: float | None = None, up: Any = None, fps: float | None = None) -> LookupResult:
+               aspect: float | None = None, up: Any = None, fps: float | None = None,
+               priority: str = "frame_rate") -> LookupResult:
         """Settings for a camera at ``position`` looking along ``direction`` (or oriented by ``matrix``,
         Blender's 4x4 camera world matrix) with vertical field of view ``fov`` in radians, under exactly
         one of ``power_budget`` (W) or ``error_budget`` (1 - SSIM), among the settings that keep up with
         the frame rate ``fps`` (default: the store's) when the store knows frame times and any does
-        (``LookupResult.meets_fps``); power is predicted at the frame rate reached for ``fps``."""
+        (``LookupResult.meets_fps``); power is predicted at the frame rate reached for ``fps``.
+        ``priority`` (:data:`service.options.QUERY_PRIORITY`) is validated and recorded on the result;
+        placeholder until the store side lands: "budget" chooses as "frame_rate" does."""
+        priority = QUERY_PRIORITY.check(priority)
         if (power_budget is None) == (error_budget is None):
             raise ValueError("give exactly one of power_budget or error_budget")
         budget = float(power_budget if power_budget is not None else error_budget)  # type: ignore[arg-type]
@@ -241,7 +245,7 @@ class ParetoStore:
         indices, settings = index.decoded(packed)
         return LookupResult(indices, packed, settings, fr.power[i], fr.error[i], clamped, infeasible,
                             corner, view, leaf, fr.frame_time[i], fr.fps_reached[i], fr.meets[i], rate,
-                            fid, i, "power" if power_budget is not None else "error", budget)
+                            fid, i, "power" if power_budget is not None else "error", budget, priority)
 
     def budget_points(self, hit: LookupResult) -> list[FrontierPoint]:
         """The points of the frontier ``hit`` came from that keep its budget (power ascending), with
