@@ -208,6 +208,23 @@ QUERY_PRIORITY = Option("priority", str, "frame_rate", "Priority",
                         "(the budget is broken) or keep the budget (the frame rate is missed)",
                         choices=PRIORITIES, choice_labels=("Frame rate first", "Budget first"),
                         group="Playback")
+#: The store lookup's query options (not the optimiser's): every layer that looks a store up (CLI query
+#: and verify, REST query and verify, the add-on's playback, engine and Evaluate Path, the main job)
+#: offers these, built from these declarations as the optimiser's options are from :data:`OPTIONS`.
+QUERY_OPTIONS: tuple[Option, ...] = (QUERY_FPS, QUERY_PRIORITY)
+#: How each priority reads in a report or a command's output ("Frame rate first", "Budget first").
+PRIORITY_LABELS: dict[str, str] = dict(zip(PRIORITIES, QUERY_PRIORITY.choice_labels, strict=True))
+
+
+def check_query(values: Mapping[str, Any]) -> dict[str, Any]:
+    """Every query option (:data:`QUERY_OPTIONS`): the defaults with ``values`` (validated, unknown names
+    refused) on top, as keyword arguments of ``ParetoStore.lookup``."""
+    known = {o.name: o for o in QUERY_OPTIONS}
+    unknown = sorted(set(values) - set(known))
+    if unknown:
+        raise ValueError(f"unknown query options {unknown}; known: {sorted(known)}")
+    return {name: o.check(values.get(name, o.default)) for name, o in known.items()}
+
 
 BY_NAME: dict[str, Option] = {o.name: o for o in OPTIONS}
 PUBLIC: tuple[Option, ...] = tuple(o for o in OPTIONS if o.public)
