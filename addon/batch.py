@@ -8,7 +8,9 @@
 Where jobs run (--url, --token, --workers, --data-dir, --timeout) comes before the command: by default on
 this computer with the bundled core, or on the remote service at --url. Each command's own options come
 after it (`python -m addon.batch optimize --help`). ``evaluate`` runs the evaluation campaign of ``make
-demo`` under the scene's power and error budgets and writes the same report folder. Prints a text progress
+demo`` under the scene's power and error budgets and the store lookup's frame-rate target and priority
+(``--fps``, ``--priority``: kept in the .blend, as playback and the render engine use them) and writes
+the same report folder. Prints a text progress
 bar; exits non-zero (with the reason on stderr) on any failure.
 """
 
@@ -150,6 +152,8 @@ def parser() -> argparse.ArgumentParser:
         p.add_argument("--budget-mode", choices=("power", "error"))
         p.add_argument("--budget", type=float, help="watts (power) or 1 - SSIM (error)")
         p.add_argument("--filter-period", type=float, help="temporal filter T in seconds")
+        for query_option in _option_schema().QUERY_OPTIONS:  # the store lookup's --fps and --priority
+            _option_schema().add_argument(p, query_option, with_default=False)
 
     opt = sub.add_parser("optimize", help="record the path if needed, optimise, keep the store, save")
     budget(opt)
@@ -194,7 +198,8 @@ def _apply_scene_options(ext: str, props, args: argparse.Namespace) -> None:
     if getattr(args, "resolution", None):
         parse_size = importlib.import_module(f"{ext}.core.campaign").parse_size
         args.eval_width, args.eval_height = parse_size(args.resolution)
-    for opt in _option_schema().PUBLIC:  # each checked here; together when the job is built
+    schema = _option_schema()
+    for opt in (*schema.PUBLIC, *schema.QUERY_OPTIONS):  # each checked here; together when the job is built
         value = getattr(args, opt.name, None)
         if value is not None:
             set_option(props, opt.name, value)

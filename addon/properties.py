@@ -153,7 +153,7 @@ def query_values(props: Any) -> dict[str, Any]:
     return option_schema.check_query(option_values(props, option_schema.QUERY_OPTIONS))
 
 
-_DECLARED = {o.name: o for o in (*option_schema.OPTIONS, *option_schema.QUERY_OPTIONS)}
+_DECLARED = {**option_schema.BY_NAME, **option_schema.QUERY_BY_NAME}
 
 
 def set_option(props: Any, name: str, value: Any) -> None:
