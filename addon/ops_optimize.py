@@ -145,8 +145,14 @@ def apply_outcome(scene: bpy.types.Scene, outcome: JobOutcome, path: path_format
     mode = props.budget_mode
     value = props.power_budget if mode == "POWER" else props.error_budget
     frames = path.frames[:: max(1, len(path.frames) // 300)]  # a few hundred poses are plenty here
-    summary = predicted_path_summary(store, frames, mode, value, **query_values(props))
-    props.summary = summary_text(summary)
+    query, unusable = query_values(props), ""
+    try:
+        summary = predicted_path_summary(store, frames, mode, value, **query)
+    except ValueError as err:  # the scene's frame-rate target is one this store cannot answer: keep the
+        # store, summarise it at its own rate and say why (playback says it on every frame)
+        summary = predicted_path_summary(store, frames, mode, value, priority=query["priority"])
+        unusable = f"frame rate {query['fps']:g} fps unusable: {err}; "
+    props.summary = unusable + summary_text(summary)
     playback.reset()
     return Applied(props.summary, budget_shortfall(summary))
 
