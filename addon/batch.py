@@ -282,7 +282,8 @@ def cmd_playback(bpy: ModuleType, ext: str, args: argparse.Namespace) -> int:
             raise ValueError(f"frame {f}: {props.playback_status}")
         rows.append((f, pb.scene_time(scene), props.active_indices, props.target_indices,
                      props.predicted_power, props.predicted_error, props.predicted_fps or None,
-                     props.active_settings))
+                     props.active_settings, props.target_fps or None,
+                     "" if not props.predicted_fps else int(not props.slower_than_fps), props.priority))
         bar((i + 1) / len(frames), f"frame {f}")
     bar.done()
     elapsed = time.perf_counter() - t0
@@ -290,11 +291,16 @@ def cmd_playback(bpy: ModuleType, ext: str, args: argparse.Namespace) -> int:
         with open(args.out, "w", newline="", encoding="utf-8") as fh:
             w = csv.writer(fh)
             w.writerow(("frame", "time_s", "active_indices", "target_indices", "predicted_power_w",
-                        "predicted_error", "predicted_fps", "settings"))
+                        "predicted_error", "predicted_fps", "settings", "fps_target", "meets_fps",
+                        "priority"))
             w.writerows(rows)
     n = max(1, len(rows))
     rates = [r[6] for r in rows if r[6]]
     rate = f" at {sum(rates) / len(rates):.1f} fps" if rates else ""  # none: a store before frame times
+    missed = sum(r[9] == 0 for r in rows)
+    if missed:  # frames whose settings miss the frame-rate target (and why, under the priority)
+        rate += (f" ({missed} frames miss {rows[0][8]:g} fps" +
+                 (": budget first)" if props.priority == "budget" else ": no setting keeps up)"))
     sys.stdout.write(f"{len(rows)} frames, mean predicted power {sum(r[4] for r in rows) / n:.3f} W{rate}, "
                      f"mean predicted error {sum(r[5] for r in rows) / n:.4f}, "
                      f"{len({r[2] for r in rows})} distinct settings, {1e3 * elapsed / n:.3f} ms/frame "
