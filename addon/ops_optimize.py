@@ -145,13 +145,13 @@ def apply_outcome(scene: bpy.types.Scene, outcome: JobOutcome, path: path_format
     mode = props.budget_mode
     value = props.power_budget if mode == "POWER" else props.error_budget
     frames = path.frames[:: max(1, len(path.frames) // 300)]  # a few hundred poses are plenty here
-    query, unusable = query_values(props), ""
+    unusable = ""
     try:
-        summary = predicted_path_summary(store, frames, mode, value, **query)
-    except ValueError as err:  # the scene's frame-rate target is one this store cannot answer: keep the
-        # store, summarise it at its own rate and say why (playback says it on every frame)
-        summary = predicted_path_summary(store, frames, mode, value, priority=query["priority"])
-        unusable = f"frame rate {query['fps']:g} fps unusable: {err}; "
+        summary = predicted_path_summary(store, frames, mode, value, **query_values(props))
+    except ValueError as err:  # e.g. a frame-rate target this store cannot answer: keep the store,
+        # summarise it at its own rate and say why (playback says it on every frame)
+        summary = predicted_path_summary(store, frames, mode, value)
+        unusable = f"lookup options unusable with this store ({err}): summary at its own frame rate; "
     props.summary = unusable + summary_text(summary)
     playback.reset()
     return Applied(props.summary, budget_shortfall(summary))

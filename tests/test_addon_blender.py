@@ -515,7 +515,7 @@ def test_playback_hud_and_engine_look_up_under_the_scene_query_options(scene, tm
     assert any("no setting keeps up with 24 fps" in t for t, _ in hud.hud_lines(scene))
     props.fps = 50.0
     _load_store(tmp_path, timed=True)  # no static power: only its own frame rate (loaded, and it says so)
-    assert "frame rate 50 fps unusable" in props.summary and "static power" in props.summary
+    assert "lookup options unusable" in props.summary and "static power" in props.summary
     scene.frame_set(2)
     assert props.playback_status.startswith("error") and "static power" in props.playback_status
     bpy.ops.wm.open_mainfile(filepath=str(tmp_path / "query.blend"))
