@@ -77,7 +77,7 @@ class LookupResult:
     rank: int = -1
     budget_mode: str = ""
     budget: float = math.nan
-    priority: str = "frame_rate"
+    priority: str = "frame_rate"  # the query's (service.options.QUERY_PRIORITY)
 
 
 @dataclass(frozen=True)
