@@ -278,3 +278,22 @@ def test_a_real_store_keeps_the_settings_too_slow_for_its_frame_rate() -> None:
         assert not hit.infeasible and hit.error <= budget and hit.meets_fps is False
         assert hit.fps is not None and hit.fps < 120.0 and math.isfinite(hit.power_w)
         assert store.lookup(f.position, direction=f.direction, error_budget=budget).infeasible
+
+
+def test_playback_under_budget_first_shows_only_points_within_each_frames_budget() -> None:
+    """The playback driver (what the campaign's ``filtered_frames`` steps) passes each hit to
+    ``budget_points``: as the error budget tightens past what real-time settings reach, the filter moves
+    to the slow tier and every shown setting is a stored point within that frame's budget."""
+    from addon.core.playback_logic import PlaybackDriver
+    from service.store.camera import look_matrix
+
+    s = _two_tier_store()
+    driver = PlaybackDriver(s, 1.0)
+    m = look_matrix((5.0, 5.0, 5.0), (1.0, 0.0, 0.0)).tolist()
+    shown = []
+    for k in range(90):  # 3 s at 30 fps: budget 0.06, then 0.015 from 1 s on
+        budget = 0.06 if k < 30 else 0.015
+        pf = driver.step(m, 0.69, 16 / 9, k / 30, "ERROR", budget, priority="budget")
+        assert pf.predicted_error <= budget and not pf.infeasible and pf.priority == "budget"
+        shown.append((pf.active_indices, pf.meets_fps))
+    assert shown[0] == ((1, 1, 2), True) and shown[-1] == ((1, 0, 1), False)
