@@ -17,12 +17,18 @@ import sim_core
 from service.camera_path import CameraPath
 from service.display_pricing import (
     DisplayPricing,
+    apron_tiles,
     cover_rects,
     inclusion_probabilities,
+    plan_windows,
     price_camera,
     serpentine,
     systematic_sample,
+    traced_area,
+    tracing,
 )
+from service.display_pricing.camera import _DESIGNS
+from service.display_pricing.design import build_design, display_cameras
 from service.eval_cache import EvalCache
 from service.evaluation import CameraSpec
 from service.executors import InProcessExecutor
@@ -191,6 +197,96 @@ def test_a_share_of_the_blocks_estimates_the_whole_frame(scene, eye, seed, size,
         assert abs(e.power_w / power - 1.0) <= 0.04, (idx, e.power_w, power)
         assert e.breakdown["display.width"] == size[0]
         assert 0 < e.breakdown["display.pixel_fraction"] < min(1.0, 3 * share)
+
+
+# -- the windows traced ----------------------------------------------------------------------------------
+def _tile_windows(mask, width, height, tile, apron):
+    """One window per tile: the most aprons any cover pays."""
+    ys, xs = np.nonzero(mask)
+    return [(x * tile, y * tile, min(tile, width - x * tile), min(tile, height - y * tile))
+            for y, x in zip(ys.tolist(), xs.tolist(), strict=True)]
+
+
+def _whole_frame(mask, width, height, tile, apron):
+    return [(0, 0, width, height)]
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.integers(1, 400), st.integers(1, 300), st.sampled_from([4, 8, 16, 32]), st.integers(0, 2),
+       st.floats(0.0, 1.0), st.integers(0, 10_000))
+def test_planned_windows_cover_the_tiles_and_never_trace_more_than_the_frame(width, height, tile, apron,
+                                                                             share, seed) -> None:
+    nty, ntx = -(-height // tile), -(-width // tile)
+    mask = np.random.default_rng(seed).random((nty, ntx)) < share
+    windows = plan_windows(mask, width, height, tile, apron)
+    cover = np.zeros((nty, ntx), dtype=bool)
+    for x, y, w, h in windows:  # on the tile grid, inside the frame
+        assert x % tile == 0 and y % tile == 0 and w >= 1 and h >= 1
+        assert (w % tile == 0 or x + w == width) and (h % tile == 0 or y + h == height)
+        assert x + w <= width and y + h <= height
+        cover[y // tile:-(-(y + h) // tile), x // tile:-(-(x + w) // tile)] = True
+    assert not (mask & ~cover).any()
+    cost = traced_area(windows, width, height, tile, apron)
+    assert cost <= width * height
+    # never dearer than the mask's exact cover by rectangles, nor than a window per tile
+    rects = [(x0 * tile, y0 * tile, min(x1 * tile, width) - x0 * tile, min(y1 * tile, height) - y0 * tile)
+             for x0, y0, x1, y1 in cover_rects(mask)]
+    assert cost <= traced_area(rects, width, height, tile, apron)
+    assert cost <= traced_area(_tile_windows(mask, width, height, tile, apron), width, height, tile, apron)
+    if not mask.any():
+        assert windows == []
+
+
+def test_traced_area_counts_the_aprons_clipped_to_the_frame() -> None:
+    assert traced_area([(16, 16, 16, 16)], 64, 64, 16, 1) == 48 * 48
+    assert traced_area([(0, 0, 16, 16)], 64, 64, 16, 1) == 32 * 32
+    assert traced_area([(0, 0, 64, 64)], 64, 64, 16, 1) == 64 * 64  # the whole frame has no apron
+    assert traced_area([(16, 16, 16, 16)] * 2, 64, 64, 16, 0) == 2 * 16 * 16
+    for mode, ao, apron in (("1spp", 0, 0), ("fsaa", 0, 1), ("undersample", 2, 1), ("supersample", 0, 1)):
+        s = sim_core.RenderSettings(mode=mode, ao_samples=ao, block=2)
+        assert apron_tiles(s) == apron, mode
+
+
+@pytest.mark.parametrize("share", [0.25, 1.0])
+def test_the_windows_traced_change_only_the_cost(scene, monkeypatch, share) -> None:
+    """The estimator's figures are the same, to the last digit, whether the sampled tiles are traced as
+    planned, as one window each (the most aprons) or as the whole frame."""
+    cam = _camera(192, 112, (3.0, -4.5, 1.8))
+    sets = _settings(3, seed=8)
+    pricing = DisplayPricing("tiles", fraction=share, seed=3)
+
+    def figures():
+        _DESIGNS.clear()
+        return [(e.error, e.power_w, e.frame_time_s, sorted(e.breakdown.items()))
+                for e in price_camera(scene, cam, sets, SPACE, profile="mobile", fps=30.0, metric="ssim",
+                                      pricing=pricing)]
+
+    planned = figures()
+    for plan in (_tile_windows, _whole_frame):
+        monkeypatch.setattr(tracing, "plan_windows", plan)
+        assert figures() == planned, plan.__name__
+    _DESIGNS.clear()
+
+
+def test_the_sampled_tiles_are_the_whole_frames(scene) -> None:
+    """Counters, histograms and pixels of the sampled tiles, traced through the planned windows, equal
+    those of one whole-frame window at every mode the space has."""
+    cam = _camera(192, 112, (3.0, -4.5, 1.8))
+    pricing = DisplayPricing("tiles", fraction=0.25, seed=3)
+    renderer = tracing.Renderer(scene, None)
+    d, _ = build_design(renderer, cam, SPACE, pricing, "ssim")
+    full_cam, _ = display_cameras(cam, pricing)
+    blocks = d.sampled.tolist()
+    for idx in _settings(4, seed=9):
+        s = SPACE.to_settings(idx)
+        planned = renderer.windows(full_cam, s, blocks, d)
+        whole = renderer.windows(full_cam, s, blocks, d, plan=_whole_frame)
+        for a, b in zip(planned[1:4], whole[1:4], strict=True):
+            np.testing.assert_array_equal(a, b)
+        pa = tracing.display_patches(planned[0], planned[4], d, blocks)
+        pb = tracing.display_patches(whole[0], whole[4], d, blocks)
+        for b in blocks:
+            np.testing.assert_array_equal(pa[b], pb[b])
 
 
 # -- the optimiser's store --------------------------------------------------------------------------------

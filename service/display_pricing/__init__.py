@@ -24,11 +24,13 @@ The tile estimator, for one camera and the settings priced there:
    sampling interval is taken with certainty.
 4. **Display-resolution values.** The sampled blocks are traced at display resolution as windows of
    the frame (``sim_core.render_window``: the frame's own pixels and per-tile counters; tiles are cold-
-   cache units, so counters add exactly). SSIM needs half a window of margin around a block: whole
-   neighbouring tiles for the adaptive modes (their interpolation runs within a tile), only the
-   margin's pixels for the per-pixel modes (1 spp, FSAA: the reference among them). y_b = the block's
-   sum of 1 - local SSIM (an SSIM of the block and its margin, whose inner part is the block) and its
-   tiles' counters.
+   cache units, so counters add exactly). SSIM needs half a window of margin around a block: the whole
+   tiles that hold the block and its margin are traced. A window that goes through the resolve pass
+   (FSAA, supersampling, AO) also traces an apron of a tile on each side, so the tiles are traced as
+   few, large windows on the tile grid: the cheapest (aprons included) of bands of rows, bands of
+   columns, the tiles' exact cover by rectangles and the whole frame, so never more than a whole frame
+   (``windows``). y_b = the block's sum of 1 - local SSIM (an SSIM of the block and its margin, whose
+   inner part is the block) and its tiles' counters.
 5. **Ratio estimators.** Y = X * sum(y_b / pi_b) / sum(x_b / pi_b) over the sampled blocks, for the
    error sum and for each counter (pi_b the inclusion probabilities, X the auxiliary frame's total):
    the sample corrects the auxiliary frame's level, the auxiliary frame spreads the sample's values
@@ -40,7 +42,8 @@ The tile estimator, for one camera and the settings priced there:
 Only the SSIM metrics can be estimated from tiles; FLIP is priced on whole frames.
 
 The package, by concept: ``config`` (the estimator's settings), ``sampling`` (blocks and the systematic
-PPS sample), ``tracing`` (whole frames, auxiliary frames, display windows), ``design`` (one camera's
+PPS sample), ``tracing`` (whole frames, auxiliary frames, display windows), ``windows`` (which windows to
+trace), ``design`` (one camera's
 sample and reference), ``estimator`` (the ratio estimators), ``camera`` (every setting at one camera)
 and ``pricer`` (the driver through the evaluation cache and executor).
 """
@@ -56,7 +59,8 @@ from service.display_pricing.sampling import (
     systematic_sample,
 )
 from service.display_pricing.tracing import AUX_TILE
+from service.display_pricing.windows import apron_tiles, plan_windows, traced_area
 
 __all__ = ["AUX_TILE", "BLOCKS", "ESTIMATORS", "ESTIMATOR_VERSION", "DisplayPricer", "DisplayPricing",
-           "cover_rects", "inclusion_probabilities", "price_camera", "sample_start", "serpentine",
-           "systematic_sample"]
+           "apron_tiles", "cover_rects", "inclusion_probabilities", "plan_windows", "price_camera",
+           "sample_start", "serpentine", "systematic_sample", "traced_area"]

@@ -4,7 +4,7 @@ display frame that the sampled blocks need."""
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -12,7 +12,11 @@ from sim_core.image import linear_to_srgb, source_span, upsample_bilinear
 from sim_core.render import COUNTER_NAMES
 
 import sim_core
-from service.display_pricing.sampling import CameraDesign, block_of, cover_rects
+from service.display_pricing.sampling import CameraDesign, block_of
+from service.display_pricing.windows import Window, apron_tiles, plan_windows
+
+#: Windows covering a tile mask: (mask, width, height, tile size, apron tiles) -> windows.
+WindowPlan = Callable[[np.ndarray, int, int, int, int], list[Window]]
 
 #: Tile side of the auxiliary frames: small, so that their tiles fall into single blocks.
 AUX_TILE = 4
@@ -31,11 +35,14 @@ class Renderer:
         """An auxiliary frame: small tiles, so that per-tile counters say where the work is."""
         return self.frame(camera, dataclasses.replace(settings, tile_size=AUX_TILE))
 
-    def windows(self, camera: Any, settings: Any, blocks: Sequence[int], d: CameraDesign
+    def windows(self, camera: Any, settings: Any, blocks: Sequence[int], d: CameraDesign,
+                plan: WindowPlan | None = None
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, tuple[int, int]]:
         """Trace what the sampled ``blocks`` need at display resolution: the traced-resolution canvas
-        (only the needed pixels filled), and the counters and histograms of the tiles whose centre lies
-        in a sampled block (rows), with those tiles' blocks."""
+        (the needed pixels filled), and the counters and histograms of the tiles whose centre lies in a
+        sampled block (rows in the frame's tile order), with those tiles' blocks. Whatever windows on the
+        tile grid ``plan`` (default ``plan_windows``) chooses, the pixels and each tile's counters are the
+        whole frame's: the plan changes only the cost."""
         s = settings
         w, h = sim_core.render_size(camera, s)
         ts = s.tile_size
@@ -54,39 +61,36 @@ class Renderer:
         cy = ty * ts + 0.5 * th
         owner = block_of(cx.ravel(), cy.ravel(), d.W / w, d.H / h, d.B, d.nbx, d.nby).reshape(nty, ntx)
         counted = np.isin(owner, np.asarray(blocks))
-        per_pixel = s.mode in ("1spp", "fsaa")
-        tiles = counted.copy()
-        if not per_pixel:  # adaptive modes: every needed pixel's whole tile
-            tiles |= np.add.reduceat(np.add.reduceat(need.astype(np.int32), np.arange(0, h, ts), axis=0),
-                                     np.arange(0, w, ts), axis=1) > 0
+        # every tile holding a sampled tile or a needed pixel, traced as few large windows as pay off
+        per_tile = np.add.reduceat(np.add.reduceat(need.astype(np.int32), np.arange(0, h, ts), axis=0),
+                                   np.arange(0, w, ts), axis=1)
+        tiles = counted | (per_tile > 0)
         canvas = np.zeros((h, w, 3), dtype=np.float32)
         covered = np.zeros((h, w), dtype=bool)
         rows_c: list[np.ndarray] = []
         rows_h: list[np.ndarray] = []
         rows_b: list[np.ndarray] = []
-        for tx0, ty0, tx1, ty1 in cover_rects(tiles):
-            x, y = tx0 * ts, ty0 * ts
-            win = (x, y, min(tx1 * ts, w) - x, min(ty1 * ts, h) - y)
+        rows_t: list[np.ndarray] = []  # the tiles' row-major index: one order whatever the windows
+        for win in (plan or plan_windows)(tiles, w, h, ts, apron_tiles(s)):
+            x, y, ww, wh = win
             r = sim_core.render_window(self.scene, camera, s, win, threads=self.threads)
-            canvas[y:y + win[3], x:x + win[2]] = r.image
-            covered[y:y + win[3], x:x + win[2]] = True
-            keep = np.asarray([counted[t["y0"] // ts, t["x0"] // ts] for t in r.tile_stats], dtype=bool)
+            canvas[y:y + wh, x:x + ww] = r.image
+            covered[y:y + wh, x:x + ww] = True
+            index = np.asarray([(t["y0"] // ts) * ntx + t["x0"] // ts for t in r.tile_stats], dtype=np.int64)
+            keep = counted.ravel()[index]
             if keep.any():
                 rows_c.append(r.tile_counters[keep])
                 rows_h.append(r.tile_histograms[keep])
-                rows_b.append(np.asarray([owner[t["y0"] // ts, t["x0"] // ts] for t in r.tile_stats])[keep])
-        if per_pixel:  # the margins' pixels alone (a per-pixel mode has the frame's pixels anywhere)
-            for x0, y0, x1, y1 in cover_rects(need & ~covered):
-                r = sim_core.render_window(self.scene, camera, s, (x0, y0, x1 - x0, y1 - y0),
-                                           threads=self.threads)
-                canvas[y0:y1, x0:x1] = r.image
-                covered[y0:y1, x0:x1] = True
+                rows_b.append(owner.ravel()[index[keep]])
+                rows_t.append(index[keep])
         if not covered[need].all():
             raise RuntimeError("tile estimator: a needed pixel was not traced")
-        nc = len(COUNTER_NAMES)
-        return (canvas, np.concatenate(rows_c) if rows_c else np.zeros((0, nc), np.uint64),
-                np.concatenate(rows_h) if rows_h else np.zeros((0, 25), np.uint64),
-                np.concatenate(rows_b) if rows_b else np.zeros(0, np.int64), (w, h))
+        if not rows_t:
+            return (canvas, np.zeros((0, len(COUNTER_NAMES)), np.uint64), np.zeros((0, 25), np.uint64),
+                    np.zeros(0, np.int64), (w, h))
+        order = np.argsort(np.concatenate(rows_t), kind="stable")
+        return (canvas, np.concatenate(rows_c)[order], np.concatenate(rows_h)[order],
+                np.concatenate(rows_b)[order], (w, h))
 
 
 def display_patches(canvas: np.ndarray, size: tuple[int, int], d: CameraDesign, blocks: Sequence[int]
