@@ -8,7 +8,9 @@
 Where jobs run (--url, --token, --workers, --data-dir, --timeout) comes before the command: by default on
 this computer with the bundled core, or on the remote service at --url. Each command's own options come
 after it (`python -m addon.batch optimize --help`). ``evaluate`` runs the evaluation campaign of ``make
-demo`` under the scene's power and error budgets and writes the same report folder. Prints a text progress
+demo`` under the scene's power and error budgets and the store lookup's frame-rate target and priority
+(``--fps``, ``--priority``: kept in the .blend, as playback and the render engine use them) and writes
+the same report folder. Prints a text progress
 bar; exits non-zero (with the reason on stderr) on any failure.
 """
 
@@ -150,6 +152,8 @@ def parser() -> argparse.ArgumentParser:
         p.add_argument("--budget-mode", choices=("power", "error"))
         p.add_argument("--budget", type=float, help="watts (power) or 1 - SSIM (error)")
         p.add_argument("--filter-period", type=float, help="temporal filter T in seconds")
+        for query_option in _option_schema().QUERY_OPTIONS:  # the store lookup's --fps and --priority
+            _option_schema().add_argument(p, query_option, with_default=False)
 
     opt = sub.add_parser("optimize", help="record the path if needed, optimise, keep the store, save")
     budget(opt)
@@ -194,7 +198,8 @@ def _apply_scene_options(ext: str, props, args: argparse.Namespace) -> None:
     if getattr(args, "resolution", None):
         parse_size = importlib.import_module(f"{ext}.core.campaign").parse_size
         args.eval_width, args.eval_height = parse_size(args.resolution)
-    for opt in _option_schema().PUBLIC:  # each checked here; together when the job is built
+    schema = _option_schema()
+    for opt in (*schema.PUBLIC, *schema.QUERY_OPTIONS):  # each checked here; together when the job is built
         value = getattr(args, opt.name, None)
         if value is not None:
             set_option(props, opt.name, value)
@@ -277,7 +282,8 @@ def cmd_playback(bpy: ModuleType, ext: str, args: argparse.Namespace) -> int:
             raise ValueError(f"frame {f}: {props.playback_status}")
         rows.append((f, pb.scene_time(scene), props.active_indices, props.target_indices,
                      props.predicted_power, props.predicted_error, props.predicted_fps or None,
-                     props.active_settings))
+                     props.active_settings, props.target_fps or None,
+                     "" if not props.predicted_fps else int(not props.slower_than_fps), props.priority))
         bar((i + 1) / len(frames), f"frame {f}")
     bar.done()
     elapsed = time.perf_counter() - t0
@@ -285,11 +291,16 @@ def cmd_playback(bpy: ModuleType, ext: str, args: argparse.Namespace) -> int:
         with open(args.out, "w", newline="", encoding="utf-8") as fh:
             w = csv.writer(fh)
             w.writerow(("frame", "time_s", "active_indices", "target_indices", "predicted_power_w",
-                        "predicted_error", "predicted_fps", "settings"))
+                        "predicted_error", "predicted_fps", "settings", "fps_target", "meets_fps",
+                        "priority"))
             w.writerows(rows)
     n = max(1, len(rows))
     rates = [r[6] for r in rows if r[6]]
     rate = f" at {sum(rates) / len(rates):.1f} fps" if rates else ""  # none: a store before frame times
+    missed = sum(r[9] == 0 for r in rows)
+    if missed:  # frames whose settings miss the frame-rate target (and why, under the priority)
+        rate += (f" ({missed} frames miss {rows[0][8]:g} fps" +
+                 (": budget first)" if props.priority == "budget" else ": no setting keeps up)"))
     sys.stdout.write(f"{len(rows)} frames, mean predicted power {sum(r[4] for r in rows) / n:.3f} W{rate}, "
                      f"mean predicted error {sum(r[5] for r in rows) / n:.4f}, "
                      f"{len({r[2] for r in rows})} distinct settings, {1e3 * elapsed / n:.3f} ms/frame "

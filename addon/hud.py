@@ -1,5 +1,6 @@
 """Viewport HUD: active settings, predicted power (with the frame rate it is drawn at) and error against
-the budget (GUI sessions only).
+the budget, the lookup's priority when it is "budget first", and the frames that miss the frame-rate
+target (GUI sessions only).
 
 Nothing here runs in background mode: there the draw handler is never added (blf.draw would segfault).
 """
@@ -26,6 +27,8 @@ def hud_lines(scene: bpy.types.Scene) -> list[tuple[str, tuple[float, float, flo
     else:
         over = props.predicted_error > props.error_budget
         budget = f"budget e {props.error_budget:.4f}"
+    if props.priority == "budget":
+        budget += ", budget first"
     # the frame rate the power is drawn at (0: a store before frame times)
     rate = f" at {props.predicted_fps:.1f} fps" if props.predicted_fps > 0 else ""
     lines = [
@@ -35,11 +38,19 @@ def hud_lines(scene: bpy.types.Scene) -> list[tuple[str, tuple[float, float, flo
     ]
     flags = [f for f, on in (("blending", props.playback_status == "blending"),
                              ("outside store", props.clamped), ("budget infeasible", props.infeasible),
-                             ("no setting keeps up with the store's frame rate", props.slower_than_fps))
+                             (missed_rate_text(props), props.slower_than_fps))
              if on]
     if flags:
         lines.append(("; ".join(flags), bad if props.infeasible else ok))
     return lines
+
+
+def missed_rate_text(props: bpy.types.PropertyGroup) -> str:
+    """Why the active settings miss the frame-rate target (the HUD and the panel say it)."""
+    target = f"{props.target_fps:g} fps" if props.target_fps > 0 else "the frame rate"
+    if props.priority == "budget":
+        return f"budget first: misses {target} here (nothing within the budget keeps up)"
+    return f"no setting keeps up with {target} here"
 
 
 def draw_hud() -> None:

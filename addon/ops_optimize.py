@@ -30,7 +30,7 @@ from .core.job_runner import JobOutcome, JobRequest, JobUpdate, run_job
 from .core.local_jobs import LocalClient
 from .core.playback_logic import budget_shortfall, predicted_path_summary, summary_text, validate_budget
 from .core.scene_translation import notes_text
-from .properties import option_values
+from .properties import option_values, query_values
 from .translate import translate_for_render
 
 log = logging.getLogger(__name__)
@@ -145,8 +145,14 @@ def apply_outcome(scene: bpy.types.Scene, outcome: JobOutcome, path: path_format
     mode = props.budget_mode
     value = props.power_budget if mode == "POWER" else props.error_budget
     frames = path.frames[:: max(1, len(path.frames) // 300)]  # a few hundred poses are plenty here
-    summary = predicted_path_summary(store, frames, mode, value)
-    props.summary = summary_text(summary)
+    unusable = ""
+    try:
+        summary = predicted_path_summary(store, frames, mode, value, **query_values(props))
+    except ValueError as err:  # e.g. a frame-rate target this store cannot answer: keep the store,
+        # summarise it at its own rate and say why (playback says it on every frame)
+        summary = predicted_path_summary(store, frames, mode, value)
+        unusable = f"lookup options unusable with this store ({err}): summary at its own frame rate; "
+    props.summary = unusable + summary_text(summary)
     playback.reset()
     return Applied(props.summary, budget_shortfall(summary))
 

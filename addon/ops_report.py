@@ -24,6 +24,7 @@ from .core.client import ServiceClient
 from .core.local_jobs import LocalClient
 from .core.playback_logic import validate_budget
 from .ops_preview import upload_scene_info
+from .properties import query_values
 
 log = logging.getLogger(__name__)
 
@@ -55,7 +56,8 @@ def evaluate_scene(scene: bpy.types.Scene, client: ServiceClient | LocalClient, 
                    progress: Callable[[int, int], None] | None = None, frame_step: int | None = None,
                    samples: bool = True) -> dict:
     """Run the evaluation campaign (the same as ``make demo``'s) for a scene with a store and a path,
-    under the scene's power and error budgets; return the written files."""
+    under the scene's power and error budgets and its query options (frame-rate target, priority); return
+    the written files."""
     props, path = _store_and_path(scene)
     budgets = validate_budget("ERROR", props.error_budget), validate_budget("POWER", props.power_budget)
     info = upload_scene_info(scene, client)
@@ -66,7 +68,7 @@ def evaluate_scene(scene: bpy.types.Scene, client: ServiceClient | LocalClient, 
         scene_id=str(info["id"]), profile=props.profile or None, resolution=measured_at,
         power_resolution=power_at,
         frame_step=frame_step or props.report_frame_step, filter_period_s=props.filter_period,
-        error_budget=budgets[0], power_budget=budgets[1], samples=3 if samples else 0)
+        error_budget=budgets[0], power_budget=budgets[1], samples=3 if samples else 0, **query_values(props))
     name = Path(bpy.data.filepath).stem or "untitled"
     pre = campaign_targets.Preprocessing(f"{name} / {scene.name}", (info.get("stats") or {}).get("triangles"))
     outcome = campaign.run(client, props.store_text.as_string(), path, spec, out_dir, title=pre.name, pre=pre,
@@ -86,13 +88,17 @@ def evaluate_scene(scene: bpy.types.Scene, client: ServiceClient | LocalClient, 
 def verify_scene(scene: bpy.types.Scene, client: ServiceClient | LocalClient, out_dir: str | Path, *,
                  frames: int = 8) -> dict:
     """The store's predictions against renders of ``frames`` path frames at the path's resolution, under
-    the scene's active budget (``service.verify``: on this computer, or POST /stores/{id}/verify on the
-    remote service); writes verify.md and verify.json to ``out_dir`` and returns the report."""
+    the scene's active budget and query options (``service.verify``: on this computer, or POST
+    /stores/{id}/verify on the remote service); writes verify.md and verify.json to ``out_dir`` and
+    returns the report."""
     props, path = _store_and_path(scene)
     mode = props.budget_mode
     value = validate_budget(mode, props.power_budget if mode == "POWER" else props.error_budget)
     payload: dict = {"camera_path": path.to_dict(), "frames": int(frames),
                      ("power_budget_w" if mode == "POWER" else "error_budget"): value}
+    # the query options the scene changes (left out at their defaults: a service from before them
+    # accepts the request)
+    payload.update(option_schema.only_query_overrides(query_values(props)))
     if isinstance(client, LocalClient):
         payload["scene_id"] = str(upload_scene_info(scene, client)["id"])
         doc = client.verify_text(props.store_text.as_string(), payload)

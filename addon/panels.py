@@ -7,6 +7,7 @@ import bpy
 from service import options as option_schema
 
 from . import ops_optimize, preferences
+from .hud import missed_rate_text
 
 
 class RENDER_BUDGET_UL_parameters(bpy.types.UIList):
@@ -82,6 +83,8 @@ def _draw_budget(layout: bpy.types.UILayout, props: bpy.types.PropertyGroup) -> 
     col.prop(props, "budget_mode", expand=True)
     col.prop(props, "power_budget" if props.budget_mode == "POWER" else "error_budget")
     col.prop(props, "filter_period")
+    for opt in option_schema.QUERY_OPTIONS:  # the lookup's frame-rate target and priority
+        col.prop(props, opt.name)
 
 
 def _draw_job(layout: bpy.types.UILayout, props: bpy.types.PropertyGroup, rt: bpy.types.PropertyGroup
@@ -128,7 +131,7 @@ def _draw_results(layout: bpy.types.UILayout, props: bpy.types.PropertyGroup) ->
         if props.infeasible:
             box.label(text="budget cannot be met here", icon="ERROR")
         if props.slower_than_fps:
-            box.label(text="no setting keeps up with the store's frame rate here", icon="ERROR")
+            box.label(text=missed_rate_text(props), icon="ERROR")
         if props.clamped:
             box.label(text="camera outside the optimised space", icon="ERROR")
 

@@ -12,6 +12,7 @@ from service import store as pareto_store
 from .camera_path import camera_vfov, render_resolution, scene_fps
 from .core.playback_logic import PlaybackDriver, PlaybackFrame, StoreCache
 from .handlers import add_handler, remove_handler
+from .properties import query_values
 
 _cache = StoreCache()
 _written: dict[int, tuple] = {}  # per scene: the last answer written to its properties
@@ -45,7 +46,7 @@ def show_error(scene: bpy.types.Scene, message: str) -> None:
     status = f"error: {message}"
     if props.playback_status != status or props.active_indices:
         props.active_settings = props.active_indices = props.target_indices = ""
-        props.predicted_power = props.predicted_error = props.predicted_fps = 0.0
+        props.predicted_power = props.predicted_error = props.predicted_fps = props.target_fps = 0.0
         props.clamped = props.infeasible = props.slower_than_fps = False
         props.playback_status = status
     _written.pop(scene.as_pointer(), None)
@@ -65,7 +66,8 @@ def update_scene(scene: bpy.types.Scene) -> PlaybackFrame | None:
     try:
         driver = _driver(props)
         mode, value = budget_of(props)
-        frame = driver.step(cam.matrix_world, camera_vfov(cam, scene), w / h, scene_time(scene), mode, value)
+        frame = driver.step(cam.matrix_world, camera_vfov(cam, scene), w / h, scene_time(scene), mode, value,
+                            **query_values(props))
     except ValueError as err:
         show_error(scene, str(err))
         return None
@@ -73,7 +75,7 @@ def update_scene(scene: bpy.types.Scene) -> PlaybackFrame | None:
     # scene holds, so undo or a hand edit of these outputs is corrected on the next frame).
     status = "blending" if frame.in_transition else "on target"
     key = (frame.active_indices, frame.target_indices, frame.predicted_power_w, frame.predicted_error,
-           frame.predicted_fps, frame.meets_fps, frame.clamped, frame.infeasible, status)
+           frame.predicted_fps, frame.meets_fps, frame.fps_target, frame.clamped, frame.infeasible, status)
     written = _written.get(scene.as_pointer())
     active_text = " ".join(map(str, frame.active_indices))
     if written == key and props.active_indices == active_text and props.playback_status == status:
@@ -84,6 +86,7 @@ def update_scene(scene: bpy.types.Scene) -> PlaybackFrame | None:
     props.predicted_power = frame.predicted_power_w
     props.predicted_error = frame.predicted_error
     props.predicted_fps = frame.predicted_fps or 0.0
+    props.target_fps = frame.fps_target or 0.0
     props.slower_than_fps = frame.meets_fps is False
     props.clamped = frame.clamped
     props.infeasible = frame.infeasible

@@ -1,7 +1,10 @@
 """Typed settings saved in the .blend (Scene) and runtime job state (WindowManager, not saved).
 
-The optimiser's options are scene properties built from their one schema (``service.options``): same
-names, defaults, bounds and help as the service's; an optional option (None: "derive it") shows 0.
+The optimiser's options and the store lookup's query options (``QUERY_OPTIONS``: the frame-rate target
+and the priority playback, the render engine and Evaluate Path look the store up with) are scene
+properties built from their one schema (``service.options``): same names, defaults, bounds and help as
+the service's; an optional option (None: "derive it") shows 0. A .blend saved before an option existed
+reads its default.
 """
 
 from __future__ import annotations
@@ -87,9 +90,13 @@ class RENDER_BUDGET_PG_scene(bpy.types.PropertyGroup):
         name="Predicted frame rate (fps)",
         description="The frame rate the active settings reach on the store's hardware profile, at which the "
                     "predicted power is drawn (0: the store predates frame times)")
+    target_fps: FloatProperty(  # type: ignore
+        name="Frame-rate target (fps)",
+        description="The frame rate the store was looked up for: the Frame rate option, else the store's")
     slower_than_fps: BoolProperty(  # type: ignore
-        name="Slower than the store's frame rate",
-        description="No setting of the store keeps up with its frame rate here")
+        name="Slower than the frame-rate target",
+        description="The active settings miss the frame-rate target here: no setting of the store keeps up "
+                    "with it, or (Budget first) none within the budget does")
     clamped: BoolProperty(name="Outside the store's space")  # type: ignore
     infeasible: BoolProperty(name="Budget infeasible")  # type: ignore
     playback_status: StringProperty(name="Playback status")  # type: ignore
@@ -116,18 +123,21 @@ def _option_property(opt: option_schema.Option) -> Any:
 
 
 def option_properties() -> dict[str, Any]:
-    """Annotations for the public optimiser options (added to the scene settings group)."""
-    return {o.name: _option_property(o) for o in option_schema.PUBLIC}
+    """Annotations for the public optimiser options and the query options (added to the scene settings
+    group)."""
+    return {o.name: _option_property(o) for o in (*option_schema.PUBLIC, *option_schema.QUERY_OPTIONS)}
 
 
 RENDER_BUDGET_PG_scene.__annotations__.update(option_properties())
 
 
-def option_values(props: Any) -> dict[str, Any]:
-    """The optimiser options as set on a scene: 0 back to None for the optional ones, and floats to the
-    7 significant digits a Blender (single-precision) float property holds, so 0.05 stays 0.05."""
+def option_values(props: Any, declared: tuple[option_schema.Option, ...] = option_schema.PUBLIC
+                  ) -> dict[str, Any]:
+    """The optimiser options (or other ``declared`` options) as set on a scene: 0 back to None for the
+    optional ones, and floats to the 7 significant digits a Blender (single-precision) float property
+    holds, so 0.05 stays 0.05."""
     out = {}
-    for o in option_schema.PUBLIC:
+    for o in declared:
         value = getattr(props, o.name)
         if o.optional and value == 0:
             value = None
@@ -137,9 +147,18 @@ def option_values(props: Any) -> dict[str, Any]:
     return out
 
 
+def query_values(props: Any) -> dict[str, Any]:
+    """The scene's store-lookup query options as ``ParetoStore.lookup`` keywords (``fps`` None: the
+    store's own frame rate)."""
+    return option_schema.check_query(option_values(props, option_schema.QUERY_OPTIONS))
+
+
+_DECLARED = {**option_schema.BY_NAME, **option_schema.QUERY_BY_NAME}
+
+
 def set_option(props: Any, name: str, value: Any) -> None:
-    """Set one optimiser option on a scene (validated first: Blender would clamp silently)."""
-    opt = option_schema.BY_NAME[name]
+    """Set one optimiser or query option on a scene (validated first: Blender would clamp silently)."""
+    opt = _DECLARED[name]
     value = opt.check(value)
     setattr(props, name, 0 if value is None else value)
 

@@ -5,10 +5,13 @@ store of the same shape as the paper's (depth 4, a few hundred corners, 16-point
 with the costliest settings of most frontiers missing 30 fps); the lookup cost
 depends on the octree and frontier sizes, not on where the frontiers came from.
 
-Run: .venv/bin/python bench/bench_lookup.py [STORE.json] [--queries N] [--reference]
+Run: .venv/bin/python bench/bench_lookup.py [STORE.json] [--queries N] [--reference] [--priority P]
 
 ``--reference`` times the lookup this one replaced (kept in tests/store_reference.py as the slow
-reference the property tests compare with) on the same queries, in the same process.
+reference the property tests compare with) on the same queries, in the same process. ``--priority``
+passes the query's priority ("frame_rate" or "budget"; not passed when omitted, so the script also
+times trees from before the option); the last column says how many of the queries were answered with a
+setting that misses the frame rate (under "budget": where no real-time setting keeps the budget).
 """
 
 from __future__ import annotations
@@ -86,25 +89,31 @@ def _queries(store: ParetoStore, n: int) -> tuple[np.ndarray, np.ndarray, list[n
     return pos, dirs, mats, rng.uniform(0.5, 3.0, n)
 
 
-def _time(lookup: Any, cases: tuple, queries: tuple, repeat: int) -> list[tuple[str, float, float]]:
-    """(label, CPU us, wall us) per case: the best of ``repeat`` runs by CPU time (other processes on
-    a shared machine only ever add time)."""
+def _time(lookup: Any, cases: tuple, queries: tuple, repeat: int, extra: dict | None = None
+          ) -> list[tuple[str, float, float, int]]:
+    """(label, CPU us, wall us, queries answered with a setting that misses the frame rate) per case:
+    the best of ``repeat`` runs by CPU time (other processes on a shared machine only ever add time);
+    ``extra``: more keyword arguments of every query."""
     pos, dirs, mats, budgets = queries
+    more = extra or {}
     out = []
     for label, with_filter, kind in cases:
         runs = []
+        slow = 0
         for _ in range(repeat):
             filt = TemporalFilter(2.0)
+            slow = 0
             w0, c0 = time.perf_counter(), time.process_time()
             for i in range(len(pos)):
                 kw = {"power_budget": budgets[i]} if kind != "e" else {"error_budget": budgets[i] / 20}
                 pose = {"matrix": mats[i]} if kind == "m" else {"direction": dirs[i]}
-                r = lookup(pos[i], **pose, **kw)
+                r = lookup(pos[i], **pose, **kw, **more)
                 if with_filter:
                     filt.update(r[0] if isinstance(r, tuple) else r.indices, i / 60.0)
+                slow += (r[-1] if isinstance(r, tuple) else r.meets_fps) is False
             runs.append(((time.process_time() - c0) / len(pos), (time.perf_counter() - w0) / len(pos)))
         cpu, wall = min(runs)
-        out.append((label, cpu * 1e6, wall * 1e6))
+        out.append((label, cpu * 1e6, wall * 1e6, slow))
     return out
 
 
@@ -115,6 +124,8 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3, help="runs per row; the best CPU time is reported")
     ap.add_argument("--reference", action="store_true",
                     help="also time the lookup this one replaced (tests/store_reference.py), same queries")
+    ap.add_argument("--priority", choices=("frame_rate", "budget"),
+                    help="the query's priority (default: not passed)")
     args = ap.parse_args()
     store = ParetoStore.from_json(args.store.read_bytes()) if args.store else generated_store()
     st = store.stats()
@@ -123,17 +134,18 @@ def main() -> None:
     queries = _queries(store, args.queries)
     cases = (("lookup (power budget)", False, "p"), ("lookup (error budget)", False, "e"),
              ("lookup + temporal filter", True, "p"), ("lookup by matrix + filter", True, "m"))
-    rows = _time(store.lookup, cases, queries, args.repeat)
+    rows = _time(store.lookup, cases, queries, args.repeat,
+                 None if args.priority is None else {"priority": args.priority})
     ref = None
     if args.reference:
         sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
         from tests.store_reference import ReferenceLookup
 
         ref = _time(ReferenceLookup(store).lookup, cases, queries, args.repeat)
-    head = f"{'query':>28} {'CPU us':>8} {'wall us':>8}"
+    head = f"{'query':>28} {'CPU us':>8} {'wall us':>8} {'missing fps':>11}"
     print(head + (f" {'ref CPU us':>11} {'ref wall':>9} {'speed-up':>9}" if ref else ""))
-    for k, (label, cpu, wall) in enumerate(rows):
-        line = f"{label:>28} {cpu:8.1f} {wall:8.1f}"
+    for k, (label, cpu, wall, slow) in enumerate(rows):
+        line = f"{label:>28} {cpu:8.1f} {wall:8.1f} {slow:11d}"
         if ref:
             line += f" {ref[k][1]:11.1f} {ref[k][2]:9.1f} {ref[k][1] / cpu:8.1f}x"
         print(line)

@@ -108,7 +108,8 @@ def build_parser() -> argparse.ArgumentParser:
     b = q.add_mutually_exclusive_group(required=True)
     b.add_argument("--power-budget", type=_finite, metavar="W")
     b.add_argument("--error-budget", type=_finite, metavar="E")
-    options.add_argument(q, options.QUERY_FPS)
+    for opt in options.QUERY_OPTIONS:
+        options.add_argument(q, opt)
     q.add_argument("--json", action="store_true", help="print JSON")
 
     v = sub.add_parser("verify", help="render sampled path frames with the store's settings at the path's "
@@ -123,6 +124,8 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--resolution", type=_size, default=None, metavar="WxH",
                    help="render at this size instead of the path's own")
     v.add_argument("--threads", type=int, default=None, help="tracer threads per render")
+    for opt in options.QUERY_OPTIONS:
+        options.add_argument(v, opt)
     v.add_argument("--json", type=Path, default=None, metavar="FILE", help="also write the report as JSON")
 
     add_serve_arguments(sub.add_parser("serve", help="run the REST service"))
@@ -203,6 +206,11 @@ def _optimize(args: argparse.Namespace) -> int:
     return 0
 
 
+def query_arguments(args: argparse.Namespace) -> dict[str, Any]:
+    """The query options given on a command line (``--fps``, ``--priority``) as lookup keywords."""
+    return options.check_query({o.name: getattr(args, o.name) for o in options.QUERY_OPTIONS})
+
+
 def _query(args: argparse.Namespace) -> int:
     store = ParetoStore.from_json(args.store.read_bytes())
     matrix = None
@@ -210,12 +218,13 @@ def _query(args: argparse.Namespace) -> int:
         matrix = [args.matrix[i * 4:(i + 1) * 4] for i in range(4)]
     fov = math.radians(args.fov) if args.fov is not None else None
     r = store.lookup(args.position, direction=args.direction, matrix=matrix, fov=fov,
-                     power_budget=args.power_budget, error_budget=args.error_budget, fps=args.fps)
+                     power_budget=args.power_budget, error_budget=args.error_budget,
+                     **query_arguments(args))
     target = r.fps_target
     out = {"settings": r.settings, "indices": list(r.indices), "packed": r.packed, "power_w": r.power_w,
            "error": r.error, "clamped": r.clamped, "infeasible": r.infeasible, "corner": r.corner,
            "view": r.view, "frame_time_s": r.frame_time_s, "fps": r.fps, "fps_target": target,
-           "meets_fps": r.meets_fps}
+           "meets_fps": r.meets_fps, "priority": r.priority}
     if args.json:
         print(json.dumps(out))
     else:
@@ -228,9 +237,11 @@ def _query(args: argparse.Namespace) -> int:
         else:
             print(f"{'frame rate':>22}: {r.fps:.1f} of {target:g} fps ({1e3 * r.frame_time_s:.1f} ms a "
                   "frame)")
+        print(f"{'priority':>22}: {options.PRIORITY_LABELS[r.priority]}")
         if r.meets_fps is False:
-            print(f"{'note':>22}: no setting of this view keeps up with {target:g} fps; the power is "
-                  "drawn at the frame rate shown")
+            why = ("the budget comes first: no setting within it keeps up with" if r.priority == "budget"
+                   else "no setting of this view keeps up with")
+            print(f"{'note':>22}: {why} {target:g} fps; the power is drawn at the frame rate shown")
         if r.clamped:
             print(f"{'note':>22}: clamped: camera outside the optimised region")
         if r.infeasible:
@@ -248,7 +259,7 @@ def _verify(args: argparse.Namespace) -> int:
 
     report = verify_store(scene, store, path, error_budget=args.error_budget, power_budget=args.power_budget,
                           frames=args.frames, resolution=args.resolution, threads=args.threads,
-                          progress=progress)
+                          progress=progress, **query_arguments(args))
     print(report.table())
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)

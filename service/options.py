@@ -159,9 +159,10 @@ OPTIONS: tuple[Option, ...] = (
            "tile estimator: share of the frame's blocks traced at the path's resolution",
            minimum=0.01, maximum=1.0, metavar="F", group="Evaluation", precision=2),
     Option("display_points", int, 8, "Points priced",
-           "at most this many points of each frontier, spread along it (both ends kept), are priced at the "
-           "path's resolution and kept in the store (0: all; each costs a share of a full-size frame at "
-           "every camera the frontier is priced at)", minimum=0, maximum=64, metavar="N",
+           "at most this many points of each frontier's settings that keep up with the frame rate, spread "
+           "along it (both ends kept), plus the two ends of its slower, more accurate settings, are "
+           "priced at the path's resolution and kept in the store (0: all; each costs a share of a "
+           "full-size frame at every camera the frontier is priced at)", minimum=0, maximum=64, metavar="N",
            group="Evaluation"),
     Option("display_height", int, None, "Display height",
            "price the store's figures at this height (width from the path's aspect) instead of the path's "
@@ -194,7 +195,8 @@ FPS_MIN, FPS_MAX = 0.01, 1000.0  # the frame rates a camera path or a store quer
 QUERY_FPS = Option("fps", float, None, "Frame rate",
                    "frame rate the chosen settings must keep up with (default: the store's own, what its "
                    "power was priced for); power is predicted at the rate each setting reaches, and a "
-                   "setting that misses the rate is never chosen while one that meets it exists",
+                   "setting that misses the rate is never chosen while one that meets it exists (unless the "
+                   "priority is the budget and none within the budget does)",
                    minimum=FPS_MIN, maximum=FPS_MAX, optional=True, metavar="FPS", group="Playback")
 
 #: What a lookup keeps when no stored setting keeps both the budget and the frame rate (a query option,
@@ -208,6 +210,30 @@ QUERY_PRIORITY = Option("priority", str, "frame_rate", "Priority",
                         "(the budget is broken) or keep the budget (the frame rate is missed)",
                         choices=PRIORITIES, choice_labels=("Frame rate first", "Budget first"),
                         group="Playback")
+
+#: The store lookup's query options (not the optimiser's): every layer that looks a store up (CLI query
+#: and verify, REST query and verify, the add-on's playback, engine and Evaluate Path, the main job)
+#: offers these, built from these declarations as the optimiser's options are from :data:`OPTIONS`.
+QUERY_OPTIONS: tuple[Option, ...] = (QUERY_FPS, QUERY_PRIORITY)
+QUERY_BY_NAME: dict[str, Option] = {o.name: o for o in QUERY_OPTIONS}
+#: How each priority reads in a report or a command's output ("Frame rate first", "Budget first").
+PRIORITY_LABELS: dict[str, str] = dict(zip(PRIORITIES, QUERY_PRIORITY.choice_labels, strict=True))
+
+
+def check_query(values: Mapping[str, Any]) -> dict[str, Any]:
+    """Every query option (:data:`QUERY_OPTIONS`): the defaults with ``values`` (validated, unknown names
+    refused) on top, as keyword arguments of ``ParetoStore.lookup``."""
+    unknown = sorted(set(values) - set(QUERY_BY_NAME))
+    if unknown:
+        raise ValueError(f"unknown query options {unknown}; known: {sorted(QUERY_BY_NAME)}")
+    return {name: o.check(values.get(name, o.default)) for name, o in QUERY_BY_NAME.items()}
+
+
+def only_query_overrides(values: Mapping[str, Any]) -> dict[str, Any]:
+    """The query options that differ from their default (what a client sends: a service from before an
+    option accepts a request that leaves it out)."""
+    return {k: v for k, v in check_query(values).items() if v != QUERY_BY_NAME[k].default}
+
 
 BY_NAME: dict[str, Option] = {o.name: o for o in OPTIONS}
 PUBLIC: tuple[Option, ...] = tuple(o for o in OPTIONS if o.public)

@@ -20,6 +20,7 @@ import numpy as np
 
 from service.camera_path import CameraPath
 from service.evaluation import CameraSpec, evaluate
+from service.options import check_query
 from service.params import default_space
 from service.store import ParetoStore
 
@@ -42,6 +43,7 @@ class FrameCheck:
     within_budget: bool
     infeasible: bool  # the store said nothing meets the budget here (it returned its nearest setting)
     clamped: bool  # the camera was outside the store's region
+    meets_fps: bool | None = None  # the store says the settings keep up with the frame rate (None: unknown)
 
     @property
     def power_ratio(self) -> float:
@@ -60,6 +62,7 @@ class VerifyReport:
     fps: float
     frames: list[FrameCheck]
     store_figures_resolution: tuple[int, int] | None  # where the store says its figures were measured
+    priority: str = "frame_rate"  # the lookup's (service.options.QUERY_PRIORITY)
 
     def summary(self) -> dict[str, Any]:
         """Share within budget, prediction errors and the worst frames (by how far over budget)."""
@@ -90,6 +93,7 @@ class VerifyReport:
     def to_dict(self) -> dict[str, Any]:
         return {"budget_mode": self.budget_mode, "budget_value": self.budget_value,
                 "resolution": list(self.resolution), "profile": self.profile, "fps": self.fps,
+                "priority": self.priority,
                 "store_figures_resolution": (list(self.store_figures_resolution)
                                              if self.store_figures_resolution else None),
                 "summary": self.summary(), "frames": [asdict(f) for f in self.frames]}
@@ -106,13 +110,16 @@ def markdown(doc: dict[str, Any]) -> str:
     figures = doc.get("store_figures_resolution")
     lines = [f"verified at {w}x{h} (store figures for "
              f"{'x'.join(str(v) for v in figures) if figures else 'an unstated size'}), {doc['budget_mode']} "
-             f"budget {doc['budget_value']:g}, profile {doc['profile']} at {doc['fps']:g} fps", "",
+             f"budget {doc['budget_value']:g}, profile {doc['profile']} at {doc['fps']:g} fps"
+             + (", budget first (the frame rate gives way where nothing within the budget keeps up)"
+                if doc.get("priority") == "budget" else ""), "",
              "| frame | time s | error predicted | error measured | power predicted W | power measured W "
              "| measured / predicted | within budget |",
              "|---|---|---|---|---|---|---|---|"]
     for f in doc["frames"]:
         ratio = f["measured_power_w"] / f["predicted_power_w"] if f["predicted_power_w"] > 0 else math.inf
-        note = " (infeasible)" if f["infeasible"] else ""
+        note = (" (infeasible)" if f["infeasible"] else "") + (
+            f" (misses {doc['fps']:g} fps)" if f.get("meets_fps") is False else "")
         lines.append(f"| {f['frame']} | {f['time']:.2f} | {f['predicted_error']:.4f} | "
                      f"{f['measured_error']:.4f} | {f['predicted_power_w']:.3f} | "
                      f"{f['measured_power_w']:.3f} | {ratio:.2f} | "
@@ -141,9 +148,14 @@ def sample_frames(n: int, count: int) -> list[int]:
 def verify_store(scene: Any, store: ParetoStore, path: CameraPath, *, error_budget: float | None = None,
                  power_budget: float | None = None, frames: int = 8,
                  resolution: tuple[int, int] | None = None, threads: int | None = None,
-                 progress: Callable[[int, int], None] | None = None) -> VerifyReport:
+                 progress: Callable[[int, int], None] | None = None, fps: float | None = None,
+                 priority: str = "frame_rate") -> VerifyReport:
     """Render a sample of ``path``'s frames at ``resolution`` (default: each frame's own) with the
-    settings ``store`` picks under the budget and measure them; ``scene`` is the store's scene."""
+    settings ``store`` picks under the budget, the frame-rate target ``fps`` (default: the store's) and
+    ``priority`` (the lookup's query options, ``service.options.QUERY_OPTIONS``), and measure them at
+    that frame rate; ``scene`` is the store's scene."""
+    query = check_query({"fps": fps, "priority": priority})
+    rate = store.check_fps(query["fps"])  # refused before anything is rendered
     if (error_budget is None) == (power_budget is None):
         raise ValueError("give exactly one of error_budget or power_budget")
     mode, value = ("error", error_budget) if error_budget is not None else ("power", power_budget)
@@ -166,17 +178,17 @@ def verify_store(scene: Any, store: ParetoStore, path: CameraPath, *, error_budg
         f = path.frames[number]
         m = np.asarray(f.matrix_world, dtype=np.float64)
         r = store.lookup(f.position, matrix=m, fov=f.vfov, aspect=f.aspect, error_budget=error_budget,
-                         power_budget=power_budget)
+                         power_budget=power_budget, **query)
         size = (rw, rh) if resolution is not None else tuple(f.resolution)
         cam = CameraSpec(tuple(m[:3, 3]), tuple(-m[:3, 2]), tuple(m[:3, 1]), f.vfov, *size)
-        ev = evaluate(scene, cam, space.indices_of(r.settings), space, profile=store.profile, fps=store.fps,
+        ev = evaluate(scene, cam, space.indices_of(r.settings), space, profile=store.profile, fps=rate,
                       metric=metric, threads=threads, reference_indices=best)
         within = ev.error <= value if mode == "error" else ev.power_w <= value
         checks.append(FrameCheck(number, float(f.time), dict(r.settings), float(r.error), float(r.power_w),
                                  float(ev.error), float(ev.power_w), float(ev.frame_time_s), bool(within),
-                                 bool(r.infeasible), bool(r.clamped)))
+                                 bool(r.infeasible), bool(r.clamped), r.meets_fps))
         if progress is not None:
             progress(done + 1, len(numbers))
     figures = store.meta.get("figures_resolution")
-    return VerifyReport(mode, value, size or (0, 0), store.profile, float(store.fps), checks,
-                        tuple(int(v) for v in figures) if figures else None)
+    return VerifyReport(mode, value, size or (0, 0), store.profile, rate, checks,
+                        tuple(int(v) for v in figures) if figures else None, query["priority"])

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from service.store import ParetoStore as ParetoStoreType
 from tests.addon_support import EXT_MODULE, dev_extension, disable_dev, enable_dev, synthetic_store
 
 pytestmark = pytest.mark.blender
@@ -464,6 +465,62 @@ def test_hud_shows_the_frame_rate_the_power_is_drawn_at(scene, tmp_path) -> None
     scene.frame_set(4)
     lines = hud.hud_lines(scene)
     assert props.predicted_fps == 0.0 and not props.slower_than_fps and " fps" not in lines[0][0]
+
+
+def test_playback_hud_and_engine_look_up_under_the_scene_query_options(scene, tmp_path) -> None:
+    """The scene's Frame rate and Priority reach every lookup: playback gives what the pure driver gives
+    under them (target written for the HUD), the HUD says "budget first" and why a frame misses the rate,
+    the render engine's chooser and the panel summary read the same options, a target the store cannot
+    answer is a playback error, and a file saved with them keeps them."""
+    from addon.core.playback_logic import PlaybackDriver
+
+    hud, render = ext_module("hud"), ext_module("engine.render")
+    cam = turning_camera(scene, 6)
+    add_cube(scene)
+    bpy.ops.render_budget.record_path_animation()
+    props = scene.render_budget
+    props.budget_mode, props.power_budget, props.filter_period = "POWER", 10.0, 0.0
+
+    def load(**kind: bool) -> ParetoStoreType:
+        store = synthetic_store(**kind)
+        store.meta["static_power_w"] = 0.2  # another frame rate can be asked for
+        f = tmp_path / "store.json"
+        f.write_text(store.to_json())
+        assert bpy.ops.render_budget.load_store(filepath=str(f)) == {"FINISHED"}
+        return store
+
+    store = load(timed=True)
+    scene.frame_set(2)
+    assert props.target_fps == pytest.approx(24.0) and "budget first" not in hud.hud_lines(scene)[0][0]
+    props.fps, props.priority = 12.0, "budget"
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "query.blend"))
+    scene.frame_set(3)
+    vfov = ext_module("camera_path").camera_vfov(cam, scene)
+    want = PlaybackDriver(store, 0.0).step(np.array(cam.matrix_world), vfov, 320 / 180, 2 / 24, "POWER", 10.0,
+                                           fps=12.0, priority="budget")
+    assert want.priority == "budget" and props.target_fps == pytest.approx(12.0)
+    assert props.active_indices == " ".join(map(str, want.active_indices))
+    assert props.predicted_power == pytest.approx(want.predicted_power_w, rel=1e-6)
+    assert "budget first" in hud.hud_lines(scene)[0][0]
+    assert render.chooser_for(scene).query == {"fps": 12.0, "priority": "budget"}
+    load(timed=True)  # loading a store summarises it under the scene's query options
+    assert "budget first" in props.summary and "of 12 fps" in props.summary
+    props.fps = 0.0  # the store's own 24 fps, which no setting of a slow store keeps up with
+    load(slow=True)
+    scene.frame_set(4)
+    flags = [text for text, _ in hud.hud_lines(scene)]
+    assert props.slower_than_fps and any("budget first: misses 24 fps" in t for t in flags), flags
+    props.priority = "frame_rate"
+    scene.frame_set(5)
+    assert any("no setting keeps up with 24 fps" in t for t, _ in hud.hud_lines(scene))
+    props.fps = 50.0
+    _load_store(tmp_path, timed=True)  # no static power: only its own frame rate (loaded, and it says so)
+    assert "lookup options unusable" in props.summary and "static power" in props.summary
+    scene.frame_set(2)
+    assert props.playback_status.startswith("error") and "static power" in props.playback_status
+    bpy.ops.wm.open_mainfile(filepath=str(tmp_path / "query.blend"))
+    again = bpy.context.scene.render_budget
+    assert (again.fps, again.priority) == (12.0, "budget")
 
 
 def test_an_infeasible_budget_says_it_cannot_be_met_and_what_the_cheapest_setting_costs(scene, tmp_path

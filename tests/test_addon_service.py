@@ -21,6 +21,7 @@ import pytest
 
 from addon.core.client import ServiceClient
 from addon.core.local_service import LocalService, free_port
+from service.store import ParetoStore
 from tests import orbit_scene
 from tests.addon_support import (
     EXT_MODULE,
@@ -208,7 +209,8 @@ def _batch(args: list[str], tmp: Path) -> subprocess.CompletedProcess:
 def test_batch_evaluate_and_playback_write_reports(optimized, service, tmp_path) -> None:
     out = tmp_path / "report"
     proc = _batch(["--blend", str(optimized), "--url", service.url, "evaluate", "--out", str(out),
-                   "--frame-step", "4", "--budget-mode", "error", "--budget", "0.05"], tmp_path)
+                   "--frame-step", "4", "--budget-mode", "error", "--budget", "0.05", "--fps", "12",
+                   "--priority", "budget"], tmp_path)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "evaluate [" in proc.stdout and "Avg. Power (W)" in proc.stdout
     # the same report folder as `make demo` (one campaign module): both budget modes, summary, PNG + EXR
@@ -223,6 +225,10 @@ def test_batch_evaluate_and_playback_write_reports(optimized, service, tmp_path)
     summary = json.loads((out / "summary.json").read_text())
     assert summary["error_budget"] == pytest.approx(0.05) and summary["frames_evaluated"] == 4
     assert summary["power_budget_w"] == pytest.approx(2.0)  # the scene's power budget (given)
+    # the query options reached both budget modes' lookups, and every mode was measured at that rate
+    assert summary["lookup"] == {"fps": 12.0, "fps_given": 12.0, "priority": "budget"}
+    assert summary["fps_target"] == 12.0 and all(0.0 < float(r["fps"]) <= 12.0 for r in rows)
+    assert "looked up for 12 fps (asked for), budget first" in (out / "report.md").read_text()
     samples = sorted(p.name for p in (out / "frames").iterdir())
     assert samples[:2] == ["frame00000_max.exr", "frame00000_max.png"]
     assert {p.rsplit(".", 1)[1] for p in samples} == {"png", "exr"} and len(samples) == 3 * 4 * 2
@@ -233,6 +239,17 @@ def test_batch_evaluate_and_playback_write_reports(optimized, service, tmp_path)
     played = list(csv.DictReader(csv_out.open(newline="")))
     assert len(played) == FRAMES
     assert all(float(r["predicted_fps"]) > 0.0 for r in played)  # a job's store knows frame times
+    # the .blend's query options (not changed by evaluate, which does not save): its own rate, frame first
+    assert {(r["priority"], r["meets_fps"] in ("0", "1")) for r in played} == {("frame_rate", True)}
+    assert {float(r["fps_target"]) for r in played} == {ParetoStore.from_json(
+        (out / "store.json").read_text()).fps}
+    proc = _batch(["--blend", str(optimized), "playback", "--out", str(csv_out), "--priority", "budget",
+                   "--fps", "12"], tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    played = list(csv.DictReader(csv_out.open(newline="")))
+    assert {(r["priority"], float(r["fps_target"])) for r in played} == {("budget", 12.0)}
+    proc = _batch(["--blend", str(optimized), "playback", "--priority", "speed"], tmp_path)
+    assert proc.returncode != 0 and "invalid choice: 'speed'" in proc.stderr
 
 
 def test_batch_fails_loudly(optimized, tmp_path) -> None:

@@ -470,3 +470,51 @@ def test_verify_a_store_over_rest(client: httpx.Client, finished: dict[str, Any]
     assert both.status_code == 422
     missing = client.post("/stores/nope/verify", json={"camera_path": path, "error_budget": 0.05})
     assert missing.status_code == 404
+
+
+def test_query_and_verify_take_the_lookup_priority(client: httpx.Client, finished: dict[str, Any]) -> None:
+    """POST /stores/{id}/query and /verify: ``priority`` reaches the store's lookup (the answer is the
+    store's own under it, and echoes it), an older request without the field is answered as before
+    (frame rate first), and a bad value is a 422 naming the field."""
+    job = finished["job"]
+    store = ParetoStore.from_json(client.get(f"/stores/{job['store_id']}").text)
+    frame = camera_path(3)["frames"][1]
+    m = np.asarray(frame["matrix_world"])
+    query = {"position": m[:3, 3].tolist(), "matrix": frame["matrix_world"], "fov": frame["vfov"],
+             "error_budget": 0.0}
+    url = f"/stores/{job['store_id']}/query"
+    old = client.post(url, json=query).json()
+    assert old["priority"] == "frame_rate"
+    before = store.lookup(m[:3, 3], matrix=m, fov=frame["vfov"], error_budget=0.0)
+    assert old["indices"] == list(before.indices)
+    for priority, fps in (("frame_rate", None), ("budget", None), ("budget", 4 * store.fps)):
+        body = {**query, "priority": priority, **({} if fps is None else {"fps": fps})}
+        got = client.post(url, json=body).json()
+        hit = store.lookup(m[:3, 3], matrix=m, fov=frame["vfov"], error_budget=0.0, fps=fps,
+                           priority=priority)
+        assert got["priority"] == hit.priority == priority
+        assert (got["indices"], got["power_w"], got["meets_fps"], got["fps_target"]) == (
+            list(hit.indices), hit.power_w, hit.meets_fps, hit.fps_target)
+    # through the temporal filter too (the previous settings a frame later)
+    filtered = client.post(url, json={**query, "priority": "budget", "previous": {
+        "indices": old["indices"], "elapsed_s": 0.5}}).json()
+    assert filtered["priority"] == "budget"
+    for bad in ("speed", "", 1, None):
+        r = client.post(url, json={**query, "priority": bad})
+        assert r.status_code == 422 and "priority" in r.text, (bad, r.text)
+    path = camera_path(3)
+    v = client.post(f"/stores/{job['store_id']}/verify", json={
+        "camera_path": path, "error_budget": 0.05, "frames": 1, "resolution": [32, 24], "priority": "budget",
+        "fps": 2 * store.fps})
+    assert v.status_code == 200, v.text
+    doc = v.json()
+    assert (doc["priority"], doc["fps"]) == ("budget", 2 * store.fps)
+    f = doc["frames"][0]
+    pf = path["frames"][f["frame"]]
+    pm = np.asarray(pf["matrix_world"])
+    hit = store.lookup(pm[:3, 3], matrix=pm, fov=pf["vfov"], aspect=pf["resolution"][0] / pf["resolution"][1],
+                       error_budget=0.05, fps=2 * store.fps, priority="budget")
+    assert f["settings"] == hit.settings and f["meets_fps"] == hit.meets_fps
+    bad = client.post(f"/stores/{job['store_id']}/verify", json={"camera_path": path, "error_budget": 0.05,
+                                                                  "priority": "speed"})
+    assert bad.status_code == 422 and "priority" in bad.text

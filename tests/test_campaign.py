@@ -58,7 +58,8 @@ def test_spec_rejects_bad_budgets_and_counts() -> None:
     campaign.CampaignSpec(**ok)
     for bad, match in (({"error_budget": 1.5}, "error budget"), ({"power_budget": 0.0}, "power budget"),
                        ({"power_budget_from": "guess"}, "presets or store"),
-                       ({"power_fraction": 1.2}, "fraction"), ({"frame_step": 0}, "frame_step")):
+                       ({"power_fraction": 1.2}, "fraction"), ({"frame_step": 0}, "frame_step"),
+                       ({"priority": "speed"}, "priority must be one of"), ({"fps": 0.0}, "fps must be in")):
         with pytest.raises(ValueError, match=match):
             campaign.CampaignSpec(**ok, **bad)
 
@@ -166,3 +167,36 @@ def test_a_store_priced_at_a_display_size_is_measured_there_and_labelled() -> No
     assert "preview resolution" in note((64, 36), (1280, 720))
     assert "1280x720 is not measured here" in note((320, 180), (320, 180))
     assert "the path's own size" in note((1280, 720), (1280, 720))
+
+
+def test_the_query_options_reach_the_budget_modes_lookups_and_the_report() -> None:
+    """CampaignSpec's frame-rate target and priority reach every lookup of the budget modes (the frames
+    playback would show, through the same driver), the measured frame rate and Table 3's heading."""
+    import numpy as np
+
+    from addon.core.evaluate_path import EvalSpec, filtered_frames, measurement_fps
+    from service.camera_path import CameraPath
+    from tests.addon_support import synthetic_store
+
+    store = synthetic_store(timed=True)
+    store.meta["static_power_w"] = 0.2
+    ang = np.linspace(0.0, 1.5, 8)
+    path = CameraPath.from_positions([(3 * np.cos(a), 3 * np.sin(a), 1.0) for a in ang],
+                                     [(-np.cos(a), -np.sin(a), -0.2) for a in ang], vfov=0.69,
+                                     resolution=(64, 36), fps=30.0)
+    shown = filtered_frames(store, path, range(8), "POWER", 3.0, 0.5, {"fps": 12.0, "priority": "budget"})
+    assert {(pf.priority, pf.fps_target) for pf in shown.values()} == {("budget", 12.0)}
+    assert {pf.priority for pf in filtered_frames(store, path, range(8), "POWER", 3.0, 0.5).values()} == {
+        "frame_rate"}
+    with pytest.raises(ValueError, match="priority"):
+        EvalSpec("s", "mobile", (64, 36), "POWER", 3.0, priority="speed")
+    assert measurement_fps(None, path) == 30.0 and measurement_fps(12.0, path) == 12.0
+    spec = campaign.CampaignSpec("s", (64, 36), fps=12.0, priority="budget")
+    assert campaign.lookup_heading(spec, store) == ("Table 3: budget modes looked up for 12 fps (asked for), "
+                                                    "budget first")
+    assert campaign.lookup_heading(campaign.CampaignSpec("s", (64, 36)), store).endswith(
+        "24 fps (the store's own), frame rate first")
+    assert "Priority: budget first" in campaign.lookup_note(spec, store)
+    assert "asked for 12 fps" in campaign.size_note(spec, path)
+    with pytest.raises(ValueError, match="static power"):  # a target the store cannot answer
+        campaign.lookup_heading(spec, synthetic_store(timed=True))

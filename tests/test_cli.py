@@ -162,3 +162,26 @@ def test_query_at_another_frame_rate(tmp_path, capsys) -> None:
     old = _store_file(tmp_path / "old", frame_times=[0.005, 0.01, 0.02, 0.1])
     assert cli.main(["query", str(old), *args[2:], "--fps", "60"]) != 0
     assert "static power" in capsys.readouterr().err
+
+
+def test_query_takes_the_priority_and_prints_it(tmp_path, capsys) -> None:
+    """--priority reaches the lookup (its result names it) and is printed; a missed frame rate under
+    "budget" says the budget came first; a bad value is refused by argparse; the default is frame rate
+    first."""
+    f = _store_file(tmp_path, frame_times=[0.05, 0.06, 0.08, 0.1], static_power_w=0.5)  # all miss 30 fps
+    args = ["query", str(f), "--position", "1", "1", "1", "--direction", "0", "0", "-1", "--error-budget",
+            "0.03"]
+    assert cli.main([*args, "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["priority"] == "frame_rate"
+    assert cli.main([*args, "--json", "--priority", "budget", "--fps", "12"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["priority"] == "budget" and out["fps_target"] == 12.0 and out["meets_fps"] is True
+    assert cli.main([*args, "--priority", "budget"]) == 0
+    text = capsys.readouterr().out
+    assert "priority: Budget first" in text and "the budget comes first" in text
+    assert cli.main(args) == 0
+    text = capsys.readouterr().out
+    assert "priority: Frame rate first" in text and "no setting of this view keeps up" in text
+    with pytest.raises(SystemExit):
+        cli.main([*args, "--priority", "speed"])
+    assert "invalid choice: 'speed'" in capsys.readouterr().err

@@ -45,10 +45,11 @@ def test_report_budgets_one_or_several() -> None:
 @pytest.mark.slow
 @pytest.mark.service
 def test_demo_end_to_end_tiny(tmp_path: Path) -> None:
+    """The whole main job, its budget modes and verify looked up budget first (--priority)."""
     out = tmp_path / "out"
-    proc = subprocess.run([sys.executable, "-m", "tools.demo", *TINY, "--out", str(out), "--data-dir",
-                           str(tmp_path / "var")], cwd=REPO_ROOT, capture_output=True, text=True, timeout=300,
-                          check=False)
+    proc = subprocess.run([sys.executable, "-m", "tools.demo", *TINY, "--priority", "budget", "--out",
+                           str(out), "--data-dir", str(tmp_path / "var")], cwd=REPO_ROOT, capture_output=True,
+                          text=True, timeout=300, check=False)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     url = re.search(r"render-budget serve on (http://\S+),", proc.stdout).group(1)
     assert "service stopped" in proc.stdout and _port_closed(url)
@@ -127,6 +128,12 @@ def test_demo_end_to_end_tiny(tmp_path: Path) -> None:
     assert verify["summary"]["within_budget"] == sum(f["measured_error"] <= eb for f in verify["frames"])
     assert "verified at 64x36 (store figures for 64x36)" in (out / "verify.md").read_text()
     assert "within budget:" in proc.stdout
+    # --priority reached both budget modes' lookups and verify's, and the report says it
+    assert summary["lookup"] == {"fps": store.fps, "fps_given": None, "priority": "budget"}
+    assert verify["priority"] == "budget" and "budget first" in (out / "verify.md").read_text()
+    assert (f"### Table 3: budget modes looked up for {store.fps:g} fps (the store's own), budget first"
+            in report_md)
+    assert "Priority: budget first." in report_md and "budget first)" in proc.stdout
 
 
 @pytest.mark.slow

@@ -296,14 +296,46 @@ def test_animation_csv(tmp_path, scene: sim_core.Scene) -> None:
     fs = FrameSettings("store", CHEAP, predicted_power_w=0.9, predicted_error=0.01, target_indices=CHEAP)
     out = render_frame(scene, VIEW, fs, profile="mobile", fps=30.0)
     log.add(7, 0.25, out)
+    missed = dataclasses.replace(fs, fps_target=30.0, meets_fps=False, priority="budget")
+    log.add(8, 0.3, render_frame(scene, VIEW, missed, profile="mobile", fps=30.0))
+    log.add(9, 0.35, render_frame(scene, VIEW, FrameSettings("manual", CHEAP), profile="mobile", fps=30.0))
     log.close()
     import csv
 
     rows = list(csv.DictReader((tmp_path / "out" / "shot_render_budget.csv").open()))
-    assert len(rows) == 1 and rows[0]["frame"] == "7" and rows[0]["source"] == "store"
+    assert len(rows) == 3 and rows[0]["frame"] == "7" and rows[0]["source"] == "store"
+    # the lookup's target and priority, and a frame whose settings miss the rate
+    assert (rows[1]["fps_target"], rows[1]["meets_fps"], rows[1]["priority"]) == ("30", "0", "budget")
+    assert (rows[2]["fps_target"], rows[2]["meets_fps"], rows[2]["priority"]) == ("", "", "")
     assert rows[0]["max_depth"] == "1" and rows[0]["sampling"] == "1spp"
     assert float(rows[0]["simulated_power_w"]) == pytest.approx(out.power_w, rel=1e-5)
     assert rows[0]["predicted_error"] == "0.01" and rows[0]["in_transition"] == "0"
+
+
+def test_store_chooser_looks_up_under_the_query_options() -> None:
+    """The engine's animation renders use the scene's query options: the same frames as the playback
+    driver under them, each frame saying its target and priority (and, in its note, a missed rate)."""
+    store = synthetic_store(timed=True, slow=True)  # no setting keeps up with the store's 24 fps
+    store.meta["static_power_w"] = 0.2
+    query = {"fps": 12.0, "priority": "budget"}
+    chooser = SettingsChooser(CHEAP, store, Budget("POWER", 3.3), period_s=0.5, query=query)
+    reference = PlaybackDriver(store, 0.5)
+    for k, m in enumerate(orbit(6)):
+        got = chooser.choose(m, 0.69, 16 / 9, k / 24)
+        want = reference.step(m, 0.69, 16 / 9, k / 24, "POWER", 3.3, **query)
+        assert got.indices == default_space().indices_of(want.active_settings)
+        assert (got.priority, got.fps_target, got.meets_fps) == ("budget", 12.0, want.meets_fps)
+    slow = SettingsChooser(CHEAP, store, Budget("POWER", 3.3), query={"priority": "budget"})
+    frame = slow.choose(orbit(1)[0], 0.69, 16 / 9, 0.0)
+    assert frame.fps_target == 24.0 and frame.meets_fps is False
+    assert "budget first: misses 24 fps" in frame.note
+    assert SettingsChooser(CHEAP, store, Budget("POWER", 3.3)).choose(orbit(1)[0], 0.69, 16 / 9, 0.0
+                                                                       ).priority == "frame_rate"
+    with pytest.raises(ValueError, match="priority must be one of"):
+        SettingsChooser(CHEAP, store, Budget("POWER", 3.3), query={"priority": "speed"})
+    with pytest.raises(ValueError, match="static power"):  # a target the store cannot answer: up front
+        SettingsChooser(CHEAP, synthetic_store(timed=True), Budget("POWER", 3.3), query={"fps": 60.0})
+    assert SettingsChooser(CHEAP).manual_settings().priority == ""
 
 
 # -- camera window -----------------------------------------------------------------------------------

@@ -181,3 +181,110 @@ def test_addon_properties_have_the_schema_default_and_bounds(scene_props) -> Non
     import inspect
 
     assert "option_schema.PUBLIC" in inspect.getsource(panels.draw_options)
+
+
+# -- the store lookup's query options (frame-rate target, priority) ----------------------------------------
+QUERY = options.QUERY_OPTIONS
+_LOOKUP = ["--position", "0", "0", "0", "--direction", "0", "1", "0", "--error-budget", "0.02"]
+_VERIFY = ["--scene", "s.rbscene", "--path", "p.json", "--error-budget", "0.02"]
+
+
+def _batch_parse(batch, command: str, *extra: str):
+    return lambda *a: batch.parser().parse_args([command, *extra, *a])
+
+
+def _query_command_lines() -> dict[str, tuple]:
+    """Every command line that looks a store up: (parse(*extra), what it reads when the option is not
+    given: the schema default, or None where an unset option leaves the .blend's value)."""
+    from addon import batch
+    from tools import demo
+
+    return {
+        "query": (lambda *a: build_parser().parse_args(["query", "s.json", *_LOOKUP, *a]), "default"),
+        "verify": (lambda *a: build_parser().parse_args(["verify", "s.json", *_VERIFY, *a]), "default"),
+        "demo": (lambda *a: demo.parser().parse_args(list(a)), "default"),
+        **{f"batch {cmd}": (_batch_parse(batch, cmd, *extra), None)
+           for cmd, extra in (("evaluate", ["--out", "r"]), ("playback", []), ("optimize", []))},
+    }
+
+
+@pytest.mark.parametrize("opt", QUERY, ids=lambda o: o.name)
+def test_every_command_line_that_looks_a_store_up_takes_each_query_option(opt: options.Option) -> None:
+    for name, (parse, unset) in _query_command_lines().items():
+        assert getattr(parse(), opt.name) == (opt.default if unset else None), name
+        for text in _inside(opt):
+            assert getattr(parse(opt.cli_flag, text), opt.name) == _value(opt, text), name
+        for text in _outside(opt):
+            with pytest.raises(SystemExit):
+                parse(opt.cli_flag, text)
+
+
+@pytest.mark.parametrize("opt", QUERY, ids=lambda o: o.name)
+def test_rest_query_and_verify_requests_take_each_query_option(opt: options.Option) -> None:
+    from service.api.schemas import StoreQuery, VerifyRequest
+
+    path = {"version": 1, "fps": 30.0, "frames": [{"time": 0.0, "matrix_world": [
+        [1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]], "vfov": 0.7, "resolution": [64, 48]}]}
+    bodies = {StoreQuery: {"position": [0, 0, 0], "direction": [0, 1, 0], "error_budget": 0.02},
+              VerifyRequest: {"camera_path": path, "error_budget": 0.02}}
+    for model, body in bodies.items():
+        prop = model.model_json_schema()["properties"][opt.name]
+        assert prop.get("default") == opt.default and prop["description"] == opt.help
+        if opt.choices:
+            assert tuple(prop["enum"]) == opt.choices
+        else:
+            number = next(p for p in prop.get("anyOf", [prop]) if p.get("type") == "number")
+            assert (number["minimum"], number["maximum"]) == (opt.minimum, opt.maximum)
+        assert getattr(model(**body), opt.name) == opt.default  # an older request without the field
+        for text in _inside(opt):
+            assert getattr(model(**body, **{opt.name: _value(opt, text)}), opt.name) == _value(opt, text)
+        for text in _outside(opt):
+            with pytest.raises(ValueError, match=opt.name):
+                model(**body, **{opt.name: text if opt.kind is str else float(text)})
+
+
+def test_query_options_are_checked_together_and_sent_only_when_changed() -> None:
+    assert options.check_query({}) == {"fps": None, "priority": "frame_rate"}
+    assert options.check_query({"priority": "budget", "fps": 12}) == {"fps": 12.0, "priority": "budget"}
+    with pytest.raises(ValueError, match="priority must be one of frame_rate, budget"):
+        options.check_query({"priority": "speed"})
+    with pytest.raises(ValueError, match="unknown query options"):
+        options.check_query({"frame_rate": 30})
+    assert options.only_query_overrides({"priority": "frame_rate", "fps": None}) == {}
+    assert options.only_query_overrides({"priority": "budget"}) == {"priority": "budget"}
+    assert set(options.PRIORITY_LABELS) == set(options.PRIORITIES)
+
+
+@pytest.mark.blender
+def test_addon_query_properties_have_the_schema_default_and_bounds(scene_props) -> None:
+    """The frame-rate target and the priority are scene properties built from their declarations (0: the
+    store's own rate), read back as the lookup's keywords, shown in the panel's budget box."""
+    import importlib
+    import inspect
+
+    from tests.addon_support import EXT_MODULE
+
+    properties = importlib.import_module(f"{EXT_MODULE}.properties")
+    rna = scene_props.bl_rna.properties
+    assert properties.option_values(scene_props, QUERY) == {o.name: o.default for o in QUERY}
+    assert properties.query_values(scene_props) == {"fps": None, "priority": "frame_rate"}
+    for opt in QUERY:
+        prop = rna[opt.name]
+        assert prop.description.lower().startswith(opt.help.lower())
+        if opt.choices:
+            assert tuple(item.identifier for item in prop.enum_items) == opt.choices
+            assert tuple(item.name for item in prop.enum_items) == opt.choice_labels
+        else:
+            assert prop.hard_min == 0 and math.isclose(prop.hard_max, opt.maximum, rel_tol=1e-6)
+        for text in _outside(opt):
+            with pytest.raises(ValueError, match=opt.name):
+                properties.set_option(scene_props, opt.name, _value(opt, text))
+    properties.set_option(scene_props, "fps", 12.5)
+    properties.set_option(scene_props, "priority", "budget")
+    assert properties.query_values(scene_props) == {"fps": 12.5, "priority": "budget"}
+    properties.set_option(scene_props, "fps", None)
+    assert scene_props.fps == 0 and properties.query_values(scene_props)["fps"] is None
+    scene_props.property_unset("priority")  # as a .blend saved before the option existed reads it
+    assert properties.query_values(scene_props) == {"fps": None, "priority": "frame_rate"}
+    panels = importlib.import_module(f"{EXT_MODULE}.panels")
+    assert "option_schema.QUERY_OPTIONS" in inspect.getsource(panels._draw_budget)

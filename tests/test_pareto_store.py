@@ -496,7 +496,13 @@ def test_frontier_of_settings_that_meet_the_frame_rate() -> None:
     power = [0.7, 0.9, 0.5, 0.3]  # the max-quality setting draws less than the next: it runs slowly
     times = [0.75, 0.12, 0.01, 0.001]
     fr = Frontier.from_points(packed, err, power, times, fps=30.0)
-    assert fr.packed.tolist() == [4, 3] and fr.frame_time_s.tolist() == [0.001, 0.01]
+    # the meeting tier, then the slow tier: setting 2 misses 30 fps and is dominated by setting 1 (which
+    # also misses it and is more accurate than every setting that meets it)
+    assert fr.packed.tolist() == [4, 3, 1] and fr.frame_time_s.tolist() == [0.001, 0.01, 0.75]
+    fast, slow_tier = fr.tiers(30.0)
+    assert fast.packed.tolist() == [4, 3] and fr.meeting(30.0).packed.tolist() == [4, 3]
+    assert slow_tier is not None and slow_tier.packed.tolist() == [1]
+    assert fr.tiers(1.0) == (fr, None)  # every point meets 1 fps: one tier
     # without frame times (or when no setting keeps up) the slow settings stay on the frontier
     assert Frontier.from_points(packed, err, power).packed.tolist() == [4, 3, 1]
     slow = Frontier.from_points(packed, err, power, [1.0] * 4, fps=30.0)
@@ -520,7 +526,7 @@ def test_frame_times_round_trip_on_their_side_of_the_frame_period(times: list[li
     s = _timed_store(t, fps)
     text = s.to_json()
     doc = json.loads(text)
-    assert doc["version"] == FORMAT_VERSION == 4 and "frontier_frame_time" in doc
+    assert doc["version"] == FORMAT_VERSION == 5 and "frontier_frame_time" in doc
     back = ParetoStore.from_json(text)
     assert back.frame_times_known and back.to_json() == text
     step = doc["frame_time_scale"] / 65535

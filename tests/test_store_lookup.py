@@ -2,7 +2,7 @@
 over random stores, poses and budgets: inside and outside the root, on cell middles and face edges
 (ties), matrices with any scale, infeasible budgets, budgets equal to frontier points, single-point
 frontiers, and frame times (none, all or some settings keeping up with the store's frame rate, on the
-frame period itself)."""
+frame period itself; frontiers with a slow tier, format 5)."""
 
 from __future__ import annotations
 
@@ -56,7 +56,8 @@ def stores(draw: st.DrawFn) -> ParetoStore:
                 corners.setdefault(xyz, len(corners))
     n_frontiers = draw(st.integers(1, 12))
     fps = draw(st.sampled_from([30.0, 24.0, 60.0, 29.97]))
-    timed = draw(st.booleans())  # frame times known (format 4) or not
+    # frame times unknown (before format 4), any mix of them on a frontier, or the two tiers of format 5
+    timed = draw(st.sampled_from([None, "any", "tiers"]))
     period = 1.0 / fps
     times = st.one_of(st.floats(0.0, 0.2), st.sampled_from(
         [period, float(np.nextafter(period, 0.0)), float(np.nextafter(period, 1.0)), 0.0, 5.0]))
@@ -67,8 +68,11 @@ def stores(draw: st.DrawFn) -> ParetoStore:
                   for _ in range(n)]
         err = draw(st.lists(st.floats(0.0, 1.0), min_size=n, max_size=n))
         pw = draw(st.lists(st.floats(0.0, 20.0), min_size=n, max_size=n))
-        fr = Frontier.from_points(packed, err, pw)
-        if timed:  # any mix of settings that meet and miss the frame rate, wherever they lie on it
+        if timed == "tiers":  # the meeting tier, then the accurate settings that miss the rate
+            fr = Frontier.from_points(packed, err, pw, draw(st.lists(times, min_size=n, max_size=n)), fps)
+        else:
+            fr = Frontier.from_points(packed, err, pw)
+        if timed == "any":  # any mix of settings that meet and miss the frame rate, wherever they lie on it
             t = draw(st.lists(times, min_size=len(fr), max_size=len(fr)))
             fr = Frontier(fr.packed, fr.error, fr.power_w, np.asarray(t))
         frontiers.append(fr)

@@ -107,3 +107,37 @@ def test_cli_verify_prints_the_table_and_writes_json(setup, capsys) -> None:
     assert cli.main(["verify", str(store_file), "--scene", str(scene_file), "--path", str(path_file),
                      "--error-budget", "0.02", "--frames", "0"]) == 1
     assert "frames to verify" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_verify_looks_up_and_measures_under_the_query_options(setup, capsys) -> None:
+    """fps and priority reach the lookup of every verified frame (the same settings as the store's own
+    lookup with them), the renders are priced at that frame rate, and the report and the CLI say both;
+    a bad priority is refused before anything is rendered."""
+    d, scene, scene_file, store, store_file, path, path_file = setup
+    report = verify_store(scene, store, path, error_budget=0.02, frames=2, resolution=(32, 24), fps=15.0,
+                          priority="budget")
+    assert report.priority == "budget" and report.fps == 15.0 and report.to_dict()["priority"] == "budget"
+    space = default_space()
+    for f in report.frames:
+        fr = path.frames[f.frame]
+        r = store.lookup(fr.position, matrix=np.asarray(fr.matrix_world), fov=fr.vfov, aspect=fr.aspect,
+                         error_budget=0.02, fps=15.0, priority="budget")
+        assert (f.settings, f.predicted_power_w, f.meets_fps) == (r.settings, r.power_w, r.meets_fps)
+        cam = sim_core.Camera.from_blender(np.asarray(fr.matrix_world), fr.vfov, 32, 24)
+        img = sim_core.render(scene, cam, space.to_settings(space.indices_of(r.settings)))
+        power = sim_core.price(img, sim_core.load_profile(store.profile), 15.0).power_w
+        assert f.measured_power_w == pytest.approx(power, rel=1e-12)
+    assert "at 15 fps, budget first" in report.table()
+    with pytest.raises(ValueError, match="priority must be one of"):
+        verify_store(scene, store, path, error_budget=0.02, priority="speed")
+    out = d / "verify-budget.json"
+    assert cli.main(["verify", str(store_file), "--scene", str(scene_file), "--path", str(path_file),
+                     "--error-budget", "0.02", "--frames", "1", "--resolution", "32x24", "--priority",
+                     "budget", "--fps", "15", "--json", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    assert (doc["priority"], doc["fps"]) == ("budget", 15.0)
+    assert "budget first" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        cli.main(["verify", str(store_file), "--scene", str(scene_file), "--path", str(path_file),
+                  "--error-budget", "0.02", "--priority", "speed"])

@@ -76,6 +76,9 @@ def parser() -> argparse.ArgumentParser:
     ap.add_argument("--sample-resolution", type=campaign.parse_size, default=None,
                     help="sample frames' WxH (default: height 72, width from the path's aspect)")
     ap.add_argument("--concurrency", type=int, default=2, help="evaluations in flight")
+    lookup = ap.add_argument_group("the store lookup's query options (both budget modes and verify)")
+    for opt in option_schema.QUERY_OPTIONS:  # --fps (default: the store's own) and --priority
+        option_schema.add_argument(lookup, opt)
     ap.add_argument("--verify-frames", type=int, default=6,
                     help="path frames the store is verified on at its figures' resolution (0: skip)")
     ap.add_argument("--job-timeout", type=float, default=3600.0, help="seconds before giving up")
@@ -203,7 +206,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             frame_step=campaign.frame_step(len(path), args.frames), filter_period_s=args.filter_period,
             error_budget=args.error_budget, power_budget=args.power_budget,
             power_budget_from=args.power_budget_from, power_fraction=args.power_fraction,
-            samples=args.samples, sample_resolution=args.sample_resolution, concurrency=args.concurrency)
+            samples=args.samples, sample_resolution=args.sample_resolution, concurrency=args.concurrency,
+            fps=args.fps, priority=args.priority)
         marks: set[int] = set()
 
         def progress(label: str, done: int, total: int) -> None:
@@ -230,9 +234,10 @@ def verify(client: Any, store_id: str, path_doc: dict[str, Any], meta: dict[str,
     say(f"== verify the store: {args.verify_frames} path frames at {size[0]}x{size[1]} "
         f"(POST /stores/{{id}}/verify, error budget {args.error_budget})")
     t = clock.start()
-    doc = client.verify(store_id, {"camera_path": path_doc, "error_budget": args.error_budget,
-                                   "frames": args.verify_frames, "resolution": [int(v) for v in size]},
-                        timeout_s=3600.0)
+    body = {"camera_path": path_doc, "error_budget": args.error_budget, "frames": args.verify_frames,
+            "resolution": [int(v) for v in size],
+            **option_schema.only_query_overrides({"fps": args.fps, "priority": args.priority})}
+    doc = client.verify(store_id, body, timeout_s=3600.0)
     spent = clock.stop("verify", t)
     text = markdown(doc)
     (out / "verify.md").write_text(f"# Verify: the store's predictions against renders\n\nStore figures "
@@ -250,7 +255,10 @@ def summarise(outcome: campaign.Outcome, out: Path) -> None:
     say(f"  store: {st['size_bytes'] / 1024:.1f} KB, depth {st['depth']}, {st['corners']} corners, "
         f"{st['views']} views, {meta.get('evaluations')} renders ({meta.get('cache_hits')} cache hits)")
     say("")
-    say(report.table3_markdown(outcome.summaries, title=f"Table 3: {s['scene']}"))
+    lookup = s["lookup"]
+    priority = option_schema.PRIORITY_LABELS[lookup["priority"]].lower()
+    say(report.table3_markdown(outcome.summaries, title=f"Table 3: {s['scene']} (budget modes looked up for "
+                                                        f"{lookup['fps']:g} fps, {priority})"))
     for line in campaign_targets.target_lines(outcome.targets, st["size_bytes"]):
         say(line)
     for line in s.get("real_time_notes", ()):

@@ -11,7 +11,9 @@ A campaign measures, through the service's POST /evaluate (:mod:`.evaluate_path`
 2. a power budget: given, or placed ``power_fraction`` of the way between the Min and Max presets'
    measured mean powers (:func:`budget_from_presets`) or between the store frontiers' ends
    (:func:`choose_power_budget`) -- never tuned on the budget modes' results;
-3. the store's settings under that power budget and under the error budget, temporal filter included.
+3. the store's settings under that power budget and under the error budget, temporal filter included,
+   both looked up under the campaign's query options (``CampaignSpec.fps``: the frame-rate target, the
+   store's own by default; ``CampaignSpec.priority``: what gives way when no setting keeps both).
 
 Then it writes the report folder (:func:`run`): ``report.md`` (Table 3, notes, then sections: issue 7's
 targets, Table 2, time per phase), ``per_frame.csv`` (``frame`` = path index), plots, ``store.json``,
@@ -47,7 +49,7 @@ from .campaign_targets import (
     target_lines,
 )
 from .client import ServiceClient
-from .evaluate_path import EvalSpec, camera_payload, evaluate_path, preset_settings
+from .evaluate_path import EvalSpec, camera_payload, evaluate_path, measurement_fps, preset_settings
 from .playback_logic import PlaybackDriver, validate_budget
 
 try:  # CPU time of finished child processes too (Unix)
@@ -147,8 +149,14 @@ class CampaignSpec:
     samples: int = 3
     sample_resolution: tuple[int, int] | None = None  # None: SAMPLE_HEIGHT tall, the path's aspect
     concurrency: int = 2
+    #: The store lookup's query options (``service.options.QUERY_OPTIONS``) both budget modes run under:
+    #: the frame-rate target (None: the store's own; every mode is then measured at the path's frame
+    #: rate, else at this one) and the priority ("frame_rate" or "budget").
+    fps: float | None = None
+    priority: str = "frame_rate"
 
     def __post_init__(self) -> None:
+        options.check_query({"fps": self.fps, "priority": self.priority})
         validate_budget("ERROR", self.error_budget)
         if self.power_budget is not None:
             validate_budget("POWER", self.power_budget)
@@ -181,6 +189,7 @@ def measure(client: ServiceClient, store: ParetoStore, path: CameraPath, spec: C
             progress: Progress | None = None, say: Callable[[str], None] = lambda _t: None) -> Measured:
     """Presets first (the automatic power budget may come from their powers), then both budget modes."""
     frames = list(range(0, len(path), spec.frame_step))
+    store.check_fps(spec.fps)  # a target the store cannot answer is refused before anything is rendered
     total = len(frames) * (len(report.PRESET_LEVELS) + 2)
     rows: list[report.FrameRow] = []
 
@@ -188,7 +197,7 @@ def measure(client: ServiceClient, store: ParetoStore, path: CameraPath, spec: C
         es = EvalSpec(scene_id=spec.scene_id, profile=spec.profile or store.profile,
                       resolution=spec.resolution, budget_mode=mode, budget_value=value,
                       filter_period_s=spec.filter_period_s, frame_step=spec.frame_step, modes=modes,
-                      power_resolution=spec.power_resolution)
+                      power_resolution=spec.power_resolution, fps=spec.fps, priority=spec.priority)
         offset = len(rows)
         tick = None if progress is None else (lambda done, _n: progress(label, offset + done, total))
         part = evaluate_path(client, store, path, es, progress=tick, concurrency=spec.concurrency)
@@ -198,7 +207,7 @@ def measure(client: ServiceClient, store: ParetoStore, path: CameraPath, spec: C
     if spec.power_budget is not None:
         power_budget, power_reason = spec.power_budget, f"power budget {spec.power_budget:g} W (given)"
     elif spec.power_budget_from == "store":
-        power_budget, power_reason = choose_power_budget(store, path, frames, spec.power_fraction)
+        power_budget, power_reason = choose_power_budget(store, path, frames, spec.power_fraction, spec.fps)
     else:
         power_budget, power_reason = budget_from_presets(rows, spec.power_fraction)
     error_reason = f"error budget {spec.error_budget:g} (1 - SSIM)"
@@ -210,25 +219,27 @@ def measure(client: ServiceClient, store: ParetoStore, path: CameraPath, spec: C
 
 
 # -- budget choice ---------------------------------------------------------------------------------------
-def frontier_span(store: ParetoStore, path: CameraPath, frames: Sequence[int]) -> tuple[float, float]:
-    """Path averages of the store's cheapest and most accurate predicted power at the given frames."""
+def frontier_span(store: ParetoStore, path: CameraPath, frames: Sequence[int], fps: float | None = None
+                  ) -> tuple[float, float]:
+    """Path averages of the store's cheapest and most accurate predicted power at the given frames (for
+    the frame-rate target ``fps``, default the store's)."""
     lo, hi = [], []
     for i in frames:
         f = path.frames[i]
         m = np.asarray(f.matrix_world, dtype=np.float64)
-        kw = {"matrix": m, "fov": f.vfov, "aspect": f.aspect}
+        kw = {"matrix": m, "fov": f.vfov, "aspect": f.aspect, "fps": fps}
         lo.append(store.lookup(m[:3, 3], error_budget=1.0, **kw).power_w)
         hi.append(store.lookup(m[:3, 3], error_budget=0.0, **kw).power_w)
     return float(np.mean(lo)), float(np.mean(hi))
 
 
-def choose_power_budget(store: ParetoStore, path: CameraPath, frames: Sequence[int], fraction: float
-                        ) -> tuple[float, str]:
+def choose_power_budget(store: ParetoStore, path: CameraPath, frames: Sequence[int], fraction: float,
+                        fps: float | None = None) -> tuple[float, str]:
     """A power budget ``fraction`` of the way from the frontiers' cheapest point to their most accurate
     one (each averaged over the evaluated frames); the reason is returned for the report."""
     if not 0.0 <= fraction <= 1.0:
         raise ValueError(f"power fraction must be in [0, 1], got {fraction}")
-    lo, hi = frontier_span(store, path, frames)
+    lo, hi = frontier_span(store, path, frames, fps)
     budget = lo + fraction * (hi - lo)
     return budget, (f"power budget {budget:.3f} W = {fraction:g} of the way from the store frontiers' "
                     f"cheapest point ({lo:.3f} W) to their most accurate one ({hi:.3f} W), path averages "
@@ -262,12 +273,13 @@ def write_samples(client: ServiceClient, store: ParetoStore, path: CameraPath, s
         chosen = {"max": presets["max"], "min": presets["min"]}
         for label, (mode, value) in budgets.items():
             chosen[label] = PlaybackDriver(store, 0.0).step(f.matrix_world, f.vfov, f.aspect, f.time, mode,
-                                                            value).active_settings
+                                                            value, fps=spec.fps,
+                                                            priority=spec.priority).active_settings
         for label, settings in chosen.items():
             for fmt in ("png", "exr"):
                 img = client.render({"scene_id": spec.scene_id, "camera": camera_payload(f, resolution),
                                      "settings": settings, "profile": spec.profile or store.profile,
-                                     "fps": path.fps,
+                                     "fps": measurement_fps(spec.fps, path),
                                      "format": fmt}, timeout_s=300.0)
                 target = out_dir / f"frame{i:05d}_{label}.{fmt}"
                 target.write_bytes(img.data)
@@ -295,22 +307,43 @@ def size_note(spec: CampaignSpec, path: CameraPath) -> str:
     w, h = spec.resolution
     pw, ph = spec.power_resolution or (w, h)
     rw, rh = path.frames[0].resolution
+    fps = measurement_fps(spec.fps, path)
     if (w, h) == (pw, ph):
         where = "the path's own size" if (w, h) == (rw, rh) else (
             f"the display size the store is priced for; the path's own {rw}x{rh} is not measured here")
         return (f"Evaluated at {w}x{h} ({where}): error and power from renders at that size, power asked for "
-                f"{path.fps:g} fps and drawn at the frame rate reached.")
+                f"{fps:g} fps and drawn at the frame rate reached.")
     return (f"Evaluated at {w}x{h} (preview resolution); power is the simulator's for the path's "
-            f"{pw}x{ph} asked for {path.fps:g} fps (static power plus dynamic energy and frame time scaled "
+            f"{pw}x{ph} asked for {fps:g} fps (static power plus dynamic energy and frame time scaled "
             "by the pixel count, as the store predicts it), drawn at the frame rate reached.")
 
 
+def lookup_heading(spec: CampaignSpec, store: ParetoStore) -> str:
+    """Table 3's heading: the frame-rate target and the priority both budget modes were looked up under."""
+    rate = store.check_fps(spec.fps)
+    whose = "the store's own" if spec.fps is None else "asked for"
+    return (f"Table 3: budget modes looked up for {rate:g} fps ({whose}), "
+            f"{options.PRIORITY_LABELS[spec.priority].lower()}")
+
+
+def lookup_note(spec: CampaignSpec, store: ParetoStore) -> str:
+    """What the priority means for the budget modes' figures (a note under Table 3)."""
+    rate = store.check_fps(spec.fps)
+    if spec.priority == "budget":
+        return (f"Priority: budget first. Where no stored setting keeps both the budget and {rate:g} fps, "
+                "the budget modes keep the budget and miss the frame rate (their fps row shows it); the "
+                "power budget is then broken only where nothing keeps it.")
+    return (f"Priority: frame rate first (the default). Where no stored setting keeps both the budget and "
+            f"{rate:g} fps, the budget modes keep the frame rate and break the budget.")
+
+
 def notes(measured: Measured, spec: CampaignSpec, path: CameraPath, store: ParetoStore) -> list[str]:
-    """What the report's figures mean: budgets, sizes, frames, presets, 'budget kept'."""
+    """What the report's figures mean: budgets, lookup priority, sizes, frames, presets, 'budget kept'."""
     step, n = spec.frame_step, len(measured.frames)
     fixed = ", ".join(store.meta.get("fixed_parameters") or {}) or "none"
     return [
         measured.power_reason + ".", measured.error_reason + ": issue 7's target error.",
+        lookup_note(spec, store),
         size_note(spec, path),
         f"Frames: {n} of {len(path)} path frames evaluated (every {step}th, {step / path.fps:.2f} s apart); "
         f"the temporal filter (T = {spec.filter_period_s:g} s) runs over the evaluated frames in path order. "
@@ -401,8 +434,10 @@ def run(client: ServiceClient, store_text: str, path: CameraPath, spec: Campaign
     flat, _views, share = background_views(store, path, measured.frames)
     targets.update(background_views=flat, background_view_frames=share)
     profile = spec.profile or store.profile
-    real_time = report.real_time_notes(summaries, path.fps, f"on the `{profile}` profile at {pw}x{ph}")
+    fps = measurement_fps(spec.fps, path)
+    real_time = report.real_time_notes(summaries, fps, f"on the `{profile}` profile at {pw}x{ph}")
     written = report.write_report(out, measured.rows, title=title, plot=plot,
+                                  table_heading=lookup_heading(spec, store),
                                   notes=[*notes(measured, spec, path, store), *real_time],
                                   budget=[("POWER", measured.power_budget), ("ERROR", measured.error_budget)],
                                   sections=sections(targets, store, path, measured, pre, clock, samples))
@@ -414,7 +449,8 @@ def run(client: ServiceClient, store_text: str, path: CameraPath, spec: Campaign
         "frames_evaluated": len(measured.frames), "frame_step": spec.frame_step, "path_frames": len(path),
         "power_budget_w": measured.power_budget, "error_budget": measured.error_budget,
         "budget_choice": measured.power_reason, "store": {**store.stats(), "meta": dict(store.meta)},
-        "profile": profile, "fps_target": path.fps,
+        "profile": profile, "fps_target": fps,
+        "lookup": {"fps": store.check_fps(spec.fps), "fps_given": spec.fps, "priority": spec.priority},
         "real_time_presets": [s.mode for s in summaries if s.mode in report.PRESET_LEVELS and s.real_time],
         "real_time_notes": real_time,
         "summaries": [dataclasses.asdict(s) for s in summaries], "targets": targets,

@@ -142,6 +142,9 @@ class FrameOutput:
             meta["predicted_error"] = f"{s.predicted_error:.6g}"
         if self.measured_error is not None:
             meta["measured_error"] = f"{self.measured_error:.6g}"
+        if s.priority:  # looked up in a store: under which frame-rate target and priority
+            meta["lookup_fps_target"] = f"{s.fps_target:g}"
+            meta["lookup_priority"] = s.priority
         notes = [n for n in (s.note, *self.notes) if n]
         if notes:
             meta["note"] = "; ".join(notes)
@@ -289,7 +292,8 @@ def render_frame(scene: Any, view: CameraView, frame_settings: FrameSettings, *,
 CSV_COLUMNS_BEFORE = ("frame", "time_s", "source")
 CSV_COLUMNS_AFTER = ("predicted_power_w", "simulated_power_w", "predicted_error", "measured_error",
                      "frame_time_ms", "achieved_fps",
-                     "deadline_met", "in_transition", "clamped", "infeasible", "render_s")
+                     "deadline_met", "in_transition", "clamped", "infeasible", "render_s",
+                     "fps_target", "meets_fps", "priority")
 
 
 class AnimationLog:
@@ -322,6 +326,11 @@ class AnimationLog:
             "clamped": int(s.clamped),
             "infeasible": int(s.infeasible),
             "render_s": f"{out.render_s:.3f}",
+            # the store lookup's frame-rate target and priority, and whether the store said the settings
+            # keep up with that target (blank for manual settings or a store before frame times)
+            "fps_target": "" if s.fps_target is None else f"{s.fps_target:g}",
+            "meets_fps": "" if s.meets_fps is None else int(s.meets_fps),
+            "priority": s.priority,
         })
         self._writer.writerow(row)
         self._fh.flush()

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from service import store as pareto_store
+from service.options import check_query
 from service.params import Indices, ParameterSpace, default_space
 
 from .playback_logic import PlaybackDriver, validate_budget
@@ -110,6 +111,9 @@ class FrameSettings:
     clamped: bool = False  # camera outside the store's space
     infeasible: bool = False  # nothing in the store meets the budget here
     note: str = ""
+    fps_target: float | None = None  # the frame rate the store was looked up for (None: manual)
+    meets_fps: bool | None = None  # the store says these settings keep up with it (None: unknown)
+    priority: str = ""  # the lookup's (service.options.QUERY_PRIORITY); empty: manual settings
 
     @property
     def in_transition(self) -> bool:
@@ -141,16 +145,20 @@ class SettingsChooser:
 
     One chooser per job: a still render starts a fresh filter (the store's target, reproducibly), an
     animation render steps one filter through its frames as playback would
-    (:class:`addon.core.playback_logic.PlaybackDriver`, the same class the playback handler uses).
+    (:class:`addon.core.playback_logic.PlaybackDriver`, the same class the playback handler uses), under
+    the lookup's query options ``query`` (``fps``, ``priority``: ``service.options.check_query``).
     """
 
     def __init__(self, manual: Indices, store: pareto_store.ParetoStore | None = None,
                  budget: Budget | None = None, period_s: float = 2.0,
-                 spc: ParameterSpace | None = None) -> None:
+                 spc: ParameterSpace | None = None, query: Mapping[str, Any] | None = None) -> None:
         self.space = spc or space()
         self.space.validate(manual)
         self.manual = tuple(manual)
         self.budget = budget
+        self.query = check_query(query or {})
+        if store is not None:
+            store.check_fps(self.query["fps"])  # a target the store cannot answer fails the job up front
         self.driver = PlaybackDriver(store, period_s) if store is not None and budget is not None else None
         self.note = "" if self.driver else ("no budget set: manual settings" if store is not None
                                             else "no store: manual settings")
@@ -172,11 +180,16 @@ class SettingsChooser:
             return self.manual_settings()
         if not (math.isfinite(vfov) and math.isfinite(aspect) and aspect > 0):
             raise ValueError(f"camera fov/aspect must be finite and positive, got {vfov}, {aspect}")
-        frame = self.driver.step(matrix_world, vfov, aspect, time_s, self.budget.mode, self.budget.value)
+        frame = self.driver.step(matrix_world, vfov, aspect, time_s, self.budget.mode, self.budget.value,
+                                 **self.query)
         store = self.driver.store
         target = self.space.indices_of(store.settings_of(frame.target_indices))
+        missed = (f"budget first: misses {frame.fps_target:g} fps" if frame.priority == "budget" else
+                  f"no setting keeps up with {frame.fps_target:g} fps")
         flags = [text for text, on in (("camera outside the store's space", frame.clamped),
-                                       ("budget cannot be met here", frame.infeasible)) if on]
+                                       ("budget cannot be met here", frame.infeasible),
+                                       (missed, frame.meets_fps is False)) if on]
         return FrameSettings("store", self.space.indices_of(frame.active_settings),
                              frame.predicted_power_w, frame.predicted_error, target, frame.clamped,
-                             frame.infeasible, "; ".join(flags))
+                             frame.infeasible, "; ".join(flags), frame.fps_target, frame.meets_fps,
+                             frame.priority)

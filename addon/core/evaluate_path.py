@@ -3,7 +3,7 @@ min) and with the store's budget-driven settings (temporal filter included), as 
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
@@ -12,6 +12,7 @@ import numpy as np
 
 from service import camera_path
 from service import store as pareto_store
+from service.options import check_query
 
 from .client import ServiceClient
 from .playback_logic import PlaybackDriver, PlaybackFrame, validate_budget
@@ -33,6 +34,18 @@ class EvalSpec:
     #: every difference between settings. The service scales it (POST /evaluate power_resolution), the
     #: way the optimiser predicts it. None keeps the figure for the evaluation image.
     power_resolution: tuple[int, int] | None = None
+    #: The store lookup's query options (``service.options.QUERY_OPTIONS``): the frame-rate target (None:
+    #: the store's own; every mode is then measured at the path's rate, else at this one) and the priority.
+    fps: float | None = None
+    priority: str = "frame_rate"
+
+    def __post_init__(self) -> None:
+        check_query({"fps": self.fps, "priority": self.priority})
+
+
+def measurement_fps(query_fps: float | None, path: camera_path.CameraPath) -> float:
+    """The frame rate the service measures power at: the query's frame-rate target, else the path's."""
+    return path.fps if query_fps is None else float(query_fps)
 
 
 def preset_settings(store: pareto_store.ParetoStore) -> dict[str, dict[str, Any]]:
@@ -55,17 +68,21 @@ def budget_kept(mode: str, value: float, power_w: float, error: float) -> bool:
 
 
 def filtered_frames(store: pareto_store.ParetoStore, path: camera_path.CameraPath, numbers: Iterable[int],
-                    budget_mode: str, budget_value: float, period_s: float) -> dict[int, PlaybackFrame]:
-    """What playback shows at the path frames ``numbers`` under a budget: the playback driver stepped
+                    budget_mode: str, budget_value: float, period_s: float,
+                    query: Mapping[str, Any] | None = None) -> dict[int, PlaybackFrame]:
+    """What playback shows at the path frames ``numbers`` under a budget and the lookup's query options
+    ``query`` (``fps``, ``priority``; default: the store's frame rate, frame rate first): the playback
+    driver stepped
     over *every* path frame up to the last of them, as during playback, so the temporal filter moves at
     its real pace between sampled frames (stepping it over the sampled frames alone would restart a
     transition at nearly every sample and keep the filter near its starting settings)."""
     wanted = set(numbers)
+    kwargs = check_query(query or {})
     driver = PlaybackDriver(store, period_s)
     out: dict[int, PlaybackFrame] = {}
     for number in range(max(wanted, default=-1) + 1):
         f = path.frames[number]
-        pf = driver.step(f.matrix_world, f.vfov, f.aspect, f.time, budget_mode, budget_value)
+        pf = driver.step(f.matrix_world, f.vfov, f.aspect, f.time, budget_mode, budget_value, **kwargs)
         if number in wanted:
             out[number] = pf
     return out
@@ -84,8 +101,8 @@ def evaluate_path(client: ServiceClient, store: pareto_store.ParetoStore, path: 
     validate_budget(spec.budget_mode, spec.budget_value)
     presets = preset_settings(store)
     numbers = range(0, len(path), max(1, spec.frame_step))
-    shown = filtered_frames(store, path, numbers, spec.budget_mode, spec.budget_value,
-                            spec.filter_period_s) if "ours" in spec.modes else {}
+    shown = filtered_frames(store, path, numbers, spec.budget_mode, spec.budget_value, spec.filter_period_s,
+                            {"fps": spec.fps, "priority": spec.priority}) if "ours" in spec.modes else {}
     Job = tuple[int, camera_path.CameraFrame, str, dict[str, Any], tuple[float, float, float | None] | None]
     jobs: list[Job] = []
     for number in numbers:
@@ -104,7 +121,7 @@ def evaluate_path(client: ServiceClient, store: pareto_store.ParetoStore, path: 
     def run(job: Job) -> FrameRow:
         number, f, mode, settings, predicted = job
         body = {"scene_id": spec.scene_id, "camera": camera_payload(f, spec.resolution), "settings": settings,
-                "profile": spec.profile, "fps": path.fps}
+                "profile": spec.profile, "fps": measurement_fps(spec.fps, path)}
         if spec.power_resolution is not None:
             body["power_resolution"] = [int(v) for v in spec.power_resolution]
         res = client.evaluate(body)

@@ -291,7 +291,8 @@ class LocalClient:
                               CameraPath.from_dict(payload["camera_path"]),
                               error_budget=payload.get("error_budget"),
                               power_budget=payload.get("power_budget_w"),
-                              frames=int(payload.get("frames", 8)), resolution=payload.get("resolution"))
+                              frames=int(payload.get("frames", 8)), resolution=payload.get("resolution"),
+                              fps=payload.get("fps"), priority=payload.get("priority", "frame_rate"))
         return report.to_dict()
 
     def render(self, payload: dict[str, Any], timeout_s: float | None = None) -> RenderedImage:

@@ -45,6 +45,7 @@ class PlaybackFrame:
     predicted_fps: float | None = None  # the frame rate the active settings reach (None: store predates it)
     meets_fps: bool | None = None  # they keep up with the frame-rate target (False: no setting does)
     fps_target: float | None = None  # the frame rate asked for (the store's unless the caller gave one)
+    priority: str = "frame_rate"  # what gave way when nothing keeps both (service.options.QUERY_PRIORITY)
 
     @property
     def in_transition(self) -> bool:
@@ -58,7 +59,7 @@ class PlaybackDriver:
     """Holds one parsed store and one temporal filter; `step()` is called once per frame change.
 
     Store lookups (with the frontier points that keep the budget, the settings the filter may show) are
-    memoised on their exact inputs (camera matrix, fov, aspect, budget, frame rate): the lookup is a
+    memoised on their exact inputs (camera matrix, fov, aspect, budget, query options): the lookup is a
     pure function of them, and playback replays the same poses over and over (loops, scrubbing), so a
     replayed frame costs a dictionary hit instead of a frustum/octree query. The filter always runs.
     """
@@ -81,17 +82,20 @@ class PlaybackDriver:
             self.filter = pareto_store.TemporalFilter(period_s)
 
     def step(self, matrix_world: Sequence[Sequence[float]], vfov: float, aspect: float, now_s: float,
-             budget_mode: str, budget_value: float, fps: float | None = None) -> PlaybackFrame:
-        """The settings of one frame; ``fps``: the frame-rate target (default: the store's)."""
+             budget_mode: str, budget_value: float, fps: float | None = None,
+             priority: str = "frame_rate") -> PlaybackFrame:
+        """The settings of one frame under the lookup's query options (``service.options.QUERY_OPTIONS``):
+        ``fps``, the frame-rate target (default: the store's), and ``priority``, what gives way when no
+        setting keeps both the budget and that rate."""
         budget = validate_budget(budget_mode, budget_value)
         rows = tuple(tuple(float(v) for v in matrix_world[r]) for r in range(3))
-        key = (rows, float(vfov), float(aspect), budget_mode, budget, fps)
+        key = (rows, float(vfov), float(aspect), budget_mode, budget, fps, priority)
         memo = self._memo.get(key)
         if memo is None:
             kwargs = {"power_budget": budget} if budget_mode == "POWER" else {"error_budget": budget}
             m = (*rows, (0.0, 0.0, 0.0, 1.0))
             hit = self.store.lookup((rows[0][3], rows[1][3], rows[2][3]), matrix=m, fov=vfov, aspect=aspect,
-                                    fps=fps, **kwargs)
+                                    fps=fps, priority=priority, **kwargs)
             points = {p.indices: p for p in self.store.budget_points(hit)}
             memo = (hit, points, list(points))
             if len(self._memo) >= self.MEMO_LIMIT:
@@ -104,7 +108,7 @@ class PlaybackDriver:
         shown = points[active]
         settings = hit.settings if active == hit.indices else self.store.settings_of(active)
         return PlaybackFrame(active, tuple(hit.indices), settings, shown.power_w, shown.error, hit.clamped,
-                             hit.infeasible, shown.fps, shown.meets_fps, hit.fps_target)
+                             hit.infeasible, shown.fps, shown.meets_fps, hit.fps_target, hit.priority)
 
 
 class StoreCache:
@@ -127,10 +131,12 @@ class StoreCache:
 
 
 def predicted_path_summary(store: pareto_store.ParetoStore, frames: Sequence[Any], budget_mode: str,
-                           budget_value: float) -> dict[str, Any]:
+                           budget_value: float, fps: float | None = None,
+                           priority: str = "frame_rate") -> dict[str, Any]:
     """Store size and the power (and frame rate) the store predicts along a path under a budget, against
     the least-error point of the same frontiers (the most accurate setting that keeps up with the
-    store's frame rate, where frame times are known): what the panel's summary shows.
+    frame-rate target, where frame times are known): what the panel's summary shows. ``fps`` and
+    ``priority``: the lookup's query options (default: the store's frame rate, frame rate first).
 
     Frames where nothing meets the budget are counted, with what the nearest setting costs there: under a
     power budget the cheapest setting's power, under an error budget the most accurate setting's error.
@@ -138,14 +144,17 @@ def predicted_path_summary(store: pareto_store.ParetoStore, frames: Sequence[Any
     """
     validate_budget(budget_mode, budget_value)
     kwargs = {"power_budget": budget_value} if budget_mode == "POWER" else {"error_budget": budget_value}
+    rate = store.check_fps(fps)
     chosen = best = 0.0
     slow = 0
     rates: list[float] = []
     nearest: list[float] = []
     for f in frames:
         pos = f.matrix_world[:3, 3]
-        hit = store.lookup(pos, matrix=f.matrix_world, fov=f.vfov, aspect=f.aspect, **kwargs)
-        top = store.lookup(pos, matrix=f.matrix_world, fov=f.vfov, aspect=f.aspect, error_budget=0.0)
+        hit = store.lookup(pos, matrix=f.matrix_world, fov=f.vfov, aspect=f.aspect, fps=rate,
+                           priority=priority, **kwargs)
+        top = store.lookup(pos, matrix=f.matrix_world, fov=f.vfov, aspect=f.aspect, fps=rate,
+                           error_budget=0.0)
         chosen += hit.power_w
         best += top.power_w
         slow += int(hit.meets_fps is False)
@@ -169,9 +178,10 @@ def predicted_path_summary(store: pareto_store.ParetoStore, frames: Sequence[Any
         "nearest_min": min(nearest) if nearest else None,
         "nearest_max": max(nearest) if nearest else None,
         "frames": len(frames),
-        "fps_target": store.fps,
+        "fps_target": rate,
+        "priority": priority,
         "mean_fps": sum(rates) / len(rates) if rates else None,  # None: the store predates frame times
-        "slow_frames": slow,  # frames where no setting of the store keeps up with fps_target
+        "slow_frames": slow,  # frames whose settings miss fps_target (priority "budget": also by choice)
     }
 
 
@@ -195,7 +205,8 @@ def summary_text(summary: dict[str, Any]) -> str:
     fps = summary.get("mean_fps")
     rate = ("frame rate unknown (store before frame times)" if fps is None else
             f"{fps:.1f} of {summary['fps_target']:g} fps" + (
-                f", {summary['slow_frames']} frames slower" if summary.get("slow_frames") else ""))
+                f", {summary['slow_frames']} frames slower" if summary.get("slow_frames") else "") + (
+                ", budget first" if summary.get("priority") == "budget" else ""))
     store = (f"{summary['views']} views, {summary['corners']} corners, depth {summary['depth']}, "
              f"{summary['size_bytes'] / 1024:.1f} KB")
     shortfall = budget_shortfall(summary)

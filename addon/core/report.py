@@ -292,9 +292,10 @@ def main(argv: Sequence[str]) -> int:
 
 def write_report(out_dir: str | Path, rows: Sequence[FrameRow], *, title: str,
                  budget: Budget | Sequence[Budget], notes: Sequence[str] = (),
-                 sections: Sequence[Section] = (), plot: bool = True) -> dict[str, Path | str]:
-    """Write report.md (Table 3 layout, the notes, then ``sections``), per_frame.csv and, when matplotlib
-    is importable, the plots. report.md is written once, whole.
+                 sections: Sequence[Section] = (), plot: bool = True, table_heading: str = ""
+                 ) -> dict[str, Path | str]:
+    """Write report.md (Table 3 layout under ``table_heading``, the notes, then ``sections``),
+    per_frame.csv and, when matplotlib is importable, the plots. report.md is written once, whole.
 
     Returns the written paths, plus 'plots_skipped' with the reason when plotting was not possible here.
     """
@@ -315,7 +316,7 @@ def write_report(out_dir: str | Path, rows: Sequence[FrameRow], *, title: str,
     lines = [f"# Power budget report: {title}", "",
              f"Budget: {stated}. Error is 1 - SSIM against the maximum-quality "
              "render of the same frame; power is the simulator's at the path's frame rate.", "",
-             table3_markdown(summaries), "",
+             table3_markdown(summaries, table_heading), "",
              "Files: `per_frame.csv` (every frame and mode), `power_over_time.png`, `error_over_time.png`, "
              "`frames/` (sample frames), `store.json`, `summary.json`.", ""]
     lines += [f"- {n}" for n in [*notes, *prediction_notes(rows)]]

@@ -36,6 +36,7 @@ from ..core.engine_settings import Budget, FrameSettings, SettingsChooser, manua
 from ..core.viewport import ViewportRenderer
 from ..handlers import add_handler, remove_handler
 from ..playback import scene_time, store_of
+from ..properties import query_values
 from ..translate import translate, translate_update
 from .properties import manual_identifiers
 
@@ -100,7 +101,7 @@ def chooser_for(scene: bpy.types.Scene) -> SettingsChooser:
                             props.power_budget if props.budget_mode == "POWER" else props.error_budget)
         except ValueError:
             budget = None  # an unset budget: the manual settings apply (and say why)
-    chooser = SettingsChooser(manual, store, budget, props.filter_period)
+    chooser = SettingsChooser(manual, store, budget, props.filter_period, query=query_values(props))
     if eng.settings_source == "MANUAL":
         chooser.note = ""  # the artist's choice, nothing to explain
     return chooser

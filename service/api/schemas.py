@@ -315,7 +315,15 @@ class PreviousSettings(StrictModel):
     period_s: Annotated[float, Field(strict=True, gt=0.0, le=3600.0)] = 2.0
 
 
-class StoreQuery(StrictModel):
+#: The store lookup's query options (``service.options.QUERY_OPTIONS``: the frame-rate target ``fps`` and
+#: the ``priority``), one field each with the schema's default, bounds and help: the query and verify
+#: requests take them; old requests without them get the defaults.
+QueryOptionsIn = create_model("QueryOptionsIn", __base__=StrictModel,
+                              __doc__="The lookup's query options (service.options.QUERY_OPTIONS).",
+                              **{o.name: _option_field(o) for o in options.QUERY_OPTIONS})
+
+
+class StoreQuery(QueryOptionsIn):  # type: ignore[valid-type,misc]
     # "Exactly one budget" and "exactly one orientation" in the OpenAPI too, for clients and fuzzers.
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False, json_schema_extra={"allOf": [
         exactly_one((("power_budget_w",), ("error_budget",)), (("error_budget",), ("power_budget_w",))),
@@ -331,7 +339,6 @@ class StoreQuery(StrictModel):
     power_budget_w: Annotated[float, Field(strict=True, gt=0.0, le=1e4)] | None = None
     error_budget: Annotated[float, Field(strict=True, ge=0.0, le=1.0)] | None = None
     previous: PreviousSettings | None = None
-    fps: Fps | None = Field(default=None, description=options.QUERY_FPS.help)
 
     @model_validator(mode="after")
     def _one_budget(self) -> StoreQuery:
@@ -366,7 +373,9 @@ class QueryResult(BaseModel):
                                           "its power was priced for)")
     meets_fps: bool | None = Field(
         default=None, description="the returned settings keep up with fps_target; false only when no "
-                                  "setting of this view does (null: unknown)")
+                                  "setting of this view does, or (priority budget) none within the budget "
+                                  "does (null: unknown)")
+    priority: str = Field(default="frame_rate", description="the query's priority, as the lookup applied it")
 
 
 # -- render and evaluate -----------------------------------------------------------------------------
@@ -432,7 +441,7 @@ class EvaluateResponse(BaseModel):
 
 
 # -- verify ------------------------------------------------------------------------------------------
-class VerifyRequest(StrictModel):
+class VerifyRequest(QueryOptionsIn):  # type: ignore[valid-type,misc]
     """Render a sample of the path's frames with the store's settings and measure them (service.verify)."""
 
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False, json_schema_extra=exactly_one(
@@ -460,7 +469,9 @@ class VerifyResult(BaseModel):
     budget_value: float
     resolution: list[int]
     profile: str
-    fps: float
+    fps: float = Field(description="the frame rate the settings were looked up and measured for (the "
+                                   "request's fps, else the store's)")
+    priority: str = Field(default="frame_rate", description="the lookup's priority")
     store_figures_resolution: list[int] | None = Field(
         description="where the store says its figures were measured (its meta)")
     summary: dict[str, Any]

@@ -16,7 +16,7 @@ from service.display_pricing import DisplayPricer
 from service.evaluation import CameraSpec, Evaluator
 from service.nsga import NSGAConfig
 from service.params import Indices, ParameterSpace
-from service.store import ParetoStore
+from service.store import ParetoStore, meets_frame_rate
 
 from .lattice import Lattice, root_cube
 from .path_samples import PathSampling
@@ -48,7 +48,9 @@ class OctreeConfig:
     warm_generations: int = 5  # "path" sampling: generations of the warm-started searches in between
     # the path's resolution, where every recorded point is priced again (None: the search's figures)
     display: tuple[int, int] | None = None
-    display_points: int = 0  # at most this many points of each frontier priced there (0: all)
+    # at most this many points of each frontier's meeting tier priced there, plus the slow tier's two
+    # ends (0: all)
+    display_points: int = 0
 
     def __post_init__(self) -> None:
         options.check({name: getattr(self, name) for name in (
@@ -85,15 +87,30 @@ class CameraSampling(Protocol):
         (its sample first; a frontier keeps each point's worst figures over them)."""
 
 
-def spread_points(points: list[tuple[Any, ...]], k: int) -> list[tuple[Any, ...]]:
-    """At most ``k`` (0: all) of a frontier's points ((indices, error, power, ...)), spread along it by
-    error: both ends (the least error, where the maximum-quality setting sits, and the cheapest) and
-    evenly between them."""
-    if k <= 0 or len(points) <= k:
+def _spread(points: list[tuple[Any, ...]], k: int) -> list[tuple[Any, ...]]:
+    """At most ``k`` points of one tier, spread along it by error: both ends (the least error and the
+    cheapest) and evenly between them."""
+    if len(points) <= k:
         return list(points)
     order = sorted(range(len(points)), key=lambda i: (points[i][1], -points[i][2]))
     picks = sorted({order[round(j * (len(order) - 1) / (k - 1))] for j in range(k)}) if k > 1 else [order[0]]
     return [points[i] for i in picks]
+
+
+def spread_points(points: list[tuple[Any, ...]], k: int, fps: float | None = None) -> list[tuple[Any, ...]]:
+    """At most ``k`` (0: all) of a frontier's points ((indices, error, power, frame time)) that meet
+    ``fps``, spread along it by error (both ends, where the least error and the cheapest sit, and evenly
+    between them), and at most the two ends of its slow tier (the points that miss ``fps`` while others
+    meet it: the most accurate, where the maximum-quality setting sits, and the cheapest), so pricing a
+    frontier costs at most ``k`` + 2 points. Without ``fps`` (or when no point meets it) one tier."""
+    if k <= 0:
+        return list(points)
+    meets = [fps is None or meets_frame_rate(float(pt[3]), fps) for pt in points]
+    if all(meets) or not any(meets):
+        return _spread(points, k)
+    fast = _spread([pt for pt, m in zip(points, meets, strict=True) if m], k)
+    slow = _spread([pt for pt, m in zip(points, meets, strict=True) if not m], 2)
+    return fast + slow
 
 
 STRATEGIES: dict[str, type] = {"axis": ViewCubeSampling, "aimed": ViewCubeSampling, "path": PathSampling}
@@ -143,13 +160,16 @@ class OctreeBuilder:
         """Every measured frontier's points priced again at the path's resolution at the frontier's
         cameras (its sample, and for path samples its guards), keeping each point's worst error, power
         and frame time there: the store's figures are the display resolution's, the search's only chose
-        the points."""
+        the points (:func:`spread_points`: at most ``display_points`` of the meeting tier and the slow
+        tier's two ends). The store's tiers are drawn again from the display figures
+        (``Frontier.from_points``): a point may meet the rate at one resolution and miss it at the
+        other."""
         assert self.pricer is not None and self.cfg.display is not None
         width, height = self.cfg.display
         search, lat = self.search, self.lattice
         jobs: list[tuple[int, list[CameraSpec], list[Indices]]] = []
         for fid, cams in sorted(self.sampling.pricing_cameras().items()):
-            keep = spread_points(lat.frontiers[fid].points, self.cfg.display_points)
+            keep = spread_points(lat.frontiers[fid].points, self.cfg.display_points, search.ev.fps)
             lat.frontiers[fid].points = keep
             jobs.append((fid, [dataclasses.replace(c, width=width, height=height) for c in cams],
                          [pt[0] for pt in keep]))

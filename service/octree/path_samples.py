@@ -7,7 +7,8 @@ frames' median viewing distance (the distance their central ray travels; ``max_d
 the runtime lookup itself (:meth:`ParetoStore.locate`) says which (corner, face) each path frame will
 read. Each such sample is measured at the path camera most like the frames reading it (their medoid
 by eye distance over viewing distance plus direction difference); a full search runs at every
-``path_stride``-th sample along the path and short warm-started ones in between; then every frontier
+``path_stride``-th sample along the path and short warm-started ones in between (warm-started from
+the neighbours' meeting tiers); then every frontier
 setting is also priced at ``guard_frames`` more of those frames (the ones least like the chosen ones)
 and the frontier keeps each setting's worst error and power, so it bounds the frames it serves. Faces
 no path frame reads inherit the frontier of the nearest sample. No frontier-difference comparisons
@@ -128,8 +129,8 @@ class PathSampling:
                 continue
             before = max(a for a in anchors if a < i)
             after = min(a for a in anchors if a > i)
-            fa = lat.frontier(*order[before]).settings()
-            fb = lat.frontier(*order[after]).settings()
+            fa = [pt[0] for pt in search.meeting_tier(lat.frontier(*order[before]).points)]
+            fb = [pt[0] for pt in search.meeting_tier(lat.frontier(*order[after]).points)]
             warm = [x for pair in itertools.zip_longest(fa, fb) for x in pair if x is not None]
             jobs.append((c, v, warm))
         self._optimise(jobs, "refine path samples", generations=warm_generations, planned=True)
@@ -200,8 +201,9 @@ class PathSampling:
                 e = np.maximum(e, [x.error for x in r])
                 pw = np.maximum(pw, [x.power_w for x in r])
                 ft = np.maximum(ft, [x.frame_time_s for x in r])
-            # points the worst case made dominated, or too slow for the frame rate while others keep
-            # up, are dropped where every record becomes a store frontier (Frontier.from_points in to_store)
+            # points the worst case made dominated within their tier (a point may also change tier: too
+            # slow for the frame rate now) are dropped where every record becomes a store frontier
+            # (Frontier.from_points in to_store)
             rec.points = [(pt[0], float(ei), float(pi), float(ti))
                           for pt, ei, pi, ti in zip(rec.points, e, pw, ft, strict=True)]
 

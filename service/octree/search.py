@@ -5,7 +5,10 @@ Each search is NSGA-II (or exhaustive enumeration when the space is small) seede
 and the camera, starting from both ends of the space (the maximum-quality setting, error 0 by
 definition, and the cheapest one) plus its warm start. A setting whose frame time misses the run's
 target frame rate is infeasible (:func:`service.store.meets_frame_rate`): the searches rank it behind
-every setting that keeps up, and a frontier holds such settings only where none keeps up. The scheduler
+every setting that keeps up. A search's frontier is drawn from every setting it evaluated (its
+archive), in the store's two tiers (:func:`service.store.frontier_tiers`): the front of the settings
+that keep up, then the front of those that miss the rate but are more accurate than any that keeps up
+(the maximum-quality setting, always evaluated, ends it unless it keeps up). The scheduler
 knows cameras and settings, not corners or views: the sampling strategies (:mod:`.view_cubes`,
 :mod:`.path_samples`) decide what to search where.
 """
@@ -22,7 +25,7 @@ from typing import Any
 from service.evaluation import CameraSpec, Evaluator
 from service.nsga import NSGA2, Archive, NSGAConfig, enumerate_space
 from service.params import Indices, ParameterSpace
-from service.store import meets_frame_rate
+from service.store import frontier_tiers, meets_frame_rate
 
 #: A frontier: (full index vector, error, power, frame time) of each setting.
 Points = list[tuple[Indices, float, float, float]]
@@ -118,12 +121,28 @@ class Search:
         times: list[dict[Indices, float]] = [{} for _ in cameras]  # frame time of every evaluated setting
         archives = (self._enumerate(cameras, phase, times) if self.exhaustive
                     else self._nsga(cameras, warm, phase, generations, times))
-        found = [[(self.space.expand(x), e, p, t[x]) for x, e, p in arch.frontier()]
-                 for arch, t in zip(archives, times, strict=True)]
+        found = [self.frontier(arch, t) for arch, t in zip(archives, times, strict=True)]
         self.state.views_done += len(cameras)
         self.steps_done = max(self.steps_done, steps_before + stage_steps)  # searches that ended early
         self.report(phase)
         return found
+
+    def frontier(self, archive: Archive, times: dict[Indices, float]) -> Points:
+        """The two-tier frontier of every setting a search evaluated: the meeting tier, then the slow
+        tier, each power ascending (ties in both objectives: the first evaluated)."""
+        xs, objectives = archive.arrays()
+        if not xs:
+            return []
+        fast, slow = frontier_tiers(objectives[:, 0], objectives[:, 1], archive.feasible_mask(xs))
+        return [(self.space.expand(xs[i]), float(objectives[i, 0]), float(objectives[i, 1]), times[xs[i]])
+                for i in fast + slow]
+
+    def meeting_tier(self, points: Points) -> Points:
+        """The points of a frontier that keep up with the run's frame rate (all of them when none
+        does): what warm starts and frontier comparisons read, so the slow tier adds to the searches'
+        results without steering them."""
+        fast = [pt for pt in points if meets_frame_rate(pt[3], self.ev.fps)]
+        return fast or list(points)
 
     def keeps_up(self, ev: Any) -> bool:
         """Whether an evaluation's frame time meets the run's target frame rate."""

@@ -9,6 +9,8 @@ paper's order: edge midpoints compare the edge's two corners; face centres pair 
 edge-midpoint neighbours along the two face axes; the node centre pairs its six face-centre neighbours
 along the three axes. A view is optimised afresh (warm-started from the pair's frontiers) only when a
 pair differs for that view; otherwise it inherits the frontier of the first corner of the first pair.
+Comparisons and warm starts read each frontier's meeting tier (:meth:`.search.Search.meeting_tier`):
+the slow tier a frontier keeps for budget-first lookups does not steer the refinement.
 
 ``"axis"`` renders view k along world axis k; ``"aimed"`` renders it along the direction from the
 corner to what the path frames looking through face k see (:func:`aimed_directions`).
@@ -166,21 +168,19 @@ class ViewCubeSampling:
             self.search.check_cancel()
             reqs = []
             for a, b, v in todo:
-                fa = self.lattice.frontier(a, v)
-                fb = self.lattice.frontier(b, v)
-                reqs += [(self.camera(b, v), x) for x in fa.settings()]
-                reqs += [(self.camera(a, v), x) for x in fb.settings()]
+                fa, fb = self._compared(a, v), self._compared(b, v)
+                reqs += [(self.camera(b, v), pt[0]) for pt in fa]
+                reqs += [(self.camera(a, v), pt[0]) for pt in fb]
             res = self.search.evaluate(reqs)
             k = 0
             for a, b, v in todo:
-                fa = self.lattice.frontier(a, v)
-                fb = self.lattice.frontier(b, v)
-                pa = np.asarray([(r.error, r.power_w) for r in res[k:k + len(fa.points)]])
-                k += len(fa.points)
-                pb = np.asarray([(r.error, r.power_w) for r in res[k:k + len(fb.points)]])
-                k += len(fb.points)
-                ta = np.asarray([(pt[1], pt[2]) for pt in fa.points])
-                tb = np.asarray([(pt[1], pt[2]) for pt in fb.points])
+                fa, fb = self._compared(a, v), self._compared(b, v)
+                pa = np.asarray([(r.error, r.power_w) for r in res[k:k + len(fa)]])
+                k += len(fa)
+                pb = np.asarray([(r.error, r.power_w) for r in res[k:k + len(fb)]])
+                k += len(fb)
+                ta = np.asarray([(pt[1], pt[2]) for pt in fa])
+                tb = np.asarray([(pt[1], pt[2]) for pt in fb])
                 allp = np.concatenate([pa, pb, ta, tb])
                 scale = (max(float(np.ptp(allp[:, 0])), self.cfg.threshold_error),
                          max(float(np.ptp(allp[:, 1])), self.cfg.threshold_power_w))
@@ -189,6 +189,11 @@ class ViewCubeSampling:
                 self._dist[(a, b, v)] = (de1 + de2, dp1 + dp2)
             self.search.report()
         return [self._dist[p] for p in pairs]
+
+    def _compared(self, corner: int, view: int) -> list[tuple[Indices, float, float, float]]:
+        """The points of a (corner, view) frontier that comparisons and warm starts read: its meeting
+        tier (:meth:`Search.meeting_tier`)."""
+        return self.search.meeting_tier(self.lattice.frontier(corner, view).points)
 
     def _differs(self, d: tuple[float, float]) -> bool:
         return d[0] > self.cfg.threshold_error or d[1] > self.cfg.threshold_power_w
@@ -236,8 +241,8 @@ class ViewCubeSampling:
                     if diff:
                         warm: list[Indices] = []
                         for a, b in diff:
-                            warm += self.lattice.frontier(a, v).settings()
-                            warm += self.lattice.frontier(b, v).settings()
+                            warm += [pt[0] for pt in self._compared(a, v)]
+                            warm += [pt[0] for pt in self._compared(b, v)]
                         jobs.append((c, v, warm))
                     else:
                         self.lattice.corner_views[c][v] = self.lattice.corner_views[prs[0][0]][v]

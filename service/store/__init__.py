@@ -2,9 +2,9 @@
 
 - :mod:`.packing`: settings as 4-bit value indices packed in 32 bits, and the parameter descriptions;
 - :mod:`.frame_rate`: the frame-rate rule (a setting meets the store's fps, the frame rate it reaches);
-- :mod:`.frontier`: a Pareto frontier and its budget searches;
+- :mod:`.frontier`: a Pareto frontier (meeting and slow tiers) and its budget searches;
 - :mod:`.codec`: how numbers are kept (base64 arrays, 16-bit steps, direction and eye codes);
-- :mod:`.format`: the versioned JSON document (reads versions 1-4);
+- :mod:`.format`: the versioned JSON document (reads versions 1-5);
 - :mod:`.camera`: camera maths shared by every part of the project (rotations, view-cube faces,
   frustum face choice, field of view);
 - :mod:`.lookup`: camera pose + budget -> settings;
@@ -18,7 +18,7 @@ from .camera import VIEW_FORWARD, VIEW_NAMES, VIEW_UP, camera_rotation, face_of,
 from .codec import quantise_directions, quantise_eyes
 from .format import FORMAT_NAME, FORMAT_VERSION, READABLE_VERSIONS
 from .frame_rate import frame_rate_reached, meets_frame_rate
-from .frontier import Frontier
+from .frontier import Frontier, frontier_tiers
 from .lookup import LookupResult
 from .packing import (
     BITS_PER_PARAM,
@@ -37,6 +37,7 @@ __all__ = [
     "BITS_PER_PARAM", "FORMAT_NAME", "FORMAT_VERSION", "MAX_PARAMS", "MAX_VALUES_PER_PARAM",
     "READABLE_VERSIONS", "VIEW_FORWARD", "VIEW_NAMES", "VIEW_UP", "Frontier", "LookupResult",
     "ParetoStore", "StoredParameter", "TemporalFilter", "camera_rotation", "face_of", "frame_rate_reached",
+    "frontier_tiers",
     "meets_frame_rate", "pack_array", "pack_indices", "quantise_directions", "quantise_eyes", "unpack_array",
     "unpack_indices", "view_up",
 ]

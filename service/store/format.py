@@ -14,7 +14,8 @@ Layout (power-budget paper, sec. 4.2 and 6):
   it was measured at (``frontier_dirs``: int16 directions, ``frontier_eyes``: uint16 positions over the
   root cube): path-sampled stores measure each face at the path camera that best represents the frames
   looking it up, and faces that inherit that frontier share its camera;
-- frontiers: lists of (packed settings, error, power), power ascending and error descending, shared
+- frontiers: lists of (packed settings, error, power), power ascending and error descending (per tier
+  since version 5, see frame times), shared
   between corners and views that inherit them: ``frontier_sizes``, indices into the unique ``settings``
   table (``frontier_settings``), error and power as 16-bit steps (error over [0, 1], power over
   [0, ``power_scale``]);
@@ -22,12 +23,16 @@ Layout (power-budget paper, sec. 4.2 and 6):
   at the path's resolution as 16-bit steps over [0, ``frame_time_scale``] s, rounded so every point stays
   on its side of the frame period 1 / ``fps`` (:func:`service.store.codec.frame_time_codes`); power is
   what the GPU draws at the frame rate it reaches (``fps`` when the point meets it, else 1 / frame
-  time), and where any point of a frontier meets ``fps`` only such points are kept. Absent (versions
-  1-3): frame times unknown, power as priced then (P_static + E * fps even for frames that missed);
+  time). In version 4, where any point of a frontier meets ``fps`` only such points are kept. Since
+  version 5 such a frontier has two tiers (:mod:`service.store.frontier`): its meeting points, then the
+  points that miss ``fps`` but are more accurate than the most accurate meeting one (each tier power
+  ascending; error descends over the whole frontier); the frame times tell the tiers apart (no new
+  field), and a version-4 frontier reads as one without a slow tier. Absent (versions 1-3): frame times
+  unknown, power as priced then (P_static + E * fps even for frames that missed);
 - ``parameters`` (names, values, maximum-quality index), ``profile``, ``fps``, ``vfov``, ``aspect``
   and the optimiser's ``meta``.
 
-Arrays are little-endian base64 blobs (:mod:`service.store.codec`). Readers accept versions 1-4.
+Arrays are little-endian base64 blobs (:mod:`service.store.codec`). Readers accept versions 1-5.
 
 Adding a field: write it in :func:`to_dict` (optional fields only when set, so older readers and
 byte-identical stores are unaffected), read it in :func:`fields_from_dict` (absent -> the old
@@ -48,10 +53,11 @@ from .frontier import Frontier
 from .packing import StoredParameter
 
 FORMAT_NAME = "render-budget/pareto-store"
-FORMAT_VERSION = 4
+FORMAT_VERSION = 5
 #: Versions this reader accepts (version 1 stores have axis-aligned sample views at the corners,
-#: version 2 adds sample directions, version 3 sample eyes, version 4 frame times).
-READABLE_VERSIONS = (1, 2, 3, 4)
+#: version 2 adds sample directions, version 3 sample eyes, version 4 frame times, version 5 the slow
+#: tier of settings that miss the frame rate).
+READABLE_VERSIONS = (1, 2, 3, 4, 5)
 
 
 def to_dict(store: Any) -> dict[str, Any]:

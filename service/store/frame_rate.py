@@ -4,8 +4,9 @@ A store is priced for one target frame rate (its ``fps``). A setting *meets* it 
 time fits in one frame period; a setting that misses it renders back to back at its own rate, so the
 frame rate it reaches is the lower of the two (and its power is the full-speed power:
 ``sim_core.sustained_power`` prices power with the same test as ``EnergyReport.deadline_met``). The
-optimiser keeps settings that meet the target ahead of those that miss it, and the lookup never picks a
-missing one while a meeting one exists.
+optimiser ranks settings that meet the target ahead of those that miss it, a frontier keeps the ones
+that miss it only in its slow tier (:mod:`.frontier`), and the lookup never picks a missing one while a
+meeting one exists unless the query puts the budget first (:mod:`.lookup`).
 """
 
 from __future__ import annotations

@@ -1,5 +1,19 @@
 """A Pareto frontier of settings: packed settings with their error, power and (since store format 4)
-frame time."""
+frame time, in two tiers when frame times are known (since store format 5).
+
+Power is what the GPU draws at the frame rate it reaches, so a setting that misses the target frame
+rate draws little because it delivers few frames, not because it is cheap: the settings that meet the
+rate and those that miss it are not compared on one front. A frontier keeps
+
+- the *meeting tier*: the (power, error) Pareto front of the settings that meet the frame rate, and
+- the *slow tier*: the Pareto front of the settings that miss it but are more accurate than the most
+  accurate meeting one (the maximum-quality setting, error 0, ends it unless it meets the rate): what a
+  budget that no real-time setting keeps can still be kept with;
+
+in that order, each tier power ascending and error descending, so error descends over the whole
+frontier. When no setting meets the rate (or frame times are unknown) there is one tier, the front of
+every setting.
+"""
 
 from __future__ import annotations
 
@@ -12,10 +26,40 @@ import numpy as np
 from .frame_rate import meets_frame_rate
 
 
+def _front(candidates: np.ndarray, error: np.ndarray, power: np.ndarray) -> list[int]:
+    """The non-dominated ``candidates`` (indices), power ascending (ties in both: the first one)."""
+    order = candidates[np.lexsort((error[candidates], power[candidates]))]  # by power, then error
+    keep: list[int] = []
+    best = math.inf
+    for i in order:
+        if error[i] < best:
+            keep.append(int(i))
+            best = error[i]
+    return keep
+
+
+def frontier_tiers(error: Iterable[float], power: Iterable[float], meets: Iterable[bool] | None = None
+                   ) -> tuple[list[int], list[int]]:
+    """Indices of the meeting tier and of the slow tier of settings with ``error`` and ``power`` and,
+    optionally, whether each ``meets`` the frame rate (the one two-tier rule: the search, the display
+    pricing and the store use it). Without ``meets``, or when no setting meets the rate: (the front of
+    all of them, [])."""
+    e = np.asarray(list(error), dtype=np.float64)
+    p = np.asarray(list(power), dtype=np.float64)
+    every = np.arange(e.size)
+    m = None if meets is None else np.asarray(list(meets), dtype=bool)
+    if m is None or not m.any():
+        return _front(every, e, p), []
+    fast = _front(every[m], e, p)
+    best = e[fast[-1]]  # the most accurate meeting setting ends the meeting tier
+    return fast, _front(every[~m & (e < best)], e, p)
+
+
 @dataclass(frozen=True)
 class Frontier:
-    """A Pareto frontier: packed settings with error and power, power ascending, error descending, and
-    each setting's frame time at the path's resolution (``None``: unknown, stores before format 4)."""
+    """A frontier: packed settings with error and power and each setting's frame time at the path's
+    resolution (``None``: unknown, stores before format 4), as the module docstring orders them: the
+    meeting tier then the slow tier (:meth:`tiers`), each power ascending, error descending throughout."""
 
     packed: np.ndarray  # uint32 (N,)
     error: np.ndarray  # float64 (N,)
@@ -32,11 +76,8 @@ class Frontier:
     @staticmethod
     def from_points(packed: Iterable[int], error: Iterable[float], power_w: Iterable[float],
                     frame_time_s: Iterable[float] | None = None, fps: float | None = None) -> Frontier:
-        """Keep the non-dominated points (ties: first occurrence) and sort them by power.
-
-        With frame times and the target ``fps``: settings that meet the frame rate dominate those that
-        miss it, so when any point meets it the frontier is that of the meeting points only (a missing
-        setting draws little power because it delivers few frames, not because it is cheap)."""
+        """The frontier of some settings: the non-dominated points (ties: first occurrence) sorted by
+        power, or, with frame times and the target ``fps``, the two tiers (:func:`frontier_tiers`)."""
         pk = np.asarray(list(packed), dtype=np.uint32)
         e = np.asarray(list(error), dtype=np.float64)
         p = np.asarray(list(power_w), dtype=np.float64)
@@ -45,47 +86,49 @@ class Frontier:
         if not (np.all(np.isfinite(e)) and np.all(np.isfinite(p))):
             raise ValueError("frontier error and power must be finite")
         t = None
-        candidates = np.arange(pk.size)
+        meets = None
         if frame_time_s is not None:
             t = np.asarray(list(frame_time_s), dtype=np.float64)
             if t.shape != pk.shape or not np.all(np.isfinite(t)) or np.any(t < 0):
                 raise ValueError("frame times must be finite, >= 0 and one per setting")
             if fps is None or not (math.isfinite(fps) and fps > 0):
                 raise ValueError("frame times need the target fps (finite, > 0)")
-            meets = np.asarray([meets_frame_rate(float(v), fps) for v in t], dtype=bool)
-            if meets.any():
-                candidates = np.flatnonzero(meets)
-        sub_e, sub_p = e[candidates], p[candidates]
-        order = candidates[np.lexsort((sub_e, sub_p))]  # by power, then error
-        keep: list[int] = []
-        best_e = math.inf
-        for i in order:
-            if e[i] < best_e:
-                keep.append(int(i))
-                best_e = e[i]
-        k = np.asarray(keep, dtype=np.int64)
+            meets = [meets_frame_rate(float(v), fps) for v in t]
+        fast, slow = frontier_tiers(e, p, meets)
+        k = np.asarray(fast + slow, dtype=np.int64)
         return Frontier(pk[k], e[k], p[k], None if t is None else t[k])
 
     def __len__(self) -> int:
         return int(self.packed.size)
 
-    def meeting(self, fps: float) -> Frontier:
-        """The points that meet ``fps`` (this frontier itself when frame times are unknown, or when no
-        point or every point meets it)."""
-        if self.frame_time_s is None:
-            return self
-        keep = np.asarray([meets_frame_rate(float(v), fps) for v in self.frame_time_s], dtype=bool)
-        if keep.all() or not keep.any():
-            return self
+    def _subset(self, keep: np.ndarray) -> Frontier:
+        assert self.frame_time_s is not None
         return Frontier(self.packed[keep], self.error[keep], self.power_w[keep], self.frame_time_s[keep])
 
+    def tiers(self, fps: float) -> tuple[Frontier, Frontier | None]:
+        """(meeting tier, slow tier) at ``fps``: the points that meet it and those that miss it; (this
+        frontier, None) when frame times are unknown, or when no point or every point meets it."""
+        if self.frame_time_s is None:
+            return self, None
+        keep = np.asarray([meets_frame_rate(float(v), fps) for v in self.frame_time_s], dtype=bool)
+        if keep.all() or not keep.any():
+            return self, None
+        return self._subset(keep), self._subset(~keep)
+
+    def meeting(self, fps: float) -> Frontier:
+        """The points that meet ``fps`` (this frontier itself when frame times are unknown, or when no
+        point or every point meets it): the meeting tier."""
+        return self.tiers(fps)[0]
+
     def under_power(self, budget: float) -> tuple[int, bool]:
-        """Index of the least error with power <= budget; (cheapest, True) when none fits."""
+        """Index of the least error with power <= budget; (cheapest, True) when none fits. On one tier
+        (a frontier without a slow tier, or :meth:`tiers`' parts)."""
         i = int(np.searchsorted(self.power_w, budget, side="right")) - 1
         return (0, True) if i < 0 else (i, False)
 
     def under_error(self, budget: float) -> tuple[int, bool]:
-        """Index of the least power with error <= budget; (most accurate, True) when none fits."""
+        """Index of the least power with error <= budget; (most accurate, True) when none fits. On one
+        tier (a frontier without a slow tier, or :meth:`tiers`' parts)."""
         # error is descending: search on the negated (ascending) array
         i = int(np.searchsorted(-self.error, -budget, side="left"))
         return (len(self) - 1, True) if i >= len(self) else (i, False)

@@ -10,14 +10,25 @@ setting's values, so a query makes one numpy call (the face) and no other alloca
 
 The frame-rate target is the store's ``fps`` (what its power was priced for) unless a query asks for
 another rate: then each point's power is repriced for that rate (:func:`.frame_rate.power_at_rate`, from
-the store's static power) and the frontier pruned again. Where a frontier knows its frame times, the
-budget search runs over the settings that meet the target (:mod:`.frame_rate`), and only when none does
-over all of them, and the result says whether the chosen setting meets it and the frame rate it reaches.
-A store keeps, per view, only the points on its frontier at its own ``fps``: a lower rate chooses among
-those (a setting dropped because it missed the store's rate is not there to be found).
+the store's static power) and the frontier's tiers drawn again at that rate (a slow point of the store
+may meet a lower rate). Where a frontier knows its frame times, it has a meeting tier and a slow tier
+(:mod:`.frontier`), and the query's priority (:data:`service.options.QUERY_PRIORITY`) says how they are
+searched:
 
-:meth:`LookupIndex.budget_points` lists the points of the frontier a result came from that keep its
-budget: the settings the temporal filter (:mod:`.temporal`) may show while it moves to the target.
+- ``"frame_rate"`` (the default): the budget search runs over the meeting tier (all points when none
+  meets the target), so a setting that misses the target is never picked while one meets it;
+- ``"budget"``: the same search first; only when no meeting point keeps the budget, the slow tier's
+  points that keep it are searched the same way (least power under an error budget, least error under a
+  power budget; ``meets_fps`` False). Only when no point of either tier keeps the budget is the result
+  infeasible, with the same fallback as under ``"frame_rate"``.
+
+The result says whether the chosen setting meets the target and the frame rate it reaches. A store
+keeps, per view, the points of its two tiers at its own ``fps``: another rate chooses among those (at a
+higher rate, a setting the store dropped because it missed its own rate and was less accurate than a
+real-time one is not there to be found).
+
+:meth:`LookupIndex.budget_points` lists the points of the tier a result came from that keep its budget:
+the settings the temporal filter (:mod:`.temporal`) may show while it moves to the target.
 """
 
 from __future__ import annotations
@@ -41,9 +52,12 @@ from .packing import StoredParameter, settings_of, unpack_indices
 class LookupResult:
     """Settings chosen for one camera and budget, with their predicted error, power (at the frame rate
     they reach), frame time and flags. ``infeasible``: no setting keeps the budget (the nearest one is
-    chosen). ``meets_fps``: the setting keeps up with the store's frame rate; False only when no setting
-    of the frontier does (the lookup never picks a missing one otherwise); None when the store does not
-    know frame times (format before 4), as are ``frame_time_s`` and ``fps`` (the frame rate reached)."""
+    chosen). ``meets_fps``: the setting keeps up with the frame-rate target ``fps_target``; False when no
+    setting of the frontier does or, under the ``"budget"`` ``priority``, when only settings that miss
+    it keep the budget (under ``"frame_rate"`` a missing one is never picked otherwise); None when the
+    store does not know frame times (format before 4), as are ``frame_time_s`` and ``fps`` (the frame
+    rate reached). ``frontier``, ``rank`` (the point's place in the tier it came from), ``budget_mode``,
+    ``budget`` and ``priority`` say where it came from (:meth:`LookupIndex.budget_points`)."""
 
     indices: tuple[int, ...]
     packed: int
@@ -63,6 +77,7 @@ class LookupResult:
     rank: int = -1
     budget_mode: str = ""
     budget: float = math.nan
+    priority: str = "frame_rate"  # the query's (service.options.QUERY_PRIORITY)
 
 
 @dataclass(frozen=True)
@@ -79,18 +94,24 @@ class FrontierPoint:
 
 
 class _FrontierLists:
-    """A frontier's points that meet the frame-rate target ``fps`` (all of them when none does or frame
-    times are unknown: ``Frontier.meeting``) as plain lists for :mod:`bisect` (the same answers as
-    ``Frontier.under_power`` / ``under_error``, which it defers to when the points are not sorted as a
-    frontier's must be), with each point's frame time, frame rate reached and whether it meets ``fps``."""
+    """One tier of a frontier at the frame-rate target ``fps`` as plain lists for :mod:`bisect` (the same
+    answers as ``Frontier.under_power`` / ``under_error``, which it defers to when the points are not
+    sorted as a tier's must be), with each point's frame time, frame rate reached and whether it meets
+    ``fps``. Built for a whole frontier it holds the meeting tier (all points when none meets the target
+    or frame times are unknown: ``Frontier.tiers``) and ``slow``, the slow tier's lists (None if none)."""
 
     __slots__ = ("error", "fps", "fps_reached", "frame_time", "frontier", "meets", "neg_error", "packed",
-                 "points", "power", "searched", "sorted")
+                 "points", "power", "searched", "slow", "sorted")
 
-    def __init__(self, frontier: Frontier, fps: float) -> None:
+    def __init__(self, frontier: Frontier, fps: float, tier: Frontier | None = None) -> None:
         self.frontier = frontier
         self.fps = fps
-        self.searched = searched = frontier.meeting(fps)
+        self.slow: _FrontierLists | None = None
+        if tier is None:
+            tier, slow = frontier.tiers(fps)
+            if slow is not None:
+                self.slow = _FrontierLists(frontier, fps, slow)
+        self.searched = searched = tier
         self.power = [float(v) for v in searched.power_w]
         self.error = [float(v) for v in searched.error]
         self.neg_error = [float(v) for v in -searched.error]
@@ -284,19 +305,22 @@ class LookupIndex:
         return lists
 
     def lists_of(self, hit: LookupResult) -> _FrontierLists:
-        """The lists ``hit`` was chosen from (its frontier at the rate it was asked for)."""
+        """The lists of the tier ``hit`` was chosen from (its frontier at the rate it was asked for: the
+        slow tier for a point that misses the rate while the frontier has meeting points)."""
         lists = self._frontiers.get(hit.frontier)
-        if lists is not None and lists.fps == hit.fps_target:
-            return lists
-        lists = self._other_rates.get((hit.frontier, hit.fps_target))
+        if lists is None or lists.fps != hit.fps_target:
+            lists = self._other_rates.get((hit.frontier, hit.fps_target))
         if lists is None:
             raise ValueError("the lookup result's frontier is no longer cached: look the camera up again")
+        if lists.slow is not None and hit.meets_fps is False:
+            return lists.slow
         return lists
 
     def budget_points(self, hit: LookupResult) -> list[FrontierPoint]:
-        """The points of ``hit``'s frontier (at its frame-rate target, among those the budget search ran
-        over) that keep its budget, in frontier order (power ascending); only ``hit``'s own point when
-        none does (``hit.infeasible``)."""
+        """The points of the tier ``hit`` came from (its frontier at its frame-rate target: the meeting
+        tier, or the slow tier when ``hit`` misses the target under the ``"budget"`` priority) that keep
+        its budget, in frontier order (power ascending); only ``hit``'s own point when none does
+        (``hit.infeasible``)."""
         lists = self.lists_of(hit)
         if lists.points is None:
             lists.points = [FrontierPoint(self.decoded(pk)[0], pk, lists.power[k], lists.error[k],

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from ..options import QUERY_FPS
+from ..options import QUERY_FPS, QUERY_PRIORITY
 from . import camera, codec, format
 from .camera import VIEW_FORWARD, VIEW_UP, view_up
 from .frontier import Frontier
@@ -210,17 +210,23 @@ class ParetoStore:
 
     def lookup(self, position: Any, direction: Any = None, matrix: Any = None, fov: float | None = None,
                power_budget: float | None = None, error_budget: float | None = None,
-               aspect: float | None = None, up: Any = None, fps: float | None = None) -> LookupResult:
+               aspect: float | None = None, up: Any = None, fps: float | None = None,
+               priority: str = "frame_rate") -> LookupResult:
         """Settings for a camera at ``position`` looking along ``direction`` (or oriented by ``matrix``,
         Blender's 4x4 camera world matrix) with vertical field of view ``fov`` in radians, under exactly
-        one of ``power_budget`` (W) or ``error_budget`` (1 - SSIM), among the settings that keep up with
-        the frame rate ``fps`` (default: the store's) when the store knows frame times and any does
-        (``LookupResult.meets_fps``); power is predicted at the frame rate reached for ``fps``."""
+        one of ``power_budget`` (W) or ``error_budget`` (1 - SSIM), for the frame-rate target ``fps``
+        (default: the store's; power is predicted at the frame rate reached for it). ``priority``
+        (:data:`service.options.QUERY_PRIORITY`): ``"frame_rate"`` chooses among the settings that keep
+        up with the target when the store knows frame times and any does; ``"budget"`` chooses among
+        them while one of them keeps the budget, else among the stored settings that miss the target
+        but keep the budget (``LookupResult.meets_fps`` False; :mod:`service.store.lookup`)."""
         if (power_budget is None) == (error_budget is None):
             raise ValueError("give exactly one of power_budget or error_budget")
         budget = float(power_budget if power_budget is not None else error_budget)  # type: ignore[arg-type]
         if not math.isfinite(budget):
             raise ValueError("budget must be finite")
+        if priority != "frame_rate":
+            QUERY_PRIORITY.check(priority)
         rate = self.check_fps(fps)
         index = self._index
         rot = camera.rotation_floats(direction, matrix, up)
@@ -237,16 +243,24 @@ class ParetoStore:
             i, infeasible = fr.under_power(budget)
         else:
             i, infeasible = fr.under_error(budget)
+        if infeasible and fr.slow is not None and priority == "budget":
+            slow = fr.slow
+            j, missed = slow.under_power(budget) if power_budget is not None else slow.under_error(budget)
+            if not missed:  # only settings that miss the frame rate keep the budget
+                fr, i, infeasible = slow, j, False
         packed = fr.packed[i]
         indices, settings = index.decoded(packed)
         return LookupResult(indices, packed, settings, fr.power[i], fr.error[i], clamped, infeasible,
                             corner, view, leaf, fr.frame_time[i], fr.fps_reached[i], fr.meets[i], rate,
-                            fid, i, "power" if power_budget is not None else "error", budget)
+                            fid, i, "power" if power_budget is not None else "error", budget, priority)
 
     def budget_points(self, hit: LookupResult) -> list[FrontierPoint]:
-        """The points of the frontier ``hit`` came from that keep its budget (power ascending), with
-        their predictions at ``hit``'s frame-rate target: the settings the temporal filter may show on
-        that frame (``hit``'s own point alone when nothing keeps the budget)."""
+        """The points of the tier ``hit`` came from that keep its budget (power ascending), with their
+        predictions at ``hit``'s frame-rate target: the settings the temporal filter may show on that
+        frame (``hit``'s own point alone when nothing keeps the budget). Under the ``"budget"`` priority
+        a hit that misses the target allows the slow tier's points within the budget (none of the
+        meeting points keeps it then); otherwise the meeting points within the budget, as under
+        ``"frame_rate"``."""
         return self._index.budget_points(hit)
 
     # -- serialisation ----------------------------------------------------------------------------

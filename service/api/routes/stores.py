@@ -61,8 +61,9 @@ def delete_store(store_id: str, storage: StorageDep, stores: StoresDep) -> Respo
 def verify(body: VerifyRequest, record: StoreRecordDep, storage: StorageDep, scenes: ScenesDep,
            stores: StoresDep, settings: SettingsDep) -> VerifyResult:
     """Render ``frames`` path frames, spread evenly, at the path's resolution (or ``resolution``) with the
-    settings the store picks under the budget, and set the measured error and power against the store's
-    predictions: per frame, the share within budget, the worst frames. Runs while the request waits
+    settings the store picks under the budget (and the query options ``fps`` and ``priority``, as a
+    query takes them; measured at that frame rate), and set the measured error and power against the
+    store's predictions: per frame, the share within budget, the worst frames. Runs while the request waits
     (about two full-size renders a frame)."""
     try:
         path = CameraPath.from_dict(body.camera_path.model_dump())
@@ -77,7 +78,8 @@ def verify(body: VerifyRequest, record: StoreRecordDep, storage: StorageDep, sce
     try:
         report = verify_store(scene, stores.get(record.id), path, error_budget=body.error_budget,
                               power_budget=body.power_budget_w, frames=body.frames,
-                              resolution=body.resolution, threads=settings.render_threads)
+                              resolution=body.resolution, threads=settings.render_threads, fps=body.fps,
+                              priority=body.priority)
     except ValueError as exc:
         raise ApiError(422, f"verify: {exc}") from exc
     return VerifyResult(**report.to_dict())
@@ -88,7 +90,7 @@ def answer_query(store: Any, body: StoreQuery) -> QueryResult:
     try:  # the lookup's camera maths is scale-free: huge or tiny but finite orientations are fine
         hit = store.lookup(body.position, direction=body.direction, matrix=body.matrix, fov=body.fov,
                            power_budget=body.power_budget_w, error_budget=body.error_budget,
-                           aspect=body.aspect, fps=body.fps)
+                           aspect=body.aspect, fps=body.fps, priority=body.priority)
     except ValueError as exc:
         raise ApiError(422, str(exc)) from exc
     except ArithmeticError as exc:  # extreme but finite numbers the lookup could not handle
@@ -114,22 +116,23 @@ def answer_query(store: Any, body: StoreQuery) -> QueryResult:
             settings=hit.settings, indices=list(target), packed=hit.packed, power_w=hit.power_w,
             error=hit.error, clamped=hit.clamped, infeasible=hit.infeasible, filtered=False,
             target_indices=list(target), frame_time_s=hit.frame_time_s, fps=hit.fps,
-            fps_target=hit.fps_target, meets_fps=hit.meets_fps)
+            fps_target=hit.fps_target, meets_fps=hit.meets_fps, priority=hit.priority)
     pt = points[shown]
     return QueryResult(
         settings=store.settings_of(shown), indices=list(shown), packed=pt.packed, power_w=pt.power_w,
         error=pt.error, clamped=hit.clamped, infeasible=hit.infeasible, filtered=True,
         target_indices=list(target), frame_time_s=pt.frame_time_s, fps=pt.fps, fps_target=hit.fps_target,
-        meets_fps=pt.meets_fps)
+        meets_fps=pt.meets_fps, priority=hit.priority)
 
 
 async def query_store(store_id: str, body: StoreQuery, request: Request) -> QueryResult:
     """Settings for a camera pose under a power or error budget, optionally through the temporal filter
     from the ``previous`` settings, ``elapsed_s`` after the target changed: Eq. 8's pace, but always a
     point of this view's frontier that keeps the budget (when the target does). ``fps`` asks for another
-    frame rate than the store's (power repriced for it; settings that miss it are never chosen while one
-    meets it). ``power_w``, ``error``, ``frame_time_s``, ``fps`` and ``meets_fps`` are the predictions
-    for the returned settings."""
+    frame rate than the store's (power repriced for it); ``priority`` says what gives way when no setting
+    keeps both the budget and that rate: ``frame_rate`` (default: the budget) or ``budget`` (the frame
+    rate; ``meets_fps`` false), echoed as ``priority``. ``power_w``, ``error``, ``frame_time_s``, ``fps``
+    and ``meets_fps`` are the predictions for the returned settings."""
     return answer_query(request.app.state.render_budget.stores.get(store_id), body)
 
 
