@@ -1,8 +1,9 @@
 """Replay a main-job run's budget modes offline with several temporal filters, to see what each costs:
 the paper's Eq. 8 (each parameter index blended separately: mid-transition settings lie on no frontier),
 the previous filter along the frontier (Eq. 8's blend of value indices, then the allowed point nearest to
-it in index space; kept here as a reference), the filter playback uses (an even pace in predicted error
-among the allowed points, ``service.store.temporal``, through ``PlaybackDriver``) and no filter (T = 0).
+it in index space, every transition lasting T; kept here as a reference), the filter playback uses (an
+even pace in predicted error among the allowed points, a move across their whole error span in T and a
+shorter one in less, ``service.store.temporal``, through ``PlaybackDriver``) and no filter (T = 0).
 The allowed points are the frame's frontier points that keep the budget
 (``ParetoStore.budget_points``).
 
@@ -47,7 +48,7 @@ from service.store.lookup import FrontierPoint
 REPO = Path(__file__).resolve().parent.parent
 FILTERS = ("none", "index", "error", "eq8")
 LABELS = {"none": "no filter (T = 0)", "index": "before: nearest in index space to Eq. 8's blend",
-          "error": "now: even pace in predicted error", "eq8": "Eq. 8 (per-index blend, off the frontier)"}
+          "error": "now: even pace in predicted error, whole span in T", "eq8": "Eq. 8 (per-index blend, off the frontier)"}
 Indices = tuple[int, ...]
 
 

@@ -21,7 +21,7 @@ from service.optimize import OptimizeConfig, optimize_path
 from service.params import default_space
 from service.store import TemporalFilter, pack_indices, unpack_indices
 from service.store.frame_rate import power_at_rate
-from service.store.temporal import blend
+from service.store.temporal import blend, transition_period
 from tests.addon_support import synthetic_store
 from tests.api_support import teapot_scene_file
 
@@ -123,14 +123,32 @@ def test_no_detour_the_shown_error_stays_between_the_start_and_the_target(case) 
 def test_mid_transition_stays_near_the_ends_in_error_not_on_a_cheap_point_near_in_index_space() -> None:
     """The case the index-space rule got wrong: half-way from (0, 4, 0) to (4, 0, 0), Eq. 8's blend of
     indices is (2, 2, 0), nearest (in index space) to the cheap (1, 1, 0), whose error is five times the
-    ends'; in error the ends are 0.12 and 0.10, so the filter shows an end (or a point between them)."""
+    ends'; in error the ends are 0.12 and 0.10, so the filter shows an end or the point between them. A
+    move of 0.02 across allowed errors spanning 0.7 lasts 0.02 / 0.7 of T."""
     allowed = {(0, 0, 0): 0.8, (1, 1, 0): 0.6, (0, 4, 0): 0.12, (4, 0, 0): 0.10, (3, 1, 2): 0.11}
     f = TemporalFilter(2.0)
     f.update((0, 4, 0), 0.0, allowed)
-    shown = [f.update((4, 0, 0), t, allowed) for t in np.arange(0.1, 2.05, 0.1)]
+    period = transition_period(2.0, 0.12, 0.10, allowed.values())
+    assert period == pytest.approx(2.0 * 0.02 / 0.7)
+    times = [period * k / 20 for k in range(21)]
+    shown = [f.update((4, 0, 0), t, allowed) for t in times]
     assert [allowed[s] for s in shown] == sorted((allowed[s] for s in shown), reverse=True)
-    assert max(allowed[s] for s in shown) <= 0.12 and (3, 1, 2) in shown and shown[-1] == (4, 0, 0)
-    assert (1, 1, 0) not in shown
+    assert max(allowed[s] for s in shown) <= 0.12 and (3, 1, 2) in shown
+    assert (1, 1, 0) not in shown and shown[0] == (0, 4, 0) and shown[-1] == (4, 0, 0)
+
+
+@given(error, error, st.lists(error, max_size=6), st.floats(0.1, 5.0))
+def test_a_transition_lasts_its_share_of_the_allowed_error_span_of_t(start, target, others, period) -> None:
+    """The whole span of the allowed errors in T, a shorter move in proportionally less, never over T."""
+    allowed = [target, *others]
+    p = transition_period(period, start, target, allowed)
+    move, width = abs(start - target), max(allowed) - min(allowed)
+    assert 0.0 <= p <= period
+    if move >= width:
+        assert p == (period if move > 0 else 0.0)  # across the whole span (or further): T
+    else:
+        assert p == pytest.approx(period * move / width)  # a share of it: that share of T
+    assert (p == 0.0) == (start == target)
 
 
 def test_targets_of_about_the_shown_quality_keep_it() -> None:
