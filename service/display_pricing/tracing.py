@@ -13,9 +13,9 @@ from sim_core.render import COUNTER_NAMES
 
 import sim_core
 from service.display_pricing.sampling import CameraDesign, block_of
-from service.display_pricing.windows import Window, apron_tiles, plan_windows
+from service.display_pricing.windows import Window, apron_pixels, plan_windows
 
-#: Windows covering a tile mask: (mask, width, height, tile size, apron tiles) -> windows.
+#: Windows covering a tile mask: (mask, width, height, tile size, apron pixels) -> windows.
 WindowPlan = Callable[[np.ndarray, int, int, int, int], list[Window]]
 
 #: Tile side of the auxiliary frames: small, so that their tiles fall into single blocks.
@@ -71,7 +71,7 @@ class Renderer:
         rows_h: list[np.ndarray] = []
         rows_b: list[np.ndarray] = []
         rows_t: list[np.ndarray] = []  # the tiles' row-major index: one order whatever the windows
-        for win in (plan or plan_windows)(tiles, w, h, ts, apron_tiles(s)):
+        for win in (plan or plan_windows)(tiles, w, h, ts, apron_pixels(s)):
             x, y, ww, wh = win
             r = sim_core.render_window(self.scene, camera, s, win, threads=self.threads)
             canvas[y:y + wh, x:x + ww] = r.image
