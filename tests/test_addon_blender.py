@@ -472,7 +472,7 @@ def test_playback_hud_and_engine_look_up_under_the_scene_query_options(scene, tm
     under them (target written for the HUD), the HUD says "budget first" and why a frame misses the rate,
     the render engine's chooser and the panel summary read the same options, a target the store cannot
     answer is a playback error, and a file saved with them keeps them."""
-    from addon.core.playback_logic import PlaybackDriver
+    from addon.core.playback_logic import PlaybackDriver, missed_rate_text
 
     hud, render = ext_module("hud"), ext_module("engine.render")
     cam = turning_camera(scene, 6)
@@ -508,11 +508,16 @@ def test_playback_hud_and_engine_look_up_under_the_scene_query_options(scene, tm
     props.fps = 0.0  # the store's own 24 fps, which no setting of a slow store keeps up with
     load(slow=True)
     scene.frame_set(4)
-    flags = [text for text, _ in hud.hud_lines(scene)]
-    assert props.slower_than_fps and any("budget first: misses 24 fps" in t for t in flags), flags
+    flags = hud.hud_lines(scene)[-1][0].split("; ")
+    missed = missed_rate_text(24.0, "budget")  # one wording: the HUD's, the panel's and the engine's
+    assert props.slower_than_fps and missed in flags, flags
+    note = render.chooser_for(scene).choose(cam.matrix_world, vfov, 320 / 180, 4 / 24).note
+    assert missed in note.split("; "), note
     props.priority = "frame_rate"
     scene.frame_set(5)
-    assert any("no setting keeps up with 24 fps" in t for t, _ in hud.hud_lines(scene))
+    assert missed_rate_text(24.0, "frame_rate") in hud.hud_lines(scene)[-1][0].split("; ")
+    assert missed_rate_text(24.0, "frame_rate") in render.chooser_for(scene).choose(
+        cam.matrix_world, vfov, 320 / 180, 5 / 24).note.split("; ")
     props.fps = 50.0
     _load_store(tmp_path, timed=True)  # no static power: only its own frame rate (loaded, and it says so)
     assert "lookup options unusable" in props.summary and "static power" in props.summary

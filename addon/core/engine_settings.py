@@ -18,7 +18,7 @@ from service import store as pareto_store
 from service.options import check_query
 from service.params import Indices, ParameterSpace, default_space
 
-from .playback_logic import PlaybackDriver, validate_budget
+from .playback_logic import PlaybackDriver, missed_rate_text, validate_budget
 
 # Labels and tooltips of the search space's parameters (their values come from the space itself).
 _TEXT: dict[str, tuple[str, str]] = {
@@ -184,11 +184,10 @@ class SettingsChooser:
                                  **self.query)
         store = self.driver.store
         target = self.space.indices_of(store.settings_of(frame.target_indices))
-        missed = (f"budget first: misses {frame.fps_target:g} fps" if frame.priority == "budget" else
-                  f"no setting keeps up with {frame.fps_target:g} fps")
         flags = [text for text, on in (("camera outside the store's space", frame.clamped),
                                        ("budget cannot be met here", frame.infeasible),
-                                       (missed, frame.meets_fps is False)) if on]
+                                       (missed_rate_text(frame.fps_target, frame.priority),
+                                        frame.meets_fps is False)) if on]
         return FrameSettings("store", self.space.indices_of(frame.active_settings),
                              frame.predicted_power_w, frame.predicted_error, target, frame.clamped,
                              frame.infeasible, "; ".join(flags), frame.fps_target, frame.meets_fps,
