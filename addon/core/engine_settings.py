@@ -119,6 +119,13 @@ class FrameSettings:
     def in_transition(self) -> bool:
         return self.target_indices is not None and self.target_indices != self.indices
 
+    def pricing_fps(self, scene_fps: float) -> float:
+        """The frame rate this frame's power is priced at: the one its store lookup chose the settings
+        for (the query's ``fps``, else the store's own), so the simulated power, the image metadata's
+        ``fps`` and the CSV's ``fps_target`` agree with the lookup; ``scene_fps`` for manual settings
+        (and a store that states no frame rate)."""
+        return self.fps_target if self.fps_target else scene_fps
+
     def values(self, spc: ParameterSpace | None = None) -> dict[str, Any]:
         return (spc or space()).values_of(self.indices)
 
