@@ -528,6 +528,38 @@ def test_playback_hud_and_engine_look_up_under_the_scene_query_options(scene, tm
     assert (again.fps, again.priority) == (12.0, "budget")
 
 
+def test_batch_playback_sets_a_saved_frame_rate_back_to_the_stores_own(scene, tmp_path) -> None:
+    """A .blend saved with Frame rate 12: batch playback keeps it when --fps is left out and plays at the
+    store's own 24 fps with ``--fps store`` (the command line a pipeline runs, in its own process)."""
+    import csv
+    import os
+    import subprocess
+
+    from tests.addon_support import REPO_ROOT
+
+    turning_camera(scene, 6)
+    add_cube(scene)
+    bpy.ops.render_budget.record_path_animation()
+    store = synthetic_store(timed=True)
+    store.meta["static_power_w"] = 0.2  # another frame rate can be asked for
+    f = tmp_path / "store.json"
+    f.write_text(store.to_json())
+    assert bpy.ops.render_budget.load_store(filepath=str(f)) == {"FINISHED"}
+    props = scene.render_budget
+    props.budget_mode, props.power_budget, props.fps = "POWER", 10.0, 12.0
+    blend = tmp_path / "saved_at_12fps.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "user"))
+    for extra, want in (((), 12.0), (("--fps", "store"), 24.0)):
+        out = tmp_path / "played.csv"
+        proc = subprocess.run([sys.executable, "-m", "addon.batch", "--blend", str(blend), "playback",
+                               "--out", str(out), *extra], cwd=REPO_ROOT, capture_output=True, text=True,
+                              env=env, timeout=600, check=False)
+        assert proc.returncode == 0, proc.stdout + proc.stderr
+        rows = list(csv.DictReader(out.open(newline="")))
+        assert len(rows) == 6 and {float(r["fps_target"]) for r in rows} == {want}, extra
+
+
 def test_an_infeasible_budget_says_it_cannot_be_met_and_what_the_cheapest_setting_costs(scene, tmp_path
                                                                                        ) -> None:
     turning_camera(scene, 12)
