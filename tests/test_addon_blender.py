@@ -560,6 +560,34 @@ def test_batch_playback_sets_a_saved_frame_rate_back_to_the_stores_own(scene, tm
         assert len(rows) == 6 and {float(r["fps_target"]) for r in rows} == {want}, extra
 
 
+def test_preview_prices_playbacks_settings_at_the_frame_rate_their_lookup_used(scene, tmp_path) -> None:
+    """Preview Frame with the active settings prices them at the rate playback's lookup chose them for
+    (the store's own 24 fps, or the Frame rate option's 12), as the render engine does, not at the
+    scene's 30 fps; at maximum quality (no lookup) at the scene's."""
+    import json
+
+    ops_preview = ext_module("ops_preview")
+    scene.render.fps = 30
+    turning_camera(scene, 6)
+    add_cube(scene)
+    bpy.ops.render_budget.record_path_animation()
+    store = synthetic_store(timed=True)
+    store.meta["static_power_w"] = 0.2  # another frame rate can be asked for
+    f = tmp_path / "store.json"
+    f.write_text(store.to_json())
+    assert bpy.ops.render_budget.load_store(filepath=str(f)) == {"FINISHED"}
+    props = scene.render_budget
+    props.budget_mode, props.power_budget = "POWER", 10.0
+    for frame, fps, want in ((2, 0.0, 24.0), (3, 12.0, 12.0)):
+        props.fps = fps
+        scene.frame_set(frame)
+        assert props.target_fps == pytest.approx(want)
+        assert ops_preview.prepare(scene, use_active=True, scale=0.1).fps == pytest.approx(want)
+    image = ops_preview.render_preview(scene, use_active=True, scale=0.1)
+    assert json.loads(image["render_budget"])["energy"]["fps"] == pytest.approx(12.0)
+    assert ops_preview.prepare(scene, use_active=False, scale=0.1).fps == pytest.approx(30.0)
+
+
 def test_an_infeasible_budget_says_it_cannot_be_met_and_what_the_cheapest_setting_costs(scene, tmp_path
                                                                                        ) -> None:
     turning_camera(scene, 12)

@@ -333,6 +333,7 @@ def test_store_chooser_looks_up_under_the_query_options() -> None:
     assert SettingsChooser(CHEAP, store, Budget("POWER", 3.3), query=query).choose(
         orbit(1)[0], 0.69, 16 / 9, 0.0).pricing_fps(30.0) == 12.0
     assert SettingsChooser(CHEAP, store).manual_settings().pricing_fps(30.0) == 30.0  # manual: the scene's
+    assert engine_settings.pricing_fps(12.0, 30.0) == 12.0 and engine_settings.pricing_fps(None, 30.0) == 30.0
     assert SettingsChooser(CHEAP, store, Budget("POWER", 3.3)).choose(orbit(1)[0], 0.69, 16 / 9, 0.0
                                                                        ).priority == "frame_rate"
     with pytest.raises(ValueError, match="priority must be one of"):

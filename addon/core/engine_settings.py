@@ -99,6 +99,14 @@ def manual_indices(identifiers: Mapping[str, str], spc: ParameterSpace | None = 
     return tuple(out)
 
 
+def pricing_fps(fps_target: float | None, scene_fps: float) -> float:
+    """The frame rate a frame's power is priced at: ``fps_target``, the one the store lookup chose its
+    settings for (the query's ``fps``, else the store's own), so the simulated power, the image
+    metadata's ``fps`` and the CSV's ``fps_target`` agree with the lookup; ``scene_fps`` when the
+    settings did not come from a lookup (None or 0: manual settings, maximum quality)."""
+    return fps_target if fps_target else scene_fps
+
+
 @dataclass(frozen=True)
 class FrameSettings:
     """The settings of one frame and where they came from."""
@@ -120,11 +128,8 @@ class FrameSettings:
         return self.target_indices is not None and self.target_indices != self.indices
 
     def pricing_fps(self, scene_fps: float) -> float:
-        """The frame rate this frame's power is priced at: the one its store lookup chose the settings
-        for (the query's ``fps``, else the store's own), so the simulated power, the image metadata's
-        ``fps`` and the CSV's ``fps_target`` agree with the lookup; ``scene_fps`` for manual settings
-        (and a store that states no frame rate)."""
-        return self.fps_target if self.fps_target else scene_fps
+        """The frame rate this frame's power is priced at (:func:`pricing_fps` of its lookup's target)."""
+        return pricing_fps(self.fps_target, scene_fps)
 
     def values(self, spc: ParameterSpace | None = None) -> dict[str, Any]:
         return (spc or space()).values_of(self.indices)
