@@ -528,6 +528,20 @@ def test_playback_hud_and_engine_look_up_under_the_scene_query_options(scene, tm
     assert (again.fps, again.priority) == (12.0, "budget")
 
 
+def _load_store_at_24fps(scene, tmp_path):
+    """A recorded 6-frame path and a loaded timed store at its own 24 fps that can be asked for another
+    frame rate (static power known); the scene's render-budget properties."""
+    turning_camera(scene, 6)
+    add_cube(scene)
+    bpy.ops.render_budget.record_path_animation()
+    store = synthetic_store(timed=True)
+    store.meta["static_power_w"] = 0.2  # another frame rate can be asked for
+    f = tmp_path / "store.json"
+    f.write_text(store.to_json())
+    assert bpy.ops.render_budget.load_store(filepath=str(f)) == {"FINISHED"}
+    return scene.render_budget
+
+
 def test_batch_playback_sets_a_saved_frame_rate_back_to_the_stores_own(scene, tmp_path) -> None:
     """A .blend saved with Frame rate 12: batch playback keeps it when --fps is left out and plays at the
     store's own 24 fps with ``--fps store`` (the command line a pipeline runs, in its own process)."""
@@ -537,15 +551,7 @@ def test_batch_playback_sets_a_saved_frame_rate_back_to_the_stores_own(scene, tm
 
     from tests.addon_support import REPO_ROOT
 
-    turning_camera(scene, 6)
-    add_cube(scene)
-    bpy.ops.render_budget.record_path_animation()
-    store = synthetic_store(timed=True)
-    store.meta["static_power_w"] = 0.2  # another frame rate can be asked for
-    f = tmp_path / "store.json"
-    f.write_text(store.to_json())
-    assert bpy.ops.render_budget.load_store(filepath=str(f)) == {"FINISHED"}
-    props = scene.render_budget
+    props = _load_store_at_24fps(scene, tmp_path)
     props.budget_mode, props.power_budget, props.fps = "POWER", 10.0, 12.0
     blend = tmp_path / "saved_at_12fps.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(blend))
@@ -568,15 +574,7 @@ def test_preview_prices_playbacks_settings_at_the_frame_rate_their_lookup_used(s
 
     ops_preview = ext_module("ops_preview")
     scene.render.fps = 30
-    turning_camera(scene, 6)
-    add_cube(scene)
-    bpy.ops.render_budget.record_path_animation()
-    store = synthetic_store(timed=True)
-    store.meta["static_power_w"] = 0.2  # another frame rate can be asked for
-    f = tmp_path / "store.json"
-    f.write_text(store.to_json())
-    assert bpy.ops.render_budget.load_store(filepath=str(f)) == {"FINISHED"}
-    props = scene.render_budget
+    props = _load_store_at_24fps(scene, tmp_path)
     props.budget_mode, props.power_budget = "POWER", 10.0
     for frame, fps, want in ((2, 0.0, 24.0), (3, 12.0, 12.0)):
         props.fps = fps
