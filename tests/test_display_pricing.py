@@ -362,6 +362,41 @@ def test_tile_estimated_store_keeps_a_few_points_per_frontier(scene) -> None:
         assert 1 <= len(fr.packed) <= 3 and float(fr.error.min()) == 0.0  # max quality always kept
 
 
+class _SlowClock:
+    """A clock on which every reading is 100 s after the last: pricing batches look slow."""
+
+    def __init__(self) -> None:
+        self.now = 0.0
+
+    def perf_counter(self) -> float:
+        self.now += 100.0
+        return self.now
+
+
+@pytest.mark.slow
+def test_the_time_left_while_pricing_follows_the_pricings_own_pace(scene, monkeypatch) -> None:
+    """Display pricing is the last phase and costs what the scene makes it cost: once a batch is priced,
+    the job's estimate is that batch's pace times the cameras left (the search steps' pace, the guess
+    before, was 8x low on the village), and it reaches 0 with the last batch."""
+    import service.octree.builder as builder_module
+
+    monkeypatch.setattr(builder_module, "time", _SlowClock())
+    updates = []
+    store = optimize_path(scene, _orbit_path(16, (48, 36)), SUBSPACE,
+                          _options(display_estimator="full", display_points=2, path_resolution=0.02),
+                          cache=EvalCache(), executor=InProcessExecutor(), progress=updates.append)
+    total = store.meta["display_cameras"]
+    assert total > 8, "the path must need more than one pricing batch (8 cameras) for this test"
+    pricing = [u.estimate_s for u in updates if u.phase == "price at display resolution"]
+    # the first report (before any batch) keeps the steps' guess; then one per batch of 8 cameras
+    batches = pricing[1:]
+    assert len(batches) == -(-total // 8)
+    for b, left in enumerate(batches, start=1):
+        done = min(8 * b, total)
+        assert left == pytest.approx(100.0 * b / done * (total - done))
+    assert batches[-1] == 0.0
+
+
 @pytest.mark.slow
 def test_a_stated_display_size_is_where_power_and_the_frame_rate_are_judged(scene) -> None:
     """A store priced at a stated smaller display judges power, and so which settings keep up with the
