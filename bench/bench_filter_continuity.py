@@ -48,7 +48,8 @@ from service.store.lookup import FrontierPoint
 REPO = Path(__file__).resolve().parent.parent
 FILTERS = ("none", "index", "error", "eq8")
 LABELS = {"none": "no filter (T = 0)", "index": "before: nearest in index space to Eq. 8's blend",
-          "error": "now: even pace in predicted error, whole span in T", "eq8": "Eq. 8 (per-index blend, off the frontier)"}
+          "error": "now: even pace in predicted error, whole span in T",
+          "eq8": "Eq. 8 (per-index blend, off the frontier)"}
 Indices = tuple[int, ...]
 
 
