@@ -43,7 +43,8 @@ def _eq8(old: Sequence[int], target: Sequence[int], a: float) -> list[float]:
 def blend(old: Sequence[int], target: Sequence[int], progress: float,
           allowed: Mapping[Sequence[int], float] | None = None, start_error: float | None = None,
           bound: float = math.inf) -> Indices:
-    """The setting shown ``progress`` (t / T) of the way from ``old`` to ``target``.
+    """The setting shown ``progress`` (time since the change / the transition's period) of the way from
+    ``old`` to ``target``.
 
     Without ``allowed``: Eq. 8 (each index blended and rounded). With ``allowed`` (each setting that may
     be shown, the target among them, mapped to its predicted error): the allowed setting whose error is
@@ -97,7 +98,7 @@ def _start_point(old: Sequence[int], target: Sequence[int], allowed: Mapping[Ind
 
 
 class TemporalFilter:
-    """Move the shown settings from the old ones to a new target over ``period_s`` (T).
+    """Move the shown settings from the old ones to a new target within ``period_s`` (T).
 
     ``update(target, now_s, allowed)`` once per frame: ``t`` is the time since the target last changed;
     a change in the middle of a transition starts the next one from the settings shown at that moment.
