@@ -225,9 +225,11 @@ def test_playback_driver_matches_store_lookup_and_filters_changes() -> None:
     assert target != ref.indices
     allowed = {p.indices: p for p in store.budget_points(hit)}
     seen = [drv.step(m_y, 0.69, 16 / 9, t, "ERROR", budget) for t in (0.1, 1.0, 1.9, 2.1, 3.0)]
-    # just after the change: the allowed point nearest the old settings (here the target itself: the
-    # views' cheap ends differ in one index only; tests/test_temporal_filter.py covers longer moves)
-    assert seen[0].active_indices == blend(ref.indices, target, 0.0, list(allowed))
+    # just after the change: the allowed point whose predicted error is nearest the old settings' (their
+    # error on the new frontier when they are on it, else the one they were shown at)
+    errors = {k: p.error for k, p in allowed.items()}
+    start = errors.get(ref.indices, first.predicted_error)
+    assert seen[0].active_indices == blend(ref.indices, target, 0.0, errors, start)
     for s in seen:
         assert s.target_indices == target
         assert s.active_indices in allowed  # a point of the new frontier within the budget ...

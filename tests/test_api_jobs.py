@@ -18,7 +18,7 @@ from api_support import camera_path, look_at_matrix, server_thread, sse_events, 
 
 from service.api import Settings
 from service.store import ParetoStore
-from service.store.temporal import blend
+from service.store.temporal import blend, transition_period
 
 pytestmark = pytest.mark.service
 
@@ -137,15 +137,20 @@ def test_job_end_to_end_events_store_and_query(client: httpx.Client, finished: d
     assert outside.status_code == 200 and outside.json()["clamped"] is True
 
     # Temporal filter: half-way through the period from the cheap to the rich settings, along the
-    # frontier (every point keeps a 1e4 W budget): the point nearest Eq. 8's blend, with its predictions.
+    # frontier (every point keeps a 1e4 W budget): the point whose predicted error is nearest to the
+    # schedule from the cheap to the rich settings' errors over the transition's period, with its
+    # predictions.
     prev = {"indices": cheap["indices"], "elapsed_s": 1.0, "period_s": 2.0}
     mid = client.post(f"/stores/{job['store_id']}/query",
                       json={**query, "power_budget_w": 1e4, "previous": prev}).json()
     hit = store.lookup(m[:3, 3], matrix=m, fov=frame["vfov"], power_budget=1e4)
     points = {p.indices: p for p in store.budget_points(hit)}
-    at_start = blend(cheap["indices"], rich["indices"], 0.0, list(points))
-    bound = sum(abs(a - b) for a, b in zip(at_start, rich["indices"], strict=True))
-    expect = blend(cheap["indices"], rich["indices"], 0.5, list(points), bound)
+    errors = {k: p.error for k, p in points.items()}
+    at_start = blend(cheap["indices"], rich["indices"], 0.0, errors)
+    bound = abs(errors[at_start] - errors[tuple(rich["indices"])])
+    period = transition_period(2.0, errors[at_start], errors[tuple(rich["indices"])], errors.values())
+    progress = 1.0 / period if period > 0 else 1.0  # elapsed 1 s
+    expect = blend(cheap["indices"], rich["indices"], progress, errors, None, bound)
     assert mid["indices"] == list(expect) and mid["target_indices"] == rich["indices"]
     assert mid["filtered"] == (list(expect) != rich["indices"])
     assert (mid["power_w"], mid["error"]) == (points[expect].power_w, points[expect].error)

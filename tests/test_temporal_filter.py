@@ -1,5 +1,6 @@
 """The temporal filter along the frontier (service.store.temporal): every shown setting is one the caller
-allows (a frontier point that keeps the budget), the target is reached within T, nothing pops at a
+allows (a frontier point that keeps the budget), it moves at an even pace in predicted error without
+detours through points less accurate than both ends, the target is reached after T, nothing pops at a
 target change; the playback driver on a real optimised store; the lookup's frame-rate target."""
 
 from __future__ import annotations
@@ -20,19 +21,24 @@ from service.optimize import OptimizeConfig, optimize_path
 from service.params import default_space
 from service.store import TemporalFilter, pack_indices, unpack_indices
 from service.store.frame_rate import power_at_rate
-from service.store.temporal import blend
+from service.store.temporal import blend, transition_period
 from tests.addon_support import synthetic_store
 from tests.api_support import teapot_scene_file
 
 N_PARAMS = 3
 setting = st.tuples(*[st.integers(0, 5)] * N_PARAMS)
+error = st.integers(0, 1000).map(lambda k: k / 1000)  # predicted errors (1 - SSIM) to three decimals
+
+
+def _l1(a, b) -> int:
+    return sum(abs(x - y) for x, y in zip(a, b, strict=True))
 
 
 @st.composite
 def frontier_frames(draw: st.DrawFn) -> tuple[float, float, list[tuple[float, dict, tuple]]]:
-    """A power budget, a period and a sequence of frames: (time, {setting: power} of that frame's
-    frontier, target), the target being the frontier's least-error point within the budget when any is
-    (power ascending = error descending along a frontier: the last point within the budget), else the
+    """A power budget, a period and a sequence of frames: (time, {setting: (power, error)} of that frame's
+    frontier, target), power ascending and error descending along the frontier, the target being the
+    frontier's least-error point within the budget when any is (the last point within it), else the
     cheapest."""
     budget = draw(st.floats(0.5, 3.0))
     period = draw(st.sampled_from([0.5, 1.0, 2.0]))
@@ -41,9 +47,11 @@ def frontier_frames(draw: st.DrawFn) -> tuple[float, float, list[tuple[float, di
     for _ in range(draw(st.integers(2, 40))):
         t += draw(st.sampled_from([1 / 30, 0.1, 0.4, 1.3]))
         pts = draw(st.lists(setting, min_size=1, max_size=6, unique=True))
-        powers = sorted(draw(st.lists(st.floats(0.1, 4.0), min_size=len(pts), max_size=len(pts))))
-        frontier = dict(zip(pts, powers, strict=True))
-        within = [p for p in pts if frontier[p] <= budget]
+        n = len(pts)
+        powers = sorted(draw(st.lists(st.floats(0.1, 4.0), min_size=n, max_size=n)))
+        errors = sorted(draw(st.lists(error, min_size=n, max_size=n)), reverse=True)
+        frontier = dict(zip(pts, zip(powers, errors, strict=True), strict=True))
+        within = [p for p in pts if frontier[p][0] <= budget]
         frames.append((t, frontier, within[-1] if within else pts[0]))
     return budget, period, frames
 
@@ -54,34 +62,107 @@ def test_every_filtered_setting_keeps_the_power_budget_when_the_target_does(case
     budget, period, frames = case
     f = TemporalFilter(period)
     for t, frontier, target in frames:
-        allowed = [p for p, w in frontier.items() if w <= budget] or [target]
+        allowed = {p: e for p, (w, e) in frontier.items() if w <= budget} or {target: frontier[target][1]}
         shown = f.update(target, t, allowed)
         assert shown in allowed  # a point of this frame's frontier that keeps the budget ...
-        if frontier[target] <= budget:
-            assert frontier[shown] <= budget  # ... whenever the target does
+        if frontier[target][0] <= budget:
+            assert frontier[shown][0] <= budget  # ... whenever the target does
+
+
+@st.composite
+def transitions(draw: st.DrawFn) -> tuple[dict, tuple, tuple, float, float]:
+    """Allowed points with predicted errors, the settings on screen (allowed or not), a target among the
+    allowed points, the period and the moment the target changes."""
+    points = draw(st.lists(setting, min_size=1, max_size=8, unique=True))
+    errors = draw(st.lists(error, min_size=len(points), max_size=len(points)))
+    allowed = dict(zip(points, errors, strict=True))
+    return (allowed, draw(setting), draw(st.sampled_from(points)), draw(st.sampled_from([0.5, 2.0])),
+            draw(st.floats(0.01, 5.0)))
 
 
 @settings(max_examples=300, deadline=None)
-@given(st.lists(setting, min_size=1, max_size=8, unique=True), setting, st.data(),
-       st.sampled_from([0.5, 2.0]))
-def test_the_filter_moves_towards_the_target_and_reaches_it_within_t(points, old, data, period) -> None:
-    target = data.draw(st.sampled_from(points))
+@given(transitions(), error)
+def test_the_filter_moves_towards_the_target_and_reaches_it_after_t(case, old_error) -> None:
+    allowed, old, target, period, t0 = case
     f = TemporalFilter(period)
-    assert f.update(old, 0.0) == old
+    assert f.update(old, 0.0, {old: old_error}) == old
     # the target changes at t0; the allowed points stay the same over the transition
-    t0 = data.draw(st.floats(0.01, 5.0))
-    shown = f.update(target, t0, points)
-    if old in points:
+    shown = f.update(target, t0, allowed)
+    if old in allowed:
         assert shown == old  # no pop: the settings on screen stay while they are allowed
-    distance = sum(abs(a - b) for a, b in zip(shown, target, strict=True))
+    gap = abs(allowed[shown] - allowed[target])
     for k in range(1, 31):
         t = t0 + period * k / 30
-        shown = f.update(target, t, points)
-        now = sum(abs(a - b) for a, b in zip(shown, target, strict=True))
-        assert shown in points and now <= distance  # never away from the target
-        distance = now
+        shown = f.update(target, t, allowed)
+        now = abs(allowed[shown] - allowed[target])
+        assert shown in allowed and now <= gap  # never away from the target (in predicted error)
+        gap = now
     assert shown == target  # reached after exactly T
-    assert f.update(target, t0 + 10 * period, points) == target
+    assert f.update(target, t0 + 10 * period, allowed) == target
+
+
+@settings(max_examples=300, deadline=None)
+@given(transitions())
+def test_no_detour_the_shown_error_stays_between_the_start_and_the_target(case) -> None:
+    """While the settings on screen are allowed when the target changes, every shown setting's predicted
+    error lies between theirs and the target's and follows Eq. 8's pace in error as closely as the
+    allowed points permit: no detour through points less accurate than both ends."""
+    allowed, _, target, period, t0 = case
+    old = next(iter(allowed))
+    f = TemporalFilter(period)
+    f.update(old, 0.0, allowed)
+    lo, hi = sorted((allowed[old], allowed[target]))
+    for k in range(30):
+        a = k / 30
+        shown = f.update(target, t0 + period * a, allowed)
+        assert lo <= allowed[shown] <= hi
+        wanted = (1 - a) * allowed[old] + a * allowed[target]
+        assert abs(allowed[shown] - wanted) <= abs(allowed[target] - wanted) + 1e-12  # as near as the end
+
+
+def test_mid_transition_stays_near_the_ends_in_error_not_on_a_cheap_point_near_in_index_space() -> None:
+    """The case the index-space rule got wrong: half-way from (0, 4, 0) to (4, 0, 0), Eq. 8's blend of
+    indices is (2, 2, 0), nearest (in index space) to the cheap (1, 1, 0), whose error is five times the
+    ends'; in error the ends are 0.12 and 0.10, so the filter shows an end or the point between them. A
+    move of 0.02 across allowed errors spanning 0.7 lasts 0.02 / 0.7 of T."""
+    allowed = {(0, 0, 0): 0.8, (1, 1, 0): 0.6, (0, 4, 0): 0.12, (4, 0, 0): 0.10, (3, 1, 2): 0.11}
+    f = TemporalFilter(2.0)
+    f.update((0, 4, 0), 0.0, allowed)
+    period = transition_period(2.0, 0.12, 0.10, allowed.values())
+    assert period == pytest.approx(2.0 * 0.02 / 0.7)
+    times = [period * k / 20 for k in range(21)]
+    shown = [f.update((4, 0, 0), t, allowed) for t in times]
+    assert [allowed[s] for s in shown] == sorted((allowed[s] for s in shown), reverse=True)
+    assert max(allowed[s] for s in shown) <= 0.12 and (3, 1, 2) in shown
+    assert (1, 1, 0) not in shown and shown[0] == (0, 4, 0) and shown[-1] == (4, 0, 0)
+
+
+@given(error, error, st.lists(error, max_size=6), st.floats(0.1, 5.0))
+def test_a_transition_lasts_its_share_of_the_allowed_error_span_of_t(start, target, others, period) -> None:
+    """The whole span of the allowed errors in T, a shorter move in proportionally less, never over T."""
+    allowed = [target, *others]
+    p = transition_period(period, start, target, allowed)
+    move, width = abs(start - target), max(allowed) - min(allowed)
+    assert 0.0 <= p <= period
+    if move >= width:
+        assert p == (period if move > 0 else 0.0)  # across the whole span (or further): T
+    else:
+        assert p == pytest.approx(period * move / width)  # a share of it: that share of T
+    assert (p == 0.0) == (start == target)
+
+
+def test_targets_of_about_the_shown_quality_keep_it() -> None:
+    """Targets that change every second between settings of about the same error (neighbouring view
+    cubes) keep the shown error near theirs; the index-space rule went through the cheap points that lie
+    near the blend of the targets' indices ((4, 0, 0) to (0, 4, 0) half-way is (2, 2, 0): next to the
+    cheap (2, 1, 0))."""
+    allowed = {(0, 0, 0): 0.7, (2, 1, 0): 0.6, (1, 0, 2): 0.6, (4, 0, 0): 0.21, (0, 4, 0): 0.20,
+               (0, 0, 4): 0.20}
+    f = TemporalFilter(2.0)
+    f.update((4, 0, 0), 0.0, allowed)
+    targets = [(0, 4, 0)] * 10 + [(0, 0, 4)] * 10 + [(0, 4, 0)] * 10
+    shown = [f.update(target, 0.1 * (k + 1), allowed) for k, target in enumerate(targets)]
+    assert all(allowed[s] <= 0.21 for s in shown)
 
 
 @given(setting, setting, st.floats(0.0, 1.0))
@@ -90,14 +171,16 @@ def test_without_allowed_points_it_is_eq_8(old, new, a) -> None:
     assert blend(old, new, a) == (tuple(new) if a >= 1 else expect)
 
 
-def test_allowed_points_must_include_the_target() -> None:
+def test_allowed_points_must_include_the_target_and_have_finite_errors() -> None:
     f = TemporalFilter(1.0)
     with pytest.raises(ValueError):
-        f.update((1, 1, 1), 0.0, [(0, 0, 0)])
+        f.update((1, 1, 1), 0.0, {(0, 0, 0): 0.1})
+    with pytest.raises(ValueError):
+        f.update((1, 1, 1), 0.0, {(1, 1, 1): math.nan})
 
 
 def test_a_new_target_mid_transition_starts_from_the_shown_setting() -> None:
-    pts = [(0, 0, 0), (1, 1, 1), (2, 2, 2), (3, 3, 3)]
+    pts = {(0, 0, 0): 0.4, (1, 1, 1): 0.3, (2, 2, 2): 0.2, (3, 3, 3): 0.1}
     f = TemporalFilter(1.0)
     f.update((0, 0, 0), 0.0, pts)
     assert f.update((3, 3, 3), 0.1, pts) == (0, 0, 0)
@@ -106,6 +189,15 @@ def test_a_new_target_mid_transition_starts_from_the_shown_setting() -> None:
     assert f.update((0, 0, 0), 0.7, pts) == mid  # back: from the shown setting, no pop
     assert f.update((0, 0, 0), 1.7, pts) == (0, 0, 0)
     assert f.update((3, 3, 3), 0.2, pts) == (3, 3, 3)  # time backwards (scrubbing): snap
+
+
+def test_a_setting_that_left_the_frontier_starts_at_the_error_it_was_shown_at() -> None:
+    """When the settings on screen are not among the new frame's allowed points, the transition starts at
+    the error they were shown at (not at an unrelated point near them in index space)."""
+    f = TemporalFilter(1.0)
+    f.update((2, 2, 2), 0.0, {(2, 2, 2): 0.3})
+    here = {(2, 2, 1): 0.9, (0, 0, 5): 0.31, (5, 5, 5): 0.05}
+    assert f.update((5, 5, 5), 0.1, here) == (0, 0, 5)
 
 
 # -- the frame-rate target ----------------------------------------------------------------------------

@@ -107,7 +107,7 @@ class PlaybackDriver:
             hit = self.store.lookup((rows[0][3], rows[1][3], rows[2][3]), matrix=m, fov=vfov, aspect=aspect,
                                     fps=fps, priority=priority, **kwargs)
             points = {p.indices: p for p in self.store.budget_points(hit)}
-            memo = (hit, points, list(points))
+            memo = (hit, points, {k: p.error for k, p in points.items()})
             if len(self._memo) >= self.MEMO_LIMIT:
                 self._memo.clear()
             self._memo[key] = memo

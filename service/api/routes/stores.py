@@ -109,8 +109,9 @@ def answer_query(store: Any, body: StoreQuery) -> QueryResult:
         points = {pt.indices: pt for pt in store.budget_points(hit)}
         tf = TemporalFilter(period_s=body.previous.period_s)
         tf.update(prev, 0.0)  # the settings shown when the target changed ...
-        tf.update(target, 0.0, list(points))  # ... the new target at that moment ...
-        shown = tf.update(target, body.previous.elapsed_s, list(points))  # ... and what it shows later
+        errors = {k: pt.error for k, pt in points.items()}
+        tf.update(target, 0.0, errors)  # ... the new target at that moment ...
+        shown = tf.update(target, body.previous.elapsed_s, errors)  # ... and what it shows later
     if shown == target:
         return QueryResult(
             settings=hit.settings, indices=list(target), packed=hit.packed, power_w=hit.power_w,
