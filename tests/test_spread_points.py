@@ -113,3 +113,58 @@ def test_budget_first_finds_an_intermediate_slow_point_near_the_budget() -> None
     # frame rate first still keeps the frame rate (and misses the budget)
     first = store.lookup((5.0, 5.0, 5.0), direction=(1.0, 0.0, 0.0), error_budget=0.02)
     assert first.infeasible and first.meets_fps and round(first.error, 3) == 0.05
+
+
+def test_the_builder_prices_the_spread_points_and_draws_the_tiers_from_their_display_figures() -> None:
+    """The builder's display pricing with a stand-in pricer: it is asked for the meeting tier and the
+    slow tier's spread (not the slow tier's ends alone), the store's tiers are drawn from the figures it
+    returns (the cheapest slow point keeps up at display resolution and joins the meeting tier), and a
+    budget-first lookup picks the intermediate slow point within the budget."""
+    import itertools
+
+    from service.octree.builder import OctreeBuilder, OctreeConfig, PathFrames
+    from service.params import default_space
+
+    space = default_space().subset(["sampling", "max_depth", "resolution_scale"])
+    settings_ = [space.expand(f) for f in itertools.product(*(range(n) for n in space.free_n_values))][:12]
+    meeting = [(settings_[j], e, p, 0.02) for j, (e, p) in enumerate(((0.3, 0.2), (0.1, 0.4), (0.05, 0.6)))]
+    slow = [(settings_[3 + j], 0.04 - 0.005 * j, 0.7 + 0.05 * j, 0.04 + 0.01 * j) for j in range(9)]
+    display = {pt[0]: (pt[1], pt[2], pt[3]) for pt in meeting + slow}
+    display[slow[0][0]] = (0.04, 0.7, 0.03)  # keeps up with 30 fps at display resolution
+
+    class Pricer:
+        ev = SimpleNamespace(executor=None)
+
+        def __init__(self) -> None:
+            self.asked: list[list[tuple[int, ...]]] = []
+
+        def price(self, requests):
+            self.asked += [list(xs) for _, xs in requests]
+            return [[SimpleNamespace(error=display[x][0], power_w=display[x][1], frame_time_s=display[x][2])
+                     for x in xs] for _, xs in requests]
+
+    cfg = OctreeConfig(threshold_power_w=0.1, threshold_error=0.01, view_sampling="axis", display=(64, 36),
+                       display_points=4)
+    path = PathFrames(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]))
+    pricer = Pricer()
+    b = OctreeBuilder(SimpleNamespace(fps=FPS, evaluations=0, cache_hits=0), space, path, cfg,  # type: ignore[arg-type]
+                      pricer=pricer)  # type: ignore[arg-type]
+
+    def build() -> None:  # one measured frontier, every view of the root's corners reads it
+        b.lattice.add_root()
+        b.lattice.set_frontier(0, 0, meeting + slow)
+        for views in b.lattice.corner_views:
+            views[:] = [0] * len(views)
+
+    b.sampling.build = build  # type: ignore[method-assign]
+    b.run()
+    want = [pt[0] for pt in meeting] + [slow[j][0] for j in (0, 3, 5, 8)]
+    assert pricer.asked == [want] and b.display_points == 7
+    store = b.to_store(profile="mobile", fps=FPS, aspect=16 / 9, meta={"static_power_w": 0.1})
+    fast, slow_tier = store.frontiers[0].tiers(FPS)
+    assert slow_tier is not None
+    assert [round(float(e), 3) for e in fast.error] == [0.3, 0.1, 0.05, 0.04]
+    assert [round(float(e), 3) for e in slow_tier.error] == [0.025, 0.015, 0.0]
+    hit = store.lookup((0.5, 0.0, 0.0), direction=(1.0, 0.0, 0.0), error_budget=0.02, priority="budget")
+    assert not hit.infeasible and hit.meets_fps is False and round(hit.error, 3) == 0.015
+    assert hit.indices == tuple(slow[5][0])
