@@ -9,7 +9,8 @@ Where jobs run (--url, --token, --workers, --data-dir, --timeout) comes before t
 this computer with the bundled core, or on the remote service at --url. Each command's own options come
 after it (`python -m addon.batch optimize --help`). ``evaluate`` runs the evaluation campaign of ``make
 demo`` under the scene's power and error budgets and the store lookup's frame-rate target and priority
-(``--fps``, ``--priority``: kept in the .blend, as playback and the render engine use them) and writes
+(``--fps``, ``--priority``: kept in the .blend, as playback and the render engine use them; left out,
+the .blend's values stay, and ``--fps store`` sets a saved frame rate back to the store's own) and writes
 the same report folder. Prints a text progress
 bar; exits non-zero (with the reason on stderr) on any failure.
 """
@@ -115,16 +116,22 @@ def _raise(exc: BaseException) -> None:
 
 
 # -- arguments -----------------------------------------------------------------------------------------
+_SCHEMA_MODULE = "render_budget_options"
+
+
 def _option_schema() -> ModuleType:
     """The optimiser's option schema (service/options.py, stdlib only): from the source tree or an
-    installed project, else the copy inside a staged extension next to this file."""
+    installed project, else the copy inside a staged extension next to this file (loaded once: the
+    parser and the scene options compare against its :data:`DERIVE`)."""
     try:  # lazy, with a fallback: a script inside Blender may not see the project's packages
         from service import options
     except ImportError:
+        if _SCHEMA_MODULE in sys.modules:
+            return sys.modules[_SCHEMA_MODULE]
         here = Path(__file__).resolve().parent
         for path in (here.parent / "service" / "options.py",):
             if path.is_file():
-                spec = importlib.util.spec_from_file_location("render_budget_options", path)
+                spec = importlib.util.spec_from_file_location(_SCHEMA_MODULE, path)
                 assert spec is not None and spec.loader is not None
                 options = importlib.util.module_from_spec(spec)
                 sys.modules[spec.name] = options  # dataclasses look their module up
@@ -200,9 +207,9 @@ def _apply_scene_options(ext: str, props, args: argparse.Namespace) -> None:
         args.eval_width, args.eval_height = parse_size(args.resolution)
     schema = _option_schema()
     for opt in (*schema.PUBLIC, *schema.QUERY_OPTIONS):  # each checked here; together when the job is built
-        value = getattr(args, opt.name, None)
-        if value is not None:
-            set_option(props, opt.name, value)
+        value = getattr(args, opt.name, None)  # None: not given, the .blend's value stays
+        if value is not None:  # DERIVE (--fps store): back to None, "derive it" (the store's own rate)
+            set_option(props, opt.name, None if value is schema.DERIVE else value)
 
 
 def _configure_service(bpy: ModuleType, ext: str, args: argparse.Namespace) -> None:

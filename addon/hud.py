@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import bpy
 
+from .core.playback_logic import missed_rate_text
+
 _handle = None
 
 
@@ -38,19 +40,11 @@ def hud_lines(scene: bpy.types.Scene) -> list[tuple[str, tuple[float, float, flo
     ]
     flags = [f for f, on in (("blending", props.playback_status == "blending"),
                              ("outside store", props.clamped), ("budget infeasible", props.infeasible),
-                             (missed_rate_text(props), props.slower_than_fps))
+                             (missed_rate_text(props.target_fps, props.priority), props.slower_than_fps))
              if on]
     if flags:
         lines.append(("; ".join(flags), bad if props.infeasible else ok))
     return lines
-
-
-def missed_rate_text(props: bpy.types.PropertyGroup) -> str:
-    """Why the active settings miss the frame-rate target (the HUD and the panel say it)."""
-    target = f"{props.target_fps:g} fps" if props.target_fps > 0 else "the frame rate"
-    if props.priority == "budget":
-        return f"budget first: misses {target} here (nothing within the budget keeps up)"
-    return f"no setting keeps up with {target} here"
 
 
 def draw_hud() -> None:

@@ -22,6 +22,7 @@ from . import service_process
 from .camera_path import camera_vfov, render_resolution, scene_fps
 from .core import preview as preview_core
 from .core.client import ServiceClient
+from .core.engine_settings import pricing_fps
 from .core.local_jobs import LocalClient
 from .ops_optimize import check_scene, export_scene, fill_parameters
 
@@ -85,12 +86,13 @@ def prepare(scene: bpy.types.Scene, *, use_active: bool = True, scale: float = 1
     w, h = max(4, round(w * scale)), max(4, round(h * scale))
     preview_core.check_size(w, h)
     settings = active_settings(scene) if use_active else None
+    # playback's settings are priced at the rate its lookup chose them for, as the render engine does
+    fps = pricing_fps(scene.render_budget.target_fps if settings is not None else None, scene_fps(scene))
     with tempfile.TemporaryDirectory(prefix="render-budget-preview-") as tmp:
         sim_scene = preview_core.load_scene(export_scene(scene, tmp))
     cam = scene.camera
     return PreviewJob(scene.name, scene.frame_current, sim_scene, [list(row) for row in cam.matrix_world],
-                      camera_vfov(cam, scene), w, h, settings, scene.render_budget.profile or "mobile",
-                      scene_fps(scene))
+                      camera_vfov(cam, scene), w, h, settings, scene.render_budget.profile or "mobile", fps)
 
 
 def store_image(job: PreviewJob, fmt: str = "PNG") -> bpy.types.Image:

@@ -7,7 +7,7 @@ import bpy
 from service import options as option_schema
 
 from . import ops_optimize, preferences
-from .hud import missed_rate_text
+from .core.playback_logic import missed_rate_text
 
 
 class RENDER_BUDGET_UL_parameters(bpy.types.UIList):
@@ -131,7 +131,7 @@ def _draw_results(layout: bpy.types.UILayout, props: bpy.types.PropertyGroup) ->
         if props.infeasible:
             box.label(text="budget cannot be met here", icon="ERROR")
         if props.slower_than_fps:
-            box.label(text=missed_rate_text(props), icon="ERROR")
+            box.label(text=missed_rate_text(props.target_fps, props.priority), icon="ERROR")
         if props.clamped:
             box.label(text="camera outside the optimised space", icon="ERROR")
 

@@ -9,11 +9,15 @@ the budgets live), relative power difference, how the estimator's own standard e
 (|difference| / standard error), and CPU time against the exact pricing.
 
     .venv/bin/python bench/bench_display_pricing.py teapot chess --size 640x360 --cameras 4 --settings 8
+
+``--dump FILE`` writes every estimator evaluation's figures (error, power, frame time, breakdown) as
+JSON, so that two builds' figures can be compared to the last digit.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import time
 from pathlib import Path
 
@@ -42,6 +46,7 @@ def main() -> None:
     ap.add_argument("--aux", type=int, nargs="+", default=[4])
     ap.add_argument("--threads", type=int, default=None)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--dump", type=Path, default=None, help="write the estimator's figures here (JSON)")
     args = ap.parse_args()
     space = default_space()
     counts = [len(p.values) for p in space.parameters]
@@ -51,6 +56,7 @@ def main() -> None:
     print("| scene | estimator | |de| median | |de| p95 | |de| max | |de| p95 (e <= 0.05) | |dP|/P median | "
           "|dP|/P p95 | |dP|/P max | |de| <= 2 se | CPU vs whole frames |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
+    dump: dict[str, list] = {}
     for name in args.scenes:
         d = REPO / "blend_scenes" / "build" / name
         scene = read_scene(d / "scene.rbscene")
@@ -76,6 +82,8 @@ def main() -> None:
                                    pricing=cfg, threads=args.threads)
                 cpu_est[i] += time.process_time() - t
                 est[i] += [(e.error, e.power_w, e.breakdown.get("display.se_error", 0.0)) for e in res]
+                dump.setdefault(f"{name} camera {k} f={cfg.fraction:g} aux {cfg.aux_divisor}", []).extend(
+                    [e.error, e.power_w, e.frame_time_s, sorted(e.breakdown.items())] for e in res)
         ex = np.asarray(exact)
         for i, cfg in enumerate(configs):
             es = np.asarray(est[i])
@@ -88,6 +96,8 @@ def main() -> None:
                   f"{np.quantile(de[low], 0.95) if low.any() else float('nan'):.4f} | {np.median(dp):.3f} | "
                   f"{np.quantile(dp, 0.95):.3f} | {dp.max():.3f} | {covered:.0%} | "
                   f"{cpu_est[i] / cpu_exact:.2f} |", flush=True)
+    if args.dump is not None:
+        args.dump.write_text(json.dumps(dump, indent=1))
 
 
 if __name__ == "__main__":

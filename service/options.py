@@ -36,7 +36,9 @@ class Option:
     """One optimiser option.
 
     ``optional``: ``None`` is a value meaning "derive it" (the help says from what); where a layer
-    cannot hold ``None`` (a Blender integer property) it shows 0. ``public``: offered by the CLI, the
+    cannot hold ``None`` (a Blender integer property) it shows 0, and on a command line
+    ``derived_word`` spells it (``--fps store``), so a value saved earlier can be set back to the
+    derived one (the add-on's batch over a .blend). ``public``: offered by the CLI, the
     REST job request, the add-on and batch; internal options are set by library callers only.
     ``group`` and ``modes`` lay out the add-on panel: the box an option sits in, and the
     ``view_sampling`` values it applies to (greyed out for the others)."""
@@ -55,6 +57,7 @@ class Option:
     flag: str = ""  # command-line spelling, when not the name with dashes
     aliases: tuple[str, ...] = ()  # older command-line spellings still accepted
     metavar: str | None = None
+    derived_word: str = ""  # optional options: the command-line word for None, "derive it"
     group: str = "Optimiser"
     modes: tuple[str, ...] = ()  # view_sampling values this option matters for (empty: all)
     soft_max: float | None = None  # the add-on's slider range, when narrower than ``maximum``
@@ -197,7 +200,8 @@ QUERY_FPS = Option("fps", float, None, "Frame rate",
                    "power was priced for); power is predicted at the rate each setting reaches, and a "
                    "setting that misses the rate is never chosen while one that meets it exists (unless the "
                    "priority is the budget and none within the budget does)",
-                   minimum=FPS_MIN, maximum=FPS_MAX, optional=True, metavar="FPS", group="Playback")
+                   minimum=FPS_MIN, maximum=FPS_MAX, optional=True, metavar="FPS", derived_word="store",
+                   group="Playback")
 
 #: What a lookup keeps when no stored setting keeps both the budget and the frame rate (a query option,
 #: declared here for the same reason as :data:`QUERY_FPS`): "frame_rate" (the issue's rule: a setting
@@ -274,8 +278,25 @@ def eval_resolution(eval_width: int | None, eval_height: int, aspect: float) -> 
 
 # -- command lines (render-budget optimize; the add-on's batch optimize) ---------------------------------
 
-def _arg_type(opt: Option) -> Any:
+class _Derive:
+    """The type of :data:`DERIVE`."""
+
+    def __repr__(self) -> str:
+        return "DERIVE"
+
+
+#: What an option's ``derived_word`` parses to on a command line whose options are overrides
+#: (``with_default=False``: None there means "not given, keep the value set earlier"): set the option
+#: back to None, "derive it" (``render-budget`` batch ``--fps store``: the store's own frame rate again).
+DERIVE = _Derive()
+
+
+def _arg_type(opt: Option, derived: Any = None) -> Any:
+    """Parse and check one option's text; its ``derived_word`` becomes ``derived`` (None, or
+    :data:`DERIVE` where None means "not given")."""
     def parse(text: str) -> Any:
+        if opt.derived_word and text == opt.derived_word:
+            return derived
         try:
             value: Any = int(text) if opt.kind is int else float(text) if opt.kind is float else text
             return opt.check(value)
@@ -297,16 +318,21 @@ def add_argument(parser: argparse.ArgumentParser | Any, opt: Option, *, with_def
     """The command-line argument of one option (``dest`` = its name), validated by :meth:`Option.check`."""
     default = opt.default if with_default else None
     shown = "" if opt.default is None else f" (default {opt.default})"  # optional: the help says it
+    metavar = opt.metavar
+    if opt.derived_word:
+        metavar = f"{opt.metavar or opt.kind.__name__.upper()}|{opt.derived_word}"
+        shown += (f" ({opt.derived_word}: that default, as when left out)" if with_default else
+                  f" (left out: the value set earlier stays; {opt.derived_word}: back to that default)")
     parser.add_argument(opt.cli_flag, *(f"--{a}" for a in opt.aliases), dest=opt.name, default=default,
-                        type=None if opt.choices else _arg_type(opt), choices=opt.choices or None,
-                        metavar=opt.metavar, help=opt.help + shown)
+                        type=None if opt.choices else _arg_type(opt, None if with_default else DERIVE),
+                        choices=opt.choices or None, metavar=metavar, help=opt.help + shown)
 
 
 def from_arguments(args: argparse.Namespace) -> dict[str, Any]:
     """The public options given on a command line parsed with ``with_defaults=False`` (None = not
     given), or all of them with ``with_defaults=True``; validated together."""
     given = {o.name: getattr(args, o.name) for o in PUBLIC if getattr(args, o.name, None) is not None}
-    return check(given, public_only=True)
+    return check({k: None if v is DERIVE else v for k, v in given.items()}, public_only=True)
 
 
 def only_overrides(values: Mapping[str, Any]) -> dict[str, Any]:

@@ -472,7 +472,7 @@ def test_playback_hud_and_engine_look_up_under_the_scene_query_options(scene, tm
     under them (target written for the HUD), the HUD says "budget first" and why a frame misses the rate,
     the render engine's chooser and the panel summary read the same options, a target the store cannot
     answer is a playback error, and a file saved with them keeps them."""
-    from addon.core.playback_logic import PlaybackDriver
+    from addon.core.playback_logic import PlaybackDriver, missed_rate_text
 
     hud, render = ext_module("hud"), ext_module("engine.render")
     cam = turning_camera(scene, 6)
@@ -508,11 +508,16 @@ def test_playback_hud_and_engine_look_up_under_the_scene_query_options(scene, tm
     props.fps = 0.0  # the store's own 24 fps, which no setting of a slow store keeps up with
     load(slow=True)
     scene.frame_set(4)
-    flags = [text for text, _ in hud.hud_lines(scene)]
-    assert props.slower_than_fps and any("budget first: misses 24 fps" in t for t in flags), flags
+    flags = hud.hud_lines(scene)[-1][0].split("; ")
+    missed = missed_rate_text(24.0, "budget")  # one wording: the HUD's, the panel's and the engine's
+    assert props.slower_than_fps and missed in flags, flags
+    note = render.chooser_for(scene).choose(cam.matrix_world, vfov, 320 / 180, 4 / 24).note
+    assert missed in note.split("; "), note
     props.priority = "frame_rate"
     scene.frame_set(5)
-    assert any("no setting keeps up with 24 fps" in t for t, _ in hud.hud_lines(scene))
+    assert missed_rate_text(24.0, "frame_rate") in hud.hud_lines(scene)[-1][0].split("; ")
+    assert missed_rate_text(24.0, "frame_rate") in render.chooser_for(scene).choose(
+        cam.matrix_world, vfov, 320 / 180, 5 / 24).note.split("; ")
     props.fps = 50.0
     _load_store(tmp_path, timed=True)  # no static power: only its own frame rate (loaded, and it says so)
     assert "lookup options unusable" in props.summary and "static power" in props.summary
@@ -521,6 +526,64 @@ def test_playback_hud_and_engine_look_up_under_the_scene_query_options(scene, tm
     bpy.ops.wm.open_mainfile(filepath=str(tmp_path / "query.blend"))
     again = bpy.context.scene.render_budget
     assert (again.fps, again.priority) == (12.0, "budget")
+
+
+def _load_store_at_24fps(scene, tmp_path):
+    """A recorded 6-frame path and a loaded timed store at its own 24 fps that can be asked for another
+    frame rate (static power known); the scene's render-budget properties."""
+    turning_camera(scene, 6)
+    add_cube(scene)
+    bpy.ops.render_budget.record_path_animation()
+    store = synthetic_store(timed=True)
+    store.meta["static_power_w"] = 0.2  # another frame rate can be asked for
+    f = tmp_path / "store.json"
+    f.write_text(store.to_json())
+    assert bpy.ops.render_budget.load_store(filepath=str(f)) == {"FINISHED"}
+    return scene.render_budget
+
+
+def test_batch_playback_sets_a_saved_frame_rate_back_to_the_stores_own(scene, tmp_path) -> None:
+    """A .blend saved with Frame rate 12: batch playback keeps it when --fps is left out and plays at the
+    store's own 24 fps with ``--fps store`` (the command line a pipeline runs, in its own process)."""
+    import csv
+    import os
+    import subprocess
+
+    from tests.addon_support import REPO_ROOT
+
+    props = _load_store_at_24fps(scene, tmp_path)
+    props.budget_mode, props.power_budget, props.fps = "POWER", 10.0, 12.0
+    blend = tmp_path / "saved_at_12fps.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "user"))
+    for extra, want in (((), 12.0), (("--fps", "store"), 24.0)):
+        out = tmp_path / "played.csv"
+        proc = subprocess.run([sys.executable, "-m", "addon.batch", "--blend", str(blend), "playback",
+                               "--out", str(out), *extra], cwd=REPO_ROOT, capture_output=True, text=True,
+                              env=env, timeout=600, check=False)
+        assert proc.returncode == 0, proc.stdout + proc.stderr
+        rows = list(csv.DictReader(out.open(newline="")))
+        assert len(rows) == 6 and {float(r["fps_target"]) for r in rows} == {want}, extra
+
+
+def test_preview_prices_playbacks_settings_at_the_frame_rate_their_lookup_used(scene, tmp_path) -> None:
+    """Preview Frame with the active settings prices them at the rate playback's lookup chose them for
+    (the store's own 24 fps, or the Frame rate option's 12), as the render engine does, not at the
+    scene's 30 fps; at maximum quality (no lookup) at the scene's."""
+    import json
+
+    ops_preview = ext_module("ops_preview")
+    scene.render.fps = 30
+    props = _load_store_at_24fps(scene, tmp_path)
+    props.budget_mode, props.power_budget = "POWER", 10.0
+    for frame, fps, want in ((2, 0.0, 24.0), (3, 12.0, 12.0)):
+        props.fps = fps
+        scene.frame_set(frame)
+        assert props.target_fps == pytest.approx(want)
+        assert ops_preview.prepare(scene, use_active=True, scale=0.1).fps == pytest.approx(want)
+    image = ops_preview.render_preview(scene, use_active=True, scale=0.1)
+    assert json.loads(image["render_budget"])["energy"]["fps"] == pytest.approx(12.0)
+    assert ops_preview.prepare(scene, use_active=False, scale=0.1).fps == pytest.approx(30.0)
 
 
 def test_an_infeasible_budget_says_it_cannot_be_met_and_what_the_cheapest_setting_costs(scene, tmp_path

@@ -16,6 +16,7 @@ from addon.core.path_sampling import build_path, frame_times
 from addon.core.playback_logic import (
     PlaybackDriver,
     StoreCache,
+    missed_rate_text,
     predicted_path_summary,
     summary_text,
     validate_budget,
@@ -294,6 +295,16 @@ def test_playback_and_summary_carry_the_frame_rate() -> None:
     s = predicted_path_summary(store, frames, "POWER", 3.0)
     assert s["mean_fps"] == 24.0 and s["slow_frames"] == 0 and s["fps_target"] == 24.0
     assert summary_text(s).endswith("24.0 of 24 fps")
+
+
+def test_a_missed_frame_rate_is_worded_once_per_priority() -> None:
+    """The one wording the HUD, the panel and the render engine's frame notes use: the target, and under
+    budget first that the budget is why; an unknown target (0 or None) is "the frame rate"."""
+    assert missed_rate_text(24.0, "frame_rate") == "no setting keeps up with 24 fps here"
+    assert missed_rate_text(12.5, "budget") == ("budget first: misses 12.5 fps here (nothing within the "
+                                                "budget keeps up)")
+    assert missed_rate_text(0.0, "frame_rate") == missed_rate_text(None, "frame_rate") == (
+        "no setting keeps up with the frame rate here")
 
 
 # -- report data ------------------------------------------------------------------------------------------

@@ -17,7 +17,7 @@ import sim_core
 from service.camera_path import CameraPath
 from service.display_pricing import (
     DisplayPricing,
-    apron_tiles,
+    apron_pixels,
     cover_rects,
     inclusion_probabilities,
     plan_windows,
@@ -212,7 +212,7 @@ def _whole_frame(mask, width, height, tile, apron):
 
 
 @settings(max_examples=150, deadline=None)
-@given(st.integers(1, 400), st.integers(1, 300), st.sampled_from([4, 8, 16, 32]), st.integers(0, 2),
+@given(st.integers(1, 400), st.integers(1, 300), st.sampled_from([4, 8, 16, 32]), st.integers(0, 40),
        st.floats(0.0, 1.0), st.integers(0, 10_000))
 def test_planned_windows_cover_the_tiles_and_never_trace_more_than_the_frame(width, height, tile, apron,
                                                                              share, seed) -> None:
@@ -238,13 +238,23 @@ def test_planned_windows_cover_the_tiles_and_never_trace_more_than_the_frame(wid
 
 
 def test_traced_area_counts_the_aprons_clipped_to_the_frame() -> None:
-    assert traced_area([(16, 16, 16, 16)], 64, 64, 16, 1) == 48 * 48
-    assert traced_area([(0, 0, 16, 16)], 64, 64, 16, 1) == 32 * 32
-    assert traced_area([(0, 0, 64, 64)], 64, 64, 16, 1) == 64 * 64  # the whole frame has no apron
+    assert traced_area([(16, 16, 16, 16)], 64, 64, 16, 3) == 22 * 22
+    assert traced_area([(0, 0, 16, 16)], 64, 64, 16, 3) == 19 * 19
+    assert traced_area([(0, 0, 64, 64)], 64, 64, 16, 3) == 64 * 64  # the whole frame has no apron
     assert traced_area([(16, 16, 16, 16)] * 2, 64, 64, 16, 0) == 2 * 16 * 16
-    for mode, ao, apron in (("1spp", 0, 0), ("fsaa", 0, 1), ("undersample", 2, 1), ("supersample", 0, 1)):
-        s = sim_core.RenderSettings(mode=mode, ao_samples=ao, block=2)
-        assert apron_tiles(s) == apron, mode
+
+
+@pytest.mark.parametrize(("mode", "block", "ao", "apron"), [
+    ("1spp", 2, 0, 0), ("1spp", 2, 4, 2),            # AO alone: the ambient pool's 2 px
+    ("fsaa", 2, 0, 1), ("fsaa", 4, 0, 1),             # the pixel filter: 1 px past the pixel
+    ("fsaa", 3, 2, 3),                                # both: the filter reads pooled samples
+    ("undersample", 2, 0, 0), ("undersample", 2, 2, 3), ("undersample", 4, 2, 5),  # + reference cells
+    ("supersample", 2, 0, 2), ("supersample", 4, 2, 4)])
+def test_the_planned_apron_is_the_native_cores(mode, block, ao, apron) -> None:
+    """The planner prices a window's apron as the pixels the resolve pass reads (plus, adaptively, the
+    rest of their reference cells), not whole tiles."""
+    s = sim_core.RenderSettings(mode=mode, ao_samples=ao, block=block, tile_size=16)
+    assert apron_pixels(s) == apron == sim_core.window_apron(s)
 
 
 @pytest.mark.parametrize("share", [0.25, 1.0])
@@ -350,6 +360,41 @@ def test_tile_estimated_store_keeps_a_few_points_per_frontier(scene) -> None:
     assert "tile estimator" in store.meta["display_pricing_label"]
     for fr in store.frontiers:
         assert 1 <= len(fr.packed) <= 3 and float(fr.error.min()) == 0.0  # max quality always kept
+
+
+class _SlowClock:
+    """A clock on which every reading is 100 s after the last: pricing batches look slow."""
+
+    def __init__(self) -> None:
+        self.now = 0.0
+
+    def perf_counter(self) -> float:
+        self.now += 100.0
+        return self.now
+
+
+@pytest.mark.slow
+def test_the_time_left_while_pricing_follows_the_pricings_own_pace(scene, monkeypatch) -> None:
+    """Display pricing is the last phase and costs what the scene makes it cost: once a batch is priced,
+    the job's estimate is that batch's pace times the cameras left (the search steps' pace, the guess
+    before, was 8x low on the village), and it reaches 0 with the last batch."""
+    import service.octree.builder as builder_module
+
+    monkeypatch.setattr(builder_module, "time", _SlowClock())
+    updates = []
+    store = optimize_path(scene, _orbit_path(16, (48, 36)), SUBSPACE,
+                          _options(display_estimator="full", display_points=2, path_resolution=0.02),
+                          cache=EvalCache(), executor=InProcessExecutor(), progress=updates.append)
+    total = store.meta["display_cameras"]
+    assert total > 8, "the path must need more than one pricing batch (8 cameras) for this test"
+    pricing = [u.estimate_s for u in updates if u.phase == "price at display resolution"]
+    # the first report (before any batch) keeps the steps' guess; then one per batch of 8 cameras
+    batches = pricing[1:]
+    assert len(batches) == -(-total // 8)
+    for b, left in enumerate(batches, start=1):
+        done = min(8 * b, total)
+        assert left == pytest.approx(100.0 * b / done * (total - done))
+    assert batches[-1] == 0.0
 
 
 @pytest.mark.slow

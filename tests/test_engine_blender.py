@@ -9,6 +9,7 @@ import csv
 import importlib
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -77,14 +78,15 @@ def orbit_camera(sc, frames: int = 8) -> None:
         cam.keyframe_insert("rotation_euler", frame=f)
 
 
-def load_store(tmp_path: Path) -> None:
-    """The synthetic store as the scene's store (after recording the camera path it summarises)."""
+def load_store(tmp_path: Path, store: Any = None) -> None:
+    """The synthetic store (or ``store``) as the scene's store (after recording the camera path it
+    summarises)."""
     sc = bpy.context.scene
     if sc.frame_end > 48:
         sc.frame_start, sc.frame_end = 1, 8
     assert bpy.ops.render_budget.record_path_animation() == {"FINISHED"}
     f = tmp_path / "store.json"
-    f.write_text(synthetic_store().to_json())
+    f.write_text((store or synthetic_store()).to_json())
     assert bpy.ops.render_budget.load_store(filepath=str(f)) == {"FINISHED"}
 
 
@@ -313,3 +315,43 @@ def test_an_animation_follows_the_store_under_the_budget(scene, tmp_path) -> Non
     bpy.ops.render.render(animation=True)
     again = list(csv.DictReader((tmp_path / "frames" / "shot_render_budget.csv").open()))
     assert [(r["frame"], r["max_depth"], r["resolution_scale"], r["shadow_samples"]) for r in again] == first
+
+
+def test_store_frames_are_priced_at_the_frame_rate_the_lookup_used(scene, tmp_path) -> None:
+    """The scene runs at 30 fps, the store was priced for 24: a frame whose settings the store chose is
+    priced at the rate its lookup targeted (the store's 24 fps; 12 fps with the Frame rate option), not
+    the scene's, so the simulated power, the metadata's ``fps`` and the CSV's ``fps_target`` agree with
+    the lookup; the viewport prices playback's settings at the same rate."""
+    from PIL import Image
+
+    sc = scene
+    sc.render.fps = 30
+    orbit_camera(sc, frames=2)
+    store = synthetic_store(timed=True)
+    store.meta["static_power_w"] = 0.2  # another frame rate can be asked for
+    load_store(tmp_path, store)
+    props = sc.render_budget
+    # an error budget: the same setting at both rates (power repriced per rate keeps its order)
+    props.budget_mode, props.error_budget, props.filter_period = "ERROR", 0.05, 0.0
+    render = ext_module("engine.render")
+    outs = {}
+    for fps in (0.0, 12.0):  # 0: the store's own
+        props.fps = fps
+        render_still(sc, tmp_path / f"still{fps:g}.png")
+        out = outs[fps] = render.last_frame.output
+        info = Image.open(tmp_path / f"still{fps:g}.png").info
+        assert out.settings.source == "store" and out.deadline_met  # a 64x36 frame keeps up
+        assert out.fps == out.achieved_fps == (fps or 24.0)
+        assert info["render_budget.fps"] == info["render_budget.lookup_fps_target"] == f"{fps or 24.0:g}"
+    assert outs[0.0].settings.indices == outs[12.0].settings.indices
+    # the same frame's energy drawn at half the rate: half the dynamic power
+    assert outs[12.0].dynamic_power_w == pytest.approx(outs[0.0].dynamic_power_w / 2, rel=1e-5)
+    sc.render.image_settings.file_format = "PNG"
+    sc.render.filepath = str(tmp_path / "frames" / "shot_")
+    bpy.ops.render.render(animation=True)
+    rows = list(csv.DictReader((tmp_path / "frames" / "shot_render_budget.csv").open()))
+    assert len(rows) == 2 and {(r["fps_target"], r["achieved_fps"]) for r in rows} == {("12", "12")}
+    props.playback_enabled = True
+    sc.frame_set(2)  # the playback handler applies the store's settings; the viewport shows those
+    settings, _store = render.viewport_settings(sc)
+    assert settings.fps_target == pytest.approx(12.0) and settings.pricing_fps(30.0) == pytest.approx(12.0)

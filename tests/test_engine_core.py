@@ -19,7 +19,7 @@ import sim_core
 from addon.core import engine_frame, engine_scene, engine_settings, progressive, viewport
 from addon.core.engine_frame import CameraView, RenderCancelled, render_frame
 from addon.core.engine_settings import Budget, FrameSettings, SettingsChooser
-from addon.core.playback_logic import PlaybackDriver
+from addon.core.playback_logic import PlaybackDriver, missed_rate_text
 from service.params import default_space
 from service.store import camera as camera_maths
 from tests.addon_support import synthetic_store
@@ -328,7 +328,12 @@ def test_store_chooser_looks_up_under_the_query_options() -> None:
     slow = SettingsChooser(CHEAP, store, Budget("POWER", 3.3), query={"priority": "budget"})
     frame = slow.choose(orbit(1)[0], 0.69, 16 / 9, 0.0)
     assert frame.fps_target == 24.0 and frame.meets_fps is False
-    assert "budget first: misses 24 fps" in frame.note
+    assert missed_rate_text(24.0, "budget") in frame.note.split("; ")  # the HUD's and the panel's words
+    assert frame.pricing_fps(30.0) == 24.0  # priced at the rate it was looked up for, not the scene's
+    assert SettingsChooser(CHEAP, store, Budget("POWER", 3.3), query=query).choose(
+        orbit(1)[0], 0.69, 16 / 9, 0.0).pricing_fps(30.0) == 12.0
+    assert SettingsChooser(CHEAP, store).manual_settings().pricing_fps(30.0) == 30.0  # manual: the scene's
+    assert engine_settings.pricing_fps(12.0, 30.0) == 12.0 and engine_settings.pricing_fps(None, 30.0) == 30.0
     assert SettingsChooser(CHEAP, store, Budget("POWER", 3.3)).choose(orbit(1)[0], 0.69, 16 / 9, 0.0
                                                                        ).priority == "frame_rate"
     with pytest.raises(ValueError, match="priority must be one of"):

@@ -219,6 +219,25 @@ def test_every_command_line_that_looks_a_store_up_takes_each_query_option(opt: o
                 parse(opt.cli_flag, text)
 
 
+def test_fps_store_names_the_stores_own_frame_rate_on_every_command_line() -> None:
+    """``--fps store``: where leaving --fps out means the store's own rate (query, verify, demo) it is the
+    same as leaving it out; in batch, where leaving it out keeps the .blend's value, it is the marker that
+    sets that value back (``options.DERIVE``). The usage and help say so; other words are refused."""
+    for name, (parse, unset) in _query_command_lines().items():
+        assert parse("--fps", "store").fps is (options.DERIVE if unset is None else None), name
+        for text in ("Store", "stores", "derive"):
+            with pytest.raises(SystemExit):
+                parse("--fps", text)
+    for with_default, says in ((True, "store: that default, as when left out"),
+                               (False, "left out: the value set earlier stays; store: back to that default")):
+        ap = argparse.ArgumentParser()
+        options.add_argument(ap, options.QUERY_FPS, with_default=with_default)
+        text = " ".join(ap.format_help().split())
+        assert "--fps FPS|store" in text and says in text, text
+    assert options.from_arguments(argparse.Namespace(eval_width=options.DERIVE)) == {"eval_width": None}
+    assert all(o.optional for o in (*options.OPTIONS, *QUERY) if o.derived_word)  # a word for None only
+
+
 @pytest.mark.parametrize("opt", QUERY, ids=lambda o: o.name)
 def test_rest_query_and_verify_requests_take_each_query_option(opt: options.Option) -> None:
     from service.api.schemas import StoreQuery, VerifyRequest
@@ -288,3 +307,27 @@ def test_addon_query_properties_have_the_schema_default_and_bounds(scene_props) 
     assert properties.query_values(scene_props) == {"fps": None, "priority": "frame_rate"}
     panels = importlib.import_module(f"{EXT_MODULE}.panels")
     assert "option_schema.QUERY_OPTIONS" in inspect.getsource(panels._draw_budget)
+
+
+@pytest.mark.blender
+def test_batch_sets_a_saved_frame_rate_back_to_the_stores_own(scene_props) -> None:
+    """A .blend saved with a Frame rate override keeps it when batch leaves --fps out, takes another
+    rate, and ``--fps store`` sets it back to 0, the store's own rate (what the lookup then uses)."""
+    import importlib
+
+    from addon import batch
+    from tests.addon_support import EXT_MODULE
+
+    properties = importlib.import_module(f"{EXT_MODULE}.properties")
+
+    def apply(*argv: str) -> dict:
+        batch._apply_scene_options(EXT_MODULE, scene_props, batch.parser().parse_args(["playback", *argv]))
+        return properties.query_values(scene_props)
+
+    properties.set_option(scene_props, "fps", 12.0)
+    assert apply() == {"fps": 12.0, "priority": "frame_rate"}  # left out: the saved value stays
+    assert apply("--fps", "store", "--priority", "budget") == {"fps": None, "priority": "budget"}
+    assert scene_props.fps == 0.0
+    assert apply("--fps", "50")["fps"] == 50.0
+    assert apply("--fps", "store")["fps"] is None
+    scene_props.property_unset("priority")

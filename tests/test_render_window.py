@@ -11,6 +11,8 @@ from tracer_scenes import effects_camera, effects_scene
 
 import sim_core
 
+RAYS = sim_core.COUNTER_NAMES.index("rays_total")
+
 
 @pytest.fixture(scope="module")
 def scene() -> sim_core.Scene:
@@ -51,3 +53,52 @@ def test_window_off_the_grid(scene):
         sim_core.render_window(scene, cam, fsaa, (40, 0, 16, 8))
     with pytest.raises(ValueError, match="window must be"):
         sim_core.render_window(scene, cam, fsaa, (1, 2))
+
+
+def _frame_tiles(full, x, y, ww, wh, ring):
+    """Rows of ``full``'s tiles inside the window (ring 0) or in the ring of tiles around it (ring 1)."""
+    ts = full.settings.tile_size
+    rows = []
+    for i, t in enumerate(full.tile_stats):
+        inside = x <= t["x0"] < x + ww and y <= t["y0"] < y + wh
+        near = x - ts <= t["x0"] < x + ww + ts and y - ts <= t["y0"] < y + wh + ts
+        if (inside if ring == 0 else near and not inside):
+            rows.append(i)
+    return rows
+
+
+@pytest.mark.parametrize(("mode", "block"), [("1spp", 2), ("fsaa", 2), ("fsaa", 3), ("undersample", 2),
+                                             ("undersample", 4), ("supersample", 2), ("supersample", 4)])
+@pytest.mark.parametrize("tile", [4, 8, 16])
+def test_a_windows_apron_is_only_what_its_resolve_reads(scene, mode, block, tile):
+    """A window traces only the pixels its pixel filter and ambient pool read around it (adaptively, the
+    reference cells holding them), fewer rays than the whole tiles there, and still has the frame's
+    pixels, AOVs, per-tile counters and histograms: in the middle, on the frame's edges and corners."""
+    cam = effects_camera(72, 52)
+    s = sim_core.RenderSettings(mode=mode, block=block, shadow_samples=2, ao_samples=2, max_depth=1,
+                                tile_size=tile)
+    full = sim_core.render(scene, cam, s, threads=2)
+    assert full.counters["ambient_filter_taps"] > 0  # the ambient pool runs
+    for x, y, tx, ty in ((tile, tile, 2, 2), (0, 0, 1, 1), (2 * tile, 0, 3, 1), (0, 2 * tile, 99, 99)):
+        ww, wh = min(tx * tile, 72 - x), min(ty * tile, 52 - y)
+        part = sim_core.render_window(scene, cam, s, (x, y, ww, wh), threads=2)
+        np.testing.assert_array_equal(part.image, full.image[y:y + wh, x:x + ww])
+        for name, aov in part.aovs.items():
+            np.testing.assert_array_equal(aov, full.aovs[name][y:y + wh, x:x + ww], err_msg=name)
+        rows = _frame_tiles(full, x, y, ww, wh, 0)
+        assert [(t["x0"], t["y0"]) for t in part.tile_stats] == \
+            [(full.tile_stats[i]["x0"], full.tile_stats[i]["y0"]) for i in rows]
+        np.testing.assert_array_equal(part.tile_counters, full.tile_counters[rows])
+        np.testing.assert_array_equal(part.tile_histograms, full.tile_histograms[rows])
+        # the whole tiles around the window, as the frame traces them: an upper bound of the apron's rays
+        ring = int(full.tile_counters[_frame_tiles(full, x, y, ww, wh, 1), RAYS].sum())
+        assert 0 < part.extra["apron_rays"] <= ring
+        if tile > sim_core.window_apron(s):
+            assert part.extra["apron_rays"] < ring
+
+
+def test_a_window_without_a_resolve_pass_traces_no_apron(scene):
+    cam = effects_camera(48, 32)
+    s = sim_core.RenderSettings(mode="undersample", block=3, shadow_samples=2, tile_size=8)
+    assert sim_core.window_apron(s) == 0
+    assert sim_core.render_window(scene, cam, s, (8, 8, 16, 16)).extra["apron_rays"] == 0

@@ -18,7 +18,7 @@ from service import store as pareto_store
 from service.options import check_query
 from service.params import Indices, ParameterSpace, default_space
 
-from .playback_logic import PlaybackDriver, validate_budget
+from .playback_logic import PlaybackDriver, missed_rate_text, validate_budget
 
 # Labels and tooltips of the search space's parameters (their values come from the space itself).
 _TEXT: dict[str, tuple[str, str]] = {
@@ -99,6 +99,14 @@ def manual_indices(identifiers: Mapping[str, str], spc: ParameterSpace | None = 
     return tuple(out)
 
 
+def pricing_fps(fps_target: float | None, scene_fps: float) -> float:
+    """The frame rate a frame's power is priced at: ``fps_target``, the one the store lookup chose its
+    settings for (the query's ``fps``, else the store's own), so the simulated power, the image
+    metadata's ``fps`` and the CSV's ``fps_target`` agree with the lookup; ``scene_fps`` when the
+    settings did not come from a lookup (None or 0: manual settings, maximum quality)."""
+    return fps_target if fps_target else scene_fps
+
+
 @dataclass(frozen=True)
 class FrameSettings:
     """The settings of one frame and where they came from."""
@@ -118,6 +126,10 @@ class FrameSettings:
     @property
     def in_transition(self) -> bool:
         return self.target_indices is not None and self.target_indices != self.indices
+
+    def pricing_fps(self, scene_fps: float) -> float:
+        """The frame rate this frame's power is priced at (:func:`pricing_fps` of its lookup's target)."""
+        return pricing_fps(self.fps_target, scene_fps)
 
     def values(self, spc: ParameterSpace | None = None) -> dict[str, Any]:
         return (spc or space()).values_of(self.indices)
@@ -184,11 +196,10 @@ class SettingsChooser:
                                  **self.query)
         store = self.driver.store
         target = self.space.indices_of(store.settings_of(frame.target_indices))
-        missed = (f"budget first: misses {frame.fps_target:g} fps" if frame.priority == "budget" else
-                  f"no setting keeps up with {frame.fps_target:g} fps")
         flags = [text for text, on in (("camera outside the store's space", frame.clamped),
                                        ("budget cannot be met here", frame.infeasible),
-                                       (missed, frame.meets_fps is False)) if on]
+                                       (missed_rate_text(frame.fps_target, frame.priority),
+                                        frame.meets_fps is False)) if on]
         return FrameSettings("store", self.space.indices_of(frame.active_settings),
                              frame.predicted_power_w, frame.predicted_error, target, frame.clamped,
                              frame.infeasible, "; ".join(flags), frame.fps_target, frame.meets_fps,

@@ -31,6 +31,16 @@ def validate_budget(mode: str, value: float) -> float:
     return v
 
 
+def missed_rate_text(fps_target: float | None, priority: str) -> str:
+    """Why a frame's settings miss the frame-rate target ``fps_target`` (None or 0: unknown) under the
+    lookup's ``priority``: worded once for the HUD, the panel and the render engine's frame notes (image
+    metadata), so every place says the same thing."""
+    target = f"{fps_target:g} fps" if fps_target else "the frame rate"
+    if priority == "budget":
+        return f"budget first: misses {target} here (nothing within the budget keeps up)"
+    return f"no setting keeps up with {target} here"
+
+
 @dataclass(frozen=True)
 class PlaybackFrame:
     """What the handler writes for one frame."""

@@ -114,7 +114,8 @@ def _indices(text: str) -> tuple[int, ...]:
 def viewport_settings(scene: bpy.types.Scene) -> tuple[FrameSettings, Any]:
     """The settings the viewport shows (and the store they come from): what the playback handler
     applied on this frame (the store's choice under the budget, temporally filtered, as the HUD shows
-    it), else a fresh lookup for the scene camera, else the manual settings."""
+    it, with the frame-rate target it was looked up for), else a fresh lookup for the scene camera, else
+    the manual settings."""
     chooser = chooser_for(scene)
     store, props, cam = chooser.store, scene.render_budget, scene.camera
     if store is None:
@@ -124,7 +125,9 @@ def viewport_settings(scene: bpy.types.Scene) -> tuple[FrameSettings, Any]:
         active = spc.indices_of(store.settings_of(_indices(props.active_indices)))
         target = spc.indices_of(store.settings_of(_indices(props.target_indices or props.active_indices)))
         return FrameSettings("store", active, props.predicted_power, props.predicted_error, target,
-                             props.clamped, props.infeasible), store
+                             props.clamped, props.infeasible, fps_target=props.target_fps or None,
+                             meets_fps=None if props.predicted_fps <= 0 else not props.slower_than_fps,
+                             priority=props.priority if props.target_fps > 0 else ""), store
     if cam is None or cam.type != "CAMERA" or cam.data.type != "PERSP":
         return chooser.manual_settings(), store
     w, h = render_resolution(scene)
@@ -229,7 +232,7 @@ class RenderBudgetEngine(bpy.types.RenderEngine):
         chooser = session.chooser if session is not None else chooser_for(scene)
         t = scene_time(scene)
         settings = chooser.choose(cam.matrix_world, vfov, w / h, t)
-        fps = scene_fps(scene)
+        fps = settings.pricing_fps(scene_fps(scene))  # the lookup's frame-rate target, else the scene's
         profile = profile_of(scene, chooser.store)
         self.update_stats("", f"{ENGINE_LABEL} | {settings.source} settings | tracing {w}x{h}")
         out = render_frame(sim_scene, CameraView(cam.matrix_world, trace_vfov, full_w, full_h), settings,
@@ -313,7 +316,7 @@ class RenderBudgetEngine(bpy.types.RenderEngine):
         try:
             settings, store = viewport_settings(scene)
             vp.show(rv3d.view_matrix.inverted(), rv3d.window_matrix, w, h, settings,
-                    profile=profile_of(scene, store), fps=scene_fps(scene),
+                    profile=profile_of(scene, store), fps=settings.pricing_fps(scene_fps(scene)),
                     transparent=scene.render.film_transparent)
         except ValueError as exc:
             self.update_stats("", f"{ENGINE_LABEL}: {exc}")

@@ -26,11 +26,11 @@ The tile estimator, for one camera and the settings priced there:
    the frame (``sim_core.render_window``: the frame's own pixels and per-tile counters; tiles are cold-
    cache units, so counters add exactly). SSIM needs half a window of margin around a block: the whole
    tiles that hold the block and its margin are traced. A window that goes through the resolve pass
-   (FSAA, supersampling, AO) also traces an apron of a tile on each side, so the tiles are traced as
-   few, large windows on the tile grid: the cheapest (aprons included) of bands of rows, bands of
-   columns, the tiles' exact cover by rectangles and the whole frame, so never more than a whole frame
-   (``windows``). y_b = the block's sum of 1 - local SSIM (an SSIM of the block and its margin, whose
-   inner part is the block) and its tiles' counters.
+   (FSAA, supersampling, AO) also traces an apron of the few pixels its filters read on each side, so
+   the tiles are traced as few, large windows on the tile grid: the cheapest (aprons included) of bands
+   of rows, bands of columns, the tiles' exact cover by rectangles and the whole frame, so never more
+   than a whole frame (``windows``). y_b = the block's sum of 1 - local SSIM (an SSIM of the block and
+   its margin, whose inner part is the block) and its tiles' counters.
 5. **Ratio estimators.** Y = X * sum(y_b / pi_b) / sum(x_b / pi_b) over the sampled blocks, for the
    error sum and for each counter (pi_b the inclusion probabilities, X the auxiliary frame's total):
    the sample corrects the auxiliary frame's level, the auxiliary frame spreads the sample's values
@@ -59,8 +59,8 @@ from service.display_pricing.sampling import (
     systematic_sample,
 )
 from service.display_pricing.tracing import AUX_TILE
-from service.display_pricing.windows import apron_tiles, plan_windows, traced_area
+from service.display_pricing.windows import apron_pixels, plan_windows, traced_area
 
 __all__ = ["AUX_TILE", "BLOCKS", "ESTIMATORS", "ESTIMATOR_VERSION", "DisplayPricer", "DisplayPricing",
-           "apron_tiles", "cover_rects", "inclusion_probabilities", "plan_windows", "price_camera",
+           "apron_pixels", "cover_rects", "inclusion_probabilities", "plan_windows", "price_camera",
            "sample_start", "serpentine", "systematic_sample", "traced_area"]

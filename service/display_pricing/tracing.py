@@ -13,9 +13,9 @@ from sim_core.render import COUNTER_NAMES
 
 import sim_core
 from service.display_pricing.sampling import CameraDesign, block_of
-from service.display_pricing.windows import Window, apron_tiles, plan_windows
+from service.display_pricing.windows import Window, apron_pixels, plan_windows
 
-#: Windows covering a tile mask: (mask, width, height, tile size, apron tiles) -> windows.
+#: Windows covering a tile mask: (mask, width, height, tile size, apron pixels) -> windows.
 WindowPlan = Callable[[np.ndarray, int, int, int, int], list[Window]]
 
 #: Tile side of the auxiliary frames: small, so that their tiles fall into single blocks.
@@ -46,32 +46,15 @@ class Renderer:
         s = settings
         w, h = sim_core.render_size(camera, s)
         ts = s.tile_size
-        ntx, nty = -(-w // ts), -(-h // ts)
-        need = np.zeros((h, w), dtype=bool)  # traced pixels the regions read
-        for b in blocks:
-            x0, y0, x1, y1 = d.regions[b]
-            sx0, sx1 = source_span(d.W, w, x0, x1)
-            sy0, sy1 = source_span(d.H, h, y0, y1)
-            need[sy0:sy1, sx0:sx1] = True
-        # tiles whose centre lies in a sampled block: their counters are the sample's
-        tx, ty = np.meshgrid(np.arange(ntx), np.arange(nty))
-        tw = np.minimum(ts, w - tx * ts)
-        th = np.minimum(ts, h - ty * ts)
-        cx = tx * ts + 0.5 * tw
-        cy = ty * ts + 0.5 * th
-        owner = block_of(cx.ravel(), cy.ravel(), d.W / w, d.H / h, d.B, d.nbx, d.nby).reshape(nty, ntx)
-        counted = np.isin(owner, np.asarray(blocks))
-        # every tile holding a sampled tile or a needed pixel, traced as few large windows as pay off
-        per_tile = np.add.reduceat(np.add.reduceat(need.astype(np.int32), np.arange(0, h, ts), axis=0),
-                                   np.arange(0, w, ts), axis=1)
-        tiles = counted | (per_tile > 0)
+        ntx = -(-w // ts)
+        need, owner, counted, tiles = needed_tiles(d, blocks, w, h, ts)
         canvas = np.zeros((h, w, 3), dtype=np.float32)
         covered = np.zeros((h, w), dtype=bool)
         rows_c: list[np.ndarray] = []
         rows_h: list[np.ndarray] = []
         rows_b: list[np.ndarray] = []
         rows_t: list[np.ndarray] = []  # the tiles' row-major index: one order whatever the windows
-        for win in (plan or plan_windows)(tiles, w, h, ts, apron_tiles(s)):
+        for win in (plan or plan_windows)(tiles, w, h, ts, apron_pixels(s)):
             x, y, ww, wh = win
             r = sim_core.render_window(self.scene, camera, s, win, threads=self.threads)
             canvas[y:y + wh, x:x + ww] = r.image
@@ -91,6 +74,33 @@ class Renderer:
         order = np.argsort(np.concatenate(rows_t), kind="stable")
         return (canvas, np.concatenate(rows_c)[order], np.concatenate(rows_h)[order],
                 np.concatenate(rows_b)[order], (w, h))
+
+
+def needed_tiles(d: CameraDesign, blocks: Sequence[int], w: int, h: int, ts: int
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """What the sampled ``blocks`` need of a ``w`` x ``h`` traced frame with ``ts``-pixel tiles: the
+    pixels their regions read (h, w), each tile's block (by its centre), the tiles whose counters are the
+    sample's (their centre in a sampled block), and every tile to trace (those, and every tile holding a
+    needed pixel); tile arrays (rows of tiles, columns of tiles)."""
+    ntx, nty = -(-w // ts), -(-h // ts)
+    need = np.zeros((h, w), dtype=bool)  # traced pixels the regions read
+    for b in blocks:
+        x0, y0, x1, y1 = d.regions[b]
+        sx0, sx1 = source_span(d.W, w, x0, x1)
+        sy0, sy1 = source_span(d.H, h, y0, y1)
+        need[sy0:sy1, sx0:sx1] = True
+    # tiles whose centre lies in a sampled block: their counters are the sample's
+    tx, ty = np.meshgrid(np.arange(ntx), np.arange(nty))
+    tw = np.minimum(ts, w - tx * ts)
+    th = np.minimum(ts, h - ty * ts)
+    cx = tx * ts + 0.5 * tw
+    cy = ty * ts + 0.5 * th
+    owner = block_of(cx.ravel(), cy.ravel(), d.W / w, d.H / h, d.B, d.nbx, d.nby).reshape(nty, ntx)
+    counted = np.isin(owner, np.asarray(blocks))
+    # every tile holding a sampled tile or a needed pixel, traced as few large windows as pay off
+    per_tile = np.add.reduceat(np.add.reduceat(need.astype(np.int32), np.arange(0, h, ts), axis=0),
+                               np.arange(0, w, ts), axis=1)
+    return need, owner, counted, counted | (per_tile > 0)
 
 
 def display_patches(canvas: np.ndarray, size: tuple[int, int], d: CameraDesign, blocks: Sequence[int]

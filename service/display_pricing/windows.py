@@ -1,10 +1,11 @@
 """Which windows of the traced frame the tile estimator renders: few, large ones.
 
-A window that goes through the resolve pass (FSAA or supersampling, or AO) also traces an apron of whole
-tiles around itself, so that its pixels are the whole frame's (``sim_core.render_window``). Many small
-windows each pay that apron, and can cost several whole frames between them. This module chooses, for a
-mask of tiles that must be traced, windows on the tile grid that cover it with the least traced area it
-finds (aprons included), and never more than the whole frame: the whole frame is one of the candidates.
+A window that goes through the resolve pass (FSAA or supersampling, or AO) also traces an apron of a
+few pixels around itself (what the pixel filter and the ambient pool read, ``sim_core.window_apron``), so
+that its pixels are the whole frame's (``sim_core.render_window``). Many small windows each pay that apron
+and a call each. This module chooses, for a mask of tiles that must be traced, windows on the tile grid
+that cover it with the least traced area it finds (aprons included), and never more than the whole
+frame: the whole frame is one of the candidates.
 Which windows are traced changes only the cost: a window on the tile grid traces exactly the frame's
 tiles there (pixels and per-tile counters)."""
 
@@ -15,28 +16,28 @@ from typing import Any
 
 import numpy as np
 
+import sim_core
 from service.display_pricing.sampling import cover_rects
 
 #: A window as (x, y, width, height) in pixels of the traced frame.
 Window = tuple[int, int, int, int]
 
 
-def apron_tiles(settings: Any) -> int:
-    """Tiles the native core traces on each side of a window for ``settings``: one where the resolve pass
-    runs (a sub-pixel grid, or AO rays), since the pixel filter's (1.5 px) and the ambient filter's (2 px)
-    reaches together stay under the smallest tile (4 px); none otherwise. Counts AO whenever
-    ``ao_samples`` > 0 (the core adds it only under a world that gives light): an overestimate of the
-    cost, never an underestimate."""
-    resolves = (settings.mode in ("fsaa", "supersample") and settings.block > 1) or settings.ao_samples > 0
-    return 1 if resolves else 0
+def apron_pixels(settings: Any) -> int:
+    """Pixels the native core traces beyond each edge of a window for ``settings``
+    (``sim_core.window_apron``: 0 without a resolve pass, 1-3 for the filters' reach, a few more for the
+    reference cells of the adaptive modes). Counts AO whenever ``ao_samples`` > 0 (the core adds it only
+    under a world that gives light): an overestimate of the cost, never an underestimate."""
+    return sim_core.window_apron(settings, ambient=True)
 
 
 def traced_area(windows: Sequence[Window], width: int, height: int, tile: int, apron: int) -> int:
-    """Pixels traced by rendering each of ``windows`` alone (their aprons of ``apron`` tiles included,
-    clipped to the ``width`` x ``height`` frame); a window that is the whole frame has no apron."""
+    """Pixels traced by rendering each of ``windows`` alone (their aprons of ``apron`` pixels each side
+    included, clipped to the ``width`` x ``height`` frame); a window that is the whole frame has no
+    apron. ``tile`` is unused (the windows are in pixels); kept so every cost takes the plan's arguments."""
     total = 0
     for x, y, w, h in windows:
-        a = 0 if (w, h) == (width, height) else apron * tile
+        a = 0 if (w, h) == (width, height) else apron
         x0, y0 = max(0, x - a), max(0, y - a)
         x1, y1 = min(width, x + w + a), min(height, y + h + a)
         total += (x1 - x0) * (y1 - y0)
@@ -54,8 +55,7 @@ def _to_pixels(rects: Sequence[tuple[int, int, int, int]], width: int, height: i
 
 
 def _merged_runs(columns: np.ndarray, gap: int) -> list[tuple[int, int]]:
-    """Runs of true entries, joined across gaps of at most ``gap`` (filling such a gap traces no more than
-    the two aprons it replaces)."""
+    """Runs of true entries, joined across gaps of at most ``gap`` entries."""
     idx = np.flatnonzero(columns)
     if idx.size == 0:
         return []
@@ -73,7 +73,8 @@ def _bands(mask: np.ndarray, width: int, height: int, tile: int, apron: int
     nty = mask.shape[0]
 
     def band(r0: int, r1: int) -> tuple[int, list[tuple[int, int, int, int]]]:
-        runs = _merged_runs(mask[r0:r1].any(axis=0), 2 * apron)
+        # filling a gap of g tiles traces no more than the two aprons it replaces when g * tile <= 2 * apron
+        runs = _merged_runs(mask[r0:r1].any(axis=0), 2 * apron // tile)
         rects = [(c0, r0, c1, r1) for c0, c1 in runs]
         return traced_area(_to_pixels(rects, width, height, tile), width, height, tile, apron), rects
 
@@ -91,7 +92,7 @@ def _bands(mask: np.ndarray, width: int, height: int, tile: int, apron: int
 
 def plan_windows(mask: np.ndarray, width: int, height: int, tile: int, apron: int) -> list[Window]:
     """Windows on the tile grid covering every true tile of ``mask`` (rows of tiles, columns of tiles) of
-    a ``width`` x ``height`` frame with ``tile``-pixel tiles, traced with ``apron`` tiles each side: the
+    a ``width`` x ``height`` frame with ``tile``-pixel tiles, traced with ``apron`` pixels each side: the
     cheapest (traced area) of the whole frame, bands of rows, bands of columns and the mask's exact cover
     by rectangles; the whole frame on ties. Never traces more than the whole frame."""
     mask = np.asarray(mask, dtype=bool)

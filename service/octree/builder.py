@@ -5,6 +5,7 @@ or the path's own cameras, :mod:`.path_samples`) put together into a runtime sto
 from __future__ import annotations
 
 import dataclasses
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -117,6 +118,14 @@ def spread_points(points: list[tuple[Any, ...]], k: int, fps: float | None = Non
     return _spread(fast, k) + _spread(slow, k)
 
 
+def time_left(spent_s: float, done: int, total: int) -> float | None:
+    """Seconds left for ``total`` equal jobs when ``done`` of them took ``spent_s`` (None before the
+    first is done)."""
+    if done <= 0:
+        return None
+    return spent_s / done * max(total - done, 0)
+
+
 STRATEGIES: dict[str, type] = {"axis": ViewCubeSampling, "aimed": ViewCubeSampling, "path": PathSampling}
 
 
@@ -189,11 +198,16 @@ class OctreeBuilder:
         # its points) leaves the other workers idle for a small share of the batch only
         chunk = max(2, 8 * int(getattr(self.pricer.ev.executor, "workers", 1) or 1))
         results: list[list[Any]] = []
+        started = time.perf_counter()
         for start in range(0, len(requests), chunk):
             search.check_cancel()
             results += self.pricer.price(requests[start:start + chunk])
             search.steps_done += weight * len(requests[start:start + chunk])
-            search.report("price at display resolution")
+            # pricing is the last phase, and its cameras cost what the scene makes them cost at display
+            # resolution, which the weight above guesses from pixel counts only (8x low on the village):
+            # from the first batch on, the time left is this phase's own measured pace
+            search.report("price at display resolution",
+                          remaining_s=time_left(time.perf_counter() - started, len(results), len(requests)))
         res = iter(results)
         for fid, cams, xs in jobs:
             err, pw, ft = np.zeros(len(xs)), np.zeros(len(xs)), np.zeros(len(xs))

@@ -71,7 +71,9 @@ class Search:
 
     # -- bookkeeping --------------------------------------------------------------------------------
 
-    def report(self, phase: str | None = None) -> None:
+    def report(self, phase: str | None = None, remaining_s: float | None = None) -> None:
+        """Publish the progress; ``remaining_s``: the time left as the caller measured it (the last
+        phase's own pace), instead of the search steps' pace."""
         if phase is not None:
             self.state.phase = phase
         s = self.state
@@ -82,6 +84,8 @@ class Search:
         # times the steps still planned: warm-started searches are shorter than full ones
         s.estimate_s = (s.elapsed_s / self.steps_done * max(self.steps_planned - self.steps_done, 0)
                         if self.steps_done else None)
+        if remaining_s is not None:
+            s.estimate_s = max(0.0, float(remaining_s))
         if self._progress_cb is not None:
             self._progress_cb(Progress(**vars(s)))
 

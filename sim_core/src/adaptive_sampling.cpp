@@ -1,6 +1,8 @@
 #include "sim_core/adaptive_sampling.h"
 
 #include <algorithm>
+#include <stdexcept>
+#include <utility>
 #include <vector>
 
 #include "sim_core/low_discrepancy.h"
@@ -41,7 +43,14 @@ SampleGeometry interpolate_geometry(const SampleGeometry& a, const SampleGeometr
   return g;
 }
 
-// The samples of one tile (its tile buffer) and the schedule that fills them.
+// A rectangle of a tile's samples: [x0, x1) x [y0, y1).
+struct SampleSpan {
+  int x0, y0, x1, y1;
+};
+
+// The samples of one tile (its tile buffer) and the schedule that fills them. The schedule may be limited
+// to a part of the tile (`part`, in the tile's samples): each of those samples comes out as in the whole
+// tile, and only they are written to the frame.
 class TileSampler {
  public:
   TileSampler(TileContext& ctx, int x0, int y0, int w, int h, int k)
@@ -49,20 +58,23 @@ class TileSampler {
         inv_k_(1.f / static_cast<float>(k)),
         samples_(static_cast<std::size_t>(nx_) * ny_), state_(samples_.size(), 0) {}
 
-  // Full rate: every sample traced, row by row.
-  void trace_all() {
-    for (int j = 0; j < ny_; ++j)
-      for (int i = 0; i < nx_; ++i) trace_at(i, j);
+  SampleSpan whole() const { return {0, 0, nx_, ny_}; }
+  // Full rate: every sample of `part` traced, row by row.
+  void trace_all(const SampleSpan& part) {
+    for (int j = part.y0; j < part.y1; ++j)
+      for (int i = part.x0; i < part.x1; ++i) trace_at(i, j);
   }
   // Reference samples every `spacing` (and the last row/column), then the runs between them along X on
-  // the reference rows, then along Y on every column.
-  void trace_adaptive(int spacing);
+  // the reference rows, then along Y on every column. A sample depends only on the reference cell it lies
+  // in (its four corner references and the X runs on the cell's two reference rows), so for `part` the
+  // schedule runs over the cells that hold its samples (for the whole tile, in the whole tile's order).
+  void trace_adaptive(int spacing, const SampleSpan& part);
   // With a sample buffer: traces the guard sub-samples of the pixel filter just outside the frame that
-  // lie beyond this tile's edges on the frame's edges.
-  void trace_guard(FrameBuffers& fb);
-  // Flushes the tile into the frame buffer: pixels (their samples' box mean, final without a resolve
-  // pass), geometry and sample kinds, and every sample into the sample buffer when there is one.
-  void flush(FrameBuffers& fb);
+  // lie beyond `part`'s edges where they are the frame's edges.
+  void trace_guard(FrameBuffers& fb, const SampleSpan& part);
+  // Flushes `part` (whole pixels) into the frame buffer: pixels (their samples' box mean, final without
+  // a resolve pass), geometry and sample kinds, and its samples into the sample buffer when there is one.
+  void flush(FrameBuffers& fb, const SampleSpan& part);
   // Folds the schedule's statistics into the tile's counters and `stat`.
   void finish(int spacing, TileStat* stat) const;
 
@@ -86,13 +98,15 @@ class TileSampler {
 };
 
 SampleResult TileSampler::trace_subsample(int sx, int sy) {
-  // Seeds by position in the whole frame: a window of it (Camera::crop_x/y) samples like the whole.
-  const std::uint32_t key = sample_key(static_cast<std::uint32_t>(ctx_.camera.crop_x * k_ + sx),
-                                       static_cast<std::uint32_t>(ctx_.camera.crop_y * k_ + sy),
-                                       static_cast<std::uint32_t>(k_));
+  // Position and seeds by place in the whole frame: a window of it (Camera::crop_x/y) samples like the
+  // whole, to the bit (the position computed from the frame's sub-sample index, not the window's).
+  const int fx = ctx_.camera.crop_x * k_ + sx, fy = ctx_.camera.crop_y * k_ + sy;
+  const std::uint32_t key =
+      sample_key(static_cast<std::uint32_t>(fx), static_cast<std::uint32_t>(fy), static_cast<std::uint32_t>(k_));
   ++traced_;
   ++ctx_.counters.tile_buffer_writes;
-  return trace_sample(ctx_, (static_cast<float>(sx) + 0.5f) * inv_k_, (static_cast<float>(sy) + 0.5f) * inv_k_, key);
+  return trace_frame_sample(ctx_, (static_cast<float>(fx) + 0.5f) * inv_k_, (static_cast<float>(fy) + 0.5f) * inv_k_,
+                            key);
 }
 
 void TileSampler::trace_at(int i, int j) {
@@ -100,16 +114,18 @@ void TileSampler::trace_at(int i, int j) {
   state_[at(i, j)] = kTraced;
 }
 
-void TileSampler::trace_guard(FrameBuffers& fb) {
+void TileSampler::trace_guard(FrameBuffers& fb, const SampleSpan& part) {
   SampleBuffer& sb = fb.samples;
   if (sb.empty()) return;
   const int g = sb.guard;
-  const int ix0 = x0_ * k_, iy0 = y0_ * k_, ix1 = ix0 + nx_, iy1 = iy0 + ny_;
+  const int ix0 = x0_ * k_ + part.x0, iy0 = y0_ * k_ + part.y0, ix1 = x0_ * k_ + part.x1, iy1 = y0_ * k_ + part.y1;
   // Only on the whole frame's edges (a window's inner edges read its neighbours' samples, render.h).
   const Camera& cam = ctx_.camera;
   const int fx0 = cam.crop_x + x0_, fy0 = cam.crop_y + y0_;
-  const int ex0 = fx0 == 0 ? ix0 - g : ix0, ex1 = fx0 + w_ == cam.frame_width() ? ix1 + g : ix1;
-  const int ey0 = fy0 == 0 ? iy0 - g : iy0, ey1 = fy0 + h_ == cam.frame_height() ? iy1 + g : iy1;
+  const int ex0 = fx0 == 0 && part.x0 == 0 ? ix0 - g : ix0;
+  const int ex1 = fx0 + w_ == cam.frame_width() && part.x1 == nx_ ? ix1 + g : ix1;
+  const int ey0 = fy0 == 0 && part.y0 == 0 ? iy0 - g : iy0;
+  const int ey1 = fy0 + h_ == cam.frame_height() && part.y1 == ny_ ? iy1 + g : iy1;
   for (int sy = ey0; sy < ey1; ++sy)
     for (int sx = ex0; sx < ex1; ++sx) {
       if (sx >= ix0 && sx < ix1 && sy >= iy0 && sy < iy1) continue;  // the tile's own samples
@@ -143,23 +159,34 @@ void TileSampler::resolve_run(std::size_t ia, std::size_t ib, int count, IndexOf
   }
 }
 
-void TileSampler::trace_adaptive(int spacing) {
+void TileSampler::trace_adaptive(int spacing, const SampleSpan& part) {
   std::vector<int> rx, ry;  // reference columns / rows: every `spacing`, plus the last one
   for (int i = 0; i < nx_; ++i) if (i % spacing == 0 || i == nx_ - 1) rx.push_back(i);
   for (int j = 0; j < ny_; ++j) if (j % spacing == 0 || j == ny_ - 1) ry.push_back(j);
-  for (int j : ry)
-    for (int i : rx) trace_at(i, j);
+  // The references bounding `part`'s cells: the last at or before its first sample, the first at or
+  // after its last one (the whole tile: all of them).
+  auto bounds = [](const std::vector<int>& refs, int lo, int hi) {
+    std::size_t a = 0, b = refs.size() - 1;
+    while (a + 1 < refs.size() && refs[a + 1] <= lo) ++a;
+    while (b > 0 && refs[b - 1] >= hi - 1) --b;
+    return std::pair<std::size_t, std::size_t>(a, b);
+  };
+  const auto [ax, bx] = bounds(rx, part.x0, part.x1);
+  const auto [ay, by] = bounds(ry, part.y0, part.y1);
+  for (std::size_t r = ay; r <= by; ++r)
+    for (std::size_t c = ax; c <= bx; ++c) trace_at(rx[c], ry[r]);
   // X: along reference rows, between adjacent reference samples.
-  for (int j : ry) {
-    for (std::size_t r = 0; r + 1 < rx.size(); ++r) {
+  for (std::size_t q = ay; q <= by; ++q) {
+    const int j = ry[q];
+    for (std::size_t r = ax; r < bx; ++r) {
       const int i0 = rx[r], i1 = rx[r + 1];
       resolve_run(at(i0, j), at(i1, j), i1 - i0 - 1, [&](int m) { return at(i0 + m, j); },
                   [&](int m) { trace_at(i0 + m, j); });
     }
   }
   // Y: along every column, between the (now known) samples of adjacent reference rows.
-  for (int i = 0; i < nx_; ++i) {
-    for (std::size_t r = 0; r + 1 < ry.size(); ++r) {
+  for (int i = rx[ax]; i <= rx[bx]; ++i) {
+    for (std::size_t r = ay; r < by; ++r) {
       const int j0 = ry[r], j1 = ry[r + 1];
       resolve_run(at(i, j0), at(i, j1), j1 - j0 - 1, [&](int m) { return at(i, j0 + m); },
                   [&](int m) { trace_at(i, j0 + m); });
@@ -167,16 +194,16 @@ void TileSampler::trace_adaptive(int spacing) {
   }
 }
 
-void TileSampler::flush(FrameBuffers& fb) {
+void TileSampler::flush(FrameBuffers& fb, const SampleSpan& part) {
   const float inv_n = 1.f / static_cast<float>(k_ * k_);
   if (!fb.samples.empty())
-    for (int j = 0; j < ny_; ++j)
-      for (int i = 0; i < nx_; ++i) {
+    for (int j = part.y0; j < part.y1; ++j)
+      for (int i = part.x0; i < part.x1; ++i) {
         const SampleResult& r = samples_[at(i, j)];
         fb.samples.set(x0_ * k_ + i, y0_ * k_ + j, r.color, r.ambient, r.geom.object, r.geom.normal, r.geom.position);
       }
-  for (int jj = 0; jj < h_; ++jj) {
-    for (int ii = 0; ii < w_; ++ii) {
+  for (int jj = part.y0 / k_; jj < part.y1 / k_; ++jj) {
+    for (int ii = part.x0 / k_; ii < part.x1 / k_; ++ii) {
       Vec3 sum;
       bool any_interp = false;
       for (int b = 0; b < k_; ++b)
@@ -210,15 +237,23 @@ void TileSampler::finish(int spacing, TileStat* stat) const {
 }  // namespace
 
 void render_tile(TileContext& ctx, FrameBuffers& fb, int x0, int y0, int w, int h, int k, int spacing,
-                 TileStat* stat) {
+                 TileStat* stat, const PixelRect* part) {
   TileSampler sampler(ctx, x0, y0, w, h, k);
-  if (spacing <= 1) {
-    sampler.trace_all();
-  } else {
-    sampler.trace_adaptive(spacing);
+  SampleSpan span = sampler.whole();
+  if (part) {
+    if (part->width < 1 || part->height < 1 || part->x0 < x0 || part->y0 < y0 || part->x0 + part->width > x0 + w ||
+        part->y0 + part->height > y0 + h)
+      throw std::invalid_argument("render_tile: the part is not inside the tile");
+    span = {(part->x0 - x0) * k, (part->y0 - y0) * k, (part->x0 + part->width - x0) * k,
+            (part->y0 + part->height - y0) * k};
   }
-  sampler.trace_guard(fb);
-  sampler.flush(fb);
+  if (spacing <= 1) {
+    sampler.trace_all(span);
+  } else {
+    sampler.trace_adaptive(spacing, span);
+  }
+  sampler.trace_guard(fb, span);
+  sampler.flush(fb, span);
   sampler.finish(spacing, stat);
 }
 

@@ -21,11 +21,15 @@ void Camera::validate() const {
 float Camera::tan_half() const { return std::tan(0.5f * vfov); }
 
 Ray Camera::primary(float px, float py) const {
+  return primary_frame(px + static_cast<float>(crop_x), py + static_cast<float>(crop_y));
+}
+
+Ray Camera::primary_frame(float fx, float fy) const {
   const float th = tan_half();
   const float fw = static_cast<float>(frame_width()), fh = static_cast<float>(frame_height());
   const float aspect = fw / fh;
-  const float sx = (2.f * (px + static_cast<float>(crop_x)) / fw - 1.f) * th * aspect;
-  const float sy = (1.f - 2.f * (py + static_cast<float>(crop_y)) / fh) * th;
+  const float sx = (2.f * fx / fw - 1.f) * th * aspect;
+  const float sy = (1.f - 2.f * fy / fh) * th;
   Ray r;
   r.origin = position;
   r.dir = normalize(forward + right * sx + up * sy);

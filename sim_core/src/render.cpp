@@ -114,13 +114,15 @@ RenderOutput render_frame(const Scene& scene, const Camera& camera, const Render
   // AO rays are traced only under a world that gives light.
   const bool ambient = settings.ao_samples > 0 && max_component(scene.environment().mean()) > 0.f;
   // A window that goes through the resolve pass reads samples beyond its edges: those of the pixel
-  // filter's support and the ambient filter's pool around each of them. It traces the whole tiles (on its
-  // own tile grid) that hold them, up to the frame's edges.
+  // filter's support and the ambient filter's pool around each of them (resolve_reach_pixels: 1 to 3
+  // px). It traces an apron of just those pixels around itself, up to the frame's edges. The apron's
+  // tiles stay those of the window's tile grid, cut off at the apron's edge: in the per-pixel modes a
+  // pixel's samples do not depend on its tile, and an adaptive tile traces the reference cells that
+  // hold the apron's samples (render_tile's `part`), which stay within a reference spacing of it.
   Camera traced = camera;
   int apron = 0;
   if ((k > 1 || ambient) && (camera.width != camera.frame_width() || camera.height != camera.frame_height())) {
-    const float reach = (k > 1 ? kPixelFilterRadius : 0.f) + (ambient ? kAmbientRadius : 0.f);
-    apron = ts * ((static_cast<int>(std::ceil(reach)) + ts - 1) / ts);
+    apron = resolve_reach_pixels(k, ambient);
     traced.crop_x = std::max(0, camera.crop_x - apron);
     traced.crop_y = std::max(0, camera.crop_y - apron);
     traced.width = std::min(camera.frame_width(), camera.crop_x + camera.width + apron) - traced.crop_x;
@@ -131,6 +133,15 @@ RenderOutput render_frame(const Scene& scene, const Camera& camera, const Render
   const int wx = camera.crop_x - traced.crop_x, wy = camera.crop_y - traced.crop_y;  // the window in `traced`
   auto grid_origin = [&](int offset) { return offset % ts == 0 ? 0 : offset % ts - ts; };
   const TileGrid grid(traced.width, traced.height, ts, grid_origin(wx), grid_origin(wy));
+  // Tile t of `grid` whole (not cut off by the traced area's edges; clipped to the frame's), in the
+  // traced area's pixels: what an adaptive tile's sampling schedule is laid out over.
+  auto whole_tile = [&](std::size_t t) {
+    const int ex = grid.origin_x + static_cast<int>(t % static_cast<std::size_t>(grid.tiles_x)) * ts;
+    const int ey = grid.origin_y + static_cast<int>(t / static_cast<std::size_t>(grid.tiles_x)) * ts;
+    const int x0 = std::max(ex, -traced.crop_x), y0 = std::max(ey, -traced.crop_y);
+    return PixelRect{x0, y0, std::min(ex + ts, traced.frame_width() - traced.crop_x) - x0,
+                     std::min(ey + ts, traced.frame_height() - traced.crop_y) - y0};
+  };
   const TileGrid window_grid(camera.width, camera.height, ts);
   // Tile t of `grid`: its index in the window's grid, or -1 in the apron.
   std::vector<std::ptrdiff_t> window_tile(static_cast<std::size_t>(grid.count()), -1);
@@ -154,8 +165,11 @@ RenderOutput render_frame(const Scene& scene, const Camera& camera, const Render
         spacing = multirate_block(previous->block[p], previous->ratio[p], previous->checks[p], settings);
       }
     }
-    render_tile(ctx, out.fb, stat.x0, stat.y0, stat.width, stat.height, k, spacing, &stat);
+    const PixelRect tile = whole_tile(t), part{stat.x0, stat.y0, stat.width, stat.height};
+    render_tile(ctx, out.fb, tile.x0, tile.y0, tile.width, tile.height, k, spacing, &stat, &part);
   }, texture_cache, &counted);
+  for (std::size_t t = 0; t < out.tiles.size(); ++t)
+    if (!counted[t]) out.apron_rays += out.tiles[t].rays_total;
   if (!out.fb.samples.empty()) {
     // Each tile of the window carries its share of the resolve pass (its pixels' filter and samples).
     const ResolveWork work =
@@ -192,6 +206,14 @@ RenderOutput render_frame(const Scene& scene, const Camera& camera, const Render
     ms.checks[t] = out.tiles[t].similarity_checks;
   }
   return out;
+}
+
+int window_apron_pixels(const RenderSettings& settings, bool ambient) {
+  settings.validate();
+  const int k = settings.subgrid();
+  if (k == 1 && !ambient) return 0;
+  const int cells = settings.adaptive() ? (settings.block - 1 + k - 1) / k : 0;
+  return resolve_reach_pixels(k, ambient) + cells;
 }
 
 }  // namespace sim_core

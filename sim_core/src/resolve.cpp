@@ -33,6 +33,15 @@ PixelFilter::PixelFilter(int k_) : k(k_) {
   for (float& w : weights) w = static_cast<float>(w / sum);
 }
 
+int ambient_reach(int k) { return static_cast<int>(std::ceil(kAmbientRadius * static_cast<float>(k))); }
+
+int resolve_reach(int k, bool ambient) {
+  if (k < 1) throw std::invalid_argument("resolve_reach: the sub-sample grid must be at least 1x1");
+  return (k > 1 ? PixelFilter(k).guard : 0) + (ambient ? ambient_reach(k) : 0);
+}
+
+int resolve_reach_pixels(int k, bool ambient) { return (resolve_reach(k, ambient) + k - 1) / k; }
+
 void SampleBuffer::allocate(int pixel_width, int pixel_height, int k_, bool ambient_) {
   k = k_;
   guard = PixelFilter(k).guard;
@@ -64,7 +73,7 @@ bool has_ambient(const AmbientSample& a) { return max_component(a.all) > 0.f; }
 // Step 1: each sample's visible share of the ambient light from its pool of same-surface neighbours.
 // `taps` gets each sample's neighbour count.
 void denoise_ambient(SampleBuffer& b, Vec3 eye, std::vector<std::uint16_t>* taps, int threads) {
-  const int reach = static_cast<int>(std::ceil(kAmbientRadius * static_cast<float>(b.k)));
+  const int reach = ambient_reach(b.k);
   const float sigma = static_cast<float>(b.k);  // 1 px
   std::vector<float> spatial(static_cast<std::size_t>((2 * reach + 1) * (2 * reach + 1)));
   for (int dy = -reach; dy <= reach; ++dy)

@@ -844,9 +844,14 @@ void TileContext::finish() {
 }
 
 SampleResult trace_sample(TileContext& ctx, float px, float py, std::uint32_t key) {
+  return trace_frame_sample(ctx, px + static_cast<float>(ctx.camera.crop_x), py + static_cast<float>(ctx.camera.crop_y),
+                            key);
+}
+
+SampleResult trace_frame_sample(TileContext& ctx, float fx, float fy, std::uint32_t key) {
   Shader shader(ctx);
   ++ctx.counters.raygen_evals;
-  const Ray ray = ctx.camera.primary(px, py);
+  const Ray ray = ctx.camera.primary_frame(fx, fy);
   SampleResult out;
   HitInfo info;
   // A pixel off the image centre subtends a smaller angle: cos^2 of its angle to the axis (radially), so a
@@ -858,10 +863,8 @@ SampleResult trace_sample(TileContext& ctx, float px, float py, std::uint32_t ke
   // whole frame (a window of it samples like the whole). Coordinates may be negative: samples just outside
   // the frame that the pixel filter reads; modulo 2^32 they keep their places and blocks.
   const float fk = static_cast<float>(k);
-  const auto sx = static_cast<std::uint32_t>(
-      static_cast<std::int32_t>(std::floor((px + static_cast<float>(ctx.camera.crop_x)) * fk)));
-  const auto sy = static_cast<std::uint32_t>(
-      static_cast<std::int32_t>(std::floor((py + static_cast<float>(ctx.camera.crop_y)) * fk)));
+  const auto sx = static_cast<std::uint32_t>(static_cast<std::int32_t>(std::floor(fx * fk)));
+  const auto sy = static_cast<std::uint32_t>(static_cast<std::int32_t>(std::floor(fy * fk)));
   const std::uint32_t place = (sx & 1u) + 2u * (sy & 1u) + 4u * ((sx >> 1) & 1u) + 8u * ((sy >> 1) & 1u);
   const Branch root{key, 1u, 0, place, sample_key(sx >> 2, sy >> 2, static_cast<std::uint32_t>(k) | 0x200u)};
   out.color = shader.trace(ray, RayKind::kPrimary, root, cone, nullptr, &info, &out.geom);

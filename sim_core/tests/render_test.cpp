@@ -1,6 +1,7 @@
 // The frame driver: identical images, depths, counters and comparator histograms for any thread count in
 // every sampling mode; finite non-negative colours; per-tile statistics (every counter and the comparator
 // histogram) that add up to the frame's; a multi-rate frame that takes the previous frame's state.
+#include <array>
 #include <cmath>
 #include <cstdint>
 
@@ -72,9 +73,49 @@ void check_render(const Scene& s) {
   CHECK(f0.multirate.matches(5, 4, 8, cam.width, cam.height));
 }
 
+// A window of the frame (on its tile grid: in the middle, and on two of its edges) has the frame's pixels
+// and per-tile counters in every mode with sub-samples and AO, its apron only the resolve's reach: fewer
+// rays than the whole tiles around it.
+void check_windows(const Scene& s) {
+  const Camera cam = test::make_camera(40, 30);
+  RenderSettings st = test::make_settings();  // 8-pixel tiles, AO
+  for (int mode = 0; mode < 4; ++mode)
+    for (int block : {2, 3}) {
+      st.mode = static_cast<SamplingMode>(mode);
+      st.block = block;
+      const RenderOutput whole = render_frame(s, cam, st, 2, nullptr, test::kCache);
+      const int wx = 8, wy = 8, ww = 16, wh = 8;
+      for (const auto& [x, y, w, h] : {std::array<int, 4>{wx, wy, ww, wh}, std::array<int, 4>{0, 16, 40, 14}}) {
+        Camera win = cam;
+        win.crop_x = x;
+        win.crop_y = y;
+        win.width = w;
+        win.height = h;
+        win.full_width = cam.width;
+        win.full_height = cam.height;
+        const RenderOutput part = render_frame(s, win, st, 2, nullptr, test::kCache);
+        bool pixels = part.fb.color.size() == static_cast<std::size_t>(w * h * 3);
+        for (int j = 0; pixels && j < h; ++j)
+          for (int i = 0; i < w * 3; ++i)
+            pixels = pixels && part.fb.color[static_cast<std::size_t>(j * w * 3 + i)] ==
+                                   whole.fb.color[static_cast<std::size_t>(((y + j) * cam.width + x) * 3 + i)];
+        CHECK(pixels);
+        std::uint64_t rays = 0, ring = 0;  // the window's tiles' rays; those of the whole tiles around it
+        for (const TileStat& t : whole.tiles) {
+          const bool inside = t.x0 >= x && t.x0 < x + w && t.y0 >= y && t.y0 < y + h;
+          const bool near = t.x0 >= x - 8 && t.x0 < x + w + 8 && t.y0 >= y - 8 && t.y0 < y + h + 8;
+          (inside ? rays : ring) += inside || near ? t.rays_total : 0;
+        }
+        CHECK(part.counters.rays_total == rays);
+        CHECK(part.apron_rays > 0 && part.apron_rays < ring);
+      }
+    }
+}
+
 }  // namespace
 
 int main() {
   check_render(test::make_scene());
+  check_windows(test::make_scene());
   return check_exit_code();
 }

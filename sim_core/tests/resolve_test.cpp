@@ -114,5 +114,39 @@ int main() {
     CHECK(parts.ambient_filter_taps == c.ambient_filter_taps && parts.resolve_bytes == c.resolve_bytes);
     CHECK(c.resolve_bytes == 12u * 8u * (sim_core::kResolveColorBytes + sim_core::kResolveAmbientBytes));
   }
+  {  // The resolve's reach (what a window's apron must hold): a pixel's value changes with a sample d
+     // sub-samples past its own exactly when d <= resolve_reach: the filter's guard (k sub-samples, 1 px)
+     // plus, with AO, the ambient pool around each of them (2k, 2 px). 1 to 3 px whatever k is.
+    for (int k = 1; k <= 4; ++k)
+      for (bool ambient : {false, true}) {
+        const int reach = sim_core::resolve_reach(k, ambient);
+        CHECK(reach == (k > 1 ? k : 0) + (ambient ? 2 * k : 0));
+        CHECK(sim_core::resolve_reach_pixels(k, ambient) == (k > 1 ? 1 : 0) + (ambient ? 2 : 0));
+        if (k == 1 && !ambient) continue;
+        const int w = 16, h = 12, px = 6, py = 5;
+        auto filled = [&](int perturbed_x) {
+          SampleBuffer b;
+          b.allocate(w, h, k, ambient);
+          const int first = -b.guard, last_x = w * k + b.guard, last_y = h * k + b.guard;
+          for (int sy = first; sy < last_y; ++sy)
+            for (int sx = first; sx < last_x; ++sx) {
+              const bool hit = sx == perturbed_x && sy == py * k;
+              const float open = hit ? 16.f : static_cast<float>((sx * 7 + sy * 3) % 9);
+              const float c = hit ? 5.f : 0.1f + 0.01f * static_cast<float>((sx + 2 * sy) % 5);
+              b.set(sx, sy, Vec3(c, c, c),
+                    AmbientSample{Vec3(0.5f, 0.5f, 0.5f), Vec3(open, open, open), Vec3(16.f, 16.f, 16.f)}, 0,
+                    Vec3(0.f, 0.f, 1.f), Vec3(static_cast<float>(sx), static_cast<float>(sy), 0.f));
+            }
+          std::vector<float> out(static_cast<std::size_t>(w * h * 3));
+          sim_core::resolve_pixels(b, w, h, Vec3(0.f, 0.f, 10.f), out.data(), 1);
+          return out[static_cast<std::size_t>((py * w + px) * 3)];
+        };
+        const float base = filled(-1000);
+        for (int d = 1; d <= reach + 2; ++d) {
+          const bool changed = filled((px + 1) * k - 1 + d) != base;
+          CHECK(changed == (d <= reach));
+        }
+      }
+  }
   return check_exit_code();
 }

@@ -22,8 +22,12 @@ int multirate_block(int previous_block, float previous_ratio, std::uint64_t prev
 // Renders the tile at pixel rect [x0, x0 + w) x [y0, y0 + h) into `fb` with reference spacing `spacing`
 // (1 = trace every sample) on a k x k sub-pixel grid; fills `stat`. With a multi-sample buffer in `fb`
 // (k > 1) the tile writes its sub-samples there, and a tile on the frame's edge also traces the guard
-// sub-samples beyond it that the pixel filter reads.
+// sub-samples beyond it that the pixel filter reads. With `part` (a rectangle of the tile's pixels, in the
+// same coordinates), only that part is written to `fb`, each of its samples as the whole tile has it: the
+// tile is traced only where they depend on it (at full rate the part's own samples; adaptively the
+// reference cells holding them), so the tile's statistics then cover that work. The tile itself may reach
+// beyond `fb` (an apron tile of a window, render.h); `part` may not.
 void render_tile(TileContext& ctx, FrameBuffers& fb, int x0, int y0, int w, int h, int k, int spacing,
-                 TileStat* stat);
+                 TileStat* stat, const PixelRect* part = nullptr);
 
 }  // namespace sim_core

@@ -25,6 +25,10 @@ struct Camera {
   int frame_height() const { return full_height > 0 ? full_height : height; }
   // Ray through continuous pixel coordinates (x right, y down; pixel centres at +0.5). Unit direction.
   Ray primary(float px, float py) const;
+  // The same through continuous coordinates of the whole frame (primary(px, py) is
+  // primary_frame(px + crop_x, py + crop_y)): a window that computes its samples' positions in the frame
+  // traces the frame's rays to the bit.
+  Ray primary_frame(float fx, float fy) const;
   // Projects a world point: continuous pixel coordinates and camera-space depth along forward.
   // Returns false when the point is behind the camera.
   bool project(Vec3 p, float* px, float* py, float* depth) const;

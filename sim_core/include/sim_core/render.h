@@ -62,7 +62,7 @@ struct FrameBuffers {
 
 // The tiles of a frame, row-major: tile t covers [x0, x0 + width) x [y0, y0 + height), clipped to the frame.
 // Tile edges lie at origin + n * tile_size; an origin in (-tile_size, 0] makes the first row/column partial
-// (a window's apron keeps the tile grid of the window it surrounds).
+// (a window's apron keeps the tile grid of the window it surrounds, its outer tiles cut off by it).
 struct TileGrid {
   int width, height, tile_size, origin_x, origin_y, tiles_x, tiles_y;
   TileGrid(int w, int h, int ts, int ox = 0, int oy = 0)
@@ -78,6 +78,7 @@ struct RenderOutput {
   std::vector<TileStat> tiles;
   ComparatorHistogram histogram{};
   MultirateState multirate;
+  std::uint64_t apron_rays = 0;  // rays a window traced for its apron (real work, in no counter)
   std::vector<TracedRay> rays;  // with TraceOptions::log_rays: every traced ray, tile by tile in tile order
 };
 
@@ -97,11 +98,18 @@ void render_tiles(const Scene& scene, const Camera& camera, const RenderSettings
 // Renders `camera` (already at render resolution) with `settings`. `previous` may be null. `cache` is the
 // T&I unit's node/triangle cache, `texture_cache` the shading cores' texture cache. Sub-samples and AO go
 // through the resolve pass (resolve.h). A window of a larger frame (Camera::crop_*) that needs the resolve
-// pass also traces an apron of whole tiles around it (the samples its pixels' filters read, as the whole
-// frame has them), uncounted: windows that tile the frame on its tile grid sum to the whole frame's image
-// and counters.
+// pass also traces an apron around it: the resolve_reach_pixels(k, AO) pixels its pixels' filters read
+// (1 to 3), as the whole frame has them (the apron's tiles are the frame's, cut off at the apron's edge;
+// an adaptive one traces the reference cells that hold the apron's samples), uncounted: windows that
+// tile the frame on its tile grid sum to the whole frame's image and counters.
 RenderOutput render_frame(const Scene& scene, const Camera& camera, const RenderSettings& settings, int threads,
                           const MultirateState* previous, const CacheConfig& cache,
                           const TraceOptions& trace = {}, const CacheConfig& texture_cache = kDefaultTextureCache);
+
+// How far beyond each edge a window of a frame rendered with `settings` traces samples (`ambient`: AO
+// rays are traced, i.e. ao_samples > 0 under a world that gives light): 0 without a resolve pass, else
+// resolve_reach_pixels, plus in the adaptive modes the rest of the reference cells that hold them (at most
+// block - 1 samples, ceil((block - 1) / k) pixels, more; some of them interpolated). For pricing windows.
+int window_apron_pixels(const RenderSettings& settings, bool ambient);
 
 }  // namespace sim_core

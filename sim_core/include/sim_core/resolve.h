@@ -35,6 +35,17 @@ inline constexpr float kAmbientPlaneTolerance = 0.02f;  // off the tangent plane
 inline constexpr std::uint64_t kResolveColorBytes = 8;
 inline constexpr std::uint64_t kResolveAmbientBytes = 32;
 
+// How far the resolve pass reads, in sub-samples along each axis, on a k x k sub-sample grid:
+// - ambient_reach: the ambient filter's pool around a sample (ceil(kAmbientRadius * k): 2 px);
+// - resolve_reach: around a pixel's own sub-samples, what its resolved value depends on: the pixel filter's
+//   guard (PixelFilter(k).guard = k sub-samples, 1 px: the Blackman-Harris support of +-1.5 px around the
+//   pixel centre reaches 1 px past the pixel's edge) and, with AO, the ambient pool around each of those
+//   samples (their denoised colours). 1 spp without AO: 0.
+int ambient_reach(int k);
+int resolve_reach(int k, bool ambient);
+// resolve_reach in whole pixels (rounded up): 1 (filter), 2 (AO at 1 sample per pixel) or 3 (both).
+int resolve_reach_pixels(int k, bool ambient);
+
 // Filter weight at `offset` pixels from the pixel centre (1 at the centre, 0 at and beyond the radius).
 float blackman_harris(float offset);
 

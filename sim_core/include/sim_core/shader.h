@@ -82,5 +82,8 @@ struct TileContext {
 // Traces and shades the primary sample through continuous pixel coordinates (px, py) of the camera.
 // `key` identifies the sample (its global sample-grid coordinates) and seeds all its random numbers.
 SampleResult trace_sample(TileContext& ctx, float px, float py, std::uint32_t key);
+// The same through continuous coordinates of the whole frame (Camera::primary_frame): what the tile
+// sampler uses, so that a window's samples are the frame's to the bit wherever the window lies.
+SampleResult trace_frame_sample(TileContext& ctx, float fx, float fy, std::uint32_t key);
 
 }  // namespace sim_core

@@ -16,6 +16,7 @@ from .render import (
     render_stereo,
     render_tiled,
     render_window,
+    window_apron,
 )
 from .scene import Scene
 from .scene_data import CameraData, Light, Material, SceneData, Texture
@@ -53,4 +54,5 @@ __all__ = [
     "render_window",
     "smooth_normals",
     "sustained_power",
+    "window_apron",
 ]

@@ -311,6 +311,16 @@ def _check_settings(settings: Any) -> RenderSettings:
     return settings
 
 
+def window_apron(settings: RenderSettings, ambient: bool = True) -> int:
+    """Pixels beyond each edge of a window that ``render_window`` traces for the resolve pass (0 without
+    one): 1 for the pixel filter of a sub-pixel grid (its 1.5 px support reaches 1 px past a pixel), 2
+    for the ambient pool of AO (3 with both), and in the adaptive modes the rest of the reference cells
+    that hold them (up to ``block - 1`` samples more). ``ambient``: AO rays are traced (``ao_samples`` > 0
+    under a world that gives light; True is the bound when the world is not known)."""
+    s = _check_settings(settings)
+    return int(_core.window_apron_pixels(s.to_native(), bool(ambient and s.ao_samples > 0)))
+
+
 def render_window(
     scene: Scene,
     camera: Camera,
@@ -330,6 +340,9 @@ def render_window(
     The result's ``image`` (and AOVs) are the window's pixels at the traced resolution (not upscaled);
     ``render_resolution`` is the whole traced frame's size; ``tile_stats`` carry frame coordinates;
     ``counters`` are the window's tiles' sums. No multi-rate history (``multirate_state`` None).
+    A window that goes through the resolve pass also traces an apron of ``window_apron(settings)`` pixels
+    or fewer around itself (what the pixel filter and the ambient pool read, up to the frame's edges):
+    real work in no counter, whose rays are ``extra["apron_rays"]``.
     """
     settings = _check(scene, camera, settings)
     w, h = _render_size(camera, settings)
@@ -359,7 +372,7 @@ def render_window(
         settings=settings,
         camera=camera,
         render_resolution=(w, h),
-        extra={"window": (x, y, ww, wh)},
+        extra={"window": (x, y, ww, wh), "apron_rays": int(d["apron_rays"])},
     )
 
 

@@ -60,6 +60,7 @@ nb::dict render_output_dict(const RenderOutput& o, const TraceOptions& trace) {
   nb::dict counters;
   o.counters.for_each([&](const char* name, std::uint64_t v) { counters[name] = v; });
   d["counters"] = counters;
+  d["apron_rays"] = o.apron_rays;
   std::vector<std::uint64_t> hist(o.histogram.begin(), o.histogram.end());
   d["comparator_histogram"] = to_numpy(hist, {hist.size()});
   nb::list tiles;
@@ -152,6 +153,8 @@ void bind_render(nb::module_& m) {
       "Renders one frame, or the width x height window at (crop_x, crop_y) of a full_width x full_height\n"
       "frame. frame rows: position, right, up, forward (unit) of the camera. bvh_width 2: the binary\n"
       "reference walk; log_rays: also return every traced ray (\"rays\").");
+  m.def("window_apron_pixels", &window_apron_pixels, "settings"_a, "ambient"_a,
+        "Pixels beyond each edge of a window that render_frame traces for the resolve pass (0: none).");
 }
 
 }  // namespace sim_core
