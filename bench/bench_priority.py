@@ -3,9 +3,10 @@
 Optimises one scene as the main job does (``tools.demo.job_request``: the service defaults plus the
 demo's stated display size and points, or the options given; in this process, one evaluation at a
 time) twice on one search cache: once pricing at display resolution each frontier's meeting-tier
-points only (as before the slow tier, ``display_points`` of them), once with the slow tier's two ends
-too (now). The display pricing starts afresh for each (its cache entries and camera designs dropped in
-between), so its CPU seconds compare; the searches are the same (the second one is answered from the
+points only (as before the slow tier, ``display_points`` of them), once with the slow tier's points
+too (now: up to as many again, spread along it; until then its two ends only). The display pricing
+starts afresh for each (its cache entries and camera designs dropped in between), so its CPU seconds
+compare; the searches are the same (the second one is answered from the
 cache). Then, along the path (every ``--stride``-th frame), the store's predictions under the error
 budget for both priorities: the share of frames whose chosen setting keeps the budget, the share that
 keeps up with the frame rate, the mean frame rate reached and the mean power.
@@ -36,7 +37,7 @@ from service.executors import InProcessExecutor  # noqa: E402
 from service.jobs import build_space, spec_options  # noqa: E402
 from service.octree import builder  # noqa: E402
 from service.optimize import OptimizeConfig, optimize_path  # noqa: E402
-from service.store import ParetoStore, meets_frame_rate  # noqa: E402
+from service.store import ParetoStore, split_by_rate  # noqa: E402
 from tools import demo  # noqa: E402
 
 
@@ -61,13 +62,12 @@ class PricingClock:
         DisplayPricer.price = price  # type: ignore[method-assign]
 
 
-SPREAD = builder.spread_points  # the display points now: the meeting tier's spread and the slow tier's ends
+SPREAD = builder.spread_points  # the display points now: the meeting tier's spread and the slow tier's
 
 
 def meeting_only(points: list[tuple[Any, ...]], k: int, fps: float | None = None) -> list[tuple[Any, ...]]:
     """The display points as before the slow tier: the meeting tier's spread alone."""
-    fast = [pt for pt in points if fps is None or meets_frame_rate(float(pt[3]), fps)]
-    return SPREAD(fast or points, k)
+    return SPREAD(split_by_rate(points, fps)[0], k)
 
 
 def forget_display_pricing(cache: EvalCache) -> None:
@@ -109,7 +109,7 @@ def main() -> None:
     clock = PricingClock()
     clock.install()
     runs: dict[str, tuple[ParetoStore, float, int, float]] = {}
-    variants = [("meeting tier only (before)", meeting_only), ("+ slow tier's ends (now)", SPREAD)]
+    variants = [("meeting tier only (before)", meeting_only), ("+ slow tier spread (now)", SPREAD)]
     for label, points in variants[1:] if args.now_only else variants:
         builder.spread_points = points  # type: ignore[assignment]
         forget_display_pricing(cache)

@@ -162,8 +162,8 @@ OPTIONS: tuple[Option, ...] = (
            "tile estimator: share of the frame's blocks traced at the path's resolution",
            minimum=0.01, maximum=1.0, metavar="F", group="Evaluation", precision=2),
     Option("display_points", int, 8, "Points priced",
-           "at most this many points of each frontier's settings that keep up with the frame rate, spread "
-           "along it (both ends kept), plus the two ends of its slower, more accurate settings, are "
+           "at most this many points of each frontier's settings that keep up with the frame rate, and as "
+           "many of its slower, more accurate settings, each spread along its tier (both ends kept), are "
            "priced at the path's resolution and kept in the store (0: all; each costs a share of a "
            "full-size frame at every camera the frontier is priced at)", minimum=0, maximum=64, metavar="N",
            group="Evaluation"),

@@ -17,7 +17,7 @@ from service.display_pricing import DisplayPricer
 from service.evaluation import CameraSpec, Evaluator
 from service.nsga import NSGAConfig
 from service.params import Indices, ParameterSpace
-from service.store import ParetoStore, meets_frame_rate
+from service.store import ParetoStore, split_by_rate
 
 from .lattice import Lattice, root_cube
 from .path_samples import PathSampling
@@ -49,8 +49,7 @@ class OctreeConfig:
     warm_generations: int = 5  # "path" sampling: generations of the warm-started searches in between
     # the path's resolution, where every recorded point is priced again (None: the search's figures)
     display: tuple[int, int] | None = None
-    # at most this many points of each frontier's meeting tier priced there, plus the slow tier's two
-    # ends (0: all)
+    # at most this many points of each tier of each frontier priced there (0: all; spread_points)
     display_points: int = 0
 
     def __post_init__(self) -> None:
@@ -99,19 +98,24 @@ def _spread(points: list[tuple[Any, ...]], k: int) -> list[tuple[Any, ...]]:
 
 
 def spread_points(points: list[tuple[Any, ...]], k: int, fps: float | None = None) -> list[tuple[Any, ...]]:
-    """At most ``k`` (0: all) of a frontier's points ((indices, error, power, frame time)) that meet
-    ``fps``, spread along it by error (both ends, where the least error and the cheapest sit, and evenly
-    between them), and at most the two ends of its slow tier (the points that miss ``fps`` while others
-    meet it: the most accurate, where the maximum-quality setting sits, and the cheapest), so pricing a
-    frontier costs at most ``k`` + 2 points. Without ``fps`` (or when no point meets it) one tier."""
+    """The points of a frontier ((indices, error, power, frame time)) priced at display resolution: at
+    most ``k`` (0: all) of each tier (:func:`service.store.split_by_rate` at ``fps``: the points that
+    meet it, then the slow tier, those that miss it while others meet it), each spread along its tier by
+    error (both ends, the least error and the cheapest, when ``k`` >= 2, and evenly between them).
+    Without ``fps`` (or when no point meets it) one tier.
+
+    The slow tier gets the same ``k`` as the meeting tier: under budget first it is where an error
+    budget that no real-time setting keeps is kept, and the lookup can only pick what was priced. With
+    its two ends alone it offered Max and the cheapest slow point, so wherever the cheapest was over the
+    budget the lookup picked Max, far below the budget and at Max's frame rate; spread as finely as the
+    meeting tier, an error budget finds a slow point about as close to it in either tier. Cost: at most
+    2 ``k`` points a frontier at each of its cameras (``k`` + 2 with the slow tier's ends alone), the
+    slow ones near-Max settings, each about as costly to price as the reference render; slow tiers
+    shorter than ``k`` cost only their own points."""
     if k <= 0:
         return list(points)
-    meets = [fps is None or meets_frame_rate(float(pt[3]), fps) for pt in points]
-    if all(meets) or not any(meets):
-        return _spread(points, k)
-    fast = _spread([pt for pt, m in zip(points, meets, strict=True) if m], k)
-    slow = _spread([pt for pt, m in zip(points, meets, strict=True) if not m], 2)
-    return fast + slow
+    fast, slow = split_by_rate(points, fps)
+    return _spread(fast, k) + _spread(slow, k)
 
 
 def time_left(spent_s: float, done: int, total: int) -> float | None:
@@ -169,8 +173,8 @@ class OctreeBuilder:
         """Every measured frontier's points priced again at the path's resolution at the frontier's
         cameras (its sample, and for path samples its guards), keeping each point's worst error, power
         and frame time there: the store's figures are the display resolution's, the search's only chose
-        the points (:func:`spread_points`: at most ``display_points`` of the meeting tier and the slow
-        tier's two ends). The store's tiers are drawn again from the display figures
+        the points (:func:`spread_points`: at most ``display_points`` of the meeting tier and as many of
+        the slow tier). The store's tiers are drawn again from the display figures
         (``Frontier.from_points``): a point may meet the rate at one resolution and miss it at the
         other."""
         assert self.pricer is not None and self.cfg.display is not None

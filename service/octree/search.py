@@ -25,7 +25,7 @@ from typing import Any
 from service.evaluation import CameraSpec, Evaluator
 from service.nsga import NSGA2, Archive, NSGAConfig, enumerate_space
 from service.params import Indices, ParameterSpace
-from service.store import frontier_tiers, meets_frame_rate
+from service.store import frontier_tiers, meets_frame_rate, split_by_rate
 
 #: A frontier: (full index vector, error, power, frame time) of each setting.
 Points = list[tuple[Indices, float, float, float]]
@@ -145,8 +145,7 @@ class Search:
         """The points of a frontier that keep up with the run's frame rate (all of them when none
         does): what warm starts and frontier comparisons read, so the slow tier adds to the searches'
         results without steering them."""
-        fast = [pt for pt in points if meets_frame_rate(pt[3], self.ev.fps)]
-        return fast or list(points)
+        return split_by_rate(points, self.ev.fps)[0]
 
     def keeps_up(self, ev: Any) -> bool:
         """Whether an evaluation's frame time meets the run's target frame rate."""

@@ -18,7 +18,7 @@ from .camera import VIEW_FORWARD, VIEW_NAMES, VIEW_UP, camera_rotation, face_of,
 from .codec import quantise_directions, quantise_eyes
 from .format import FORMAT_NAME, FORMAT_VERSION, READABLE_VERSIONS
 from .frame_rate import frame_rate_reached, meets_frame_rate
-from .frontier import Frontier, frontier_tiers
+from .frontier import Frontier, frontier_tiers, split_by_rate
 from .lookup import LookupResult
 from .packing import (
     BITS_PER_PARAM,
@@ -38,6 +38,6 @@ __all__ = [
     "READABLE_VERSIONS", "VIEW_FORWARD", "VIEW_NAMES", "VIEW_UP", "Frontier", "LookupResult",
     "ParetoStore", "StoredParameter", "TemporalFilter", "camera_rotation", "face_of", "frame_rate_reached",
     "frontier_tiers",
-    "meets_frame_rate", "pack_array", "pack_indices", "quantise_directions", "quantise_eyes", "unpack_array",
-    "unpack_indices", "view_up",
+    "meets_frame_rate", "pack_array", "pack_indices", "quantise_directions", "quantise_eyes", "split_by_rate",
+    "unpack_array", "unpack_indices", "view_up",
 ]

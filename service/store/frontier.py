@@ -18,12 +18,16 @@ every setting.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from typing import Any, TypeVar
 
 import numpy as np
 
 from .frame_rate import meets_frame_rate
+
+#: A frontier point as the search and the display pricing hold it: (settings, error, power, frame time, ...).
+PointT = TypeVar("PointT", bound=tuple[Any, ...])
 
 
 def _front(candidates: np.ndarray, error: np.ndarray, power: np.ndarray) -> list[int]:
@@ -53,6 +57,21 @@ def frontier_tiers(error: Iterable[float], power: Iterable[float], meets: Iterab
     fast = _front(every[m], e, p)
     best = e[fast[-1]]  # the most accurate meeting setting ends the meeting tier
     return fast, _front(every[~m & (e < best)], e, p)
+
+
+def split_by_rate(points: Sequence[PointT], fps: float | None) -> tuple[list[PointT], list[PointT]]:
+    """(meeting, slow): the ``points`` ((settings, error, power, frame time, ...), in their order) that
+    keep up with ``fps`` and those that miss it, by :func:`.frame_rate.meets_frame_rate` on each point's
+    frame time. One tier, (all of them, []), without ``fps`` or when none keeps up: the same rule as
+    :func:`frontier_tiers`, for point lists (the search's warm starts and comparisons, the display
+    pricing's choice of points)."""
+    if fps is None:
+        return list(points), []
+    meeting: list[PointT] = []
+    slow: list[PointT] = []
+    for pt in points:
+        (meeting if meets_frame_rate(float(pt[3]), fps) else slow).append(pt)
+    return (meeting, slow) if meeting else (list(points), [])
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,170 @@
+"""Which frontier points are priced at display resolution (``service.octree.builder.spread_points``) and
+the one split of point lists by the frame rate (``service.store.split_by_rate``) that it, the search's
+warm starts and its comparisons share.
+
+Property tests over random two-tier point lists: at most ``k`` points of each tier, both ends of each
+tier, the slow tier spread as the meeting tier is; and a budget-first lookup on a store drawn from the
+spread points finds a slow setting near an error budget instead of max quality."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from service.octree.builder import spread_points
+from service.octree.search import Search
+from service.store import Frontier, ParetoStore, meets_frame_rate, pack_indices, split_by_rate
+from tests.test_store_lookup import PARAMS
+
+FPS = 30.0
+
+#: (settings, error, power, frame time) points; the settings are the point's position, so that equal
+#: figures stay distinguishable
+point_lists = st.lists(st.tuples(st.floats(0.0, 1.0), st.floats(0.0, 5.0),
+                                 st.one_of(st.floats(0.0, 0.2), st.sampled_from([1 / FPS, 0.0]))),
+                       max_size=40).map(lambda pts: [((i,), e, p, t) for i, (e, p, t) in enumerate(pts)])
+
+
+def _ends(tier: list[tuple]) -> set[tuple[float, float]]:
+    """A tier's two ends as the spread orders it, by (error, -power): the least error (the most power
+    among equal errors) and the most error (the least power among equal ones)."""
+    keys = [(pt[1], -pt[2]) for pt in tier]
+    return {min(keys), max(keys)}
+
+
+@settings(max_examples=300, deadline=None)
+@given(points=point_lists, fps=st.one_of(st.none(), st.just(FPS), st.floats(1.0, 200.0)))
+def test_split_by_rate_parts_the_points_as_the_frame_rate_rule_does(points, fps) -> None:
+    meeting, slow = split_by_rate(points, fps)
+    meets = [fps is not None and meets_frame_rate(pt[3], fps) for pt in points]
+    if not any(meets):  # one tier: all of them, as frontier_tiers has it
+        assert meeting == points and slow == []
+        return
+    assert meeting == [pt for pt, m in zip(points, meets, strict=True) if m]  # order kept
+    assert slow == [pt for pt, m in zip(points, meets, strict=True) if not m]
+    # the search's warm starts and comparisons read the same meeting tier
+    search = Search(SimpleNamespace(fps=fps), None, None, 0)  # type: ignore[arg-type]
+    assert search.meeting_tier(points) == meeting
+
+
+@settings(max_examples=300, deadline=None)
+@given(points=point_lists, k=st.integers(0, 10), fps=st.one_of(st.none(), st.just(FPS)))
+def test_spread_prices_at_most_k_of_each_tier_with_both_ends(points, k, fps) -> None:
+    picked = spread_points(points, k, fps)
+    if k == 0:
+        assert picked == points
+        return
+    meeting, slow = split_by_rate(points, fps)
+    got_meeting = [pt for pt in picked if pt in meeting]
+    got_slow = [pt for pt in picked if pt in slow]
+    assert picked == got_meeting + got_slow  # the meeting tier's picks first, each in its list's order
+    assert got_meeting == [pt for pt in meeting if pt in picked]
+    assert got_slow == [pt for pt in slow if pt in picked]
+    # at most k of each tier, exactly k when it holds more: the slow tier's intermediate points are
+    # priced as the meeting tier's are (its two ends alone before)
+    assert len(got_meeting) == min(k, len(meeting)) and len(got_slow) == min(k, len(slow))
+    assert len(picked) <= 2 * k
+    for tier, got in ((meeting, got_meeting), (slow, got_slow)):
+        if k >= 2 and tier:  # both ends of each tier: the least error and the cheapest
+            assert _ends(tier) <= {(pt[1], -pt[2]) for pt in got}
+
+
+def test_the_slow_tier_is_spread_evenly_by_error() -> None:
+    """Nine slow points from error 0.04 down to 0 (max quality), four priced: both ends and two between,
+    evenly by rank; the meeting tier's three points all priced."""
+    meeting = [((0, j), e, p, 0.02) for j, (e, p) in enumerate(((0.3, 0.2), (0.1, 0.4), (0.05, 0.6)))]
+    slow = [((1, j), 0.04 - 0.005 * j, 0.7 + 0.05 * j, 0.04 + 0.01 * j) for j in range(9)]
+    picked = spread_points(meeting + slow, 4, FPS)
+    assert picked[:3] == meeting
+    assert [round(pt[1], 3) for pt in picked[3:]] == [0.04, 0.025, 0.015, 0.0]
+
+
+def _setting(n: int) -> tuple[int, int, int]:
+    """The ``n``-th of the 24 settings of the test parameters (``PARAMS``: 3 x 2 x 4 values)."""
+    return n % 3, (n // 3) % 2, n // 6
+
+
+def _one_frontier_store(points: list[tuple]) -> ParetoStore:
+    """One leaf whose six views share the frontier of ``points`` (drawn as the builder's store is:
+    ``Frontier.from_points`` at the store's frame rate)."""
+    corners = np.array([[(k & 1), (k >> 1) & 1, (k >> 2) & 1] for k in range(8)], dtype=np.int64)
+    fr = Frontier.from_points([pack_indices(pt[0]) for pt in points], [pt[1] for pt in points],
+                              [pt[2] for pt in points], [pt[3] for pt in points], fps=FPS)
+    return ParetoStore(PARAMS, np.zeros(3), 10.0, 0, np.array([-1]), corners, np.zeros((8, 6), np.int64),
+                       [fr], fps=FPS, meta={"static_power_w": 0.1})
+
+
+def test_budget_first_finds_an_intermediate_slow_point_near_the_budget() -> None:
+    """Real-time settings reach error 0.05 at best; nine slower ones reach 0.04 down to 0. With the
+    spread points priced, an error budget of 0.02 picks the slow setting at 0.015 (0.09 s a frame), not
+    max quality (0.12 s), which was the only slow point within it when only the ends were priced."""
+    meeting = [(_setting(j), e, p, 0.02) for j, (e, p) in enumerate(((0.3, 0.2), (0.1, 0.4), (0.05, 0.6)))]
+    slow = [(_setting(3 + j), 0.04 - 0.005 * j, 0.7 + 0.05 * j, 0.04 + 0.01 * j) for j in range(9)]
+    store = _one_frontier_store(spread_points(meeting + slow, 4, FPS))
+    fast, slow_tier = store.frontiers[0].tiers(FPS)
+    assert slow_tier is not None and len(slow_tier) == 4 and len(fast) == 3
+    hit = store.lookup((5.0, 5.0, 5.0), direction=(1.0, 0.0, 0.0), error_budget=0.02, priority="budget")
+    assert not hit.infeasible and hit.meets_fps is False
+    assert hit.indices == _setting(3 + 5) and round(hit.error, 3) == 0.015
+    assert abs(hit.frame_time_s - 0.09) < 1e-6 and abs(hit.fps - 1 / 0.09) < 0.01
+    # frame rate first still keeps the frame rate (and misses the budget)
+    first = store.lookup((5.0, 5.0, 5.0), direction=(1.0, 0.0, 0.0), error_budget=0.02)
+    assert first.infeasible and first.meets_fps and round(first.error, 3) == 0.05
+
+
+def test_the_builder_prices_the_spread_points_and_draws_the_tiers_from_their_display_figures() -> None:
+    """The builder's display pricing with a stand-in pricer: it is asked for the meeting tier and the
+    slow tier's spread (not the slow tier's ends alone), the store's tiers are drawn from the figures it
+    returns (the cheapest slow point keeps up at display resolution and joins the meeting tier), and a
+    budget-first lookup picks the intermediate slow point within the budget."""
+    import itertools
+
+    from service.octree.builder import OctreeBuilder, OctreeConfig, PathFrames
+    from service.params import default_space
+
+    space = default_space().subset(["sampling", "max_depth", "resolution_scale"])
+    settings_ = [space.expand(f) for f in itertools.product(*(range(n) for n in space.free_n_values))][:12]
+    meeting = [(settings_[j], e, p, 0.02) for j, (e, p) in enumerate(((0.3, 0.2), (0.1, 0.4), (0.05, 0.6)))]
+    slow = [(settings_[3 + j], 0.04 - 0.005 * j, 0.7 + 0.05 * j, 0.04 + 0.01 * j) for j in range(9)]
+    display = {pt[0]: (pt[1], pt[2], pt[3]) for pt in meeting + slow}
+    display[slow[0][0]] = (0.04, 0.7, 0.03)  # keeps up with 30 fps at display resolution
+
+    class Pricer:
+        ev = SimpleNamespace(executor=None)
+
+        def __init__(self) -> None:
+            self.asked: list[list[tuple[int, ...]]] = []
+
+        def price(self, requests):
+            self.asked += [list(xs) for _, xs in requests]
+            return [[SimpleNamespace(error=display[x][0], power_w=display[x][1], frame_time_s=display[x][2])
+                     for x in xs] for _, xs in requests]
+
+    cfg = OctreeConfig(threshold_power_w=0.1, threshold_error=0.01, view_sampling="axis", display=(64, 36),
+                       display_points=4)
+    path = PathFrames(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]))
+    pricer = Pricer()
+    b = OctreeBuilder(SimpleNamespace(fps=FPS, evaluations=0, cache_hits=0), space, path, cfg,  # type: ignore[arg-type]
+                      pricer=pricer)  # type: ignore[arg-type]
+
+    def build() -> None:  # one measured frontier, every view of the root's corners reads it
+        b.lattice.add_root()
+        b.lattice.set_frontier(0, 0, meeting + slow)
+        for views in b.lattice.corner_views:
+            views[:] = [0] * len(views)
+
+    b.sampling.build = build  # type: ignore[method-assign]
+    b.run()
+    want = [pt[0] for pt in meeting] + [slow[j][0] for j in (0, 3, 5, 8)]
+    assert pricer.asked == [want] and b.display_points == 7
+    store = b.to_store(profile="mobile", fps=FPS, aspect=16 / 9, meta={"static_power_w": 0.1})
+    fast, slow_tier = store.frontiers[0].tiers(FPS)
+    assert slow_tier is not None
+    assert [round(float(e), 3) for e in fast.error] == [0.3, 0.1, 0.05, 0.04]
+    assert [round(float(e), 3) for e in slow_tier.error] == [0.025, 0.015, 0.0]
+    hit = store.lookup((0.5, 0.0, 0.0), direction=(1.0, 0.0, 0.0), error_budget=0.02, priority="budget")
+    assert not hit.infeasible and hit.meets_fps is False and round(hit.error, 3) == 0.015
+    assert hit.indices == tuple(slow[5][0])
