@@ -180,6 +180,8 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, config: O
         "fixed_parameters": dict(space.fixed_reasons),
         "evaluations": evaluator.evaluations,
         "cache_hits": evaluator.cache_hits,
+        # settings between the most accurate real-time one and Max evaluated for the slow tier (Search.probes)
+        "probe_evaluations": builder.search.probes_evaluated,
         "views_optimised": builder.state.views_done,
         "elapsed_s": round(time.perf_counter() - t0, 3),
         "scene": handle.content_hash,

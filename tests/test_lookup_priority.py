@@ -221,8 +221,9 @@ def test_round_trip_keeps_the_slow_tier_and_a_version_4_store_still_reads() -> N
 @pytest.mark.slow
 def test_a_real_store_keeps_the_settings_too_slow_for_its_frame_rate() -> None:
     """The tests' teapot optimised for 120 fps, where its max-quality setting does not keep up: every
-    frontier ends with the slow tier (max quality, error 0, included), priced as measured, and a
-    budget-first lookup keeps an error budget no real-time setting keeps."""
+    frontier ends with the slow tier (max quality, error 0, included), priced as measured, a
+    budget-first lookup keeps an error budget no real-time setting keeps, and the searches' probes put
+    a setting between max quality and the real-time ones in a slow tier (max quality alone without them)."""
     from tracer_scenes import teapot_scene
 
     from service.camera_path import CameraPath
@@ -278,6 +279,22 @@ def test_a_real_store_keeps_the_settings_too_slow_for_its_frame_rate() -> None:
         assert not hit.infeasible and hit.error <= budget and hit.meets_fps is False
         assert hit.fps is not None and hit.fps < 120.0 and math.isfinite(hit.power_w)
         assert store.lookup(f.position, direction=f.direction, error_budget=budget).infeasible
+    # the searches' probes of the slow region (Search.probes) give a slow tier a point between max
+    # quality and the real-time settings, which a budget between picks instead of max quality
+    assert store.meta["probe_evaluations"] > 0
+    picked = 0
+    for f in path.frames:
+        fr = store.frontier(*store.locate(f.position, direction=f.direction))
+        fast, slow = fr.tiers(store.fps)
+        if slow is None or len(slow) < 2:
+            continue
+        budget = float(slow.error[-2])  # the slow tier's least error but max quality's (0)
+        assert 0.0 < budget < float(fast.error.min())
+        hit = store.lookup(f.position, direction=f.direction, error_budget=budget, priority="budget")
+        assert hit.meets_fps is False and hit.error == pytest.approx(budget)
+        assert hit.indices != space.max_quality_indices()
+        picked += 1
+    assert picked > 0
 
 
 def test_playback_under_budget_first_shows_only_points_within_each_frames_budget() -> None:

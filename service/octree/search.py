@@ -8,7 +8,15 @@ target frame rate is infeasible (:func:`service.store.meets_frame_rate`): the se
 every setting that keeps up. A search's frontier is drawn from every setting it evaluated (its
 archive), in the store's two tiers (:func:`service.store.frontier_tiers`): the front of the settings
 that keep up, then the front of those that miss the rate but are more accurate than any that keeps up
-(the maximum-quality setting, always evaluated, ends it unless it keeps up). The scheduler
+(the maximum-quality setting, always evaluated, ends it unless it keeps up).
+
+Ranked behind every real-time setting, the slow region is barely explored by NSGA-II (a handful of
+the ~250 settings a camera evaluates), so the slow tier was often the maximum-quality setting alone and
+an error budget no real-time setting keeps was kept with Max. After each search that left settings on
+both sides of the frame rate, a few deterministic *probes* (:meth:`Search.probes`) between the most
+accurate real-time setting and Max are evaluated; those that miss the rate join the archive, so the slow
+tier can hold intermediate points. Probes that happen to keep up are dropped: the meeting tier, which
+the warm starts and frontier comparisons read, stays what the search found. The scheduler
 knows cameras and settings, not corners or views: the sampling strategies (:mod:`.view_cubes`,
 :mod:`.path_samples`) decide what to search where.
 """
@@ -22,6 +30,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from service.evaluation import CameraSpec, Evaluator
 from service.nsga import NSGA2, Archive, NSGAConfig, enumerate_space
 from service.params import Indices, ParameterSpace
@@ -29,6 +39,10 @@ from service.store import frontier_tiers, meets_frame_rate, split_by_rate
 
 #: A frontier: (full index vector, error, power, frame time) of each setting.
 Points = list[tuple[Indices, float, float, float]]
+
+#: Where the probes' chain from Max towards the most accurate real-time setting stops (fractions of the
+#: way, per parameter index).
+PROBE_CHAIN = (0.25, 0.5, 0.75)
 
 
 class Cancelled(Exception):
@@ -67,6 +81,7 @@ class Search:
         self.t0 = time.perf_counter()
         self.steps_done = 0
         self.steps_planned = 0
+        self.probes_evaluated = 0  # probe settings evaluated (cache hits included), all searches
         self.state = Progress(phase="root")
 
     # -- bookkeeping --------------------------------------------------------------------------------
@@ -103,11 +118,12 @@ class Search:
         return self.space.size <= self.exhaustive_limit
 
     def steps(self, n_jobs: int, generations: int | None = None) -> int:
-        """Steps of ``n_jobs`` searches run together: chunks of the enumeration, or NSGA-II generations."""
+        """Steps of ``n_jobs`` searches run together: chunks of the enumeration, or NSGA-II generations
+        plus one step of probes each (at most a generation's worth of settings)."""
         if self.exhaustive:
             n = math.prod(self.space.free_n_values)
             return n_jobs * -(-n // max(1, 256 // max(1, n_jobs)))
-        return n_jobs * (generations or self.nsga.generations)
+        return n_jobs * ((generations or self.nsga.generations) + 1)
 
     # -- the searches -------------------------------------------------------------------------------
 
@@ -123,8 +139,11 @@ class Search:
         if not planned:
             self.steps_planned += stage_steps
         times: list[dict[Indices, float]] = [{} for _ in cameras]  # frame time of every evaluated setting
-        archives = (self._enumerate(cameras, phase, times) if self.exhaustive
-                    else self._nsga(cameras, warm, phase, generations, times))
+        if self.exhaustive:
+            archives = self._enumerate(cameras, phase, times)
+        else:
+            archives = self._nsga(cameras, warm, phase, generations, times)
+            self._probe(cameras, archives, times, phase)
         found = [self.frontier(arch, t) for arch, t in zip(archives, times, strict=True)]
         self.state.views_done += len(cameras)
         self.steps_done = max(self.steps_done, steps_before + stage_steps)  # searches that ended early
@@ -150,6 +169,56 @@ class Search:
     def keeps_up(self, ev: Any) -> bool:
         """Whether an evaluation's frame time meets the run's target frame rate."""
         return meets_frame_rate(ev.frame_time_s, self.ev.fps)
+
+    def probes(self, archive: Archive) -> list[Indices]:
+        """Settings (free indices) between the most accurate setting of ``archive`` that keeps up and
+        the maximum-quality one, not yet evaluated: Max with each free parameter stepped one value
+        towards its cheap end, then Max moved :data:`PROBE_CHAIN` of the way (per index, rounded)
+        towards that real-time setting. None unless the archive holds settings that keep up and
+        settings that miss the rate (no frame-rate target missed: no slow tier to fill), or when one
+        that keeps up is as accurate as Max. At most the
+        number of free parameters plus ``len(PROBE_CHAIN)`` (11 on the default space)."""
+        xs, objectives = archive.arrays()
+        if not xs:
+            return []
+        meets = archive.feasible_mask(xs)
+        if meets.all() or not meets.any():
+            return []
+        ok = np.flatnonzero(meets)
+        i_best = int(ok[np.lexsort((objectives[ok, 1], objectives[ok, 0]))[0]])  # least error, then power
+        if objectives[i_best, 0] <= 0.0:
+            return []  # a setting as accurate as Max keeps up: nothing can be more accurate
+        best = xs[i_best]
+        top = self.space.restrict(self.space.max_quality_indices())
+        low = self.space.restrict(self.space.min_quality_indices())
+        out: list[Indices] = []
+        for i, (t, lo) in enumerate(zip(top, low, strict=True)):
+            if t != lo:
+                out.append((*top[:i], t + (1 if lo > t else -1), *top[i + 1:]))
+        for f in PROBE_CHAIN:
+            out.append(tuple(t + round(f * (b - t)) for t, b in zip(top, best, strict=True)))
+        return [x for x in dict.fromkeys(out) if x not in archive]
+
+    def _probe(self, cameras: Sequence[CameraSpec], archives: list[Archive],
+               times: list[dict[Indices, float]], phase: str) -> None:
+        """Every camera's :meth:`probes`, as one batch; those that miss the frame rate join its
+        archive (the slow tier's candidates), those that keep up are dropped (the meeting tier stays
+        the search's). One progress step per camera probed."""
+        jobs = [(j, self.probes(a)) for j, a in enumerate(archives)]
+        jobs = [(j, xs) for j, xs in jobs if xs]
+        if not jobs:
+            return
+        self.check_cancel()
+        res = iter(self.evaluate([(cameras[j], self.space.expand(x)) for j, xs in jobs for x in xs]))
+        for j, xs in jobs:
+            for x in xs:
+                ev = next(res)
+                if not self.keeps_up(ev):
+                    archives[j].add(x, (ev.error, ev.power_w), False)
+                    times[j][x] = ev.frame_time_s
+            self.probes_evaluated += len(xs)
+        self.steps_done += len(jobs)
+        self.report(phase)
 
     def _enumerate(self, cameras: Sequence[CameraSpec], phase: str, times: list[dict[Indices, float]]
                    ) -> list[Archive]:

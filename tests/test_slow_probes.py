@@ -1,0 +1,135 @@
+"""The search's probes of the slow region (:meth:`service.octree.search.Search.probes`): settings between
+the most accurate real-time one and max quality, evaluated after each search so that the slow tier holds
+intermediate points a budget-first lookup can pick, at a small stated cost, and only when a frame-rate
+target is missed. A stand-in evaluator with a known error and frame-time model keeps this exact."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from service.evaluation import CameraSpec
+from service.nsga import NSGAConfig
+from service.octree.search import PROBE_CHAIN, Search
+from service.params import default_space
+from service.store import Frontier, ParetoStore, meets_frame_rate
+
+FPS = 30.0
+SPACE = default_space().subset(["sampling", "max_depth", "resolution_scale"])  # 5 x 4 x 4 settings
+CAM = CameraSpec((0.0, -5.0, 1.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0), 0.7, 16, 12)
+
+
+def _gap(indices: tuple[int, ...]) -> float:
+    """How far a setting is from max quality: the free parameters' index distances, each over its range."""
+    top = SPACE.max_quality_indices()
+    return sum(abs(int(top[i]) - int(indices[i])) / (len(SPACE.parameters[i].values) - 1)
+               for i in SPACE.free_positions)
+
+
+class Model:
+    """A stand-in evaluator: error grows with the gap to max quality, power falls with it, and only the
+    settings within a gap of ~0.47 of max quality (max quality and each parameter one value below it)
+    miss 30 fps."""
+
+    def __init__(self, fps: float = FPS) -> None:
+        self.fps = fps
+        self.evaluations = 0
+        self.cache_hits = 0
+        self.asked: list[tuple[int, ...]] = []
+
+    def evaluate(self, requests):
+        out = []
+        for _, x in requests:
+            g = _gap(x)
+            self.evaluations += 1
+            self.asked.append(tuple(x))
+            out.append(SimpleNamespace(error=0.05 * g, power_w=1.1 - g / 3,
+                                       frame_time_s=0.02 + 0.025 * max(0.0, 1.0 - g)))
+        return out
+
+
+def _search(model: Model) -> Search:
+    return Search(model, SPACE, NSGAConfig(population=4, generations=2, seed=1), exhaustive_limit=0)  # type: ignore[arg-type]
+
+
+def _store(points) -> ParetoStore:
+    """One leaf whose views all read the frontier of ``points``, drawn as the builder's store is."""
+    fr = Frontier.from_points([SPACE.pack(pt[0]) for pt in points], [pt[1] for pt in points],
+                              [pt[2] for pt in points], [pt[3] for pt in points], fps=FPS)
+    corners = np.array([[(k & 1), (k >> 1) & 1, (k >> 2) & 1] for k in range(8)], dtype=np.int64)
+    return ParetoStore(SPACE.to_stored(), np.zeros(3), 10.0, 0, np.array([-1]), corners,
+                       np.zeros((8, 6), np.int64), [fr], fps=FPS, meta={"static_power_w": 0.1})
+
+
+def test_probes_put_intermediate_points_in_the_slow_tier_and_budget_first_picks_one(monkeypatch) -> None:
+    """Without probes this search's slow tier is max quality alone (NSGA-II ranks the slow settings
+    behind every real-time one and never reaches them); with them it holds the settings one value below
+    max quality that miss the rate, and an error budget between them and the best real-time setting is
+    kept with one of those, not with max quality. The meeting tier is the search's either way."""
+    with monkeypatch.context() as m:
+        m.setattr(Search, "probes", lambda self, archive: [])
+        plain = _search(Model()).run([CAM], [[]], "search")[0]
+    model = Model()
+    search = _search(model)
+    probed = search.run([CAM], [[]], "search")[0]
+
+    def tiers(points):
+        return ([pt for pt in points if meets_frame_rate(pt[3], FPS)],
+                [pt for pt in points if not meets_frame_rate(pt[3], FPS)])
+
+    fast0, slow0 = tiers(plain)
+    fast1, slow1 = tiers(probed)
+    assert fast1 == fast0  # probes that keep up are dropped: the meeting tier stays the search's
+    assert [pt[0] for pt in slow0] == [SPACE.max_quality_indices()]
+    best = min(pt[1] for pt in fast1)
+    inner = [pt for pt in slow1 if 0.0 < pt[1] < best]
+    assert len(inner) >= 2 and slow1[-1][0] == SPACE.max_quality_indices()
+    # the cost: at most the free parameters plus the chain, each evaluated once, counted as one step
+    n_probes = len(SPACE.free_positions) + len(PROBE_CHAIN)
+    assert 0 < search.probes_evaluated <= n_probes
+    assert len(model.asked) == len(set(model.asked))
+    assert search.steps_done == search.steps_planned
+
+    store = _store(probed)
+    budget = 0.5 * (inner[0][1] + best)  # kept by the cheapest intermediate slow point, by no real-time one
+    hit = store.lookup((5.0, 5.0, 5.0), direction=(1.0, 0.0, 0.0), error_budget=budget, priority="budget")
+    assert not hit.infeasible and hit.meets_fps is False
+    assert hit.indices == inner[0][0] and hit.error == pytest.approx(inner[0][1])
+    assert hit.indices != SPACE.max_quality_indices()
+    no_probes = _store(plain).lookup((5.0, 5.0, 5.0), direction=(1.0, 0.0, 0.0), error_budget=budget,
+                                     priority="budget")
+    assert no_probes.indices == SPACE.max_quality_indices()  # what budget first picked before
+
+
+def test_no_probes_when_every_setting_keeps_up() -> None:
+    """At 10 fps every setting keeps up: no slow tier to fill, no probe evaluated."""
+    model = Model(fps=10.0)
+    search = _search(model)
+    points = search.run([CAM], [[]], "search")[0]
+    assert search.probes_evaluated == 0
+    assert all(meets_frame_rate(pt[3], 10.0) for pt in points)
+
+
+def test_probes_are_max_stepped_down_then_a_chain_towards_the_best_real_time_setting() -> None:
+    """The probe list itself, from an archive of max quality (slow) and one real-time setting."""
+    from service.nsga import Archive
+
+    search = _search(Model())
+    top = SPACE.restrict(SPACE.max_quality_indices())  # (4, 3, 3)
+    real_time = (0, 1, 3)
+    archive = Archive()
+    archive.add(top, (0.0, 1.1), False)
+    archive.add(real_time, (0.05, 0.3), True)
+    got = search.probes(archive)
+    singles = [(3, 3, 3), (4, 2, 3), (4, 3, 2)]
+    chain = [(3, 3, 3), (2, 2, 3), (1, 1, 3)]  # 1/4, 1/2, 3/4 of the way (rounded half to even)
+    assert got == list(dict.fromkeys(singles + chain))
+    archive.add((3, 3, 3), (0.01, 1.0), False)
+    assert (3, 3, 3) not in search.probes(archive)  # evaluated settings are not probed again
+    # a real-time setting as accurate as max quality: nothing to probe
+    exact = Archive()
+    exact.add(top, (0.0, 1.1), False)
+    exact.add((3, 3, 3), (0.0, 0.9), True)
+    assert search.probes(exact) == []
