@@ -429,8 +429,10 @@ def test_an_idle_event_stream_sends_keepalives_and_ends_cleanly(tmp_path: Path) 
     with server_thread(Settings(data_dir=tmp_path, job_workers=1, sse_keepalive_s=0.2)) as url, \
             httpx.Client(base_url=url, timeout=60) as c:
         scene = c.post("/scenes", content=teapot_scene_glb(), headers=GLB).json()["id"]
-        busy = tiny_job(scene, resolution=(96, 72), depth_values=(0, 1, 2))
-        busy["options"].update(max_depth=1, view_sampling="aimed")
+        # busy for far longer than the two keepalives take (it is cancelled then): a job that ended first
+        # would let the waiting one run and finish instead of being cancelled while queued
+        busy = tiny_job(scene, resolution=(192, 144), depth_values=(0, 1, 2))
+        busy["options"].update(max_depth=2, view_sampling="aimed")
         first = c.post("/jobs", json=busy).json()
         waiting = c.post("/jobs", json=tiny_job(scene)).json()  # queued behind the first
         lines: list[str] = []
@@ -442,6 +444,7 @@ def test_an_idle_event_stream_sends_keepalives_and_ends_cleanly(tmp_path: Path) 
                     for job in (waiting, first):
                         assert c.post(f"/jobs/{job['id']}/cancel").status_code == 200
         assert lines[:2] == ["id: 1", "event: queued"]
+        assert "event: running" not in lines, "the busy job ended before the keepalives: make it longer"
         assert "event: cancelled" in lines and lines.count(": keepalive") >= 2  # and then the stream ended
 
 
