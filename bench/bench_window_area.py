@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 import sim_core
+from addon.core.campaign import parse_size
 from service.camera_path import CameraPath
 from service.display_pricing import DisplayPricing
 from service.display_pricing.design import build_design, display_cameras
@@ -30,15 +31,10 @@ from service.params import default_space
 REPO = Path(__file__).resolve().parent.parent
 
 
-def size(text: str) -> tuple[int, int]:
-    w, h = (int(v) for v in text.lower().split("x"))
-    return w, h
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("scenes", nargs="+")
-    ap.add_argument("--size", type=size, default=(640, 360))
+    ap.add_argument("--size", type=parse_size, default=(640, 360))
     ap.add_argument("--cameras", type=int, default=2)
     ap.add_argument("--fraction", type=float, nargs="+", default=[0.1, 0.25])
     ap.add_argument("--seed", type=int, default=0)
