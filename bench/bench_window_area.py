@@ -73,9 +73,9 @@ def main() -> None:
                 ys, xs = np.nonzero(tiles)
                 tile_px = int(np.sum(np.minimum(ts, w - xs * ts) * np.minimum(ts, h - ys * ts)))
                 a = apron_pixels(s)
-                old = traced_area(plan_windows(tiles, w, h, ts, ts), w, h, ts, ts)
+                old = traced_area(plan_windows(tiles, w, h, ts, ts), w, h, ts)
                 windows = plan_windows(tiles, w, h, ts, a)
-                new = traced_area(windows, w, h, ts, a)
+                new = traced_area(windows, w, h, a)
                 frame = w * h
                 rays = "-"
                 if args.rays:

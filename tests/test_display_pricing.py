@@ -226,22 +226,22 @@ def test_planned_windows_cover_the_tiles_and_never_trace_more_than_the_frame(wid
         assert x + w <= width and y + h <= height
         cover[y // tile:-(-(y + h) // tile), x // tile:-(-(x + w) // tile)] = True
     assert not (mask & ~cover).any()
-    cost = traced_area(windows, width, height, tile, apron)
+    cost = traced_area(windows, width, height, apron)
     assert cost <= width * height
     # never dearer than the mask's exact cover by rectangles, nor than a window per tile
     rects = [(x0 * tile, y0 * tile, min(x1 * tile, width) - x0 * tile, min(y1 * tile, height) - y0 * tile)
              for x0, y0, x1, y1 in cover_rects(mask)]
-    assert cost <= traced_area(rects, width, height, tile, apron)
-    assert cost <= traced_area(_tile_windows(mask, width, height, tile, apron), width, height, tile, apron)
+    assert cost <= traced_area(rects, width, height, apron)
+    assert cost <= traced_area(_tile_windows(mask, width, height, tile, apron), width, height, apron)
     if not mask.any():
         assert windows == []
 
 
 def test_traced_area_counts_the_aprons_clipped_to_the_frame() -> None:
-    assert traced_area([(16, 16, 16, 16)], 64, 64, 16, 3) == 22 * 22
-    assert traced_area([(0, 0, 16, 16)], 64, 64, 16, 3) == 19 * 19
-    assert traced_area([(0, 0, 64, 64)], 64, 64, 16, 3) == 64 * 64  # the whole frame has no apron
-    assert traced_area([(16, 16, 16, 16)] * 2, 64, 64, 16, 0) == 2 * 16 * 16
+    assert traced_area([(16, 16, 16, 16)], 64, 64, 3) == 22 * 22
+    assert traced_area([(0, 0, 16, 16)], 64, 64, 3) == 19 * 19
+    assert traced_area([(0, 0, 64, 64)], 64, 64, 3) == 64 * 64  # the whole frame has no apron
+    assert traced_area([(16, 16, 16, 16)] * 2, 64, 64, 0) == 2 * 16 * 16
 
 
 @pytest.mark.parametrize(("mode", "block", "ao", "apron"), [

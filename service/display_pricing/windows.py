@@ -31,10 +31,10 @@ def apron_pixels(settings: Any) -> int:
     return sim_core.window_apron(settings, ambient=True)
 
 
-def traced_area(windows: Sequence[Window], width: int, height: int, tile: int, apron: int) -> int:
+def traced_area(windows: Sequence[Window], width: int, height: int, apron: int) -> int:
     """Pixels traced by rendering each of ``windows`` alone (their aprons of ``apron`` pixels each side
     included, clipped to the ``width`` x ``height`` frame); a window that is the whole frame has no
-    apron. ``tile`` is unused (the windows are in pixels); kept so every cost takes the plan's arguments."""
+    apron."""
     total = 0
     for x, y, w, h in windows:
         a = 0 if (w, h) == (width, height) else apron
@@ -76,7 +76,7 @@ def _bands(mask: np.ndarray, width: int, height: int, tile: int, apron: int
         # filling a gap of g tiles traces no more than the two aprons it replaces when g * tile <= 2 * apron
         runs = _merged_runs(mask[r0:r1].any(axis=0), 2 * apron // tile)
         rects = [(c0, r0, c1, r1) for c0, c1 in runs]
-        return traced_area(_to_pixels(rects, width, height, tile), width, height, tile, apron), rects
+        return traced_area(_to_pixels(rects, width, height, tile), width, height, apron), rects
 
     best: list[tuple[int, list[tuple[int, int, int, int]]]] = [(0, [])]
     for r1 in range(1, nty + 1):
@@ -105,4 +105,4 @@ def plan_windows(mask: np.ndarray, width: int, height: int, tile: int, apron: in
     rows = _bands(mask, width, height, tile, apron)
     cols = [(c0, r0, c1, r1) for r0, c0, r1, c1 in _bands(mask.T, height, width, tile, apron)]
     candidates = [whole] + [_to_pixels(r, width, height, tile) for r in (rows, cols, cover_rects(mask))]
-    return min(candidates, key=lambda ws: traced_area(ws, width, height, tile, apron))
+    return min(candidates, key=lambda ws: traced_area(ws, width, height, apron))
