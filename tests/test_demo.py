@@ -42,6 +42,17 @@ def test_report_budgets_one_or_several() -> None:
     assert budget_list(None) == []
 
 
+def test_demo_searches_and_measures_on_the_profile_it_is_given() -> None:
+    """``--profile`` reaches the optimisation job (the campaign then reads it from the store); a profile
+    that is not bundled is refused before anything runs."""
+    from tools import demo
+
+    assert demo.job_request(demo.parser().parse_args([])).profile == "mobile"
+    assert demo.job_request(demo.parser().parse_args(["--profile", "desktop"])).profile == "desktop"
+    with pytest.raises(SystemExit):
+        demo.parser().parse_args(["--profile", "../etc/passwd"])
+
+
 @pytest.mark.slow
 @pytest.mark.service
 def test_demo_end_to_end_tiny(tmp_path: Path) -> None:

@@ -33,6 +33,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+import sim_core
 from addon.core import campaign, campaign_targets, report
 from addon.core.job_runner import JobRequest, follow_job
 from addon.core.local_service import LocalService, free_port
@@ -76,6 +77,9 @@ def parser() -> argparse.ArgumentParser:
     ap.add_argument("--sample-resolution", type=campaign.parse_size, default=None,
                     help="sample frames' WxH (default: height 72, width from the path's aspect)")
     ap.add_argument("--concurrency", type=int, default=2, help="evaluations in flight")
+    ap.add_argument("--profile", choices=sorted(sim_core.list_profiles()), default="mobile",
+                    help="hardware profile the store is searched and priced for, and the evaluation "
+                         "measured on (default: mobile)")
     lookup = ap.add_argument_group("the store lookup's query options (both budget modes and verify)")
     for opt in option_schema.QUERY_OPTIONS:  # --fps (default: the store's own) and --priority
         option_schema.add_argument(lookup, opt)
@@ -105,7 +109,7 @@ def job_request(args: argparse.Namespace) -> JobRequest:
     given.setdefault("display_points", DEMO_DISPLAY_POINTS)
     if args.resolution is not None:
         given["eval_width"], given["eval_height"] = args.resolution
-    return JobRequest(profile="mobile", options=given)
+    return JobRequest(profile=args.profile, options=given)
 
 
 def process_cpu_s(pid: int) -> float | None:
