@@ -56,13 +56,27 @@ def blend(old: Sequence[int], target: Sequence[int], progress: float,
     goal = tuple(int(v) for v in target)
     if progress >= 1.0:
         return goal
+    if allowed is None:
+        return tuple(math.floor(v + 0.5) for v in _eq8(old, goal, max(0.0, float(progress))))
+    return _blend_points(old, goal, progress, _allowed_points(allowed, goal), start_error, bound)
+
+
+def _allowed_points(allowed: Mapping[Sequence[int], float], target: Indices) -> dict[Indices, float]:
+    """``allowed`` keyed by integer index tuples, as the blend looks settings up (converted once per
+    frame: the filter hands the result on to :func:`_blend_points`)."""
+    points = {tuple(int(v) for v in k): float(e) for k, e in allowed.items()}
+    if target not in points:
+        raise ValueError("the allowed settings must include the target")
+    return points
+
+
+def _blend_points(old: Sequence[int], goal: Indices, progress: float, points: Mapping[Indices, float],
+                  start_error: float | None, bound: float) -> Indices:
+    """:func:`blend` over allowed settings already keyed as :func:`_allowed_points` keys them."""
+    if progress >= 1.0:
+        return goal
     a = max(0.0, float(progress))
     point = _eq8(old, goal, a)
-    if allowed is None:
-        return tuple(math.floor(v + 0.5) for v in point)
-    points = {tuple(int(v) for v in k): float(e) for k, e in allowed.items()}
-    if goal not in points:
-        raise ValueError("the allowed settings must include the target")
     if start_error is None:
         start_error = points[_start_point(old, goal, points)]
     e_goal = points[goal]
@@ -145,9 +159,7 @@ class TemporalFilter:
             raise ValueError("indices must be non-negative")
         points: dict[Indices, float] | None = None
         if allowed is not None:
-            points = {tuple(map(int, k)): float(e) for k, e in allowed.items()}
-            if target not in points:
-                raise ValueError("the allowed settings must include the target")
+            points = _allowed_points(allowed, target)
             if not all(math.isfinite(e) for e in points.values()):
                 raise ValueError("predicted errors must be finite")
         if self._target is None or now < self._last_t:
@@ -174,7 +186,7 @@ class TemporalFilter:
             else:
                 elapsed = now - self._t0
                 progress = elapsed / self._period if self._period > 0 else (1.0 if elapsed > 0 else 0.0)
-                shown = blend(self._old, target, progress, points, self._start_error, self._gap)
+                shown = _blend_points(self._old, target, progress, points, self._start_error, self._gap)
         if shown == target:
             self._old = None  # arrived: the transition is over
         self._shown = shown
