@@ -46,8 +46,8 @@ class Renderer:
         s = settings
         w, h = sim_core.render_size(camera, s)
         ts = s.tile_size
-        ntx = -(-w // ts)
         need, owner, counted, tiles = needed_tiles(d, blocks, w, h, ts)
+        ntx = tiles.shape[1]  # tile columns: the grid needed_tiles laid out
         canvas = np.zeros((h, w, 3), dtype=np.float32)
         covered = np.zeros((h, w), dtype=bool)
         rows_c: list[np.ndarray] = []
