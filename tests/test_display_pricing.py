@@ -398,6 +398,62 @@ def test_the_time_left_while_pricing_follows_the_pricings_own_pace(scene, monkey
 
 
 @pytest.mark.slow
+def test_the_time_left_during_the_search_includes_the_pricing_to_come(scene, monkeypatch) -> None:
+    """While the search runs, the job's time left is the search steps' plus the display pricing still to
+    come: PRICING_COST x the display to evaluation pixel ratio x the search's time per render, for every
+    point to price and every camera's reference (before any frontier is found, display_points + 1 a
+    frontier). So it grows with the points to price, does not jump when the pricing starts (where the
+    points are known), and a store priced at preview resolution, with no pricing to come, keeps the search
+    steps' estimate alone. The add-on's progress line shows the whole estimate."""
+    import service.octree.search as search_module
+    from addon.core.job_runner import describe
+    from service.jobs import progress_dict
+    from service.octree.builder import PRICING_COST
+
+    path = _orbit_path(6, (96, 72))
+    ratio = 96 * 72 / (16 * 12)
+    runs = {}
+    for k in (0, 1, 3):  # 0: preview, no display pricing
+        monkeypatch.setattr(search_module, "time", _SlowClock())  # every search reading 100 s after the last
+        updates = []
+        opts = (_options(display_estimator="full", display_points=k) if k
+                else _options(display_estimator="preview"))
+        store = optimize_path(scene, path, SUBSPACE, opts, cache=EvalCache(), executor=InProcessExecutor(),
+                              progress=updates.append)
+        pricing = "price at display resolution"
+        search = [u for u in updates if u.phase not in (pricing, "done")]
+        runs[k] = store, search, [u for u in updates if u.phase == pricing]
+    # the same search in all three runs (the same renders, the same clock readings)
+    seen = [[(u.phase, u.evaluations, u.elapsed_s, u.views_done, u.views_planned) for u in runs[k][1]]
+            for k in (0, 1, 3)]
+    assert seen[0] == seen[1] == seen[2]
+    timed = [i for i, u in enumerate(runs[0][1]) if u.estimate_s is not None]
+    assert len(timed) > 3
+    early = 0
+    for i in timed:
+        steps = runs[0][1][i].estimate_s  # preview: the search steps' estimate alone
+        u1, u3 = runs[1][1][i], runs[3][1][i]
+        more1, more3 = u1.estimate_s - steps, u3.estimate_s - steps
+        assert 0 < more1 < more3
+        if u1.views_done == 0:  # no frontier found yet: views planned x (k + 1 points + 1 reference)
+            pace = PRICING_COST * ratio * u1.elapsed_s / u1.evaluations * u1.views_planned
+            assert more1 == pytest.approx(pace * 3) and more3 == pytest.approx(pace * 5)
+            early += 1
+    assert early > 0
+    assert runs[0][2] == [] and runs[0][1][-1].estimate_s == 0.0
+    for k in (1, 3):
+        store, search, pricing = runs[k]
+        last = search[-1]
+        points = store.meta["display_points"] + store.meta["display_cameras"]  # one camera a frontier
+        expected = PRICING_COST * ratio * last.elapsed_s / last.evaluations * points
+        # every frontier found: the search's last estimate is the pricing's first, no jump
+        assert pricing[0].estimate_s == pytest.approx(expected) and last.estimate_s == pytest.approx(expected)
+    u = runs[3][1][timed[0]]
+    text = describe({"state": "running", "progress": progress_dict(u, elapsed_s=u.elapsed_s)}).text
+    assert text.endswith(f"evaluations, ~{u.estimate_s:.0f} s left") and f"[{u.phase}]" in text
+
+
+@pytest.mark.slow
 def test_a_stated_display_size_is_where_power_and_the_frame_rate_are_judged(scene) -> None:
     """A store priced at a stated smaller display judges power, and so which settings keep up with the
     frame rate, for that size during the search too (a search priced for the path's larger size would keep

@@ -126,6 +126,15 @@ def time_left(spent_s: float, done: int, total: int) -> float | None:
     return spent_s / done * max(total - done, 0)
 
 
+#: What pricing one setting at display resolution costs, in the search's wall time per evaluation
+#: rendered times the pixel ratio of the display to the evaluation size (:meth:`OctreeBuilder.pricing_time`).
+#: Above 1 because the settings priced are frontier points, many of them near Max, and each camera's
+#: maximum-quality reference, where most of the search's renders are cheaper settings: 1.6-2.2 on the
+#: recorded runs at 320x180 from 64x36 (the teapot's demo job, CPU time; the village's main job, CPU and
+#: wall time; bench/RESULTS.md, "The job's time left during the search"). The tile estimator cost about
+#: what whole frames cost where it was measured (0.8-1.1x at 640x360), so one factor serves both.
+PRICING_COST = 2.0
+
 STRATEGIES: dict[str, type] = {"axis": ViewCubeSampling, "aimed": ViewCubeSampling, "path": PathSampling}
 
 
@@ -158,6 +167,8 @@ class OctreeBuilder:
         self.pricer = pricer
         self.display_cameras = 0  # cameras priced at display resolution
         self.display_points = 0  # frontier points priced there
+        if pricer is not None:  # the search's time left includes the pricing after it
+            self.search.after = self._pricing_ahead
 
     @property
     def state(self) -> Progress:
@@ -168,6 +179,34 @@ class OctreeBuilder:
         if self.pricer is not None:
             self._price_at_display()
         self.search.report("done")
+
+    def pricing_time(self, state: Progress, cameras: int, points: float) -> float | None:
+        """Seconds to price ``points`` settings at ``cameras`` display cameras, from the search's pace.
+
+        Assumes a render's time grows with its pixel count: each point and each camera's reference
+        costs the search's wall time per evaluation rendered so far (``state``) times the display to
+        evaluation pixel ratio times :data:`PRICING_COST`. None before the search rendered anything (a
+        search answered from the evaluation cache has no pace to go by)."""
+        if self.cfg.display is None or state.evaluations <= 0:
+            return None
+        ratio = self.cfg.display[0] * self.cfg.display[1] / (self.cfg.width * self.cfg.height)
+        return PRICING_COST * ratio * state.elapsed_s / state.evaluations * (points + cameras)
+
+    def _pricing_ahead(self, state: Progress) -> float | None:
+        """The display pricing still to come while the search runs (:meth:`pricing_time`): every frontier
+        planned so far, at its sample camera and (path samples) at most ``guard_frames`` guards, each with
+        as many points as the frontiers found so far keep to be priced on average (:func:`spread_points`).
+        Before the first is found, ``display_points`` + 1: a full meeting tier and one slow point (Max,
+        when it misses the frame rate; recorded slow tiers mostly hold one point, bench/RESULTS.md), or a
+        population when every point is priced."""
+        cfg = self.cfg
+        kept = [len(spread_points(rec.points, cfg.display_points, self.search.ev.fps))
+                for rec in self.lattice.frontiers]
+        per_frontier = (sum(kept) / len(kept) if kept else
+                        cfg.display_points + 1 if cfg.display_points else cfg.nsga.population)
+        cameras = max(state.views_planned, len(kept)) * (1 + cfg.guard_frames if cfg.view_sampling == "path"
+                                                         else 1)
+        return self.pricing_time(state, cameras, cameras * per_frontier)
 
     def _price_at_display(self) -> None:
         """Every measured frontier's points priced again at the path's resolution at the frontier's
@@ -187,13 +226,17 @@ class OctreeBuilder:
             jobs.append((fid, [dataclasses.replace(c, width=width, height=height) for c in cams],
                          [pt[0] for pt in keep]))
         requests = [(cam, xs) for _, cams, xs in jobs for cam in cams]
-        # a camera priced at display resolution costs about this many search steps (ETA only)
-        weight = max(1, round(0.3 * width * height / (self.cfg.width * self.cfg.height)
-                              * max(len(xs) for _, xs in requests) / max(1, self.cfg.nsga.population))
+        # a camera priced at display resolution costs about this many search steps (the time left when
+        # the search rendered nothing to take a pace from, pricing_time)
+        weight = max(1, round(PRICING_COST * width * height / (self.cfg.width * self.cfg.height)
+                              * (max(len(xs) for _, xs in requests) + 1) / max(1, self.cfg.nsga.population))
                      ) if requests else 1
         search.steps_planned += weight * len(requests)
+        search.after = None  # the points to price are known: the estimate is this phase's own from here
         search.check_cancel()
-        search.report("price at display resolution")
+        search.report("price at display resolution",
+                      remaining_s=self.pricing_time(search.state, len(requests),
+                                                    sum(len(xs) for _, xs in requests)))
         # cameras per batch: several per worker, so that a batch's last camera (whose cost varies with
         # its points) leaves the other workers idle for a small share of the batch only
         chunk = max(2, 8 * int(getattr(self.pricer.ev.executor, "workers", 1) or 1))
@@ -204,8 +247,8 @@ class OctreeBuilder:
             results += self.pricer.price(requests[start:start + chunk])
             search.steps_done += weight * len(requests[start:start + chunk])
             # pricing is the last phase, and its cameras cost what the scene makes them cost at display
-            # resolution, which the weight above guesses from pixel counts only (8x low on the village):
-            # from the first batch on, the time left is this phase's own measured pace
+            # resolution, which pricing_time guesses from the search's pace and pixel counts only: from
+            # the first batch on, the time left is this phase's own measured pace
             search.report("price at display resolution",
                           remaining_s=time_left(time.perf_counter() - started, len(results), len(requests)))
         res = iter(results)

@@ -83,12 +83,16 @@ class Search:
         self.steps_planned = 0
         self.probes_evaluated = 0  # probe settings evaluated (cache hits included), all searches
         self.state = Progress(phase="root")
+        # seconds the phases after the search will take, estimated from the progress so far (None: not
+        # known yet); added to the search steps' time left
+        self.after: Callable[[Progress], float | None] | None = None
 
     # -- bookkeeping --------------------------------------------------------------------------------
 
     def report(self, phase: str | None = None, remaining_s: float | None = None) -> None:
         """Publish the progress; ``remaining_s``: the time left as the caller measured it (the last
-        phase's own pace), instead of the search steps' pace."""
+        phase's own pace), instead of the search steps' pace plus what :attr:`after` expects of the
+        phases after the search."""
         if phase is not None:
             self.state.phase = phase
         s = self.state
@@ -101,6 +105,10 @@ class Search:
                         if self.steps_done else None)
         if remaining_s is not None:
             s.estimate_s = max(0.0, float(remaining_s))
+        elif s.estimate_s is not None and self.after is not None:
+            later = self.after(s)
+            if later is not None:
+                s.estimate_s += later
         if self._progress_cb is not None:
             self._progress_cb(Progress(**vars(s)))
 
