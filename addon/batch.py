@@ -11,8 +11,10 @@ after it (`python -m addon.batch optimize --help`). ``evaluate`` runs the evalua
 demo`` under the scene's power and error budgets and the store lookup's frame-rate target and priority
 (``--fps``, ``--priority``: kept in the .blend, as playback and the render engine use them; left out,
 the .blend's values stay, and ``--fps store`` sets a saved frame rate back to the store's own) and writes
-the same report folder. Prints a text progress
-bar; exits non-zero (with the reason on stderr) on any failure.
+the same report folder. Every option whose default is derived has a word that sets a value saved in the
+.blend back to it: ``--fps store``, ``--eval-width auto`` (from the path's aspect), ``--display-height
+path`` (the path's own resolution). Prints a text progress bar; exits non-zero (with the reason on
+stderr) on any failure.
 """
 
 from __future__ import annotations
@@ -142,6 +144,10 @@ def _option_schema() -> ModuleType:
     return options
 
 
+#: What an option left out of a command line does here (its help says so, next to its derived word).
+_KEPT = "the .blend's value stays"
+
+
 def parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="batch", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -160,12 +166,12 @@ def parser() -> argparse.ArgumentParser:
         p.add_argument("--budget", type=float, help="watts (power) or 1 - SSIM (error)")
         p.add_argument("--filter-period", type=float, help="temporal filter T in seconds")
         for query_option in _option_schema().QUERY_OPTIONS:  # the store lookup's --fps and --priority
-            _option_schema().add_argument(p, query_option, with_default=False)
+            _option_schema().add_argument(p, query_option, with_default=False, left_out=_KEPT)
 
     opt = sub.add_parser("optimize", help="record the path if needed, optimise, keep the store, save")
     budget(opt)
     opt.add_argument("--profile")
-    _option_schema().add_arguments(opt, with_defaults=False)
+    _option_schema().add_arguments(opt, with_defaults=False, left_out=_KEPT)
     opt.add_argument("--resolution", help="evaluation resolution WxH, e.g. 64x36 (sets --eval-width, "
                      "--eval-height)")
     opt.add_argument("--frame-step", type=int)
@@ -208,7 +214,7 @@ def _apply_scene_options(ext: str, props, args: argparse.Namespace) -> None:
     schema = _option_schema()
     for opt in (*schema.PUBLIC, *schema.QUERY_OPTIONS):  # each checked here; together when the job is built
         value = getattr(args, opt.name, None)  # None: not given, the .blend's value stays
-        if value is not None:  # DERIVE (--fps store): back to None, "derive it" (the store's own rate)
+        if value is not None:  # DERIVE (--fps store, --eval-width auto, ...): back to None, "derive it"
             set_option(props, opt.name, None if value is schema.DERIVE else value)
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import bpy
 
-from .core.playback_logic import missed_rate_text
+from .playback import flags_of
 
 _handle = None
 
@@ -38,10 +38,7 @@ def hud_lines(scene: bpy.types.Scene) -> list[tuple[str, tuple[float, float, flo
          bad if over or props.infeasible else ok),
         (f"Settings: {props.active_settings}", ok),
     ]
-    flags = [f for f, on in (("blending", props.playback_status == "blending"),
-                             ("outside store", props.clamped), ("budget infeasible", props.infeasible),
-                             (missed_rate_text(props.target_fps, props.priority), props.slower_than_fps))
-             if on]
+    flags = flags_of(props, short=True)  # the panels' and the render engine's words, in short
     if flags:
         lines.append(("; ".join(flags), bad if props.infeasible else ok))
     return lines

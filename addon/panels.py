@@ -7,7 +7,7 @@ import bpy
 from service import options as option_schema
 
 from . import ops_optimize, preferences
-from .core.playback_logic import missed_rate_text
+from .playback import flags_of
 
 
 class RENDER_BUDGET_UL_parameters(bpy.types.UIList):
@@ -128,12 +128,9 @@ def _draw_results(layout: bpy.types.UILayout, props: bpy.types.PropertyGroup) ->
                        f"error {props.predicted_error:.4f}")
         for chunk in _wrap(props.active_settings, 48):
             box.label(text=chunk)
-        if props.infeasible:
-            box.label(text="budget cannot be met here", icon="ERROR")
-        if props.slower_than_fps:
-            box.label(text=missed_rate_text(props.target_fps, props.priority), icon="ERROR")
-        if props.clamped:
-            box.label(text="camera outside the optimised space", icon="ERROR")
+        for flag in flags_of(props, transition=False):  # the HUD's and the render engine's words
+            for i, chunk in enumerate(_wrap(flag, 48)):
+                box.label(text=chunk, icon="ERROR" if i == 0 else "BLANK1")
 
 
 def _draw_actions(layout: bpy.types.UILayout, props: bpy.types.PropertyGroup) -> None:

@@ -10,7 +10,7 @@ from bpy.app.handlers import persistent
 from service import store as pareto_store
 
 from .camera_path import camera_vfov, render_resolution, scene_fps
-from .core.playback_logic import PlaybackDriver, PlaybackFrame, StoreCache
+from .core.playback_logic import PlaybackDriver, PlaybackFrame, StoreCache, frame_flags
 from .handlers import add_handler, remove_handler
 from .properties import query_values
 
@@ -37,6 +37,16 @@ def _driver(props: bpy.types.PropertyGroup) -> PlaybackDriver:
 def store_of(scene: bpy.types.Scene) -> pareto_store.ParetoStore | None:
     """The scene's store, parsed once per revision (shared with the render engine)."""
     return None if scene.render_budget.store_text is None else _driver(scene.render_budget).store
+
+
+def flags_of(props: bpy.types.PropertyGroup, *, short: bool = False, transition: bool = True) -> list[str]:
+    """The flags playback wrote for this frame, in the words the render engine's frame notes use too
+    (:func:`~.core.playback_logic.frame_flags`). ``short``: the HUD's forms; ``transition``: also the
+    temporal filter's blending (the HUD shows it; the panels list only what keeps a frame from its
+    budget, rate or store)."""
+    return frame_flags(infeasible=props.infeasible, slow=props.slower_than_fps, clamped=props.clamped,
+                       in_transition=transition and props.playback_status == "blending",
+                       fps_target=props.target_fps, priority=props.priority, short=short)
 
 
 def show_error(scene: bpy.types.Scene, message: str) -> None:

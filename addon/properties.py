@@ -24,6 +24,8 @@ from bpy.props import (
 
 from service import options as option_schema
 
+from .core.playback_logic import FRAME_FLAGS
+
 
 class RENDER_BUDGET_PG_parameter(bpy.types.PropertyGroup):
     """One parameter of the search space as the service reported it for this scene."""
@@ -97,8 +99,8 @@ class RENDER_BUDGET_PG_scene(bpy.types.PropertyGroup):
         name="Slower than the frame-rate target",
         description="The active settings miss the frame-rate target here: no setting of the store keeps up "
                     "with it, or (Budget first) none within the budget does")
-    clamped: BoolProperty(name="Outside the store's space")  # type: ignore
-    infeasible: BoolProperty(name="Budget infeasible")  # type: ignore
+    clamped: BoolProperty(name=FRAME_FLAGS["clamped"][0].capitalize())  # type: ignore
+    infeasible: BoolProperty(name=FRAME_FLAGS["infeasible"][0].capitalize())  # type: ignore
     playback_status: StringProperty(name="Playback status")  # type: ignore
 
 

@@ -37,8 +37,9 @@ class Option:
 
     ``optional``: ``None`` is a value meaning "derive it" (the help says from what); where a layer
     cannot hold ``None`` (a Blender integer property) it shows 0, and on a command line
-    ``derived_word`` spells it (``--fps store``), so a value saved earlier can be set back to the
-    derived one (the add-on's batch over a .blend). ``public``: offered by the CLI, the
+    ``derived_word`` spells it (``--fps store``, ``--eval-width auto``, ``--display-height path``), so a
+    value saved earlier can be set back to the derived one (the add-on's batch over a .blend). Every
+    optional option has one. ``public``: offered by the CLI, the
     REST job request, the add-on and batch; internal options are set by library callers only.
     ``group`` and ``modes`` lay out the add-on panel: the box an option sits in, and the
     ``view_sampling`` values it applies to (greyed out for the others)."""
@@ -148,7 +149,7 @@ OPTIONS: tuple[Option, ...] = (
            choices=METRICS, choice_labels=("1 - SSIM", "1 - SSIM (Gaussian window)", "FLIP")),
     Option("eval_width", int, None, "Evaluation width",
            "evaluation image width in pixels (default: from the path's aspect ratio)",
-           minimum=8, maximum=1024, optional=True, metavar="PX", group="Evaluation"),
+           minimum=8, maximum=1024, optional=True, metavar="PX", derived_word="auto", group="Evaluation"),
     Option("eval_height", int, 36, "Evaluation height", "evaluation image height in pixels",
            minimum=8, maximum=1024, metavar="PX", group="Evaluation"),
     Option("display_estimator", str, "tiles", "Store figures",
@@ -169,8 +170,9 @@ OPTIONS: tuple[Option, ...] = (
            group="Evaluation"),
     Option("display_height", int, None, "Display height",
            "price the store's figures at this height (width from the path's aspect) instead of the path's "
-           "own resolution: a stated smaller display size when full size is too slow", minimum=16,
-           maximum=4320, optional=True, metavar="PX", group="Evaluation"),
+           "own resolution: a stated smaller display size when full size is too slow (default: the path's "
+           "own resolution)", minimum=16, maximum=4320, optional=True, metavar="PX", derived_word="path",
+           group="Evaluation"),
     # internal: set by library callers (tests, benchmarks), not offered by the CLI, REST or add-on
     Option("margin", float, 0.1, "Margin", "view cubes: fraction of a node's side added around it when "
            "testing whether the path passes through it", minimum=0.0, public=False),
@@ -287,7 +289,8 @@ class _Derive:
 
 #: What an option's ``derived_word`` parses to on a command line whose options are overrides
 #: (``with_default=False``: None there means "not given, keep the value set earlier"): set the option
-#: back to None, "derive it" (``render-budget`` batch ``--fps store``: the store's own frame rate again).
+#: back to None, "derive it" (the add-on's batch ``--fps store``: the store's own frame rate again;
+#: ``--eval-width auto``: from the path's aspect; ``--display-height path``: the path's own resolution).
 DERIVE = _Derive()
 
 
@@ -307,14 +310,17 @@ def _arg_type(opt: Option, derived: Any = None) -> Any:
     return parse
 
 
-def add_arguments(parser: argparse.ArgumentParser | Any, *, with_defaults: bool = True) -> None:
+def add_arguments(parser: argparse.ArgumentParser | Any, *, with_defaults: bool = True,
+                  left_out: str = "the value set earlier stays") -> None:
     """One argument per public option (``dest`` = the option name). ``with_defaults=False`` leaves
-    every default None, so the caller can tell which options were given (overrides only)."""
+    every default None, so the caller can tell which options were given (overrides only); ``left_out``
+    then says in the help what an option left out keeps."""
     for o in PUBLIC:
-        add_argument(parser, o, with_default=with_defaults)
+        add_argument(parser, o, with_default=with_defaults, left_out=left_out)
 
 
-def add_argument(parser: argparse.ArgumentParser | Any, opt: Option, *, with_default: bool = True) -> None:
+def add_argument(parser: argparse.ArgumentParser | Any, opt: Option, *, with_default: bool = True,
+                 left_out: str = "the value set earlier stays") -> None:
     """The command-line argument of one option (``dest`` = its name), validated by :meth:`Option.check`."""
     default = opt.default if with_default else None
     shown = "" if opt.default is None else f" (default {opt.default})"  # optional: the help says it
@@ -322,7 +328,7 @@ def add_argument(parser: argparse.ArgumentParser | Any, opt: Option, *, with_def
     if opt.derived_word:
         metavar = f"{opt.metavar or opt.kind.__name__.upper()}|{opt.derived_word}"
         shown += (f" ({opt.derived_word}: that default, as when left out)" if with_default else
-                  f" (left out: the value set earlier stays; {opt.derived_word}: back to that default)")
+                  f" (left out: {left_out}; {opt.derived_word}: back to that default)")
     parser.add_argument(opt.cli_flag, *(f"--{a}" for a in opt.aliases), dest=opt.name, default=default,
                         type=None if opt.choices else _arg_type(opt, None if with_default else DERIVE),
                         choices=opt.choices or None, metavar=metavar, help=opt.help + shown)

@@ -438,7 +438,73 @@ def test_hud_text_flags_a_broken_budget(scene, tmp_path) -> None:
     props.power_budget = 0.5  # below every frontier point: infeasible, shown in red
     scene.frame_set(3)
     lines = hud.hud_lines(scene)
-    assert lines[0][1][1] < 0.5 and any("infeasible" in text for text, _ in lines)
+    assert lines[0][1][1] < 0.5 and "budget cannot be met" in lines[-1][0].split("; ")
+
+
+class _Labels:
+    """A stand-in for a panel's UILayout that keeps the labels its draw() writes (props are ignored)."""
+
+    def __init__(self) -> None:
+        self.lines: list[tuple[str, str]] = []
+
+    def box(self) -> _Labels:
+        return self
+
+    row = column = box
+
+    def label(self, text: str = "", icon: str = "NONE") -> None:
+        self.lines.append((text, icon))
+
+    def prop(self, *_args: object, **_kwargs: object) -> None:
+        pass
+
+    def flags(self) -> list[str]:
+        """The error labels, each with the lines it wraps onto joined again."""
+        out: list[str] = []
+        for text, icon in self.lines:
+            if icon == "ERROR":
+                out.append(text)
+            elif icon == "BLANK1" and out:
+                out[-1] += " " + text
+        return out
+
+
+def test_hud_panels_and_engine_flag_a_frame_in_one_wording(scene, tmp_path) -> None:
+    """A frame with the camera outside the store's space under a budget nothing meets: the HUD (short
+    forms), the sidebar panel, the render engine's Budget panel and the engine's frame note (long forms)
+    all say so in the words of ``playback_logic.FRAME_FLAGS``, the HUD's the start of the others'."""
+    from types import SimpleNamespace
+
+    from addon.core.playback_logic import FRAME_FLAGS, frame_flags
+
+    hud, panels, render = ext_module("hud"), ext_module("panels"), ext_module("engine.render")
+    cam = turning_camera(scene, 6)
+    add_cube(scene)
+    bpy.ops.render_budget.record_path_animation()
+    _load_store(tmp_path)  # its space: the cube -10..10 around the origin
+    props = scene.render_budget
+    props.budget_mode, props.power_budget, props.filter_period = "POWER", 0.5, 0.0  # below every point
+    cam.animation_data_clear()
+    cam.location = (50.0, 0.0, 1.0)
+    scene.frame_set(2)
+    assert props.clamped and props.infeasible and props.playback_status == "on target"
+    long = [FRAME_FLAGS["infeasible"][1], FRAME_FLAGS["clamped"][1]]
+    assert long == frame_flags(infeasible=True, clamped=True)
+    hud_flags = hud.hud_lines(scene)[-1][0].split("; ")
+    assert hud_flags == [FRAME_FLAGS["infeasible"][0], FRAME_FLAGS["clamped"][0]], hud_flags
+    sidebar = _Labels()
+    panels._draw_results(sidebar, props)
+    assert sidebar.flags() == long, sidebar.lines
+    budget_panel = _Labels()
+    ext_module("engine.panels").RENDER_PT_render_budget_budget.draw(
+        SimpleNamespace(split_layout=lambda: budget_panel), SimpleNamespace(scene=scene))
+    assert budget_panel.flags() == long, budget_panel.lines
+    vfov = ext_module("camera_path").camera_vfov(cam, scene)
+    note = render.chooser_for(scene).choose(cam.matrix_world, vfov, 320 / 180, 2 / 24).note.split("; ")
+    assert note == long, note
+    assert all(text.startswith(short) for text, short in zip(note, hud_flags, strict=True))
+    rna = props.bl_rna.properties  # the flags' own property names (tooltips, Python) read the same
+    assert [rna[name].name.lower() for name in ("infeasible", "clamped")] == hud_flags
 
 
 def test_hud_shows_the_frame_rate_the_power_is_drawn_at(scene, tmp_path) -> None:

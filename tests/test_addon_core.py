@@ -14,8 +14,10 @@ from addon.core.job_runner import JobRequest, describe
 from addon.core.local_service import free_port, serve_command
 from addon.core.path_sampling import build_path, frame_times
 from addon.core.playback_logic import (
+    FRAME_FLAGS,
     PlaybackDriver,
     StoreCache,
+    frame_flags,
     missed_rate_text,
     predicted_path_summary,
     summary_text,
@@ -307,6 +309,26 @@ def test_a_missed_frame_rate_is_worded_once_per_priority() -> None:
                                                 "budget keeps up)")
     assert missed_rate_text(0.0, "frame_rate") == missed_rate_text(None, "frame_rate") == (
         "no setting keeps up with the frame rate here")
+
+
+def test_a_frames_flags_are_worded_once_with_the_huds_short_forms_in_the_same_place() -> None:
+    """Every per-frame flag the HUD, the panels and the render engine's frame notes show comes from
+    ``frame_flags``, most serious first: the long forms (panels, notes) from :data:`FRAME_FLAGS` and
+    ``missed_rate_text``, the HUD's short forms the start of the same words; artist's words, not the
+    store's internals."""
+    every = dict.fromkeys(("infeasible", "slow", "clamped", "in_transition"), True)
+    assert frame_flags(**every, fps_target=24.0, priority="budget") == [
+        FRAME_FLAGS["infeasible"][1], missed_rate_text(24.0, "budget"), FRAME_FLAGS["clamped"][1],
+        FRAME_FLAGS["in_transition"][1]]
+    assert frame_flags(**every, fps_target=24.0, short=True) == [
+        FRAME_FLAGS["infeasible"][0], missed_rate_text(24.0, "frame_rate"), FRAME_FLAGS["clamped"][0],
+        FRAME_FLAGS["in_transition"][0]]
+    assert frame_flags(clamped=True, short=True) == ["camera outside the optimised area"]
+    assert frame_flags(infeasible=True) == ["budget cannot be met here: the setting closest to it is used"]
+    assert frame_flags() == frame_flags(fps_target=24.0, short=True) == []
+    for short, long in FRAME_FLAGS.values():
+        assert long.startswith(short) and len(short) <= 40, (short, long)  # one wording, short enough
+        assert not any(word in long for word in ("store", "infeasible", "clamp", "Eq.")), long
 
 
 # -- report data ------------------------------------------------------------------------------------------

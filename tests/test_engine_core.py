@@ -19,7 +19,7 @@ import sim_core
 from addon.core import engine_frame, engine_scene, engine_settings, progressive, viewport
 from addon.core.engine_frame import CameraView, RenderCancelled, render_frame
 from addon.core.engine_settings import Budget, FrameSettings, SettingsChooser
-from addon.core.playback_logic import PlaybackDriver, missed_rate_text
+from addon.core.playback_logic import FRAME_FLAGS, PlaybackDriver, frame_flags, missed_rate_text
 from service.params import default_space
 from service.store import camera as camera_maths
 from tests.addon_support import synthetic_store
@@ -310,6 +310,26 @@ def test_animation_csv(tmp_path, scene: sim_core.Scene) -> None:
     assert rows[0]["max_depth"] == "1" and rows[0]["sampling"] == "1spp"
     assert float(rows[0]["simulated_power_w"]) == pytest.approx(out.power_w, rel=1e-5)
     assert rows[0]["predicted_error"] == "0.01" and rows[0]["in_transition"] == "0"
+
+
+def test_a_frames_note_flags_it_in_the_words_of_the_hud_and_the_panels() -> None:
+    """The engine's frame note (image metadata) says what is flagged on the frame in the one wording of
+    the HUD and the panels (``frame_flags``): a camera outside the store's space under a budget nothing
+    meets, and the temporal filter blending towards a new target; a frame on target within its budget
+    says nothing."""
+    store = synthetic_store()  # root cube -10..10; the cheapest setting costs 1.35 W or more
+    outside = SettingsChooser(CHEAP, store, Budget("POWER", 0.5)).choose(look((50.0, 0.0, 1.0)), 0.69, 16 / 9,
+                                                                         0.0)
+    assert outside.clamped and outside.infeasible and not outside.in_transition
+    assert outside.note.split("; ") == [FRAME_FLAGS["infeasible"][1], FRAME_FLAGS["clamped"][1]]
+    chooser = SettingsChooser(CHEAP, store, Budget("ERROR", 0.01), period_s=1.0)
+    eyes = [(3.0, 0.0, 0.4), (0.0, 3.0, 0.4), (-3.0, 0.0, 0.4), (0.0, -3.0, 0.4), (0.0, 0.1, 3.0)] * 3
+    frames = [chooser.choose(look(eye), 0.69, 16 / 9, k / 24) for k, eye in enumerate(eyes)]
+    assert any(f.in_transition for f in frames) and not all(f.in_transition for f in frames)
+    for f in frames:
+        assert not (f.clamped or f.infeasible)
+        assert f.note == "; ".join(frame_flags(in_transition=f.in_transition)), f.note
+    assert FRAME_FLAGS["in_transition"][1] in {f.note for f in frames}
 
 
 def test_store_chooser_looks_up_under_the_query_options() -> None:

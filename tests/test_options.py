@@ -331,3 +331,95 @@ def test_batch_sets_a_saved_frame_rate_back_to_the_stores_own(scene_props) -> No
     assert apply("--fps", "50")["fps"] == 50.0
     assert apply("--fps", "store")["fps"] is None
     scene_props.property_unset("priority")
+
+
+# -- options whose default is derived (None): a command-line word sets a saved value back -----------------
+DERIVED = tuple(o for o in (*PUBLIC, *QUERY) if o.optional)
+
+
+def test_the_options_whose_default_is_derived_are_the_known_ones() -> None:
+    """Each optional option's None means "derive it" from the path or the store; a new one must get a
+    word of its own (the next tests walk every one of them)."""
+    assert {o.name: o.derived_word for o in DERIVED} == {"eval_width": "auto", "display_height": "path",
+                                                         "fps": "store"}
+
+
+@pytest.mark.parametrize("opt", DERIVED, ids=lambda o: o.name)
+def test_every_derived_option_has_a_word_on_every_command_line_and_its_help(opt: options.Option) -> None:
+    """The word (never a valid value) is what leaving the option out gives where that is the derived
+    default (``render-budget optimize``, the demo's query options), and the marker that sets a saved
+    value back in batch, where leaving it out keeps the .blend's value; both helps name it."""
+    from addon import batch
+
+    word = opt.derived_word
+    assert word and opt.help
+    with pytest.raises(ValueError):
+        opt.check(word)
+    batch_optimize = batch.parser()._subparsers._group_actions[0].choices["optimize"]
+    assert getattr(_parse_batch(opt.cli_flag, word), opt.name) is options.DERIVE
+    helps = {"batch optimize": (batch_optimize, f"the .blend's value stays; {word}: back to that default")}
+    if opt in PUBLIC:
+        assert options.from_arguments(_parse_batch(opt.cli_flag, word))[opt.name] is None
+        assert getattr(_parse_cli(opt.cli_flag, word), opt.name) is None
+        helps["render-budget optimize"] = (build_parser()._subparsers._group_actions[0].choices["optimize"],
+                                           f"{word}: that default, as when left out")
+    for name, (ap, says) in helps.items():
+        text = " ".join(ap.format_help().split())
+        assert f"{opt.cli_flag} {opt.metavar}|{word}" in text and says in text, (name, text)
+    for text in (word.upper(), word + "s", "derive"):
+        with pytest.raises(SystemExit):
+            _parse_batch(opt.cli_flag, text)
+
+
+def test_demo_display_height_path_prices_at_the_paths_own_resolution() -> None:
+    """The demo's own display height (180) unless given; ``--display-height path`` is the path's own
+    resolution (None, left to the service), as its help says."""
+    from tools import demo
+
+    def display_height(*argv: str) -> object:
+        return demo.job_request(demo.parser().parse_args(list(argv))).option("display_height")
+
+    assert display_height() == demo.DEMO_DISPLAY_HEIGHT
+    assert display_height("--display-height", "path") is None
+    assert display_height("--display-height", "360") == 360
+    says = " ".join(demo.parser().format_help().split())
+    assert "--display-height PX|path" in says
+    assert "left out: the demo's own; path: back to that default" in says
+
+
+@pytest.mark.blender
+@pytest.mark.parametrize("opt", DERIVED, ids=lambda o: o.name)
+def test_batch_sets_each_saved_derived_option_back_so_the_job_derives_it(scene_props, opt: options.Option
+                                                                        ) -> None:
+    """A value saved in the .blend stays when batch leaves the option out, is replaced by another, and the
+    option's word sets it back to 0, the add-on's "derive it": the lookup's keywords (``fps``) or the
+    optimisation job the add-on sends (the optimiser's options) then leave it to the store or service."""
+    import importlib
+
+    from addon import batch
+    from tests.addon_support import EXT_MODULE
+
+    properties = importlib.import_module(f"{EXT_MODULE}.properties")
+    ops_optimize = importlib.import_module(f"{EXT_MODULE}.ops_optimize")
+    declared = PUBLIC if opt in PUBLIC else QUERY
+
+    def apply(*argv: str) -> object:
+        batch._apply_scene_options(EXT_MODULE, scene_props, batch.parser().parse_args(["optimize", *argv]))
+        return properties.option_values(scene_props, declared)[opt.name]
+
+    low, high = (_value(opt, text) for text in _inside(opt)[:2])
+    properties.set_option(scene_props, opt.name, high)
+    assert apply() == high  # left out: the saved value stays
+    assert apply(opt.cli_flag, str(low)) == low
+    assert apply(opt.cli_flag, opt.derived_word) is None and getattr(scene_props, opt.name) == 0
+    assert apply() is None  # and stays derived
+    if opt in PUBLIC:  # what the Optimize job sends: the option left to the service, which derives it
+        request = ops_optimize.job_request(scene_props.id_data)
+        assert request.option(opt.name) is None
+        assert opt.name not in request.payload("0" * 64, {})["options"]
+        properties.set_option(scene_props, opt.name, high)
+        sent = ops_optimize.job_request(scene_props.id_data).payload("0" * 64, {})["options"]
+        assert sent[opt.name] == high
+    else:
+        assert properties.query_values(scene_props)[opt.name] is None
+    properties.set_option(scene_props, opt.name, None)

@@ -87,15 +87,17 @@ def parser() -> argparse.ArgumentParser:
                     help="path frames the store is verified on at its figures' resolution (0: skip)")
     ap.add_argument("--job-timeout", type=float, default=3600.0, help="seconds before giving up")
     ap.add_argument("--skip-build", action="store_true", help="use the built scene as it is")
-    option_schema.add_arguments(ap.add_argument_group("optimiser options (the service's defaults unless "
-                                                      "given)"), with_defaults=False)
+    optimiser = ap.add_argument_group(
+        "optimiser options (the service's defaults unless given, but the demo's own display height "
+        f"{DEMO_DISPLAY_HEIGHT} and display points {DEMO_DISPLAY_POINTS})")
+    option_schema.add_arguments(optimiser, with_defaults=False, left_out="the demo's own")
     return ap
 
 
 #: The demo prices its store at this display height (width from the path's aspect; whole frames at this
 #: size) and keeps this many points a frontier, unless --display-height / --display-points say otherwise:
 #: a stated smaller size than the paths' 1280x720, so that ``make demo`` stays near its time budget on two
-#: cores (full size: ``--display-height 720``).
+#: cores (full size: ``--display-height path``).
 DEMO_DISPLAY_HEIGHT = 180
 DEMO_DISPLAY_POINTS = 4
 

@@ -18,7 +18,7 @@ from service import store as pareto_store
 from service.options import check_query
 from service.params import Indices, ParameterSpace, default_space
 
-from .playback_logic import PlaybackDriver, missed_rate_text, validate_budget
+from .playback_logic import PlaybackDriver, frame_flags, validate_budget
 
 # Labels and tooltips of the search space's parameters (their values come from the space itself).
 _TEXT: dict[str, tuple[str, str]] = {
@@ -118,7 +118,7 @@ class FrameSettings:
     target_indices: Indices | None = None  # the store's target before the temporal filter
     clamped: bool = False  # camera outside the store's space
     infeasible: bool = False  # nothing in the store meets the budget here
-    note: str = ""
+    note: str = ""  # why these settings, and what is flagged on this frame (playback_logic.frame_flags)
     fps_target: float | None = None  # the frame rate the store was looked up for (None: manual)
     meets_fps: bool | None = None  # the store says these settings keep up with it (None: unknown)
     priority: str = ""  # the lookup's (service.options.QUERY_PRIORITY); empty: manual settings
@@ -196,10 +196,9 @@ class SettingsChooser:
                                  **self.query)
         store = self.driver.store
         target = self.space.indices_of(store.settings_of(frame.target_indices))
-        flags = [text for text, on in (("camera outside the store's space", frame.clamped),
-                                       ("budget cannot be met here", frame.infeasible),
-                                       (missed_rate_text(frame.fps_target, frame.priority),
-                                        frame.meets_fps is False)) if on]
+        flags = frame_flags(infeasible=frame.infeasible, slow=frame.meets_fps is False,  # the HUD's words
+                            clamped=frame.clamped, in_transition=frame.in_transition,
+                            fps_target=frame.fps_target, priority=frame.priority)
         return FrameSettings("store", self.space.indices_of(frame.active_settings),
                              frame.predicted_power_w, frame.predicted_error, target, frame.clamped,
                              frame.infeasible, "; ".join(flags), frame.fps_target, frame.meets_fps,

@@ -41,6 +41,34 @@ def missed_rate_text(fps_target: float | None, priority: str) -> str:
     return f"no setting keeps up with {target} here"
 
 
+#: The other per-frame flags, each worded once as (short, long): the HUD's one line of flags takes the
+#: short forms; the panels and the render engine's frame notes (image metadata) the long ones, which also
+#: say what the frame gets instead. Keys are the flags' field names (``PlaybackFrame``, the engine's
+#: ``FrameSettings`` and per-frame CSV columns).
+FRAME_FLAGS: dict[str, tuple[str, str]] = {
+    "infeasible": ("budget cannot be met",
+                   "budget cannot be met here: the setting closest to it is used"),
+    "clamped": ("camera outside the optimised area",
+                "camera outside the optimised area: the settings of its nearest edge are used"),
+    "in_transition": ("blending", "blending towards this view's settings over the filter time"),
+}
+
+
+def frame_flags(*, infeasible: bool = False, slow: bool = False, clamped: bool = False,
+                in_transition: bool = False, fps_target: float | None = None, priority: str = "frame_rate",
+                short: bool = False) -> list[str]:
+    """What is flagged on one frame, most serious first: the words of :data:`FRAME_FLAGS` (``short``:
+    the HUD's forms) and, for ``slow`` settings that miss ``fps_target``, :func:`missed_rate_text`.
+    The one source of the HUD's, the panels' and the render engine's flags, so none words them apart."""
+    form = 0 if short else 1
+    texts = [FRAME_FLAGS["infeasible"][form]] if infeasible else []
+    if slow:
+        texts.append(missed_rate_text(fps_target, priority))
+    texts += [FRAME_FLAGS[name][form] for name, on in (("clamped", clamped), ("in_transition", in_transition))
+              if on]
+    return texts
+
+
 @dataclass(frozen=True)
 class PlaybackFrame:
     """What the handler writes for one frame."""

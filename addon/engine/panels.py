@@ -10,6 +10,7 @@ from __future__ import annotations
 import bpy
 
 from ..core.engine_settings import quality_properties
+from ..playback import flags_of
 from . import render
 
 # EEVEE panels that show what the engine translates (Principled BSDF surfaces, light and world
@@ -82,8 +83,8 @@ class RENDER_PT_render_budget_budget(_EnginePanel, bpy.types.Panel):
         if props.store_text is not None and props.active_settings:
             box = layout.box()
             box.label(text=f"This frame: {props.predicted_power:.3f} W, error {props.predicted_error:.4f}")
-            if props.infeasible:
-                box.label(text="budget cannot be met here", icon="ERROR")
+            for flag in flags_of(props, transition=False):  # the HUD's and the frame notes' words
+                box.label(text=flag, icon="ERROR")
 
 
 class RENDER_PT_render_budget_hardware(_EnginePanel, bpy.types.Panel):
