@@ -73,13 +73,36 @@ def test_spread_prices_at_most_k_of_each_tier_with_both_ends(points, k, fps) -> 
 
 
 def test_the_slow_tier_is_spread_evenly_by_error() -> None:
-    """Nine slow points from error 0.04 down to 0 (max quality), four priced: both ends and two between,
-    evenly by rank; the meeting tier's three points all priced."""
+    """Nine slow points from error 0.04 down to 0 (max quality) on a straight line, four priced: both
+    ends and two between, evenly along it; the meeting tier's three points all priced."""
     meeting = [((0, j), e, p, 0.02) for j, (e, p) in enumerate(((0.3, 0.2), (0.1, 0.4), (0.05, 0.6)))]
     slow = [((1, j), 0.04 - 0.005 * j, 0.7 + 0.05 * j, 0.04 + 0.01 * j) for j in range(9)]
     picked = spread_points(meeting + slow, 4, FPS)
     assert picked[:3] == meeting
     assert [round(pt[1], 3) for pt in picked[3:]] == [0.04, 0.025, 0.015, 0.0]
+
+
+def test_the_spread_follows_the_curve_not_the_crowd_at_the_cheap_end() -> None:
+    """A frontier shaped as chess's on the `desktop` profile: max quality at 26 W, three settings between
+    it and error 0.03, then ten cheap settings (error 0.05-0.4) all within a watt of the static power.
+    Eight picks evenly by rank put six among the cheap ten and none between max quality and 0.03; along
+    the curve the picks cover the steep part, so an error budget of 0.02 finds a setting well below
+    max quality's power."""
+    knee = [(0.0, 26.0), (0.002, 22.0), (0.01, 19.0), (0.018, 17.5), (0.03, 16.5)]
+    cheap = [(0.05 + 0.035 * j, 15.9 - 0.09 * j) for j in range(10)]
+    points = [((j,), e, p, 0.02) for j, (e, p) in enumerate(knee + cheap)]
+    picked = spread_points(points, 8, FPS)
+    assert len(picked) == 8 and picked == [pt for pt in points if pt in picked]
+    assert _ends(points) <= {(pt[1], -pt[2]) for pt in picked}
+    between = [pt for pt in picked if 0.0 < pt[1] < 0.03]
+    assert len(between) >= 2, picked
+    within = [pt[2] for pt in picked if pt[1] <= 0.02]
+    assert min(within) <= 19.0  # not max quality's 26 W
+
+
+def test_points_with_equal_figures_are_still_spread_by_rank() -> None:
+    points = [((j,), 0.1, 1.0, 0.02) for j in range(9)]
+    assert len(spread_points(points, 4, FPS)) == 4
 
 
 def _setting(n: int) -> tuple[int, int, int]:
