@@ -104,7 +104,8 @@ def _spread(points: list[tuple[Any, ...]], k: int) -> list[tuple[Any, ...]]:
     err = np.array([points[i][1] for i in order], dtype=np.float64)
     pwr = np.array([points[i][2] for i in order], dtype=np.float64)
     span_e, span_p = np.ptp(err), np.ptp(pwr)
-    steps = np.hypot(np.diff(err) / span_e if span_e > 0 else 0.0, np.diff(pwr) / span_p if span_p > 0 else 0.0)
+    steps = np.hypot(np.diff(err) / span_e if span_e > 0 else 0.0,
+                     np.diff(pwr) / span_p if span_p > 0 else 0.0)
     along = np.concatenate(([0.0], np.cumsum(steps)))
     if along[-1] <= 0.0:  # every point at the same figures: by rank
         along = np.arange(len(order), dtype=np.float64)
