@@ -85,7 +85,7 @@ def test_the_slow_tier_is_spread_evenly_by_error() -> None:
 def test_the_spread_follows_the_curve_not_the_crowd_at_the_cheap_end() -> None:
     """A frontier shaped as chess's on the `desktop` profile: max quality at 26 W, three settings between
     it and error 0.03, then ten cheap settings (error 0.05-0.4) all within a watt of the static power.
-    Eight picks evenly by rank put six among the cheap ten and none between max quality and 0.03; along
+    Eight picks evenly by rank put five among the cheap ten and one between max quality and 0.03; along
     the curve the picks cover the steep part, so an error budget of 0.02 finds a setting well below
     max quality's power."""
     knee = [(0.0, 26.0), (0.002, 22.0), (0.01, 19.0), (0.018, 17.5), (0.03, 16.5)]
