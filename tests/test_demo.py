@@ -65,6 +65,9 @@ def test_demo_prices_the_slow_tier_only_when_its_lookups_read_it() -> None:
     assert slow() == 1 and slow("--priority", "frame_rate") == 1
     assert slow("--priority", "budget") == demo.DEMO_DISPLAY_POINTS
     assert slow("--slow-points", "3") == 3 and slow("--priority", "budget", "--slow-points", "0") == 0
+    guards = [demo.job_request(demo.parser().parse_args(argv)).options["guard_frames"]
+              for argv in ([], ["--guard-frames", "2"])]
+    assert guards == [demo.DEMO_GUARD_FRAMES, 2]
 
 
 @pytest.mark.slow
