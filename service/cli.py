@@ -163,8 +163,7 @@ class _Bar:
         if not self.enabled or (now - self.last < 0.2 and p.phase != "done"):
             return
         self.last = now
-        frac = p.views_done / p.views_planned if p.views_planned else 0.0
-        n = int(30 * frac)
+        n = int(30 * p.fraction)  # the whole run's, display pricing included
         eta = f"{p.estimate_s:6.0f}s left" if p.estimate_s is not None else "   ...    "
         sys.stderr.write(f"\r[{'#' * n}{'.' * (30 - n)}] {p.views_done}/{p.views_planned} views, "
                          f"{p.evaluations} renders, {p.cache_hits} cached, {eta} {p.phase[:28]:<28}")

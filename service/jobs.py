@@ -23,6 +23,7 @@ from service.camera_path import CameraPath
 from service.eval_cache import EvalCache
 from service.evaluation import SceneHandle, read_scene
 from service.lru import LRUCache
+from service.octree.search import FRACTION_BEFORE_DONE
 from service.optimize import Cancelled, OptimizeConfig, optimize_path
 from service.params import Parameter, ParameterSpace, default_space
 
@@ -88,13 +89,17 @@ def _plain(value: Any) -> Any:
     return f if math.isfinite(f) else None
 
 
-def progress_dict(progress: Any, *, elapsed_s: float) -> dict[str, Any]:
+def progress_dict(progress: Any, *, elapsed_s: float, fraction_before: float = 0.0) -> dict[str, Any]:
     """``service.optimize.Progress`` as JSON, with the elapsed time summed over all attempts of the job
-    (the optimiser's own ``elapsed_s`` restarts with each attempt)."""
+    (the optimiser's own ``elapsed_s`` restarts with each attempt) and the fraction done never below
+    ``fraction_before``, what an earlier attempt reached (a resumed job runs from the start again, its
+    finished renders answered by the evaluation cache), unless this attempt is done."""
     out = _plain(progress)
     if not isinstance(out, dict):
         raise TypeError(f"progress must be a dataclass or a dict, got {type(progress).__name__}")
     out["elapsed_s"] = round(float(elapsed_s), 3)
+    if isinstance(out.get("fraction"), float) and out["fraction"] < 1.0:
+        out["fraction"] = max(out["fraction"], min(float(fraction_before), FRACTION_BEFORE_DONE))
     done, planned = int(out.get("views_done", 0)), int(out.get("views_planned", 0))
     if out.get("estimate_s") is None and 0 < done <= planned:
         out["estimate_s"] = round(elapsed_s * (planned - done) / done, 3)
@@ -272,6 +277,7 @@ class JobManager:
             cancel.set()
         t0 = time.monotonic()
         base_elapsed = job.elapsed_s
+        base_fraction = job.progress.get("fraction") or 0.0  # an earlier attempt's, if any
         self._bump()
 
         def elapsed() -> float:
@@ -281,7 +287,7 @@ class JobManager:
             return cancel.is_set() or self._stopping.is_set()
 
         def on_progress(progress: Any) -> None:
-            p = progress_dict(progress, elapsed_s=elapsed())
+            p = progress_dict(progress, elapsed_s=elapsed(), fraction_before=base_fraction)
             self.storage.update_job(job_id=job.id, progress=p, elapsed_s=elapsed(), event=("progress", p))
             self._bump()
 

@@ -184,6 +184,23 @@ def test_describe_job_progress() -> None:
     assert u.fraction == pytest.approx(0.5) and "[level 0]" in u.text
 
 
+def test_describe_follows_the_services_fraction_through_the_display_pricing() -> None:
+    """While the display pricing runs every view is done: the views' count reads 100 %, the service's
+    whole-job fraction does not, and describe() shows the latter (older services: the views' count)."""
+    pricing = {"views_done": 9, "views_planned": 9, "evaluations": 180, "cache_hits": 4, "estimate_s": 470.0,
+               "phase": "price at display resolution"}
+    old = {"state": "running", "progress": pricing}
+    assert describe(old).fraction == 1.0 and describe(old, evals_per_view=18).fraction == 1.0
+    new = {"state": "running", "progress": {**pricing, "fraction": 0.2164}}
+    for u in (describe(new), describe(new, evals_per_view=18)):
+        assert u.fraction == pytest.approx(0.2164)
+        assert u.text == ("running [price at display resolution]: 22 %, 9/9 views, 180 evaluations "
+                          "(4 cached), ~470 s left")
+    assert describe({"state": "running", "progress": {**pricing, "fraction": None}}).fraction == 1.0
+    done = describe({"state": "done", "progress": {**pricing, "fraction": 1.0, "phase": "done"}})
+    assert done.fraction == 1.0 and done.text == "done: 9/9 views, 180 evaluations (4 cached)"
+
+
 def test_serve_command(tmp_path) -> None:
     cmd = serve_command(sys.executable, 8123, tmp_path, token="t")
     assert cmd[-9:] == ["serve", "--host", "127.0.0.1", "--port", "8123", "--data-dir", str(tmp_path),

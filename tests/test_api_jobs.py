@@ -94,6 +94,15 @@ def test_job_end_to_end_events_store_and_query(client: httpx.Client, finished: d
     done = [d["views_done"] for k, d in events if k == "progress"]
     assert done == sorted(done) and done[-1] > 0
     assert job["progress"]["evaluations"] > 0
+    # the whole job's fraction (search and display pricing), documented in the OpenAPI schema
+    progress = [d for k, d in events if k == "progress"]
+    fractions = [d["fraction"] for d in progress]
+    assert fractions == sorted(fractions) and job["progress"]["fraction"] == 1.0
+    assert all(d["fraction"] < 1.0 for d in progress if d["phase"] != "done")
+    assert all(d["views_done"] == d["views_planned"] and d["fraction"] < 1.0
+               for d in progress if d["phase"] == "price at display resolution")
+    schema = client.get("/openapi.json").json()["components"]["schemas"]["JobProgress"]
+    assert "display pricing" in schema["properties"]["fraction"]["description"]
     assert events[-1][1]["store_id"] == job["store_id"]
 
     r = client.get(f"/stores/{job['store_id']}")

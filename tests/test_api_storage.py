@@ -125,6 +125,39 @@ def test_progress_keeps_total_elapsed_and_estimates() -> None:
                       elapsed_s=6.0)
     assert p["elapsed_s"] == 6.0 and p["estimate_s"] == 18.0
     assert p["evaluations"] == 40 and p["cache_hits"] == 5 and p["phase"] == "starting"
+    # the whole job's fraction: a resumed attempt starts over, the job's fraction does not
+    assert progress_dict(Progress(fraction=0.25), elapsed_s=1.0)["fraction"] == 0.25
+    assert progress_dict(Progress(fraction=0.25), elapsed_s=1.0, fraction_before=0.5)["fraction"] == 0.5
+    assert progress_dict(Progress(fraction=0.75), elapsed_s=1.0, fraction_before=0.5)["fraction"] == 0.75
+    assert progress_dict(Progress(fraction=1.0, phase="done"), elapsed_s=1.0, fraction_before=0.5)[
+        "fraction"] == 1.0
+    assert progress_dict(Progress(fraction=0.25), elapsed_s=1.0, fraction_before=1.0)["fraction"] < 1.0
+    assert "fraction" not in progress_dict({"views_done": 1}, elapsed_s=1.0)  # an optimiser without it
+
+
+def test_a_resumed_job_keeps_the_fraction_an_earlier_attempt_reached(storage: Storage, monkeypatch) -> None:
+    """The job manager passes the stored progress's fraction on to the next attempt's reports."""
+    import service.jobs as jobs_module
+    from service.optimize import Cancelled, Progress
+
+    job = storage.create_job(scene_id=SCENE, spec={})
+    storage.update_job(job_id=job.id, progress={"views_done": 3, "fraction": 0.5})
+
+    def attempt(spec, *, progress, **_kw):  # the second attempt: the optimiser starts over
+        for f in (0.125, 0.625):
+            progress(Progress(fraction=f))
+        raise Cancelled("stopped")
+
+    monkeypatch.setattr(jobs_module, "run_optimisation", attempt)
+    monkeypatch.setattr(jobs_module, "SceneHandle", lambda *_a, **_kw: None)
+    manager = JobManager(storage, SceneCache(storage), workers=0)
+    monkeypatch.setattr(manager.scenes, "get", lambda _id: None)
+    monkeypatch.setattr(manager, "executor", lambda: None)
+    monkeypatch.setattr(manager, "eval_cache", lambda: None)
+    manager._run(job.id)
+    reported = [e.data["fraction"] for e in storage.events_after(job_id=job.id) if e.kind == "progress"]
+    assert reported == [0.5, 0.625]
+    assert storage.get_job(job_id=job.id).progress["fraction"] == 0.625
 
 
 def test_claim_is_exclusive_and_loses_to_a_cancel(storage: Storage) -> None:

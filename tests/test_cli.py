@@ -185,3 +185,12 @@ def test_query_takes_the_priority_and_prints_it(tmp_path, capsys) -> None:
     with pytest.raises(SystemExit):
         cli.main([*args, "--priority", "speed"])
     assert "invalid choice: 'speed'" in capsys.readouterr().err
+
+
+def test_the_progress_bar_shows_the_whole_runs_fraction(monkeypatch, capsys) -> None:
+    """Every view is done while the display pricing runs: the bar shows the run's fraction, not 9/9."""
+    from service.optimize import Progress
+
+    monkeypatch.setenv("RENDER_BUDGET_BAR", "1")
+    cli._Bar(True)(Progress(views_done=9, views_planned=9, phase="price at display resolution", fraction=0.5))
+    assert f"[{'#' * 15}{'.' * 15}] 9/9 views" in capsys.readouterr().err

@@ -454,6 +454,41 @@ def test_the_time_left_during_the_search_includes_the_pricing_to_come(scene, mon
 
 
 @pytest.mark.slow
+def test_the_fraction_done_covers_the_display_pricing(scene) -> None:
+    """The job's fraction done counts the display pricing, a real job's longest phase, in search steps
+    (each camera priced weighted by its points and the pixel ratio), from the start: it never decreases,
+    it does not jump when the pricing starts (the pricing to come was counted during the search), it is
+    well short of 1 then although every view is done (the views' count, the progress shown before, reads
+    100 % through the pricing), it grows with every batch priced and reads 1 only when the job is done.
+    The add-on's progress line and bar follow it."""
+    from addon.core.job_runner import describe
+    from service.jobs import progress_dict
+
+    updates = []
+    store = optimize_path(scene, _orbit_path(16, (48, 36)), SUBSPACE,
+                          _options(display_estimator="full", display_points=2, path_resolution=0.02),
+                          cache=EvalCache(), executor=InProcessExecutor(), progress=updates.append)
+    cameras = store.meta["display_cameras"]
+    assert cameras > 8, "the path must need more than one pricing batch (8 cameras) for this test"
+    fractions = [u.fraction for u in updates]
+    assert fractions == sorted(fractions) and fractions[0] == 0.0
+    assert updates[-1].phase == "done" and fractions[-1] == 1.0 and max(fractions[:-1]) < 1.0
+    pricing = [i for i, u in enumerate(updates) if u.phase == "price at display resolution"]
+    assert len(pricing) == 1 + -(-cameras // 8)  # the phase's start, then one report per batch
+    start = updates[pricing[0]]
+    assert start.views_done == start.views_planned > 0
+    assert start.fraction == pytest.approx(updates[pricing[0] - 1].fraction, rel=1e-9)
+    assert 0.0 < start.fraction < 0.5
+    priced = [updates[i].fraction for i in pricing]
+    assert priced == sorted(set(priced))  # rising with every batch
+    body = {"state": "running", "progress": progress_dict(start, elapsed_s=start.elapsed_s)}
+    line = describe(body, evals_per_view=6 * 3)
+    assert line.fraction == pytest.approx(start.fraction) and f": {100 * start.fraction:.0f} %, " in line.text
+    del body["progress"]["fraction"]  # an older service: the views' count
+    assert describe(body, evals_per_view=6 * 3).fraction == 1.0
+
+
+@pytest.mark.slow
 def test_a_stated_display_size_is_where_power_and_the_frame_rate_are_judged(scene) -> None:
     """A store priced at a stated smaller display judges power, and so which settings keep up with the
     frame rate, for that size during the search too (a search priced for the path's larger size would keep

@@ -75,20 +75,29 @@ class JobOutcome:
 def describe(job: dict[str, Any], evals_per_view: int | None = None) -> JobUpdate:
     """Fraction done and a one-line status from a GET /jobs/{id} body.
 
-    The optimiser finishes the views of an octree level together, so `views_done` moves in jumps; with
-    `evals_per_view` (population x generations) the fraction also follows the renders inside a level.
+    The fraction is the service's own for the whole job (`progress.fraction`: the search and the display
+    pricing after it), shown in the text too. A service without it: views done of those planned, which
+    reads 100 % while the display pricing runs; the optimiser finishes the views of an octree level
+    together, so `views_done` moves in jumps, and with `evals_per_view` (population x generations) the
+    fraction also follows the renders inside a level.
     """
     p = job.get("progress") or {}
     done, planned = int(p.get("views_done") or 0), int(p.get("views_planned") or 0)
     evals = int(p.get("evaluations") or 0) + int(p.get("cache_hits") or 0)
     state = str(job.get("state", "?"))
-    frac = min(1.0, done / planned) if planned > 0 else 0.0
-    if evals_per_view and planned > 0:
-        frac = max(frac, min(0.99, evals / (planned * evals_per_view)))
+    whole = p.get("fraction")
+    if isinstance(whole, int | float) and not isinstance(whole, bool):
+        frac = min(1.0, max(0.0, float(whole)))
+    else:
+        whole = None
+        frac = min(1.0, done / planned) if planned > 0 else 0.0
+        if evals_per_view and planned > 0:
+            frac = max(frac, min(0.99, evals / (planned * evals_per_view)))
     if state == "done":
         frac = 1.0
     phase = f" [{p['phase']}]" if isinstance(p.get("phase"), str) and state == "running" else ""
-    text = f"{state}{phase}: {done}/{planned} views, {int(p.get('evaluations') or 0)} evaluations"
+    share = f"{100 * frac:.0f} %, " if whole is not None and state == "running" else ""
+    text = f"{state}{phase}: {share}{done}/{planned} views, {int(p.get('evaluations') or 0)} evaluations"
     if p.get("cache_hits"):
         text += f" ({int(p['cache_hits'])} cached)"
     if p.get("estimate_s") is not None and state == "running":

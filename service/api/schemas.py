@@ -270,6 +270,12 @@ class JobProgress(BaseModel):
     cache_hits: int = 0
     elapsed_s: float = 0.0
     estimate_s: float | None = None
+    fraction: float | None = Field(
+        None, ge=0.0, le=1.0,
+        description="the share of the whole job done, the search and the display pricing after it (in "
+                    "search steps, a priced camera weighted by its cost): never decreasing over the job's "
+                    "attempts, 1 only when done; null before the first report and for jobs run by "
+                    "versions without it")
 
 
 class JobPublic(BaseModel):

@@ -198,8 +198,9 @@ class OctreeBuilder:
         self.pricer = pricer
         self.display_cameras = 0  # cameras priced at display resolution
         self.display_points = 0  # frontier points priced there
-        if pricer is not None:  # the search's time left includes the pricing after it
+        if pricer is not None:  # the search's time left and fraction done include the pricing after it
             self.search.after = self._pricing_ahead
+            self.search.steps_after = self._pricing_steps_ahead
 
     @property
     def state(self) -> Progress:
@@ -209,7 +210,7 @@ class OctreeBuilder:
         self.sampling.build()
         if self.pricer is not None:
             self._price_at_display()
-        self.search.report("done")
+        self.search.finish()
 
     def pricing_time(self, state: Progress, cameras: int, points: float) -> float | None:
         """Seconds to price ``points`` settings at ``cameras`` display cameras, from the search's pace.
@@ -220,24 +221,46 @@ class OctreeBuilder:
         search answered from the evaluation cache has no pace to go by)."""
         if self.cfg.display is None or state.evaluations <= 0:
             return None
+        return self._pricing_renders(cameras, points) * state.elapsed_s / state.evaluations
+
+    def pricing_steps(self, cameras: int, points: float) -> float:
+        """Search steps that pricing ``points`` settings at ``cameras`` display cameras is worth, for the
+        run's fraction done (:meth:`Search.report`): a step renders about a population of settings at the
+        evaluation size, and pricing costs what :meth:`pricing_time` says in such renders."""
+        return self._pricing_renders(cameras, points) / max(1, self.cfg.nsga.population)
+
+    def _pricing_renders(self, cameras: int, points: float) -> float:
+        """Search renders (at the evaluation size) that pricing ``points`` settings and each of ``cameras``
+        references at display resolution costs: :data:`PRICING_COST` x the pixel ratio each."""
+        assert self.cfg.display is not None
         ratio = self.cfg.display[0] * self.cfg.display[1] / (self.cfg.width * self.cfg.height)
-        return PRICING_COST * ratio * state.elapsed_s / state.evaluations * (points + cameras)
+        return PRICING_COST * ratio * (points + cameras)
 
     def _pricing_ahead(self, state: Progress) -> float | None:
-        """The display pricing still to come while the search runs (:meth:`pricing_time`): every frontier
-        planned so far, at its sample camera and (path samples) at most ``guard_frames`` guards, each with
-        as many points as the frontiers found so far keep to be priced on average (:func:`spread_points`).
-        Before the first is found, ``display_points`` + 1: a full meeting tier and one slow point (Max,
-        when it misses the frame rate; recorded slow tiers mostly hold one point, bench/RESULTS.md), or a
-        population when every point is priced."""
+        """The display pricing's time still to come while the search runs (:meth:`pricing_time` of
+        :meth:`_pricing_to_come`)."""
+        return self.pricing_time(state, *self._pricing_to_come())
+
+    def _pricing_steps_ahead(self) -> float:
+        """The display pricing still to come while the search runs, in search steps (:meth:`pricing_steps`
+        of :meth:`_pricing_to_come`)."""
+        return self.pricing_steps(*self._pricing_to_come())
+
+    def _pricing_to_come(self) -> tuple[int, float]:
+        """Cameras and points of the display pricing after the search, as far as the search knows them:
+        every frontier planned so far, at its sample camera and (path samples) at most ``guard_frames``
+        guards, each with as many points as the frontiers found so far keep to be priced on average
+        (:func:`spread_points`). Before the first is found, ``display_points`` + 1: a full meeting tier
+        and one slow point (Max, when it misses the frame rate; recorded slow tiers mostly hold one point,
+        bench/RESULTS.md), or a population when every point is priced."""
         cfg = self.cfg
         kept = [len(spread_points(rec.points, cfg.display_points, self.search.ev.fps, cfg.slow_points))
                 for rec in self.lattice.frontiers]
         per_frontier = (sum(kept) / len(kept) if kept else
                         cfg.display_points + 1 if cfg.display_points else cfg.nsga.population)
-        cameras = max(state.views_planned, len(kept)) * (1 + cfg.guard_frames if cfg.view_sampling == "path"
-                                                         else 1)
-        return self.pricing_time(state, cameras, cameras * per_frontier)
+        cameras = max(self.state.views_planned, len(kept)) * (1 + cfg.guard_frames
+                                                              if cfg.view_sampling == "path" else 1)
+        return cameras, cameras * per_frontier
 
     def _price_at_display(self) -> None:
         """Every measured frontier's points priced again at the path's resolution at the frontier's
@@ -258,13 +281,13 @@ class OctreeBuilder:
             jobs.append((fid, [dataclasses.replace(c, width=width, height=height) for c in cams],
                          [pt[0] for pt in keep]))
         requests = [(cam, xs) for _, cams, xs in jobs for cam in cams]
-        # a camera priced at display resolution costs about this many search steps (the time left when
-        # the search rendered nothing to take a pace from, pricing_time)
-        weight = max(1, round(PRICING_COST * width * height / (self.cfg.width * self.cfg.height)
-                              * (max(len(xs) for _, xs in requests) + 1) / max(1, self.cfg.nsga.population))
-                     ) if requests else 1
-        search.steps_planned += weight * len(requests)
-        search.after = None  # the points to price are known: the estimate is this phase's own from here
+        # what each camera priced at display resolution costs in search steps (the fraction done, and the
+        # time left when the search rendered nothing to take a pace from, pricing_time)
+        steps = [self.pricing_steps(1, len(xs)) for _, xs in requests]
+        search.steps_planned += sum(steps)
+        done = search.steps_done
+        # the points to price are known: the estimate is this phase's own from here, and its steps planned
+        search.after = search.steps_after = None
         search.check_cancel()
         search.report("price at display resolution",
                       remaining_s=self.pricing_time(search.state, len(requests),
@@ -277,7 +300,7 @@ class OctreeBuilder:
         for start in range(0, len(requests), chunk):
             search.check_cancel()
             results += self.pricer.price(requests[start:start + chunk])
-            search.steps_done += weight * len(requests[start:start + chunk])
+            search.steps_done = done + sum(steps[:start + chunk])  # at the last batch: every camera's
             # pricing is the last phase, and its cameras cost what the scene makes them cost at display
             # resolution, which pricing_time guesses from the search's pace and pixel counts only: from
             # the first batch on, the time left is this phase's own measured pace

@@ -40,6 +40,10 @@ from service.store import frontier_tiers, meets_frame_rate, split_by_rate
 #: A frontier: (full index vector, error, power, frame time) of each setting.
 Points = list[tuple[Indices, float, float, float]]
 
+#: The most a run's fraction done reads before the run is done (its last step counted, the frontiers
+#: still being written): 1 means done.
+FRACTION_BEFORE_DONE = 0.99
+
 #: Where the probes' chain from Max towards the most accurate real-time setting stops (fractions of the
 #: way, per parameter index).
 PROBE_CHAIN = (0.25, 0.5, 0.75)
@@ -51,7 +55,9 @@ class Cancelled(Exception):
 
 @dataclass
 class Progress:
-    """Where a run stands: views optimised of those planned so far, renders, cache hits, time."""
+    """Where a run stands: views optimised of those planned so far, renders, cache hits, time, and the
+    fraction of the whole run done (:meth:`Search.report`: search and display pricing, in search steps;
+    never decreasing, 1 only when the run is done)."""
 
     views_done: int = 0
     views_planned: int = 0
@@ -60,6 +66,7 @@ class Progress:
     elapsed_s: float = 0.0
     estimate_s: float | None = None
     phase: str = "starting"
+    fraction: float = 0.0
 
 
 def camera_seed(seed: int, camera: CameraSpec) -> int:
@@ -86,16 +93,28 @@ class Search:
         # seconds the phases after the search will take, estimated from the progress so far (None: not
         # known yet); added to the search steps' time left
         self.after: Callable[[Progress], float | None] | None = None
+        # search steps' worth of the phases after the search still to come (not yet in steps_planned);
+        # counted in the fraction done
+        self.steps_after: Callable[[], float] | None = None
 
     # -- bookkeeping --------------------------------------------------------------------------------
 
     def report(self, phase: str | None = None, remaining_s: float | None = None) -> None:
         """Publish the progress; ``remaining_s``: the time left as the caller measured it (the last
         phase's own pace), instead of the search steps' pace plus what :attr:`after` expects of the
-        phases after the search."""
+        phases after the search.
+
+        The fraction done is the steps done of those planned, the phases after the search included
+        (:attr:`steps_after` while they are not planned yet), so that a last phase as long as the display
+        pricing is not a run at 100 %. Steps planned grow as the run learns its work (more views, the
+        pricing's own count when it starts): the fraction keeps the highest value it reached, and stays
+        at most :data:`FRACTION_BEFORE_DONE` until :meth:`finish`."""
         if phase is not None:
             self.state.phase = phase
         s = self.state
+        total = self.steps_planned + (self.steps_after() if self.steps_after is not None else 0.0)
+        if total > 0:
+            s.fraction = max(s.fraction, min(FRACTION_BEFORE_DONE, self.steps_done / total))
         s.evaluations = self.ev.evaluations
         s.cache_hits = self.ev.cache_hits
         s.elapsed_s = time.perf_counter() - self.t0
@@ -111,6 +130,11 @@ class Search:
                 s.estimate_s += later
         if self._progress_cb is not None:
             self._progress_cb(Progress(**vars(s)))
+
+    def finish(self) -> None:
+        """Publish the run as done (fraction 1)."""
+        self.state.fraction = 1.0
+        self.report("done")
 
     def check_cancel(self) -> None:
         if self._should_cancel is not None and self._should_cancel():
