@@ -139,7 +139,7 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, config: O
         view_sampling=config.view_sampling, path_resolution=config.path_resolution,
         guard_frames=config.guard_frames,
         display=None if config.display_estimator == "preview" else display,
-        display_points=config.display_points,
+        display_points=config.display_points, slow_points=config.slow_points,
     )
     pricing = pricer = None
     if config.display_estimator != "preview":
@@ -168,6 +168,8 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, config: O
                                   "preview resolution (power scaled by the pixel ratio)"),
         "display_cameras": builder.display_cameras,
         "display_points": builder.display_points,
+        # the slow tiers' share of them: at most this many points a frontier (0: all; 1: max quality alone)
+        "slow_points": config.slow_points,
         "metric": config.metric,
         # the power figures include it: a lookup at another frame rate reprices power from it
         "static_power_w": sim_core.load_profile(config.profile).static_power_w,

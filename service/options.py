@@ -163,11 +163,18 @@ OPTIONS: tuple[Option, ...] = (
            "tile estimator: share of the frame's blocks traced at the path's resolution",
            minimum=0.01, maximum=1.0, metavar="F", group="Evaluation", precision=2),
     Option("display_points", int, 8, "Points priced",
-           "at most this many points of each frontier's settings that keep up with the frame rate, and as "
-           "many of its slower, more accurate settings, each spread along its tier (both ends kept), are "
-           "priced at the path's resolution and kept in the store (0: all; each costs a share of a "
-           "full-size frame at every camera the frontier is priced at)", minimum=0, maximum=64, metavar="N",
+           "at most this many points of each frontier's settings that keep up with the frame rate, spread "
+           "along their tier (both ends kept), are priced at the path's resolution and kept in the store "
+           "(0: all; each costs a share of a full-size frame at every camera the frontier is priced at; "
+           "the settings that miss the rate: slow points)", minimum=0, maximum=64, metavar="N",
            group="Evaluation"),
+    Option("slow_points", int, 8, "Slow points priced",
+           "at most this many of each frontier's settings that miss the frame rate (slower and more "
+           "accurate than every real-time one; a lookup reads them only when its priority is the budget), "
+           "spread along their tier (both ends kept), are priced at the path's resolution and kept in the "
+           "store (0: all; 1: max quality alone, which each camera's reference render prices at no extra "
+           "cost; each other point costs about a max-quality frame at every camera the frontier is priced "
+           "at)", minimum=0, maximum=64, metavar="N", group="Evaluation"),
     Option("display_height", int, None, "Display height",
            "price the store's figures at this height (width from the path's aspect) instead of the path's "
            "own resolution: a stated smaller display size when full size is too slow (default: the path's "

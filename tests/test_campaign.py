@@ -197,6 +197,10 @@ def test_the_query_options_reach_the_budget_modes_lookups_and_the_report() -> No
     assert campaign.lookup_heading(campaign.CampaignSpec("s", (64, 36)), store).endswith(
         "24 fps (the store's own), frame rate first")
     assert "Priority: budget first" in campaign.lookup_note(spec, store)
+    assert "max quality alone" not in campaign.lookup_note(spec, store)
+    store.meta["slow_points"] = 1  # a store that priced max quality alone in its slow tiers says so
+    assert "max quality alone among the settings that miss 12 fps" in campaign.lookup_note(spec, store)
+    assert "max quality alone" not in campaign.lookup_note(campaign.CampaignSpec("s", (64, 36)), store)
     assert "asked for 12 fps" in campaign.size_note(spec, path)
     with pytest.raises(ValueError, match="static power"):  # a target the store cannot answer
         campaign.lookup_heading(spec, synthetic_store(timed=True))

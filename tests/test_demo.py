@@ -53,6 +53,23 @@ def test_demo_searches_and_measures_on_the_profile_it_is_given() -> None:
         demo.parser().parse_args(["--profile", "../etc/passwd"])
 
 
+def test_demo_prices_the_slow_tier_only_when_its_lookups_read_it() -> None:
+    """Frame rate first (the default) never picks a setting that misses the rate while one meets it, so
+    the demo's store prices max quality alone there (free: the reference render); budget first gets the
+    display points; --slow-points wins over both."""
+    from tools import demo
+
+    def slow(*argv: str) -> int:
+        return demo.job_request(demo.parser().parse_args(list(argv))).options["slow_points"]
+
+    assert slow() == 1 and slow("--priority", "frame_rate") == 1
+    assert slow("--priority", "budget") == demo.DEMO_DISPLAY_POINTS
+    assert slow("--slow-points", "3") == 3 and slow("--priority", "budget", "--slow-points", "0") == 0
+    guards = [demo.job_request(demo.parser().parse_args(argv)).options["guard_frames"]
+              for argv in ([], ["--guard-frames", "2"])]
+    assert guards == [demo.DEMO_GUARD_FRAMES, 2]
+
+
 @pytest.mark.slow
 @pytest.mark.service
 def test_demo_end_to_end_tiny(tmp_path: Path) -> None:

@@ -191,3 +191,64 @@ def test_the_builder_prices_the_spread_points_and_draws_the_tiers_from_their_dis
     hit = store.lookup((0.5, 0.0, 0.0), direction=(1.0, 0.0, 0.0), error_budget=0.02, priority="budget")
     assert not hit.infeasible and hit.meets_fps is False and round(hit.error, 3) == 0.015
     assert hit.indices == tuple(slow[5][0])
+
+
+@settings(max_examples=300, deadline=None)
+@given(points=point_lists, k=st.integers(0, 10), k_slow=st.integers(0, 10))
+def test_the_slow_tier_gets_its_own_count(points, k, k_slow) -> None:
+    """``k_slow`` bounds the slow tier alone (0: all of it) and leaves the meeting tier as ``k`` has it;
+    with 1 the slow tier keeps its least-error end, max quality in a frontier, whose figures the
+    reference render gives."""
+    picked = spread_points(points, k, FPS, k_slow)
+    meeting, slow = split_by_rate(points, FPS)
+    picked_slow = [pt for pt in picked if pt in slow]
+    assert [pt for pt in picked if pt in meeting] == [pt for pt in spread_points(meeting, k) if pt in meeting]
+    if not slow:
+        assert picked == spread_points(points, k, FPS)
+        return
+    assert len(picked_slow) == (len(slow) if k_slow == 0 else min(k_slow, len(slow)))
+    if k_slow == 1:
+        assert [(pt[1], -pt[2]) for pt in picked_slow] == [min((pt[1], -pt[2]) for pt in slow)]
+    assert spread_points(points, k, FPS, None) == spread_points(points, k, FPS, k)
+
+
+def test_the_builder_prices_max_quality_alone_in_the_slow_tier_with_one_slow_point() -> None:
+    """``slow_points`` 1: the builder asks the pricer for the meeting tier's spread and the slow tier's
+    least-error point only, and a budget-first lookup within a budget no real-time point keeps gets it."""
+    import itertools
+
+    from service.octree.builder import OctreeBuilder, OctreeConfig, PathFrames
+    from service.params import default_space
+
+    space = default_space().subset(["sampling", "max_depth", "resolution_scale"])
+    settings_ = [space.expand(f) for f in itertools.product(*(range(n) for n in space.free_n_values))][:12]
+    meeting = [(settings_[j], e, p, 0.02) for j, (e, p) in enumerate(((0.3, 0.2), (0.1, 0.4), (0.05, 0.6)))]
+    slow = [(settings_[3 + j], 0.04 - 0.005 * j, 0.7 + 0.05 * j, 0.04 + 0.01 * j) for j in range(9)]
+    asked: list[list[tuple[int, ...]]] = []
+
+    class Pricer:
+        ev = SimpleNamespace(executor=None)
+
+        def price(self, requests):
+            asked.extend(list(xs) for _, xs in requests)
+            return [[SimpleNamespace(error=e, power_w=p, frame_time_s=t)
+                     for x in xs for (s, e, p, t) in meeting + slow if s == x] for _, xs in requests]
+
+    cfg = OctreeConfig(threshold_power_w=0.1, threshold_error=0.01, view_sampling="axis", display=(64, 36),
+                       display_points=4, slow_points=1)
+    b = OctreeBuilder(SimpleNamespace(fps=FPS, evaluations=0, cache_hits=0), space,  # type: ignore[arg-type]
+                      PathFrames(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])), cfg, pricer=Pricer())  # type: ignore[arg-type]
+
+    def build() -> None:
+        b.lattice.add_root()
+        b.lattice.set_frontier(0, 0, meeting + slow)
+        for views in b.lattice.corner_views:
+            views[:] = [0] * len(views)
+
+    b.sampling.build = build  # type: ignore[method-assign]
+    b.run()
+    assert asked == [[pt[0] for pt in meeting] + [slow[8][0]]] and b.display_points == 4
+    store = b.to_store(profile="mobile", fps=FPS, aspect=16 / 9, meta={"static_power_w": 0.1})
+    hit = store.lookup((0.5, 0.0, 0.0), direction=(1.0, 0.0, 0.0), error_budget=0.02, priority="budget")
+    assert not hit.infeasible and hit.meets_fps is False and hit.error == 0.0
+    assert hit.indices == tuple(slow[8][0])

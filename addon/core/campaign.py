@@ -330,9 +330,13 @@ def lookup_note(spec: CampaignSpec, store: ParetoStore) -> str:
     """What the priority means for the budget modes' figures (a note under Table 3)."""
     rate = store.check_fps(spec.fps)
     if spec.priority == "budget":
-        return (f"Priority: budget first. Where no stored setting keeps both the budget and {rate:g} fps, "
+        note = (f"Priority: budget first. Where no stored setting keeps both the budget and {rate:g} fps, "
                 "the budget modes keep the budget and miss the frame rate (their fps row shows it); the "
                 "power budget is then broken only where nothing keeps it.")
+        if store.meta.get("slow_points") == 1:
+            note += (f" The store priced max quality alone among the settings that miss {rate:g} fps "
+                     "(slow points 1), so there the error-budget mode picks max quality.")
+        return note
     return (f"Priority: frame rate first (the default). Where no stored setting keeps both the budget and "
             f"{rate:g} fps, the budget modes keep the frame rate and break the budget.")
 

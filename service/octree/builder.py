@@ -49,8 +49,10 @@ class OctreeConfig:
     warm_generations: int = 5  # "path" sampling: generations of the warm-started searches in between
     # the path's resolution, where every recorded point is priced again (None: the search's figures)
     display: tuple[int, int] | None = None
-    # at most this many points of each tier of each frontier priced there (0: all; spread_points)
+    # at most this many points of each frontier's meeting tier, and of its slow tier (None: as many),
+    # priced there (0: all; spread_points)
     display_points: int = 0
+    slow_points: int | None = None
 
     def __post_init__(self) -> None:
         options.check({name: getattr(self, name) for name in (
@@ -121,26 +123,30 @@ def _spread(points: list[tuple[Any, ...]], k: int) -> list[tuple[Any, ...]]:
     return [points[order[j]] for j in sorted(picks, key=lambda j: order[j])]
 
 
-def spread_points(points: list[tuple[Any, ...]], k: int, fps: float | None = None) -> list[tuple[Any, ...]]:
+def spread_points(points: list[tuple[Any, ...]], k: int, fps: float | None = None,
+                  k_slow: int | None = None) -> list[tuple[Any, ...]]:
     """The points of a frontier ((indices, error, power, frame time)) priced at display resolution: at
-    most ``k`` (0: all) of each tier (:func:`service.store.split_by_rate` at ``fps``: the points that
-    meet it, then the slow tier, those that miss it while others meet it), each spread along its tier (both
-    ends, the least error and the cheapest, when ``k`` >= 2, and evenly along the tier's curve between
-    them: :func:`_spread`).
-    Without ``fps`` (or when no point meets it) one tier.
+    most ``k`` of the meeting tier and ``k_slow`` (default ``k``) of the slow tier
+    (:func:`service.store.split_by_rate` at ``fps``: the points that meet it, then those that miss it
+    while others meet it; 0: all of a tier), each spread along its tier (both ends, the least error and
+    the cheapest, when its count is >= 2, and evenly along the tier's curve between them:
+    :func:`_spread`). Without ``fps`` (or when no point meets it) one tier, of at most ``k``.
 
-    The slow tier gets the same ``k`` as the meeting tier: under budget first it is where an error
-    budget that no real-time setting keeps is kept, and the lookup can only pick what was priced. With
-    its two ends alone it offered Max and the cheapest slow point, so wherever the cheapest was over the
-    budget the lookup picked Max, far below the budget and at Max's frame rate; spread as finely as the
-    meeting tier, an error budget finds a slow point about as close to it in either tier. Cost: at most
-    2 ``k`` points a frontier at each of its cameras (``k`` + 2 with the slow tier's ends alone), the
-    slow ones near-Max settings, each about as costly to price as the reference render; slow tiers
-    shorter than ``k`` cost only their own points."""
-    if k <= 0:
+    The slow tier is read only when a lookup's priority is the budget: there it is where an error budget
+    that no real-time setting keeps is kept, and the lookup can only pick what was priced. With its two
+    ends alone it offered Max and the cheapest slow point, so wherever the cheapest was over the budget
+    the lookup picked Max, far below the budget and at Max's frame rate; spread as finely as the meeting
+    tier, an error budget finds a slow point about as close to it in either tier. Cost: the slow points
+    are near-Max settings, each about as costly to price as the reference render (on the teapot's demo
+    store they were a fifth of the pricing's CPU time, bench/RESULTS.md), except Max itself, whose
+    figures the reference render gives: with ``k_slow`` 1 (Max alone, the tier's least-error end) the
+    slow tier costs nothing, for stores looked up frame rate first."""
+    k_slow = k if k_slow is None else k_slow
+    if k <= 0 and k_slow <= 0:
         return list(points)
     fast, slow = split_by_rate(points, fps)
-    return _spread(fast, k) + _spread(slow, k)
+    return ((list(fast) if k <= 0 else _spread(fast, k))
+            + (list(slow) if k_slow <= 0 else _spread(slow, k_slow)))
 
 
 def time_left(spent_s: float, done: int, total: int) -> float | None:
@@ -248,7 +254,7 @@ class OctreeBuilder:
         and one slow point (Max, when it misses the frame rate; recorded slow tiers mostly hold one point,
         bench/RESULTS.md), or a population when every point is priced."""
         cfg = self.cfg
-        kept = [len(spread_points(rec.points, cfg.display_points, self.search.ev.fps))
+        kept = [len(spread_points(rec.points, cfg.display_points, self.search.ev.fps, cfg.slow_points))
                 for rec in self.lattice.frontiers]
         per_frontier = (sum(kept) / len(kept) if kept else
                         cfg.display_points + 1 if cfg.display_points else cfg.nsga.population)
@@ -260,8 +266,8 @@ class OctreeBuilder:
         """Every measured frontier's points priced again at the path's resolution at the frontier's
         cameras (its sample, and for path samples its guards), keeping each point's worst error, power
         and frame time there: the store's figures are the display resolution's, the search's only chose
-        the points (:func:`spread_points`: at most ``display_points`` of the meeting tier and as many of
-        the slow tier). The store's tiers are drawn again from the display figures
+        the points (:func:`spread_points`: at most ``display_points`` of the meeting tier and
+        ``slow_points`` of the slow tier). The store's tiers are drawn again from the display figures
         (``Frontier.from_points``): a point may meet the rate at one resolution and miss it at the
         other."""
         assert self.pricer is not None and self.cfg.display is not None
@@ -269,7 +275,8 @@ class OctreeBuilder:
         search, lat = self.search, self.lattice
         jobs: list[tuple[int, list[CameraSpec], list[Indices]]] = []
         for fid, cams in sorted(self.sampling.pricing_cameras().items()):
-            keep = spread_points(lat.frontiers[fid].points, self.cfg.display_points, search.ev.fps)
+            keep = spread_points(lat.frontiers[fid].points, self.cfg.display_points, search.ev.fps,
+                                 self.cfg.slow_points)
             lat.frontiers[fid].points = keep
             jobs.append((fid, [dataclasses.replace(c, width=width, height=height) for c in cams],
                          [pt[0] for pt in keep]))
