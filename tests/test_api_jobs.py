@@ -103,6 +103,11 @@ def test_job_end_to_end_events_store_and_query(client: httpx.Client, finished: d
                for d in progress if d["phase"] == "price at display resolution")
     schema = client.get("/openapi.json").json()["components"]["schemas"]["JobProgress"]
     assert "display pricing" in schema["properties"]["fraction"]["description"]
+    # the phase, declared: a string (null before the first report) naming the pricing phase the events show
+    phase = schema["properties"]["phase"]
+    assert {t.get("type") for t in phase["anyOf"]} == {"string", "null"}
+    assert all(f'"{p}"' in phase["description"] for p in {d["phase"] for d in progress}
+               if not any(c.isdigit() for c in p))  # "compare depth N": the depth varies
     assert events[-1][1]["store_id"] == job["store_id"]
 
     r = client.get(f"/stores/{job['store_id']}")

@@ -11,6 +11,7 @@ from __future__ import annotations
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -252,3 +253,61 @@ def test_the_builder_prices_max_quality_alone_in_the_slow_tier_with_one_slow_poi
     hit = store.lookup((0.5, 0.0, 0.0), direction=(1.0, 0.0, 0.0), error_budget=0.02, priority="budget")
     assert not hit.infeasible and hit.meets_fps is False and hit.error == 0.0
     assert hit.indices == tuple(slow[8][0])
+
+
+@settings(max_examples=100, deadline=None)
+@given(lists=st.lists(point_lists, min_size=1, max_size=6), k=st.integers(0, 6),
+       k_slow=st.one_of(st.none(), st.integers(0, 6)),
+       changes=st.lists(st.tuples(st.integers(0, 5), st.integers(0, 5), st.booleans()), max_size=8))
+def test_the_builders_counted_points_are_the_spread_of_each_frontiers_points(lists, k, k_slow,
+                                                                            changes) -> None:
+    """The points each frontier keeps to be priced, counted once per points list (the search's progress
+    reports read them on every step), are what :func:`spread_points` gives for the points the frontier
+    holds now, through frontiers added and points replaced (the guards' worst figures, which may move a
+    point to the slow tier) or copied from another frontier; and a report that finds nothing changed
+    spreads no frontier again."""
+    import service.octree.builder as builder_module
+    from service.octree.builder import OctreeBuilder, OctreeConfig, PathFrames
+    from service.params import default_space
+
+    cfg = OctreeConfig(threshold_power_w=0.1, threshold_error=0.01, view_sampling="axis", display=(64, 36),
+                       display_points=k, slow_points=k_slow)
+    b = OctreeBuilder(SimpleNamespace(fps=FPS, evaluations=0, cache_hits=0), default_space(),  # type: ignore[arg-type]
+                      PathFrames(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])), cfg,
+                      pricer=SimpleNamespace())  # type: ignore[arg-type]
+    b.lattice.add_root()
+    spreads = 0
+    spread = builder_module.spread_points
+
+    def counting(*args, **kw):
+        nonlocal spreads
+        spreads += 1
+        return spread(*args, **kw)
+
+    def check() -> None:
+        nonlocal spreads
+        recs = b.lattice.frontiers
+        want = [len(spread_points(r.points, k, FPS, k_slow)) for r in recs]
+        spreads = 0
+        assert [b._kept_count(f) for f in range(len(recs))] == want
+        again = spreads
+        assert [b._kept_count(f) for f in range(len(recs))] == want and spreads == again
+        per = sum(want) / len(want)
+        views = max(b.state.views_planned, len(recs))
+        assert b._pricing_to_come() == (views, pytest.approx(views * per)) and spreads == again
+
+    builder_module.spread_points = counting
+    try:
+        for n, points in enumerate(lists):
+            b.lattice.set_frontier(n % 8, n // 8, points)
+            check()
+        for target, source, slower in changes:
+            recs = b.lattice.frontiers
+            rec = recs[target % len(recs)]
+            if slower:  # the worst figures over a guard: every point a little slower, a new list
+                rec.points = [(x, e, p, t * 1.5 + 0.01) for x, e, p, t in rec.points]
+            else:
+                rec.points = recs[source % len(recs)].points
+            check()
+    finally:
+        builder_module.spread_points = spread

@@ -270,6 +270,14 @@ class JobProgress(BaseModel):
     cache_hits: int = 0
     elapsed_s: float = 0.0
     estimate_s: float | None = None
+    phase: str | None = Field(
+        None,
+        description="what the job is doing: a search phase (\"root\", \"compare depth N\", \"optimise "
+                    "depth N stage M\" for view cubes; \"place samples\", \"optimise path samples\", "
+                    "\"refine path samples\", \"price guard frames\" for path samples), \"price at display "
+                    "resolution\" while the store's points are priced at the path's resolution, then "
+                    "\"done\" (or \"cancelled\"); free text for people, not an enumeration to branch on; "
+                    "null before the first report")
     fraction: float | None = Field(
         None, ge=0.0, le=1.0,
         description="the share of the whole job done, the search and the display pricing after it (in "

@@ -88,6 +88,13 @@ class CameraSampling(Protocol):
         """Every measured frontier (lattice frontier id) with the cameras its points are priced at
         (its sample first; a frontier keeps each point's worst figures over them)."""
 
+    def pricing_plan(self) -> list[tuple[int, int]] | None:
+        """While the search runs, the frontiers :meth:`pricing_cameras` will give once it is done, as far
+        as the strategy already knows them: (lattice frontier id, or -1 while not measured yet; the
+        number of cameras it will be priced at) each. None when they are not known before the search
+        ends (the builder then guesses them from the views planned:
+        :meth:`OctreeBuilder._pricing_to_come`)."""
+
 
 def _spread(points: list[tuple[Any, ...]], k: int) -> list[tuple[Any, ...]]:
     """At most ``k`` points of one tier: both ends (the least error and the cheapest) and between them
@@ -198,6 +205,9 @@ class OctreeBuilder:
         self.pricer = pricer
         self.display_cameras = 0  # cameras priced at display resolution
         self.display_points = 0  # frontier points priced there
+        # per lattice frontier id: (the points list, fps) it was counted for and the count of its points
+        # the display pricing keeps (_kept_count)
+        self._kept_counts: dict[int, tuple[list[Any], float | None, int]] = {}
         if pricer is not None:  # the search's time left and fraction done include the pricing after it
             self.search.after = self._pricing_ahead
             self.search.steps_after = self._pricing_steps_ahead
@@ -247,20 +257,42 @@ class OctreeBuilder:
         return self.pricing_steps(*self._pricing_to_come())
 
     def _pricing_to_come(self) -> tuple[int, float]:
-        """Cameras and points of the display pricing after the search, as far as the search knows them:
-        every frontier planned so far, at its sample camera and (path samples) at most ``guard_frames``
-        guards, each with as many points as the frontiers found so far keep to be priced on average
-        (:func:`spread_points`). Before the first is found, ``display_points`` + 1: a full meeting tier
-        and one slow point (Max, when it misses the frame rate; recorded slow tiers mostly hold one point,
-        bench/RESULTS.md), or a population when every point is priced."""
+        """Cameras and points of the display pricing after the search, as far as the search knows them.
+
+        Where the sampling strategy knows the frontiers it will price and their cameras before the search
+        ends (:meth:`CameraSampling.pricing_plan`: path samples, once placed, each at its sample camera
+        and its own guards, which are fewer than ``guard_frames`` where a group's frames coincide), exactly
+        those cameras, each with the points its frontier keeps to be priced (:func:`spread_points`) or,
+        for a frontier not found yet, as many as the frontiers found so far keep on average. Otherwise
+        (view cubes, or path samples not placed yet) every view planned so far, at its sample camera and
+        (path samples) ``guard_frames`` guards, with that average each. Before the first frontier is found,
+        ``display_points`` + 1 a frontier: a full meeting tier and one slow point (Max, when it misses the
+        frame rate; recorded slow tiers mostly hold one point, bench/RESULTS.md), or a population when
+        every point is priced."""
         cfg = self.cfg
-        kept = [len(spread_points(rec.points, cfg.display_points, self.search.ev.fps, cfg.slow_points))
-                for rec in self.lattice.frontiers]
+        kept = [self._kept_count(fid) for fid in range(len(self.lattice.frontiers))]
         per_frontier = (sum(kept) / len(kept) if kept else
                         cfg.display_points + 1 if cfg.display_points else cfg.nsga.population)
+        plan = self.sampling.pricing_plan()
+        if plan is not None:
+            return (sum(n for _, n in plan),
+                    sum(n * (kept[fid] if fid >= 0 else per_frontier) for fid, n in plan))
         cameras = max(self.state.views_planned, len(kept)) * (1 + cfg.guard_frames
                                                               if cfg.view_sampling == "path" else 1)
         return cameras, cameras * per_frontier
+
+    def _kept_count(self, fid: int) -> int:
+        """How many points of lattice frontier ``fid`` the display pricing keeps (:func:`spread_points`),
+        counted once for each points list the frontier holds: a frontier's points are replaced, never
+        changed in place, so a list other than the one counted (the guards' worst figures, the pricing's
+        spread and figures) is counted again. The counted list is kept with its count, so its identity
+        is not reused while the count stands."""
+        points, fps = self.lattice.frontiers[fid].points, self.search.ev.fps
+        hit = self._kept_counts.get(fid)
+        if hit is None or hit[0] is not points or hit[1] != fps:
+            n = len(spread_points(points, self.cfg.display_points, fps, self.cfg.slow_points))
+            hit = self._kept_counts[fid] = (points, fps, n)
+        return hit[2]
 
     def _price_at_display(self) -> None:
         """Every measured frontier's points priced again at the path's resolution at the frontier's

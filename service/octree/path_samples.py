@@ -45,11 +45,20 @@ class PathSampling:
         self.sample_cams: dict[tuple[int, int], CameraSpec] = {}  # the camera behind each sample
         self.sample_scale: dict[tuple[int, int], float] = {}  # median viewing distance of its frames
         self.guards: dict[tuple[int, int], list[CameraSpec]] = {}  # each sample's guard cameras
+        self.placed = False  # every sample camera and its guards chosen (build, before the searches)
 
     def pricing_cameras(self) -> dict[int, list[CameraSpec]]:
         """Each sample's frontier with its sample camera and guard cameras."""
         return {self.lattice.corner_views[c][v]: [cam, *self.guards.get((c, v), [])]
                 for (c, v), cam in self.sample_cams.items()}
+
+    def pricing_plan(self) -> list[tuple[int, int]] | None:
+        """Once the samples are placed (before their searches run), every sample's frontier (-1 until
+        its search has run) with its camera count: the sample and its own guards."""
+        if not self.placed:
+            return None
+        views = self.lattice.corner_views
+        return [(views[c][v], 1 + len(self.guards[(c, v)])) for c, v in self.sample_cams]
 
     def store_cameras(self, used: list[int]) -> dict[str, Any]:
         """Every stored frontier's sample camera (format version 3)."""
@@ -75,6 +84,7 @@ class PathSampling:
             self.sample_scale[(c, v)] = float(np.median(dist[frames]))
             guards[(c, v)] = cams[1:]
         self.guards = guards
+        self.placed = True
         self._search_along(order, guards)
         if self.cfg.display is None:  # else the guards are priced at display resolution, not here
             self._guard(guards)

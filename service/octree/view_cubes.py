@@ -127,6 +127,10 @@ class ViewCubeSampling:
         """Each measured frontier with the corner view camera it was measured at."""
         return {fid: [self.camera(rec.corner, rec.view)] for fid, rec in enumerate(self.lattice.frontiers)}
 
+    def pricing_plan(self) -> None:
+        """Not known before the search ends: the refinement decides which views are measured."""
+        return None
+
     def _optimise(self, jobs: Sequence[tuple[int, int, list[Indices]]], phase: str) -> None:
         found = self.search.run([self.camera(c, v) for c, v, _ in jobs], [w for _, _, w in jobs], phase)
         for (c, v, _), points in zip(jobs, found, strict=True):
