@@ -307,6 +307,15 @@ def _orbit_path(n: int, resolution: tuple[int, int]) -> CameraPath:
     return CameraPath.from_positions(pos, dirs, vfov=0.7, resolution=resolution)
 
 
+def _priced_orbit(scene, updates: list, **options):
+    """The store of a 16-frame orbit searched at 48x36 and priced as whole frames (2 points a frontier,
+    samples 0.02 x the viewing distance apart: more than one pricing batch), its progress in ``updates``."""
+    return optimize_path(scene, _orbit_path(16, (48, 36)), SUBSPACE,
+                         _options(display_estimator="full", display_points=2, path_resolution=0.02,
+                                  **options),
+                         cache=EvalCache(), executor=InProcessExecutor(), progress=updates.append)
+
+
 def _options(**kw) -> OptimizeConfig:
     base = dict(threshold_power_w=0.01, threshold_error=0.005, max_depth=3, population=6, generations=3,
                 exhaustive_limit=0, eval_width=16, eval_height=12, seed=3, view_sampling="path",
@@ -382,9 +391,7 @@ def test_the_time_left_while_pricing_follows_the_pricings_own_pace(scene, monkey
 
     monkeypatch.setattr(builder_module, "time", _SlowClock())
     updates = []
-    store = optimize_path(scene, _orbit_path(16, (48, 36)), SUBSPACE,
-                          _options(display_estimator="full", display_points=2, path_resolution=0.02),
-                          cache=EvalCache(), executor=InProcessExecutor(), progress=updates.append)
+    store = _priced_orbit(scene, updates)
     total = store.meta["display_cameras"]
     assert total > 8, "the path must need more than one pricing batch (8 cameras) for this test"
     pricing = [u.estimate_s for u in updates if u.phase == "price at display resolution"]
@@ -465,9 +472,7 @@ def test_the_fraction_done_covers_the_display_pricing(scene) -> None:
     from service.jobs import progress_dict
 
     updates = []
-    store = optimize_path(scene, _orbit_path(16, (48, 36)), SUBSPACE,
-                          _options(display_estimator="full", display_points=2, path_resolution=0.02),
-                          cache=EvalCache(), executor=InProcessExecutor(), progress=updates.append)
+    store = _priced_orbit(scene, updates)
     cameras = store.meta["display_cameras"]
     assert cameras > 8, "the path must need more than one pricing batch (8 cameras) for this test"
     fractions = [u.fraction for u in updates]
@@ -522,10 +527,7 @@ def test_the_pricing_to_come_counts_each_samples_own_guards(scene, monkeypatch) 
 
     monkeypatch.setattr(OctreeBuilder, "_pricing_to_come", spy)
     updates = []
-    store = optimize_path(scene, _orbit_path(16, (48, 36)), SUBSPACE,
-                          _options(display_estimator="full", display_points=2, path_resolution=0.02,
-                                   guard_frames=1),
-                          cache=EvalCache(), executor=InProcessExecutor(), progress=updates.append)
+    store = _priced_orbit(scene, updates, guard_frames=1)
     samples, cameras = len(store.frontiers), store.meta["display_cameras"]
     assert samples < cameras < 2 * samples, "some samples need their guard and some none for this test"
     placed = [n for phase, n in counted if phase != "place samples"]

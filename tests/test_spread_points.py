@@ -121,6 +121,29 @@ def _one_frontier_store(points: list[tuple]) -> ParetoStore:
                        [fr], fps=FPS, meta={"static_power_w": 0.1})
 
 
+def _run_one_frontier_builder(points: list[tuple], pricer, **options):
+    """An octree builder whose one measured frontier holds ``points`` and that every view reads, run with
+    a stand-in ``pricer`` (its display pricing alone does work): the builder, after its run."""
+    from service.octree.builder import OctreeBuilder, OctreeConfig, PathFrames
+    from service.params import default_space
+
+    space = default_space().subset(["sampling", "max_depth", "resolution_scale"])
+    cfg = OctreeConfig(threshold_power_w=0.1, threshold_error=0.01, view_sampling="axis", display=(64, 36),
+                       **options)
+    b = OctreeBuilder(SimpleNamespace(fps=FPS, evaluations=0, cache_hits=0), space,  # type: ignore[arg-type]
+                      PathFrames(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])), cfg, pricer=pricer)
+
+    def build() -> None:  # one measured frontier, every view of the root's corners reads it
+        b.lattice.add_root()
+        b.lattice.set_frontier(0, 0, points)
+        for views in b.lattice.corner_views:
+            views[:] = [0] * len(views)
+
+    b.sampling.build = build  # type: ignore[method-assign]
+    b.run()
+    return b
+
+
 def test_budget_first_finds_an_intermediate_slow_point_near_the_budget() -> None:
     """Real-time settings reach error 0.05 at best; nine slower ones reach 0.04 down to 0. With the
     spread points priced, an error budget of 0.02 picks the slow setting at 0.015 (0.09 s a frame), not
@@ -146,7 +169,6 @@ def test_the_builder_prices_the_spread_points_and_draws_the_tiers_from_their_dis
     budget-first lookup picks the intermediate slow point within the budget."""
     import itertools
 
-    from service.octree.builder import OctreeBuilder, OctreeConfig, PathFrames
     from service.params import default_space
 
     space = default_space().subset(["sampling", "max_depth", "resolution_scale"])
@@ -167,21 +189,8 @@ def test_the_builder_prices_the_spread_points_and_draws_the_tiers_from_their_dis
             return [[SimpleNamespace(error=display[x][0], power_w=display[x][1], frame_time_s=display[x][2])
                      for x in xs] for _, xs in requests]
 
-    cfg = OctreeConfig(threshold_power_w=0.1, threshold_error=0.01, view_sampling="axis", display=(64, 36),
-                       display_points=4)
-    path = PathFrames(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]))
     pricer = Pricer()
-    b = OctreeBuilder(SimpleNamespace(fps=FPS, evaluations=0, cache_hits=0), space, path, cfg,  # type: ignore[arg-type]
-                      pricer=pricer)  # type: ignore[arg-type]
-
-    def build() -> None:  # one measured frontier, every view of the root's corners reads it
-        b.lattice.add_root()
-        b.lattice.set_frontier(0, 0, meeting + slow)
-        for views in b.lattice.corner_views:
-            views[:] = [0] * len(views)
-
-    b.sampling.build = build  # type: ignore[method-assign]
-    b.run()
+    b = _run_one_frontier_builder(meeting + slow, pricer, display_points=4)
     want = [pt[0] for pt in meeting] + [slow[j][0] for j in (0, 3, 5, 8)]
     assert pricer.asked == [want] and b.display_points == 7
     store = b.to_store(profile="mobile", fps=FPS, aspect=16 / 9, meta={"static_power_w": 0.1})
@@ -218,7 +227,6 @@ def test_the_builder_prices_max_quality_alone_in_the_slow_tier_with_one_slow_poi
     least-error point only, and a budget-first lookup within a budget no real-time point keeps gets it."""
     import itertools
 
-    from service.octree.builder import OctreeBuilder, OctreeConfig, PathFrames
     from service.params import default_space
 
     space = default_space().subset(["sampling", "max_depth", "resolution_scale"])
@@ -235,19 +243,7 @@ def test_the_builder_prices_max_quality_alone_in_the_slow_tier_with_one_slow_poi
             return [[SimpleNamespace(error=e, power_w=p, frame_time_s=t)
                      for x in xs for (s, e, p, t) in meeting + slow if s == x] for _, xs in requests]
 
-    cfg = OctreeConfig(threshold_power_w=0.1, threshold_error=0.01, view_sampling="axis", display=(64, 36),
-                       display_points=4, slow_points=1)
-    b = OctreeBuilder(SimpleNamespace(fps=FPS, evaluations=0, cache_hits=0), space,  # type: ignore[arg-type]
-                      PathFrames(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])), cfg, pricer=Pricer())  # type: ignore[arg-type]
-
-    def build() -> None:
-        b.lattice.add_root()
-        b.lattice.set_frontier(0, 0, meeting + slow)
-        for views in b.lattice.corner_views:
-            views[:] = [0] * len(views)
-
-    b.sampling.build = build  # type: ignore[method-assign]
-    b.run()
+    b = _run_one_frontier_builder(meeting + slow, Pricer(), display_points=4, slow_points=1)
     assert asked == [[pt[0] for pt in meeting] + [slow[8][0]]] and b.display_points == 4
     store = b.to_store(profile="mobile", fps=FPS, aspect=16 / 9, meta={"static_power_w": 0.1})
     hit = store.lookup((0.5, 0.0, 0.0), direction=(1.0, 0.0, 0.0), error_budget=0.02, priority="budget")
