@@ -209,8 +209,7 @@ class OctreeBuilder:
         # the display pricing keeps (_kept_count)
         self._kept_counts: dict[int, tuple[list[Any], float | None, int]] = {}
         if pricer is not None:  # the search's time left and fraction done include the pricing after it
-            self.search.after = self._pricing_ahead
-            self.search.steps_after = self._pricing_steps_ahead
+            self.search.renders_after = self._pricing_renders_ahead
 
     @property
     def state(self) -> Progress:
@@ -246,15 +245,11 @@ class OctreeBuilder:
         ratio = self.cfg.display[0] * self.cfg.display[1] / (self.cfg.width * self.cfg.height)
         return PRICING_COST * ratio * (points + cameras)
 
-    def _pricing_ahead(self, state: Progress) -> float | None:
-        """The display pricing's time still to come while the search runs (:meth:`pricing_time` of
-        :meth:`_pricing_to_come`)."""
-        return self.pricing_time(state, *self._pricing_to_come())
-
-    def _pricing_steps_ahead(self) -> float:
-        """The display pricing still to come while the search runs, in search steps (:meth:`pricing_steps`
-        of :meth:`_pricing_to_come`)."""
-        return self.pricing_steps(*self._pricing_to_come())
+    def _pricing_renders_ahead(self) -> float:
+        """The display pricing still to come while the search runs, in search renders
+        (:meth:`_pricing_renders` of :meth:`_pricing_to_come`): :attr:`Search.renders_after` turns it into
+        time left (as :meth:`pricing_time` does) and steps (as :meth:`pricing_steps` does)."""
+        return self._pricing_renders(*self._pricing_to_come())
 
     def _pricing_to_come(self) -> tuple[int, float]:
         """Cameras and points of the display pricing after the search, as far as the search knows them.
@@ -319,7 +314,7 @@ class OctreeBuilder:
         search.steps_planned += sum(steps)
         done = search.steps_done
         # the points to price are known: the estimate is this phase's own from here, and its steps planned
-        search.after = search.steps_after = None
+        search.renders_after = None
         search.check_cancel()
         search.report("price at display resolution",
                       remaining_s=self.pricing_time(search.state, len(requests),

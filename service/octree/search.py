@@ -90,29 +90,28 @@ class Search:
         self.steps_planned = 0
         self.probes_evaluated = 0  # probe settings evaluated (cache hits included), all searches
         self.state = Progress(phase="root")
-        # seconds the phases after the search will take, estimated from the progress so far (None: not
-        # known yet); added to the search steps' time left
-        self.after: Callable[[Progress], float | None] | None = None
-        # search steps' worth of the phases after the search still to come (not yet in steps_planned);
-        # counted in the fraction done
-        self.steps_after: Callable[[], float] | None = None
+        # the phases after the search still to come (not yet in steps_planned), in search renders (at the
+        # evaluation size) as far as they are known so far: their time left at the search's own pace per
+        # render, and their search steps (a population of renders each) in the fraction done
+        self.renders_after: Callable[[], float] | None = None
 
     # -- bookkeeping --------------------------------------------------------------------------------
 
     def report(self, phase: str | None = None, remaining_s: float | None = None) -> None:
         """Publish the progress; ``remaining_s``: the time left as the caller measured it (the last
-        phase's own pace), instead of the search steps' pace plus what :attr:`after` expects of the
-        phases after the search.
+        phase's own pace), instead of the search steps' pace plus what :attr:`renders_after` expects of
+        the phases after the search.
 
         The fraction done is the steps done of those planned, the phases after the search included
-        (:attr:`steps_after` while they are not planned yet), so that a last phase as long as the display
+        (:attr:`renders_after` while they are not planned yet), so that a last phase as long as the display
         pricing is not a run at 100 %. Steps planned grow as the run learns its work (more views, the
         pricing's own count when it starts): the fraction keeps the highest value it reached, and stays
         at most :data:`FRACTION_BEFORE_DONE` until :meth:`finish`."""
         if phase is not None:
             self.state.phase = phase
         s = self.state
-        total = self.steps_planned + (self.steps_after() if self.steps_after is not None else 0.0)
+        later = self.renders_after() if self.renders_after is not None else 0.0
+        total = self.steps_planned + later / max(1, self.nsga.population)
         if total > 0:
             s.fraction = max(s.fraction, min(FRACTION_BEFORE_DONE, self.steps_done / total))
         s.evaluations = self.ev.evaluations
@@ -124,10 +123,8 @@ class Search:
                         if self.steps_done else None)
         if remaining_s is not None:
             s.estimate_s = max(0.0, float(remaining_s))
-        elif s.estimate_s is not None and self.after is not None:
-            later = self.after(s)
-            if later is not None:
-                s.estimate_s += later
+        elif s.estimate_s is not None and s.evaluations > 0:  # (no pace from a search answered by the cache)
+            s.estimate_s += later * s.elapsed_s / s.evaluations
         if self._progress_cb is not None:
             self._progress_cb(Progress(**vars(s)))
 
