@@ -26,6 +26,7 @@ import numpy as np
 from service.evaluation import CameraSpec
 from service.params import Indices
 from service.store import VIEW_FORWARD, quantise_directions, quantise_eyes, view_up
+from service.store.priced import camera_dissimilarity
 
 from .lattice import N_VIEWS, Lattice
 from .search import Search
@@ -51,6 +52,11 @@ class PathSampling:
         """Each sample's frontier with its sample camera and guard cameras."""
         return {self.lattice.corner_views[c][v]: [cam, *self.guards.get((c, v), [])]
                 for (c, v), cam in self.sample_cams.items()}
+
+    def pricing_scales(self) -> dict[int, float]:
+        """Each sample's frontier with the median viewing distance of its frames: the distance unit of
+        the camera dissimilarity its sample and guards were chosen by."""
+        return {self.lattice.corner_views[c][v]: s for (c, v), s in self.sample_scale.items()}
 
     def pricing_plan(self) -> list[tuple[int, int]] | None:
         """Once the samples are placed (before their searches run), every sample's frontier (-1 until
@@ -174,8 +180,7 @@ class PathSampling:
         p = self.path.positions[idx]
         f = self.path.forwards[idx] / np.linalg.norm(self.path.forwards[idx], axis=1, keepdims=True)
         scale = float(np.median(dist[idx]))
-        cost = (((p[:, None, :] - p[None, :, :]) ** 2).sum(axis=2) / scale**2
-                + ((f[:, None, :] - f[None, :, :]) ** 2).sum(axis=2))
+        cost = camera_dissimilarity(p[:, None, :], f[:, None, :], p[None, :, :], f[None, :, :], scale)
         chosen = [int(np.argmin(cost.sum(axis=1)))]
         for _ in range(self.cfg.guard_frames):
             far = cost[chosen].min(axis=0)
