@@ -239,3 +239,21 @@ def test_playback_reports_the_prediction_for_the_camera() -> None:
     shown = {p.indices: p for p in store.budget_points(hit)}
     assert (between.predicted_error, between.predicted_power_w) == store.expected(
         hit, shown[between.active_indices])
+
+
+def test_the_panels_path_summary_predicts_power_for_each_frames_camera() -> None:
+    """The add-on panel's predicted power along a path is the mean of each frame's prediction for its
+    camera, not of the stored worst figures."""
+    from addon.core.playback_logic import predicted_path_summary
+    from service.camera_path import CameraFrame
+    from service.store.camera import look_matrix
+
+    cams = [((2.0, 2.0, 2.0), (1.0, 0.0, 0.0)), ((6.0, 2.0, 2.0), (1.0, 0.0, 0.0))]
+    store = _store(cams, np.array([[0.08, 0.0], [0.12, 0.0]]), np.array([[3.0, 9.0], [4.0, 9.8]]), scale=2.0)
+    frames = [CameraFrame(i / 24, look_matrix((2.0 + 0.4 * i, 2.0, 2.0), (1.0, 0.0, 0.0)), store.vfov,
+                          (64, 36)) for i in range(11)]
+    s = predicted_path_summary(store, frames, "POWER", 5.0)
+    hits = [store.lookup(f.matrix_world[:3, 3], matrix=f.matrix_world, fov=f.vfov, aspect=f.aspect,
+                         power_budget=5.0) for f in frames]
+    assert s["mean_power_w"] == pytest.approx(np.mean([h.expected_power_w for h in hits]))
+    assert s["mean_power_w"] < np.mean([h.power_w for h in hits]) - 0.2  # the stored 4 W on every frame

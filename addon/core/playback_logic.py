@@ -196,8 +196,8 @@ def predicted_path_summary(store: pareto_store.ParetoStore, frames: Sequence[Any
                            priority=priority, **kwargs)
         top = store.lookup(pos, matrix=f.matrix_world, fov=f.vfov, aspect=f.aspect, fps=rate,
                            error_budget=0.0)
-        chosen += hit.power_w
-        best += top.power_w
+        chosen += hit.expected_power_w  # predicted for this camera (the stored figures are the worst
+        best += top.expected_power_w  # over the frontier's pricing cameras)
         slow += int(hit.meets_fps is False)
         if hit.fps is not None:
             rates.append(hit.fps)
