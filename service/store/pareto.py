@@ -276,7 +276,7 @@ class ParetoStore:
         figures = None if self.priced is None else self.priced[fid]
         if figures is not None:
             forward = (-rot[2], -rot[5], -rot[8])  # the camera looks down its local -Z
-            weights = figures.weights(camera.vec3(position, "position"), forward)
+            weights = figures.weights(position, forward)  # (checked finite by the leaf search)
             error, power = self._expected(figures, weights, packed, error, power, fr.frame_time[i], rate)
         return LookupResult(indices, packed, settings, fr.power[i], fr.error[i], clamped, infeasible,
                             corner, view, leaf, fr.frame_time[i], fr.fps_reached[i], fr.meets[i], rate,

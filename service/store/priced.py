@@ -46,10 +46,10 @@ def shepard_weights(costs: Sequence[float]) -> tuple[float, ...]:
     """Interpolation weights (non-negative, summing to 1) from squared distances ``costs``: 1 / cost
     normalised (Shepard's inverse distance weighting, power 2); all of it on the first camera whose
     cost is at most :data:`SAME_CAMERA`."""
-    c = [float(v) for v in costs]
+    c = costs if isinstance(costs, list) else [float(v) for v in costs]
     if not c:
         raise ValueError("no cameras to weigh")
-    if not all(math.isfinite(v) and v >= 0.0 for v in c):
+    if not (min(c) >= 0.0 and math.isfinite(sum(c))):
         raise ValueError("camera dissimilarities must be finite and >= 0")
     for k, v in enumerate(c):
         if v <= SAME_CAMERA:
@@ -73,7 +73,10 @@ class PricedFigures:
     packed: np.ndarray
     error: np.ndarray
     power_w: np.ndarray
-    _column: dict[int, int] = field(init=False, repr=False, compare=False)
+    _column: dict[int, tuple[tuple[float, ...], tuple[float, ...]]] = field(init=False, repr=False,
+                                                                            compare=False)
+    _cams: tuple[tuple[float, float, float, float, float, float], ...] = field(init=False, repr=False,
+                                                                              compare=False)
 
     def __post_init__(self) -> None:
         self.eyes = np.asarray(self.eyes, dtype=np.float64).reshape(-1, 3)
@@ -95,7 +98,10 @@ class PricedFigures:
             raise ValueError("the pricing cameras' distance scale must be positive and finite")
         if not (np.all(np.isfinite(self.error)) and np.all(np.isfinite(self.power_w))):
             raise ValueError("priced figures must be finite")
-        self._column = {int(p): j for j, p in enumerate(self.packed)}
+        # plain floats for the per-frame lookup (a few cameras: no numpy call per query)
+        err, pw = self.error.T.tolist(), self.power_w.T.tolist()
+        self._column = {int(p): (tuple(err[j]), tuple(pw[j])) for j, p in enumerate(self.packed.tolist())}
+        self._cams = tuple((*e, *f) for e, f in zip(self.eyes.tolist(), self.forwards.tolist(), strict=True))
 
     @property
     def cameras(self) -> int:
@@ -103,21 +109,25 @@ class PricedFigures:
 
     def weights(self, eye: Sequence[float], forward: Sequence[float]) -> tuple[float, ...]:
         """Each pricing camera's weight for a frame at ``eye`` looking along the unit ``forward``."""
-        ex, ey, ez = (float(v) for v in eye)
-        fx, fy, fz = (float(v) for v in forward)
+        ex, ey, ez = eye.tolist() if isinstance(eye, np.ndarray) else eye
+        fx, fy, fz = forward.tolist() if isinstance(forward, np.ndarray) else forward
         s2 = self.scale * self.scale
-        costs = [((ex - a) ** 2 + (ey - b) ** 2 + (ez - c) ** 2) / s2 + (fx - u) ** 2 + (fy - v) ** 2
-                 + (fz - w) ** 2
-                 for (a, b, c), (u, v, w) in zip(self.eyes.tolist(), self.forwards.tolist(), strict=True)]
+        costs = [((ex - a) * (ex - a) + (ey - b) * (ey - b) + (ez - c) * (ez - c)) / s2
+                 + (fx - u) * (fx - u) + (fy - v) * (fy - v) + (fz - w) * (fz - w)
+                 for a, b, c, u, v, w in self._cams]
         return shepard_weights(costs)
 
     def expected(self, weights: Sequence[float], packed: int) -> tuple[float, float] | None:
         """(error, power) of setting ``packed`` interpolated with ``weights`` (None: not a point of this
         frontier)."""
-        j = self._column.get(int(packed))
-        if j is None:
+        col = self._column.get(int(packed))
+        if col is None:
             return None
-        w = np.asarray(weights, dtype=np.float64)
-        if w.shape != (self.cameras,):
+        if len(weights) != len(self._cams):
             raise ValueError("one weight per pricing camera")
-        return float(w @ self.error[:, j]), float(w @ self.power_w[:, j])
+        err, pw = col
+        e = p = 0.0
+        for k, w in enumerate(weights):
+            e += w * err[k]
+            p += w * pw[k]
+        return e, p
