@@ -583,3 +583,23 @@ def test_guarded_frontiers_keep_each_cameras_figures_and_predict_a_frame_at_a_gu
         assert hit.expected_power_w == pytest.approx(guard.power_w[1, j], abs=1e-9)
         differs += hit.expected_error != hit.error or hit.expected_power_w != hit.power_w
     assert looked_up > 0 and differs > 0
+
+
+@pytest.mark.slow
+def test_guards_priced_at_the_search_resolution_keep_each_cameras_figures_too(scene) -> None:
+    """Without display pricing ("preview") the guards are priced during the build, at the search's
+    resolution: the store keeps those per-camera figures the same way, its figures the worst of them."""
+    path = _orbit_path(8, (48, 36))
+    store = optimize_path(scene, path, SUBSPACE, _options(display_estimator="preview", guard_frames=1,
+                                                          path_resolution=1.0),
+                          cache=EvalCache(), executor=InProcessExecutor())
+    assert store.meta["display_points"] == 0 and store.priced is not None
+    priced = [(fid, pf) for fid, pf in enumerate(store.priced) if pf is not None]
+    assert priced and all(pf.cameras == 2 for _, pf in priced)
+    for fid, pf in priced:
+        fr = store.frontiers[fid]
+        assert np.array_equal(fr.error, pf.error.max(axis=0))
+        assert np.array_equal(fr.power_w, pf.power_w.max(axis=0))
+        assert np.allclose(pf.eyes[0], store.frontier_eyes[fid])
+    back = ParetoStore.from_json(store.to_json())
+    assert [p is None for p in back.priced] == [p is None for p in store.priced]

@@ -89,6 +89,11 @@ class CameraSampling(Protocol):
         """Every measured frontier (lattice frontier id) with the cameras its points are priced at
         (its sample first; a frontier keeps each point's worst figures over them)."""
 
+    def priced_figures(self) -> dict[int, tuple[list[CameraSpec], list[Indices], np.ndarray, np.ndarray]]:
+        """Per-camera figures of the frontiers the strategy priced at several cameras itself (path
+        samples' guards when there is no display pricing; the display pricing replaces them): lattice
+        frontier id -> (cameras, sample first; settings; error and power (K, n))."""
+
     def pricing_scales(self) -> dict[int, float]:
         """The distance unit of the camera dissimilarity (:func:`service.store.priced.
         camera_dissimilarity`) of every frontier priced at several cameras (lattice frontier id: the
@@ -226,6 +231,7 @@ class OctreeBuilder:
 
     def run(self) -> None:
         self.sampling.build()
+        self.priced = dict(self.sampling.priced_figures())
         if self.pricer is not None:
             self._price_at_display()
         self.search.finish()
