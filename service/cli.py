@@ -223,14 +223,15 @@ def _query(args: argparse.Namespace) -> int:
     out = {"settings": r.settings, "indices": list(r.indices), "packed": r.packed, "power_w": r.power_w,
            "error": r.error, "clamped": r.clamped, "infeasible": r.infeasible, "corner": r.corner,
            "view": r.view, "frame_time_s": r.frame_time_s, "fps": r.fps, "fps_target": target,
-           "meets_fps": r.meets_fps, "priority": r.priority}
+           "meets_fps": r.meets_fps, "priority": r.priority, "expected_power_w": r.expected_power_w,
+           "expected_error": r.expected_error}
     if args.json:
         print(json.dumps(out))
     else:
         for k, v in r.settings.items():
             print(f"{k:>22}: {v}")
-        print(f"{'predicted power':>22}: {r.power_w:.4f} W")
-        print(f"{'predicted error':>22}: {r.error:.5f} (1 - SSIM)")
+        print(f"{'predicted power':>22}: {r.expected_power_w:.4f} W (at most {r.power_w:.4f} W)")
+        print(f"{'predicted error':>22}: {r.expected_error:.5f} (1 - SSIM; at most {r.error:.5f})")
         if r.fps is None:
             print(f"{'frame rate':>22}: unknown (the store predates frame times; target {target:g} fps)")
         else:

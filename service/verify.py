@@ -184,7 +184,8 @@ def verify_store(scene: Any, store: ParetoStore, path: CameraPath, *, error_budg
         ev = evaluate(scene, cam, space.indices_of(r.settings), space, profile=store.profile, fps=rate,
                       metric=metric, threads=threads, reference_indices=best)
         within = ev.error <= value if mode == "error" else ev.power_w <= value
-        checks.append(FrameCheck(number, float(f.time), dict(r.settings), float(r.error), float(r.power_w),
+        checks.append(FrameCheck(number, float(f.time), dict(r.settings), float(r.expected_error),
+                                 float(r.expected_power_w),
                                  float(ev.error), float(ev.power_w), float(ev.frame_time_s), bool(within),
                                  bool(r.infeasible), bool(r.clamped), r.meets_fps))
         if progress is not None:

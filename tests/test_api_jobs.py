@@ -131,6 +131,11 @@ def test_job_end_to_end_events_store_and_query(client: httpx.Client, finished: d
     assert (rich["frame_time_s"], rich["fps"], rich["meets_fps"]) == (direct.frame_time_s, direct.fps,
                                                                       direct.meets_fps)
     assert rich["frame_time_s"] > 0 and rich["fps"] <= store.fps
+    # the prediction for this camera (interpolated between the frontier's pricing cameras), never above
+    # the stored worst figures the budget was checked against
+    assert (rich["expected_error"], rich["expected_power_w"]) == (direct.expected_error,
+                                                                  direct.expected_power_w)
+    assert rich["expected_error"] <= rich["error"] and rich["expected_power_w"] <= rich["power_w"]
     # Another frame rate: the store's lookup at that rate (power repriced, slower settings left out).
     fast = client.post(f"/stores/{job['store_id']}/query",
                        json={**query, "power_budget_w": 1e4, "fps": 2 * store.fps}).json()
@@ -168,6 +173,7 @@ def test_job_end_to_end_events_store_and_query(client: httpx.Client, finished: d
     assert mid["indices"] == list(expect) and mid["target_indices"] == rich["indices"]
     assert mid["filtered"] == (list(expect) != rich["indices"])
     assert (mid["power_w"], mid["error"]) == (points[expect].power_w, points[expect].error)
+    assert (mid["expected_error"], mid["expected_power_w"]) == store.expected(hit, points[expect])
     late = client.post(f"/stores/{job['store_id']}/query",
                        json={**query, "power_budget_w": 1e4, "previous": {**prev, "elapsed_s": 5.0}}).json()
     assert late["indices"] == rich["indices"] and late["filtered"] is False

@@ -51,6 +51,8 @@ def test_query_reports_the_frame_rate(tmp_path, capsys) -> None:
     assert out["settings"] == {"max_depth": 2, "shadow_samples": 4} and out["infeasible"]
     assert out["meets_fps"] is True and out["fps"] == 30.0 and out["fps_target"] == 30.0
     assert out["frame_time_s"] == pytest.approx(0.02, rel=1e-4)
+    # no per-camera figures in this store: the prediction for the camera is the stored figure
+    assert (out["expected_error"], out["expected_power_w"]) == (out["error"], out["power_w"])
     assert cli.main(args) == 0
     assert "30.0 of 30 fps (20.0 ms a frame)" in capsys.readouterr().out
     (tmp_path / "old").mkdir()

@@ -35,7 +35,7 @@ from service.executors import InProcessExecutor
 from service.metrics import ssim, ssim_map
 from service.optimize import OptimizeConfig, display_resolution, optimize_path
 from service.params import default_space
-from service.store import unpack_indices, view_up
+from service.store import ParetoStore, unpack_indices, view_up
 
 SPACE = default_space()
 SUBSPACE = SPACE.subset(["sampling", "max_depth", "resolution_scale"])
@@ -540,3 +540,66 @@ def test_the_pricing_to_come_counts_each_samples_own_guards(scene, monkeypatch) 
     assert 0.0 < start.fraction < 0.5
     assert start.fraction - before.fraction <= 1e-9
     assert start.estimate_s == pytest.approx(before.estimate_s, rel=1e-9)
+
+
+@pytest.mark.slow
+def test_guarded_frontiers_keep_each_cameras_figures_and_predict_a_frame_at_a_guard_by_them(scene) -> None:
+    """With a guard frame a frontier is priced at two cameras and stores each point's worst figures (the
+    budgets' bound); the store also keeps each camera's own figures (``store.priced``), each what an
+    independent render at that camera gives, and a lookup at a guard camera predicts that guard's
+    figures, not the worst (after the JSON document too)."""
+    path = _orbit_path(8, (48, 36))
+    store = optimize_path(scene, path, SUBSPACE, _options(display_estimator="full", guard_frames=1,
+                                                          display_points=3, path_resolution=1.0),
+                          cache=EvalCache(), executor=InProcessExecutor())
+    assert store.priced is not None
+    back = ParetoStore.from_json(store.to_json())
+    priced = [(fid, pf) for fid, pf in enumerate(store.priced) if pf is not None]
+    assert priced and all(pf.cameras == 2 for _, pf in priced)
+    step = store.stats()["power_step_w"]
+    looked_up = differs = 0
+    for fid, pf in priced:
+        fr = store.frontiers[fid]
+        assert np.allclose(pf.eyes[0], store.frontier_eyes[fid]) and np.allclose(pf.forwards[0],
+                                                                                 store.frontier_dirs[fid])
+        assert np.array_equal(fr.error, pf.error.max(axis=0))
+        assert np.array_equal(fr.power_w, pf.power_w.max(axis=0))
+        for k in range(pf.cameras):
+            fwd = pf.forwards[k]
+            cam = CameraSpec(tuple(pf.eyes[k]), tuple(fwd), tuple(view_up(fwd)), store.vfov, 48, 36)
+            for j, packed in enumerate(fr.packed):
+                idx = unpack_indices(int(packed), store.n_params)
+                err, power, _ = _independent(scene, cam, idx, SUBSPACE)
+                assert pf.error[k, j] == pytest.approx(err, abs=2e-3)
+                assert pf.power_w[k, j] == pytest.approx(power, rel=0.01, abs=step)
+        guard = back.priced[fid]
+        hit = back.lookup(guard.eyes[1], direction=guard.forwards[1], fov=store.vfov, aspect=48 / 36,
+                          power_budget=1e9)
+        if hit.frontier != fid:  # the guard's own frame reads this frontier; its quantised eye may not
+            continue
+        looked_up += 1
+        j = list(guard.packed).index(hit.packed)
+        assert hit.expected_error == pytest.approx(guard.error[1, j], abs=1e-12)
+        assert hit.expected_power_w == pytest.approx(guard.power_w[1, j], abs=1e-9)
+        differs += hit.expected_error != hit.error or hit.expected_power_w != hit.power_w
+    assert looked_up > 0 and differs > 0
+
+
+@pytest.mark.slow
+def test_guards_priced_at_the_search_resolution_keep_each_cameras_figures_too(scene) -> None:
+    """Without display pricing ("preview") the guards are priced during the build, at the search's
+    resolution: the store keeps those per-camera figures the same way, its figures the worst of them."""
+    path = _orbit_path(8, (48, 36))
+    store = optimize_path(scene, path, SUBSPACE, _options(display_estimator="preview", guard_frames=1,
+                                                          path_resolution=1.0),
+                          cache=EvalCache(), executor=InProcessExecutor())
+    assert store.meta["display_points"] == 0 and store.priced is not None
+    priced = [(fid, pf) for fid, pf in enumerate(store.priced) if pf is not None]
+    assert priced and all(pf.cameras == 2 for _, pf in priced)
+    for fid, pf in priced:
+        fr = store.frontiers[fid]
+        assert np.array_equal(fr.error, pf.error.max(axis=0))
+        assert np.array_equal(fr.power_w, pf.power_w.max(axis=0))
+        assert np.allclose(pf.eyes[0], store.frontier_eyes[fid])
+    back = ParetoStore.from_json(store.to_json())
+    assert [p is None for p in back.priced] == [p is None for p in store.priced]

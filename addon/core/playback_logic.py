@@ -76,8 +76,8 @@ class PlaybackFrame:
     active_indices: tuple[int, ...]  # after the temporal filter: what is applied (a frontier point)
     target_indices: tuple[int, ...]  # the store's choice for this pose and budget
     active_settings: dict[str, Any]
-    predicted_power_w: float  # of the active settings (a point of this frame's frontier)
-    predicted_error: float
+    predicted_power_w: float  # of the active settings (a point of this frame's frontier) at this camera
+    predicted_error: float  # likewise (ParetoStore.expected)
     clamped: bool
     infeasible: bool
     predicted_fps: float | None = None  # the frame rate the active settings reach (None: store predates it)
@@ -145,7 +145,10 @@ class PlaybackDriver:
         active = self.filter.update(hit.indices, now_s, allowed)
         shown = points[active]
         settings = hit.settings if active == hit.indices else self.store.settings_of(active)
-        return PlaybackFrame(active, tuple(hit.indices), settings, shown.power_w, shown.error, hit.clamped,
+        # predicted for this camera (the shown point's figures at its frontier's pricing cameras,
+        # interpolated here), not the worst over those cameras that the budget was checked against
+        error, power = self.store.expected(hit, shown)
+        return PlaybackFrame(active, tuple(hit.indices), settings, power, error, hit.clamped,
                              hit.infeasible, shown.fps, shown.meets_fps, hit.fps_target, hit.priority)
 
 
@@ -193,8 +196,8 @@ def predicted_path_summary(store: pareto_store.ParetoStore, frames: Sequence[Any
                            priority=priority, **kwargs)
         top = store.lookup(pos, matrix=f.matrix_world, fov=f.vfov, aspect=f.aspect, fps=rate,
                            error_budget=0.0)
-        chosen += hit.power_w
-        best += top.power_w
+        chosen += hit.expected_power_w  # predicted for this camera (the stored figures are the worst
+        best += top.expected_power_w  # over the frontier's pricing cameras)
         slow += int(hit.meets_fps is False)
         if hit.fps is not None:
             rates.append(hit.fps)

@@ -390,6 +390,11 @@ class QueryResult(BaseModel):
                                   "setting of this view does, or (priority budget) none within the budget "
                                   "does (null: unknown)")
     priority: str = Field(default="frame_rate", description="the query's priority, as the lookup applied it")
+    expected_power_w: float | None = Field(
+        default=None, description="predicted power of the returned settings at this camera: their figures at "
+                                  "the cameras the view's frontier was priced at, interpolated here (power_w "
+                                  "is the worst of those, what the budget was checked against)")
+    expected_error: float | None = Field(default=None, description="predicted error at this camera, likewise")
 
 
 # -- render and evaluate -----------------------------------------------------------------------------

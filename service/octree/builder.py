@@ -17,7 +17,8 @@ from service.display_pricing import DisplayPricer
 from service.evaluation import CameraSpec, Evaluator
 from service.nsga import NSGAConfig
 from service.params import Indices, ParameterSpace
-from service.store import ParetoStore, split_by_rate
+from service.store import Frontier, ParetoStore, split_by_rate
+from service.store.priced import PricedFigures
 
 from .lattice import Lattice, root_cube
 from .path_samples import PathSampling
@@ -87,6 +88,16 @@ class CameraSampling(Protocol):
     def pricing_cameras(self) -> dict[int, list[CameraSpec]]:
         """Every measured frontier (lattice frontier id) with the cameras its points are priced at
         (its sample first; a frontier keeps each point's worst figures over them)."""
+
+    def priced_figures(self) -> dict[int, tuple[list[CameraSpec], list[Indices], np.ndarray, np.ndarray]]:
+        """Per-camera figures of the frontiers the strategy priced at several cameras itself (path
+        samples' guards when there is no display pricing; the display pricing replaces them): lattice
+        frontier id -> (cameras, sample first; settings; error and power (K, n))."""
+
+    def pricing_scales(self) -> dict[int, float]:
+        """The distance unit of the camera dissimilarity (:func:`service.store.priced.
+        camera_dissimilarity`) of every frontier priced at several cameras (lattice frontier id: the
+        median viewing distance of the frames it serves); empty when every frontier has one camera."""
 
     def pricing_plan(self) -> list[tuple[int, int]] | None:
         """While the search runs, the frontiers :meth:`pricing_cameras` will give once it is done, as far
@@ -205,6 +216,9 @@ class OctreeBuilder:
         self.pricer = pricer
         self.display_cameras = 0  # cameras priced at display resolution
         self.display_points = 0  # frontier points priced there
+        # per lattice frontier id priced at several cameras: (cameras, settings, error and power (K, n)
+        # of each setting at each camera), what the store keeps as its per-camera figures
+        self.priced: dict[int, tuple[list[CameraSpec], list[Indices], np.ndarray, np.ndarray]] = {}
         # per lattice frontier id: (the points list, fps) it was counted for and the count of its points
         # the display pricing keeps (_kept_count)
         self._kept_counts: dict[int, tuple[list[Any], float | None, int]] = {}
@@ -217,6 +231,7 @@ class OctreeBuilder:
 
     def run(self) -> None:
         self.sampling.build()
+        self.priced = dict(self.sampling.priced_figures())
         if self.pricer is not None:
             self._price_at_display()
         self.search.finish()
@@ -334,19 +349,35 @@ class OctreeBuilder:
             search.report("price at display resolution",
                           remaining_s=time_left(time.perf_counter() - started, len(results), len(requests)))
         res = iter(results)
+        self.priced = {}
         for fid, cams, xs in jobs:
-            err, pw, ft = np.zeros(len(xs)), np.zeros(len(xs)), np.zeros(len(xs))
-            for _ in cams:
-                evs = next(res)
-                err = np.maximum(err, [e.error for e in evs])
-                pw = np.maximum(pw, [e.power_w for e in evs])
-                ft = np.maximum(ft, [e.frame_time_s for e in evs])
-            lat.frontiers[fid].points = [(x, float(e), float(p), float(t))
-                                         for x, e, p, t in zip(xs, err, pw, ft, strict=True)]
+            evs = [next(res) for _ in cams]
+            err, pw, ft = (np.asarray([[getattr(e, name) for e in ev] for ev in evs],
+                                      dtype=np.float64).reshape(len(cams), len(xs))
+                           for name in ("error", "power_w", "frame_time_s"))
+            # the stored figures: the worst over the cameras (what the budgets are checked against)
+            worst = zip(xs, err.max(axis=0), pw.max(axis=0), ft.max(axis=0), strict=True)
+            lat.frontiers[fid].points = [(x, float(e), float(p), float(t)) for x, e, p, t in worst]
+            if len(cams) > 1:  # and each camera's, to predict a frame between them
+                self.priced[fid] = (cams, xs, err, pw)
             self.display_points += len(xs)
         self.display_cameras = len(requests)
+
+    def _priced_figures(self, fid: int, frontier: Frontier) -> PricedFigures | None:
+        """The per-camera figures of lattice frontier ``fid`` for its store frontier (the points it
+        kept, in its order); None when it was priced at one camera."""
+        rec = self.priced.get(fid)
+        scale = self.sampling.pricing_scales().get(fid)
+        if rec is None or scale is None:
+            return None
+        cams, xs, err, pw = rec
+        column = {self.space.pack(x): j for j, x in enumerate(xs)}
+        cols = [column[int(p)] for p in frontier.packed]
+        return PricedFigures(np.asarray([c.eye for c in cams]), np.asarray([c.forward for c in cams]), scale,
+                             frontier.packed, np.clip(err[:, cols], 0.0, 1.0), pw[:, cols])
 
     def to_store(self, *, profile: str, fps: float, aspect: float, meta: dict) -> ParetoStore:
         """The runtime store: nodes in creation order (children consecutive), shared frontiers."""
         return self.lattice.store(self.space, vfov=self.cfg.vfov, aspect=aspect, profile=profile, fps=fps,
-                                  meta=meta, cameras=self.sampling.store_cameras)
+                                  meta=meta, cameras=self.sampling.store_cameras,
+                                  priced=self._priced_figures if self.priced else None)

@@ -155,9 +155,10 @@ class Lattice:
 
     def store(self, space: ParameterSpace, *, vfov: float, aspect: float, profile: str = "mobile",
               fps: float = 30.0, meta: dict | None = None,
-              cameras: Any = None) -> ParetoStore:
-        """The runtime store: nodes in creation order, the frontiers in use (shared where inherited)
-        and the sample cameras ``cameras(used frontier ids)`` gives (store fields by name)."""
+              cameras: Any = None, priced: Any = None) -> ParetoStore:
+        """The runtime store: nodes in creation order, the frontiers in use (shared where inherited),
+        the sample cameras ``cameras(used frontier ids)`` gives (store fields by name) and the per-camera
+        figures ``priced(frontier id, store frontier)`` gives (``PricedFigures`` or None), if any."""
         used = sorted({f for views in self.corner_views for f in views})
         remap = {f: i for i, f in enumerate(used)}
         frontiers = []
@@ -173,7 +174,8 @@ class Lattice:
             corner_coords=np.asarray(self.corner_coords, dtype=np.int64).reshape(-1, 3),
             corner_views=np.asarray([[remap[f] for f in views] for views in self.corner_views]),
             frontiers=frontiers, vfov=vfov, aspect=aspect, profile=profile, fps=fps, meta=meta or {},
-            **(cameras(used) if cameras is not None else {}))
+            **(cameras(used) if cameras is not None else {}),
+            priced=None if priced is None else [priced(f, fr) for f, fr in zip(used, frontiers, strict=True)])
 
     def skeleton(self, space: ParameterSpace, *, vfov: float, aspect: float) -> ParetoStore:
         """The tree so far with one placeholder frontier, to ask it what a camera would look up."""

@@ -26,6 +26,7 @@ import numpy as np
 from service.evaluation import CameraSpec
 from service.params import Indices
 from service.store import VIEW_FORWARD, quantise_directions, quantise_eyes, view_up
+from service.store.priced import camera_dissimilarity
 
 from .lattice import N_VIEWS, Lattice
 from .search import Search
@@ -46,11 +47,23 @@ class PathSampling:
         self.sample_scale: dict[tuple[int, int], float] = {}  # median viewing distance of its frames
         self.guards: dict[tuple[int, int], list[CameraSpec]] = {}  # each sample's guard cameras
         self.placed = False  # every sample camera and its guards chosen (build, before the searches)
+        # guards priced at the search's resolution (no display pricing): per lattice frontier id, its
+        # cameras (the sample first), settings and each setting's error and power (K, n) at each camera
+        self.priced: dict[int, tuple[list[CameraSpec], list[Indices], np.ndarray, np.ndarray]] = {}
 
     def pricing_cameras(self) -> dict[int, list[CameraSpec]]:
         """Each sample's frontier with its sample camera and guard cameras."""
         return {self.lattice.corner_views[c][v]: [cam, *self.guards.get((c, v), [])]
                 for (c, v), cam in self.sample_cams.items()}
+
+    def priced_figures(self) -> dict[int, tuple[list[CameraSpec], list[Indices], np.ndarray, np.ndarray]]:
+        """The guards' per-camera figures where they were priced during the build (no display pricing)."""
+        return self.priced
+
+    def pricing_scales(self) -> dict[int, float]:
+        """Each sample's frontier with the median viewing distance of its frames: the distance unit of
+        the camera dissimilarity its sample and guards were chosen by."""
+        return {self.lattice.corner_views[c][v]: s for (c, v), s in self.sample_scale.items()}
 
     def pricing_plan(self) -> list[tuple[int, int]] | None:
         """Once the samples are placed (before their searches run), every sample's frontier (-1 until
@@ -174,8 +187,7 @@ class PathSampling:
         p = self.path.positions[idx]
         f = self.path.forwards[idx] / np.linalg.norm(self.path.forwards[idx], axis=1, keepdims=True)
         scale = float(np.median(dist[idx]))
-        cost = (((p[:, None, :] - p[None, :, :]) ** 2).sum(axis=2) / scale**2
-                + ((f[:, None, :] - f[None, :, :]) ** 2).sum(axis=2))
+        cost = camera_dissimilarity(p[:, None, :], f[:, None, :], p[None, :, :], f[None, :, :], scale)
         chosen = [int(np.argmin(cost.sum(axis=1)))]
         for _ in range(self.cfg.guard_frames):
             far = cost[chosen].min(axis=0)
@@ -203,19 +215,20 @@ class PathSampling:
         res = iter(self.search.evaluate(reqs))
         for cv, cams in guards.items():
             rec = self.lattice.frontier(*cv)
-            e = np.asarray([pt[1] for pt in rec.points], dtype=np.float64)
-            pw = np.asarray([pt[2] for pt in rec.points], dtype=np.float64)
-            ft = np.asarray([pt[3] for pt in rec.points], dtype=np.float64)
+            rows = [[(pt[1], pt[2], pt[3]) for pt in rec.points]]  # the sample's own figures first
             for _ in cams:
-                r = [next(res) for _ in rec.points]
-                e = np.maximum(e, [x.error for x in r])
-                pw = np.maximum(pw, [x.power_w for x in r])
-                ft = np.maximum(ft, [x.frame_time_s for x in r])
+                rows.append([(x.error, x.power_w, x.frame_time_s) for x in (next(res) for _ in rec.points)])
+            err, pw, ft = (np.asarray([[f[i] for f in row] for row in rows], dtype=np.float64)
+                           .reshape(len(rows), len(rec.points)) for i in range(3))
+            xs = [pt[0] for pt in rec.points]
             # points the worst case made dominated within their tier (a point may also change tier: too
             # slow for the frame rate now) are dropped where every record becomes a store frontier
             # (Frontier.from_points in to_store)
-            rec.points = [(pt[0], float(ei), float(pi), float(ti))
-                          for pt, ei, pi, ti in zip(rec.points, e, pw, ft, strict=True)]
+            worst = zip(xs, err.max(axis=0), pw.max(axis=0), ft.max(axis=0), strict=True)
+            rec.points = [(x, float(ei), float(pi), float(ti)) for x, ei, pi, ti in worst]
+            if cams:  # and each camera's own figures, to predict a frame between them
+                self.priced[self.lattice.corner_views[cv[0]][cv[1]]] = ([self.sample_cams[cv], *cams], xs,
+                                                                        err, pw)
 
     def _inherit_unsampled(self) -> None:
         """Views no path frame looks up take the frontier (and sample camera) of the sample nearest to

@@ -127,6 +127,14 @@ class ViewCubeSampling:
         """Each measured frontier with the corner view camera it was measured at."""
         return {fid: [self.camera(rec.corner, rec.view)] for fid, rec in enumerate(self.lattice.frontiers)}
 
+    def priced_figures(self) -> dict[int, Any]:
+        """None: every frontier is priced at its one corner view camera."""
+        return {}
+
+    def pricing_scales(self) -> dict[int, float]:
+        """None: every frontier is priced at its one corner view camera."""
+        return {}
+
     def pricing_plan(self) -> None:
         """Not known before the search ends: the refinement decides which views are measured."""
         return None

@@ -29,6 +29,13 @@ Layout (power-budget paper, sec. 4.2 and 6):
   ascending; error descends over the whole frontier); the frame times tell the tiers apart (no new
   field), and a version-4 frontier reads as one without a slow tier. Absent (versions 1-3): frame times
   unknown, power as priced then (P_static + E * fps even for frames that missed);
+- per-camera figures (optional, version 5 readers that do not know them read the worst figures
+  above): where a frontier was priced at several cameras (path samples and their guard frames,
+  :mod:`service.store.priced`), ``priced_cameras`` gives each frontier's camera count (0: none kept),
+  the sample camera being the frontier's own (``frontier_eyes``/``frontier_dirs``), ``priced_eyes`` /
+  ``priced_dirs`` the others' (the same codes), ``priced_scale`` (float32) the distance unit of the
+  camera dissimilarity, and ``priced_error`` / ``priced_power`` each point's figures at each camera
+  (camera major within a frontier; the same 16-bit steps and ``power_scale`` as the frontier's);
 - ``parameters`` (names, values, maximum-quality index), ``profile``, ``fps``, ``vfov``, ``aspect``
   and the optimiser's ``meta``.
 
@@ -51,6 +58,7 @@ from . import codec
 from .camera import VIEW_NAMES
 from .frontier import Frontier
 from .packing import StoredParameter
+from .priced import PricedFigures
 
 FORMAT_NAME = "render-budget/pareto-store"
 FORMAT_VERSION = 5
@@ -84,6 +92,8 @@ def to_dict(store: Any) -> dict[str, Any]:
             codec.direction_codes(store.frontier_dirs, codec.DIR_Q16).reshape(-1), "<i2")
         extra["frontier_eyes"] = codec.encode(
             codec.eye_codes(store.frontier_eyes, store.root_min, store.root_size).reshape(-1), "<u2")
+    if store.priced is not None:
+        extra.update(_priced_fields(store, power_scale))
     if store.frame_times_known:
         codes, scale = codec.frame_time_codes(np.concatenate([f.frame_time_s for f in frontiers]), store.fps)
         extra["frontier_frame_time"] = codec.encode(codes, "<u2")
@@ -111,6 +121,37 @@ def to_dict(store: Any) -> dict[str, Any]:
         "power_scale": power_scale,
         "meta": store.meta,
         **extra,
+    }
+
+
+def _priced_fields(store: Any, power_scale: float) -> dict[str, Any]:
+    """The per-camera figures' fields (:mod:`service.store.priced`)."""
+    if store.frontier_eyes is None or store.frontier_dirs is None:
+        raise ValueError("per-camera figures need the frontiers' sample cameras (frontier_eyes and dirs)")
+    counts, scales, eyes, dirs, err, pw = [], [], [], [], [], []
+    for pf in store.priced:
+        counts.append(0 if pf is None else pf.cameras)
+        if pf is None:
+            continue
+        scales.append(pf.scale)
+        eyes.append(pf.eyes[1:])
+        dirs.append(pf.forwards[1:])
+        err.append(pf.error.reshape(-1))
+        pw.append(pf.power_w.reshape(-1))
+    e, p = np.concatenate(err), np.concatenate(pw)
+    if e.size and (e.min() < 0 or e.max() > 1):
+        raise ValueError("per-camera errors must lie in [0, 1] to be stored")
+    if p.size and (p.min() < 0 or p.max() > power_scale * (1 + 1e-9)):
+        raise ValueError("per-camera power must lie in [0, the frontiers' largest power] to be stored")
+    eyes_a, dirs_a = np.concatenate(eyes).reshape(-1, 3), np.concatenate(dirs).reshape(-1, 3)
+    return {
+        "priced_cameras": codec.encode(np.asarray(counts), "<u1"),
+        "priced_scale": codec.encode(np.asarray(scales), "<f4"),
+        "priced_eyes": codec.encode(codec.eye_codes(eyes_a, store.root_min, store.root_size).reshape(-1),
+                                    "<u2"),
+        "priced_dirs": codec.encode(codec.direction_codes(dirs_a, codec.DIR_Q16).reshape(-1), "<i2"),
+        "priced_error": codec.encode(np.rint(e * codec.QMAX), "<u2"),
+        "priced_power": codec.encode(np.minimum(np.rint(p / power_scale * codec.QMAX), codec.QMAX), "<u2"),
     }
 
 
@@ -159,6 +200,40 @@ def _sample_cameras(d: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+def _priced(d: dict[str, Any], frontiers: list[Frontier], cams: dict[str, Any]) -> list[Any] | None:
+    """The per-camera figures (None: the store keeps none)."""
+    if d.get("priced_cameras") is None:
+        return None
+    counts = codec.decode(d["priced_cameras"]).astype(np.int64)
+    if counts.size != len(frontiers):
+        raise ValueError("priced_cameras disagrees in length with the frontiers")
+    if cams["frontier_eyes"] is None:
+        raise ValueError("per-camera figures need the frontiers' sample cameras")
+    scales = codec.decode(d["priced_scale"]).astype(np.float64)
+    eyes = codec.decode_eyes(d["priced_eyes"], d["root_min"], d["root_size"])
+    dirs = codec.decode(d["priced_dirs"]).astype(np.float64).reshape(-1, 3)
+    err = codec.decode(d["priced_error"]).astype(np.float64) / codec.QMAX
+    pw = codec.decode(d["priced_power"]).astype(np.float64) / codec.QMAX * float(d["power_scale"])
+    priced = counts > 0
+    guards = int((counts[priced] - 1).sum())
+    values = int(sum(int(k) * len(f) for k, f in zip(counts, frontiers, strict=True)))
+    if (scales.size != int(priced.sum()) or eyes.shape[0] != guards or dirs.shape[0] != guards
+            or err.size != values or pw.size != values):
+        raise ValueError("per-camera figures disagree in length with their cameras and frontiers")
+    out: list[Any] = []
+    g = v = s = 0
+    for f, (k, fr) in enumerate(zip(counts.tolist(), frontiers, strict=True)):
+        if k == 0:
+            out.append(None)
+            continue
+        n = k * len(fr)
+        out.append(PricedFigures(np.vstack([cams["frontier_eyes"][f], eyes[g:g + k - 1]]),
+                                 np.vstack([cams["frontier_dirs"][f], dirs[g:g + k - 1]]), scales[s],
+                                 fr.packed, err[v:v + n], pw[v:v + n]))
+        g, v, s = g + k - 1, v + n, s + 1
+    return out
+
+
 def fields_from_dict(d: dict[str, Any]) -> dict[str, Any]:
     """``ParetoStore`` constructor arguments from a document (ValueError naming what is wrong)."""
     if not isinstance(d, dict) or d.get("format") != FORMAT_NAME:
@@ -166,6 +241,8 @@ def fields_from_dict(d: dict[str, Any]) -> dict[str, Any]:
     if d.get("version") not in READABLE_VERSIONS:
         raise ValueError(f"unsupported store version {d.get('version')!r} (reader: {READABLE_VERSIONS})")
     try:
+        frontiers = _frontiers(d)
+        cams = _sample_cameras(d)
         return {
             "parameters": tuple(StoredParameter.from_dict(p) for p in d["parameters"]),
             "root_min": np.asarray(d["root_min"], dtype=np.float64),
@@ -174,13 +251,14 @@ def fields_from_dict(d: dict[str, Any]) -> dict[str, Any]:
             "children": codec.decode(d["children"]),
             "corner_coords": codec.decode(d["corners"]),
             "corner_views": codec.decode(d["corner_views"]),
-            "frontiers": _frontiers(d),
+            "frontiers": frontiers,
             "vfov": float(d["vfov"]),
             "aspect": float(d["aspect"]),
             "profile": str(d["profile"]),
             "fps": float(d["fps"]),
             "meta": dict(d.get("meta") or {}),
-            **_sample_cameras(d),
+            **cams,
+            "priced": _priced(d, frontiers, cams),
         }
     except (KeyError, TypeError) as exc:
         raise ValueError(f"malformed store: missing or wrong field {exc}") from exc

@@ -57,7 +57,13 @@ class LookupResult:
     it keep the budget (under ``"frame_rate"`` a missing one is never picked otherwise); None when the
     store does not know frame times (format before 4), as are ``frame_time_s`` and ``fps`` (the frame
     rate reached). ``frontier``, ``rank`` (the point's place in the tier it came from), ``budget_mode``,
-    ``budget`` and ``priority`` say where it came from (:meth:`LookupIndex.budget_points`)."""
+    ``budget`` and ``priority`` say where it came from (:meth:`LookupIndex.budget_points`).
+
+    ``error`` and ``power_w`` are the frontier's stored figures, the worst over the cameras it was
+    priced at: what the budget was checked against. ``expected_error`` and ``expected_power_w`` are the
+    prediction for this camera (:mod:`.priced`: the pricing cameras' figures interpolated at it with
+    ``weights``, one per pricing camera); the stored figures where the store keeps no per-camera
+    figures (``weights`` empty)."""
 
     indices: tuple[int, ...]
     packed: int
@@ -78,6 +84,9 @@ class LookupResult:
     budget_mode: str = ""
     budget: float = math.nan
     priority: str = "frame_rate"  # the query's (service.options.QUERY_PRIORITY)
+    expected_error: float = math.nan
+    expected_power_w: float = math.nan
+    weights: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)

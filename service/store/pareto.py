@@ -16,9 +16,11 @@ import numpy as np
 from ..options import QUERY_FPS, QUERY_PRIORITY
 from . import camera, codec, format
 from .camera import VIEW_FORWARD, VIEW_UP, view_up
+from .frame_rate import power_at_rate
 from .frontier import Frontier
 from .lookup import FrontierPoint, LookupIndex, LookupResult
 from .packing import MAX_PARAMS, MAX_VALUES_PER_PARAM, StoredParameter, settings_of
+from .priced import PricedFigures
 
 
 def _finite_vec3(v: Any, name: str) -> np.ndarray:
@@ -49,6 +51,8 @@ class ParetoStore:
     view_dirs: np.ndarray | None = None  # float64 (C, 6, 3) sample directions; None = the axes
     frontier_dirs: np.ndarray | None = None  # float64 (F, 3) sample direction of each frontier
     frontier_eyes: np.ndarray | None = None  # float64 (F, 3) sample eye of each frontier
+    #: per frontier, its points' figures at each camera it was priced at (None: the stored figures only)
+    priced: list[PricedFigures | None] | None = None
 
     def __post_init__(self) -> None:
         self.root_min = _finite_vec3(self.root_min, "root_min")
@@ -67,6 +71,7 @@ class ParetoStore:
         self.corner_views = np.asarray(self.corner_views, dtype=np.int64).reshape(-1, 6)
         self._check_tree()
         self._check_sample_cameras()
+        self._check_priced()
         if len(self.parameters) > MAX_PARAMS:
             raise ValueError(f"at most {MAX_PARAMS} parameters")
         for prm in self.parameters:
@@ -115,6 +120,22 @@ class ParetoStore:
                 raise ValueError("frontier_dirs must be non-zero")
             self.frontier_dirs = fd / n
             self.frontier_eyes = fe
+
+    def _check_priced(self) -> None:
+        if self.priced is None:
+            return
+        self.priced = list(self.priced)
+        if len(self.priced) != len(self.frontiers):
+            raise ValueError("priced figures must be given for every frontier (None where there are none)")
+        for pf, fr in zip(self.priced, self.frontiers, strict=True):
+            if pf is None:
+                continue
+            if not isinstance(pf, PricedFigures):
+                raise ValueError("priced figures must be PricedFigures or None")
+            if pf.packed.size != len(fr) or np.any(pf.packed != fr.packed.astype(np.int64)):
+                raise ValueError("priced figures must list their frontier's points in frontier order")
+        if all(pf is None for pf in self.priced):
+            self.priced = None
 
     # -- what is stored ---------------------------------------------------------------------------
 
@@ -250,9 +271,41 @@ class ParetoStore:
                 fr, i, infeasible = slow, j, False
         packed = fr.packed[i]
         indices, settings = index.decoded(packed)
+        error, power = fr.error[i], fr.power[i]
+        weights: tuple[float, ...] = ()
+        figures = None if self.priced is None else self.priced[fid]
+        if figures is not None:
+            forward = (-rot[2], -rot[5], -rot[8])  # the camera looks down its local -Z
+            weights = figures.weights(position, forward)  # (checked finite by the leaf search)
+            error, power = self._expected(figures, weights, packed, error, power, fr.frame_time[i], rate)
         return LookupResult(indices, packed, settings, fr.power[i], fr.error[i], clamped, infeasible,
                             corner, view, leaf, fr.frame_time[i], fr.fps_reached[i], fr.meets[i], rate,
-                            fid, i, "power" if power_budget is not None else "error", budget, priority)
+                            fid, i, "power" if power_budget is not None else "error", budget, priority,
+                            error, power, weights)
+
+    def _expected(self, figures: PricedFigures, weights: Sequence[float], packed: int, error: float,
+                  power: float, frame_time_s: float | None, rate: float) -> tuple[float, float]:
+        """(error, power) of ``packed`` interpolated at a camera (``weights``), its power at the frame
+        rate ``rate`` asked for; ``error`` and ``power`` (the stored figures) when the frontier has no
+        figures for it."""
+        got = figures.expected(weights, packed)
+        if got is None:
+            return error, power
+        e, p = got
+        if rate != self.fps and frame_time_s is not None and self.static_power_w is not None:
+            p = power_at_rate(p, frame_time_s, self.fps, rate, self.static_power_w)
+        return e, p
+
+    def expected(self, hit: LookupResult, point: FrontierPoint) -> tuple[float, float]:
+        """The predicted (error, power) of ``point`` (one of :meth:`budget_points` of ``hit``, or ``hit``'s
+        own) at ``hit``'s camera and frame-rate target: its figures at the frontier's pricing cameras
+        interpolated at that camera (:mod:`.priced`), else its stored figures."""
+        figures = None if self.priced is None or hit.frontier < 0 else self.priced[hit.frontier]
+        if figures is None or not hit.weights:
+            return point.error, point.power_w
+        rate = self.fps if hit.fps_target is None else hit.fps_target
+        return self._expected(figures, hit.weights, point.packed, point.error, point.power_w,
+                              point.frame_time_s, rate)
 
     def budget_points(self, hit: LookupResult) -> list[FrontierPoint]:
         """The points of the tier ``hit`` came from that keep its budget (power ascending), with their

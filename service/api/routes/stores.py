@@ -117,13 +117,16 @@ def answer_query(store: Any, body: StoreQuery) -> QueryResult:
             settings=hit.settings, indices=list(target), packed=hit.packed, power_w=hit.power_w,
             error=hit.error, clamped=hit.clamped, infeasible=hit.infeasible, filtered=False,
             target_indices=list(target), frame_time_s=hit.frame_time_s, fps=hit.fps,
-            fps_target=hit.fps_target, meets_fps=hit.meets_fps, priority=hit.priority)
+            fps_target=hit.fps_target, meets_fps=hit.meets_fps, priority=hit.priority,
+            expected_power_w=hit.expected_power_w, expected_error=hit.expected_error)
     pt = points[shown]
+    expected_error, expected_power = store.expected(hit, pt)
     return QueryResult(
         settings=store.settings_of(shown), indices=list(shown), packed=pt.packed, power_w=pt.power_w,
         error=pt.error, clamped=hit.clamped, infeasible=hit.infeasible, filtered=True,
         target_indices=list(target), frame_time_s=pt.frame_time_s, fps=pt.fps, fps_target=hit.fps_target,
-        meets_fps=pt.meets_fps, priority=hit.priority)
+        meets_fps=pt.meets_fps, priority=hit.priority, expected_power_w=expected_power,
+        expected_error=expected_error)
 
 
 async def query_store(store_id: str, body: StoreQuery, request: Request) -> QueryResult:
