@@ -140,6 +140,7 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, config: O
         guard_frames=config.guard_frames,
         display=None if config.display_estimator == "preview" else display,
         display_points=config.display_points, slow_points=config.slow_points,
+        bridge_points=config.bridge_points,
     )
     pricing = pricer = None
     if config.display_estimator != "preview":
@@ -170,6 +171,10 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, config: O
         "display_points": builder.display_points,
         # the slow tiers' share of them: at most this many points a frontier (0: all; 1: max quality alone)
         "slow_points": config.slow_points,
+        # at most this many settings a frontier priced where its priced errors jumped (0: none), and how
+        # many were priced in all
+        "bridge_points": config.bridge_points,
+        "bridged_points": builder.bridged_points,
         "metric": config.metric,
         # the power figures include it: a lookup at another frame rate reprices power from it
         "static_power_w": sim_core.load_profile(config.profile).static_power_w,

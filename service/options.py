@@ -175,6 +175,12 @@ OPTIONS: tuple[Option, ...] = (
            "store (0: all; 1: max quality alone, which each camera's reference render prices at no extra "
            "cost; each other point costs about a max-quality frame at every camera the frontier is priced "
            "at)", minimum=0, maximum=64, metavar="N", group="Evaluation"),
+    Option("bridge_points", int, 8, "Bridging points priced",
+           "at most this many more settings of each frontier are priced at the path's resolution where "
+           "the priced real-time points' errors jump (more than doubling from one to the next): the "
+           "cheaper point with one parameter of the dearer one, a few rounds (a search at small images "
+           "misjudges some settings' error at full size; 0: none)", minimum=0, maximum=64, metavar="N",
+           group="Evaluation"),
     Option("display_height", int, None, "Display height",
            "price the store's figures at this height (width from the path's aspect) instead of the path's "
            "own resolution: a stated smaller display size when full size is too slow (default: the path's "

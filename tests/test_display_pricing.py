@@ -336,6 +336,9 @@ def test_store_figures_are_whole_frames_at_the_paths_resolution(scene) -> None:
                           executor=InProcessExecutor())
     assert store.meta["figures_resolution"] == [96, 72] and store.meta["display_pricing"].startswith("full")
     assert store.meta["display_points"] > 0 and store.meta["display_cameras"] == len(store.frontiers)
+    # the settings priced between the first ones' error jumps are among them (checked below like them)
+    assert store.meta["bridge_points"] == 8
+    assert 0 <= store.meta["bridged_points"] < store.meta["display_points"]
     preview = optimize_path(scene, path, SUBSPACE, _options(display_estimator="preview"), cache=cache,
                             executor=InProcessExecutor())
     assert preview.meta["figures_resolution"] == [16, 12] and preview.meta["display_points"] == 0
@@ -359,7 +362,8 @@ def test_store_figures_are_whole_frames_at_the_paths_resolution(scene) -> None:
 def test_tile_estimated_store_keeps_a_few_points_per_frontier(scene) -> None:
     path = _orbit_path(6, (128, 96))
     store = optimize_path(scene, path, SUBSPACE, _options(display_estimator="tiles", display_fraction=0.3,
-                                                          display_points=3, display_tiles_min_pixels=0),
+                                                          display_points=3, display_tiles_min_pixels=0,
+                                                          bridge_points=0),  # (the spread's cap alone)
                           cache=EvalCache(), executor=InProcessExecutor())
     assert store.meta["display_pricing"].startswith("tiles") and store.meta["figures_resolution"] == [128, 96]
     # a display this small is priced as whole frames unless told otherwise (the tiles would cost as much)
@@ -423,7 +427,8 @@ def test_the_time_left_during_the_search_includes_the_pricing_to_come(scene, mon
     for k in (0, 1, 3):  # 0: preview, no display pricing
         monkeypatch.setattr(search_module, "time", _SlowClock())  # every search reading 100 s after the last
         updates = []
-        opts = (_options(display_estimator="full", display_points=k) if k
+        # (no bridging: its rounds after the pricing are tested with their own estimate, test_bridge)
+        opts = (_options(display_estimator="full", display_points=k, bridge_points=0) if k
                 else _options(display_estimator="preview"))
         store = optimize_path(scene, path, SUBSPACE, opts, cache=EvalCache(), executor=InProcessExecutor(),
                               progress=updates.append)

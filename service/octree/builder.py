@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -20,6 +20,7 @@ from service.params import Indices, ParameterSpace
 from service.store import Frontier, ParetoStore, split_by_rate
 from service.store.priced import PricedFigures
 
+from . import bridge
 from .lattice import Lattice, root_cube
 from .path_samples import PathSampling
 from .search import Progress, Search
@@ -54,6 +55,9 @@ class OctreeConfig:
     # priced there (0: all; spread_points)
     display_points: int = 0
     slow_points: int | None = None
+    # at most this many more settings of each frontier priced there where the priced meeting tier's
+    # errors jump (:mod:`.bridge`; 0: none)
+    bridge_points: int = 0
 
     def __post_init__(self) -> None:
         options.check({name: getattr(self, name) for name in (
@@ -216,6 +220,9 @@ class OctreeBuilder:
         self.pricer = pricer
         self.display_cameras = 0  # cameras priced at display resolution
         self.display_points = 0  # frontier points priced there
+        self.bridged_points = 0  # of them, priced between the first ones' error jumps (:mod:`.bridge`)
+        self._first_priced: dict[int, list[Indices]] = {}  # per frontier, the points priced first
+        self._bridge_reserve = 0.0  # search steps planned for bridging not priced yet
         # per lattice frontier id priced at several cameras: (cameras, settings, error and power (K, n)
         # of each setting at each camera), what the store keeps as its per-camera figures
         self.priced: dict[int, tuple[list[CameraSpec], list[Indices], np.ndarray, np.ndarray]] = {}
@@ -278,11 +285,13 @@ class OctreeBuilder:
         (path samples) ``guard_frames`` guards, with that average each. Before the first frontier is found,
         ``display_points`` + 1 a frontier: a full meeting tier and one slow point (Max, when it misses the
         frame rate; recorded slow tiers mostly hold one point, bench/RESULTS.md), or a population when
-        every point is priced."""
+        every point is priced. Each frontier counts ``bridge_points`` more, the most its bridging may
+        price (:mod:`.bridge`): the fraction done may jump at the end, never stall at the bridging."""
         cfg = self.cfg
-        kept = [self._kept_count(fid) for fid in range(len(self.lattice.frontiers))]
+        kept = [self._kept_count(fid) + cfg.bridge_points for fid in range(len(self.lattice.frontiers))]
         per_frontier = (sum(kept) / len(kept) if kept else
-                        cfg.display_points + 1 if cfg.display_points else cfg.nsga.population)
+                        cfg.display_points + 1 + cfg.bridge_points if cfg.display_points else
+                        cfg.nsga.population + cfg.bridge_points)
         plan = self.sampling.pricing_plan()
         if plan is not None:
             return (sum(n for _, n in plan),
@@ -309,59 +318,105 @@ class OctreeBuilder:
         cameras (its sample, and for path samples its guards), keeping each point's worst error, power
         and frame time there: the store's figures are the display resolution's, the search's only chose
         the points (:func:`spread_points`: at most ``display_points`` of the meeting tier and
-        ``slow_points`` of the slow tier). The store's tiers are drawn again from the display figures
-        (``Frontier.from_points``): a point may meet the rate at one resolution and miss it at the
-        other."""
+        ``slow_points`` of the slow tier). Then, where the priced meeting tier's errors jump, up to
+        ``bridge_points`` more settings between them, a few rounds (:mod:`.bridge`). The store's tiers
+        are drawn again from the display figures (``Frontier.from_points``): a point may meet the rate at
+        one resolution and miss it at the other."""
         assert self.pricer is not None and self.cfg.display is not None
         width, height = self.cfg.display
         search, lat = self.search, self.lattice
-        jobs: list[tuple[int, list[CameraSpec], list[Indices]]] = []
+        fps = search.ev.fps
+        # per frontier: its cameras at display resolution, the settings priced so far and their figures
+        # there, (K, n) each: error, power, frame time
+        jobs: dict[int, tuple[list[CameraSpec], list[Indices], list[np.ndarray]]] = {}
+        asked: dict[int, list[Indices]] = {}
         for fid, cams in sorted(self.sampling.pricing_cameras().items()):
-            keep = spread_points(lat.frontiers[fid].points, self.cfg.display_points, search.ev.fps,
+            keep = spread_points(lat.frontiers[fid].points, self.cfg.display_points, fps,
                                  self.cfg.slow_points)
-            lat.frontiers[fid].points = keep
-            jobs.append((fid, [dataclasses.replace(c, width=width, height=height) for c in cams],
-                         [pt[0] for pt in keep]))
-        requests = [(cam, xs) for _, cams, xs in jobs for cam in cams]
+            jobs[fid] = ([dataclasses.replace(c, width=width, height=height) for c in cams], [],
+                         [np.zeros((len(cams), 0)) for _ in range(3)])
+            asked[fid] = [pt[0] for pt in keep]
+        # the points to price are known: the estimate is this phase's own from here, and its steps planned,
+        # with the most the bridging may price held in reserve (the rounds draw their steps from it)
+        search.renders_after = None
+        self._bridge_reserve = sum(self.pricing_steps(0, len(cams) * self.cfg.bridge_points)
+                                   for cams, _, _ in jobs.values())
+        search.steps_planned += self._bridge_reserve
+        self.bridged_points = 0
+        for round_ in range(1 + (bridge.ROUNDS if self.cfg.bridge_points > 0 else 0)):
+            if round_:
+                asked = {}
+                for fid, (_, xs, figs) in jobs.items():
+                    left = self.cfg.bridge_points - (len(xs) - len(self._first_priced[fid]))
+                    more = bridge.bridge_candidates(self._worst(xs, figs), fps, left, xs)
+                    if more:
+                        asked[fid] = more
+                if not asked:
+                    break
+                self.bridged_points += sum(len(xs) for xs in asked.values())
+            self._price_round(jobs, asked, "price at display resolution" if not round_ else
+                              "price between the priced points")
+            if not round_:
+                self._first_priced = {fid: list(xs) for fid, (_, xs, _) in jobs.items()}
+        self.priced = {}
+        for fid, (cams, xs, (err, pw, ft)) in jobs.items():
+            lat.frontiers[fid].points = self._worst(xs, (err, pw, ft))
+            if len(cams) > 1:  # and each camera's, to predict a frame between them
+                self.priced[fid] = (cams, xs, err, pw)
+            self.display_points += len(xs)
+            self.display_cameras += len(cams)
+
+    @staticmethod
+    def _worst(xs: list[Indices], figures: Sequence[np.ndarray]) -> list[tuple[Any, ...]]:
+        """The points ``xs`` with their worst figures over the cameras (what the budgets are checked
+        against)."""
+        err, pw, ft = figures
+        return [(x, float(e), float(p), float(t))
+                for x, e, p, t in zip(xs, err.max(axis=0), pw.max(axis=0), ft.max(axis=0), strict=True)]
+
+    def _price_round(self, jobs: dict[int, tuple[list[CameraSpec], list[Indices], list[np.ndarray]]],
+                     asked: dict[int, list[Indices]], phase: str) -> None:
+        """Price ``asked`` (settings per frontier) at their frontiers' cameras and append them and their
+        figures to ``jobs``, reporting progress per batch."""
+        search = self.search
+        requests = [(cam, xs) for fid, xs in asked.items() for cam in jobs[fid][0]]
         # what each camera priced at display resolution costs in search steps (the fraction done, and the
         # time left when the search rendered nothing to take a pace from, pricing_time)
-        steps = [self.pricing_steps(1, len(xs)) for _, xs in requests]
-        search.steps_planned += sum(steps)
+        # (a bridging round's cameras have their reference rendered already)
+        refs = 0 if any(jobs[fid][1] for fid in asked) else 1
+        steps = [self.pricing_steps(refs, len(xs)) for _, xs in requests]
+        reserved = min(self._bridge_reserve, sum(steps)) if refs == 0 else 0.0
+        self._bridge_reserve -= reserved
+        search.steps_planned += sum(steps) - reserved
         done = search.steps_done
-        # the points to price are known: the estimate is this phase's own from here, and its steps planned
-        search.renders_after = None
         search.check_cancel()
-        search.report("price at display resolution",
-                      remaining_s=self.pricing_time(search.state, len(requests),
-                                                    sum(len(xs) for _, xs in requests)))
+        # (the first round's estimate includes the most the bridging may price, as the search's did)
+        most = sum(len(jobs[fid][0]) for fid in asked) * self.cfg.bridge_points if refs else 0
+        search.report(phase, remaining_s=self.pricing_time(search.state, len(requests),
+                                                           sum(len(xs) for _, xs in requests) + most))
         # cameras per batch: several per worker, so that a batch's last camera (whose cost varies with
         # its points) leaves the other workers idle for a small share of the batch only
-        chunk = max(2, 8 * int(getattr(self.pricer.ev.executor, "workers", 1) or 1))
+        chunk = max(2, 8 * int(getattr(self.pricer.ev.executor, "workers", 1) or 1))  # type: ignore[union-attr]
         results: list[list[Any]] = []
         started = time.perf_counter()
         for start in range(0, len(requests), chunk):
             search.check_cancel()
-            results += self.pricer.price(requests[start:start + chunk])
+            results += self.pricer.price(requests[start:start + chunk])  # type: ignore[union-attr]
             search.steps_done = done + sum(steps[:start + chunk])  # at the last batch: every camera's
             # pricing is the last phase, and its cameras cost what the scene makes them cost at display
             # resolution, which pricing_time guesses from the search's pace and pixel counts only: from
             # the first batch on, the time left is this phase's own measured pace
-            search.report("price at display resolution",
-                          remaining_s=time_left(time.perf_counter() - started, len(results), len(requests)))
+            search.report(phase, remaining_s=time_left(time.perf_counter() - started, len(results),
+                                                       len(requests)))
         res = iter(results)
-        self.priced = {}
-        for fid, cams, xs in jobs:
+        for fid, xs in asked.items():
+            cams, have, figs = jobs[fid]
             evs = [next(res) for _ in cams]
-            err, pw, ft = (np.asarray([[getattr(e, name) for e in ev] for ev in evs],
-                                      dtype=np.float64).reshape(len(cams), len(xs))
-                           for name in ("error", "power_w", "frame_time_s"))
-            # the stored figures: the worst over the cameras (what the budgets are checked against)
-            worst = zip(xs, err.max(axis=0), pw.max(axis=0), ft.max(axis=0), strict=True)
-            lat.frontiers[fid].points = [(x, float(e), float(p), float(t)) for x, e, p, t in worst]
-            if len(cams) > 1:  # and each camera's, to predict a frame between them
-                self.priced[fid] = (cams, xs, err, pw)
-            self.display_points += len(xs)
-        self.display_cameras = len(requests)
+            new = [np.asarray([[getattr(e, name) for e in ev] for ev in evs],
+                              dtype=np.float64).reshape(len(cams), len(xs))
+                   for name in ("error", "power_w", "frame_time_s")]
+            jobs[fid] = (cams, have + list(xs), [np.concatenate((a, b), axis=1) for a, b in zip(figs, new,
+                                                                                               strict=True)])
 
     def _priced_figures(self, fid: int, frontier: Frontier) -> PricedFigures | None:
         """The per-camera figures of lattice frontier ``fid`` for its store frontier (the points it

@@ -1,0 +1,111 @@
+"""Settings priced between a frontier's priced points where their errors jump (service.octree.bridge)."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from service.octree.bridge import ERROR_FLOOR, GAP_RATIO, bridge_candidates, gaps
+from service.octree.search import FRACTION_BEFORE_DONE
+from tests.test_spread_points import FPS, _run_one_frontier_builder
+
+indices = st.tuples(st.integers(0, 3), st.integers(0, 3), st.integers(0, 3))
+priced_points = st.lists(st.tuples(indices, st.floats(0.0, 0.5), st.floats(0.0, 5.0),
+                                   st.sampled_from([0.01, 0.02, 0.1])), max_size=12,
+                         unique_by=lambda pt: pt[0])
+
+
+@settings(max_examples=300, deadline=None)
+@given(points=priced_points, k=st.integers(0, 10))
+def test_bridges_are_a_gaps_cheaper_end_with_one_parameter_of_its_dearer_end(points, k) -> None:
+    """At most ``k`` settings, none priced already, none twice; each is the cheaper end of a gap of the
+    priced real-time points with exactly one parameter set to the dearer end's value; no gap, no
+    bridge."""
+    priced = [pt[0] for pt in points]
+    got = bridge_candidates(points, FPS, k, priced)
+    found = gaps(points, FPS)
+    assert len(got) <= max(k, 0) and len(set(got)) == len(got) and not set(got) & set(priced)
+    for ratio, cheap, dear in found:
+        assert ratio > GAP_RATIO and cheap[2] <= dear[2] and cheap[1] > dear[1]
+    for x in got:
+        assert any(sum(a != b for a, b in zip(x, cheap[0], strict=True)) == 1
+                   and all(a in (b, c) for a, b, c in zip(x, cheap[0], dear[0], strict=True))
+                   for _, cheap, dear in found)
+    if not found:
+        assert got == []
+
+
+def test_a_gap_is_measured_with_the_error_floor_so_jumps_near_max_count() -> None:
+    """Errors 0.004 and 0 (ratio 5 with the floor) are a gap; 0.0004 and 0 (1.4) are not, nor are
+    0.3 and 0.16 (under 2); settings that miss the frame rate are not bridged."""
+    def pts(*errors, t=0.01):
+        return [((j, 0, 0), e, float(j + 1), t) for j, e in enumerate(errors)]  # power ascending
+
+    assert [round(r, 2) for r, _, _ in gaps(pts(0.004, 0.0), FPS)] == [(0.004 + ERROR_FLOOR) / ERROR_FLOOR]
+    assert gaps(pts(0.0004, 0.0), FPS) == [] and gaps(pts(0.3, 0.16), FPS) == []
+    slow = pts(0.1, 0.0)
+    slow[1] = (slow[1][0], 0.0, slow[1][2], 0.2)  # the dearer one misses 30 fps: the tiers differ
+    assert gaps(slow, FPS) == []
+
+
+def test_the_widest_gap_gets_the_first_bridges_in_turns() -> None:
+    """Two gaps: the one near Max (0.04 to 0, ratio 41) is asked first, then they take turns."""
+    cheap, mid, best = ((0, 0, 0), 0.28, 1.0, 0.01), ((1, 2, 0), 0.04, 2.0, 0.01), ((3, 3, 3), 0.0, 3.0, 0.01)
+    got = bridge_candidates([cheap, mid, best], FPS, 4, [cheap[0], mid[0], best[0]])
+    assert got == [(3, 2, 0), (1, 0, 0), (1, 3, 0), (0, 2, 0)]
+
+
+def _figures(x):
+    """A scene's display figures for the space (sampling, max_depth, resolution_scale): each step below
+    Max costs error and saves power; Max is (4, 3, 3), error 0 at 30 W."""
+    s, d, r = x
+    return 0.01 * (4 - s) + 0.03 * (3 - d) + 0.05 * (3 - r), 15.0 + 1.5 * s + 2.0 * d + 1.0 * r
+
+
+def test_the_builder_prices_a_bridge_and_the_error_budget_picks_it_over_max() -> None:
+    """The search kept the cheapest setting, one at (3, 2, 3) that looked good at its small images but
+    measures 0.04 at display resolution, and Max: an error budget of 0.02 could only pick Max (30 W).
+    With bridging the builder also prices (3, 2, 3) with Max's depth, (3, 3, 3): 0.01 at 28.5 W, which
+    the budget then picks; nothing is priced twice, and at most ``bridge_points`` more a frontier."""
+    from service.params import default_space
+
+    space = default_space().subset(["sampling", "max_depth", "resolution_scale"])  # the helper's space
+    searched = [(space.expand(x), e, p, 0.02)
+                for x, e, p in (((0, 0, 0), 0.2, 15.0), ((3, 2, 3), 0.005, 26.5), ((4, 3, 3), 0.0, 30.0))]
+    asked: list[tuple[int, ...]] = []
+
+    class Pricer:
+        ev = SimpleNamespace(executor=None)
+
+        def price(self, requests):
+            out = []
+            for _, xs in requests:
+                asked.extend(space.restrict(x) for x in xs)
+                out.append([SimpleNamespace(error=e, power_w=p, frame_time_s=0.02)
+                            for e, p in (_figures(space.restrict(x)) for x in xs)])
+            return out
+
+    reports = []
+
+    def pick(**options):
+        asked.clear()
+        reports.clear()
+        b = _run_one_frontier_builder(searched, Pricer(), reports.append, display_points=8, **options)
+        store = b.to_store(profile="mobile", fps=FPS, aspect=16 / 9, meta={"static_power_w": 15.0})
+        hit = store.lookup((0.5, 0.0, 0.0), direction=(1.0, 0.0, 0.0), error_budget=0.02)
+        return b, hit
+
+    b, hit = pick()
+    assert space.restrict(hit.indices) == (4, 3, 3) and b.bridged_points == 0 and len(asked) == 3
+    b, hit = pick(bridge_points=4)
+    assert space.restrict(hit.indices) == (3, 3, 3)
+    assert round(hit.error, 6) == 0.01 and round(hit.power_w, 6) == 28.5
+    assert len(asked) == len(set(asked)) == 3 + b.bridged_points and 0 < b.bridged_points <= 4
+    assert b.display_points == len(asked)
+    # the fraction done held the bridging's most in reserve: it rose through the rounds, never stalled
+    fractions = [r.fraction for r in reports]
+    bridging = [r.fraction for r in reports if r.phase == "price between the priced points"]
+    assert fractions == sorted(fractions) and fractions[-1] == 1.0
+    assert bridging and bridging[0] < min(bridging[-1], FRACTION_BEFORE_DONE)
