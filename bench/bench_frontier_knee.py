@@ -16,22 +16,18 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import time
-from pathlib import Path
 
-from bench_space_steps import _parse_value, cameras
+from bench_space_steps import _parse_value, built_scene, cameras
 
 from addon.core.campaign import parse_size
-from service.camera_path import CameraPath
 from service.display_pricing import DisplayPricing, price_camera
 from service.eval_cache import EvalCache
-from service.evaluation import Evaluator, read_scene
+from service.evaluation import Evaluator
 from service.nsga import NSGAConfig
 from service.octree.builder import spread_points
 from service.octree.search import Search
 from service.optimize import resolve_space
 from service.params import default_space
-
-REPO = Path(__file__).resolve().parent.parent
 
 
 def main() -> None:
@@ -49,9 +45,7 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=None)
     args = ap.parse_args()
     t0 = time.time()
-    d = REPO / "blend_scenes" / "build" / args.scene
-    scene = read_scene(d / "scene.rbscene")
-    path = CameraPath.load(d / "path.json")
+    scene, path = built_scene(args.scene)
     space = resolve_space(scene, default_space(), path, args.threads)
     print(f"{args.scene}: search at {args.eval[0]}x{args.eval[1]}, priced at {args.size[0]}x{args.size[1]}, "
           f"profile {args.profile}; fixed {dict(space.fixed_reasons)}; {space.size} settings searched")

@@ -47,6 +47,12 @@ CANDIDATES: tuple[tuple[str, dict[str, Any]], ...] = (
 )
 
 
+def built_scene(name: str) -> tuple[Any, CameraPath]:
+    """A scene built by ``python -m blend_scenes.build --scene NAME`` and its camera path."""
+    d = REPO / "blend_scenes" / "build" / name
+    return read_scene(d / "scene.rbscene"), CameraPath.load(d / "path.json")
+
+
 def cameras(path: CameraPath, n: int, size: tuple[int, int], step: int = 0) -> list[tuple[int, CameraSpec]]:
     """``n`` path frames spread evenly (the middle of ``n`` equal parts), or with ``step`` every
     ``step``-th frame from the first (the main job's evaluated frames)."""
@@ -147,9 +153,7 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=None)
     args = ap.parse_args()
     t0 = time.time()
-    d = REPO / "blend_scenes" / "build" / args.scene
-    scene = read_scene(d / "scene.rbscene")
-    path = CameraPath.load(d / "path.json")
+    scene, path = built_scene(args.scene)
     cams = cameras(path, args.cameras, args.size, args.frame_step)
     pr = Pricer(scene, cams, args.profile, args.fps, args.metric, args.threads)
     space = pr.space
