@@ -107,10 +107,11 @@ DEMO_DISPLAY_POINTS = 4
 #: 0.001 W and cost a third of the pricing's CPU time (bench/RESULTS.md, "make demo under ten minutes").
 DEMO_GUARD_FRAMES = 1
 #: Settings priced between the priced points' error jumps, at most, a frontier (the service's default is
-#: 8): on the teapot's demo job 8 raised the error budget's saving from 52.5 % to 61.3 % (at mean error
-#: 0.0106) but priced 441 more points, half again the job's CPU time (about 12 minutes on two cores);
-#: 2 bridges each frontier's widest jumps first (bench/RESULTS.md, "Bridging ... the teapot's demo").
-DEMO_BRIDGE_POINTS = 2
+#: 8): none. On the teapot's demo job 8 raised the error budget's saving from 52.5 % to 61.3 % (at mean
+#: error 0.0106) but took half again the job's CPU time; 2 gave 54.2 % at 0.0073 and took the demo to
+#: 10 min 36 s on a fresh clone, over its 10 minutes (bench/RESULTS.md, "Bridging on the teapot's demo
+#: job"). ``--bridge-points 8`` gives the service's pricing.
+DEMO_BRIDGE_POINTS = 0
 
 
 def demo_slow_points(priority: str) -> int:
