@@ -221,7 +221,6 @@ class OctreeBuilder:
         self.display_cameras = 0  # cameras priced at display resolution
         self.display_points = 0  # frontier points priced there
         self.bridged_points = 0  # of them, priced between the first ones' error jumps (:mod:`.bridge`)
-        self._first_priced: dict[int, list[Indices]] = {}  # per frontier, the points priced first
         self._bridge_reserve = 0.0  # search steps planned for bridging not priced yet
         # per lattice frontier id priced at several cameras: (cameras, settings, error and power (K, n)
         # of each setting at each camera), what the store keeps as its per-camera figures
@@ -343,21 +342,21 @@ class OctreeBuilder:
                                    for cams, _, _ in jobs.values())
         search.steps_planned += self._bridge_reserve
         self.bridged_points = 0
+        first_count: dict[int, int] = {}  # per frontier, the points its first round priced
         for round_ in range(1 + (bridge.ROUNDS if self.cfg.bridge_points > 0 else 0)):
             if round_:
                 asked = {}
                 for fid, (_, xs, figs) in jobs.items():
-                    left = self.cfg.bridge_points - (len(xs) - len(self._first_priced[fid]))
+                    left = self.cfg.bridge_points - (len(xs) - first_count[fid])
                     more = bridge.bridge_candidates(self._worst(xs, figs), fps, left, xs)
                     if more:
                         asked[fid] = more
                 if not asked:
                     break
                 self.bridged_points += sum(len(xs) for xs in asked.values())
-            self._price_round(jobs, asked, "price at display resolution" if not round_ else
-                              "price between the priced points")
+            self._price_round(jobs, asked, bridging=round_ > 0)
             if not round_:
-                self._first_priced = {fid: list(xs) for fid, (_, xs, _) in jobs.items()}
+                first_count = {fid: len(xs) for fid, (_, xs, _) in jobs.items()}
         self.priced = {}
         for fid, (cams, xs, (err, pw, ft)) in jobs.items():
             lat.frontiers[fid].points = self._worst(xs, (err, pw, ft))
@@ -375,7 +374,7 @@ class OctreeBuilder:
                 for x, e, p, t in zip(xs, err.max(axis=0), pw.max(axis=0), ft.max(axis=0), strict=True)]
 
     def _price_round(self, jobs: dict[int, tuple[list[CameraSpec], list[Indices], list[np.ndarray]]],
-                     asked: dict[int, list[Indices]], phase: str) -> None:
+                     asked: dict[int, list[Indices]], bridging: bool) -> None:
         """Price ``asked`` (settings per frontier) at their frontiers' cameras and append them and their
         figures to ``jobs``, reporting progress per batch."""
         search = self.search
@@ -383,7 +382,8 @@ class OctreeBuilder:
         # what each camera priced at display resolution costs in search steps (the fraction done, and the
         # time left when the search rendered nothing to take a pace from, pricing_time)
         # (a bridging round's cameras have their reference rendered already)
-        refs = 0 if any(jobs[fid][1] for fid in asked) else 1
+        phase = "price between the priced points" if bridging else "price at display resolution"
+        refs = 0 if bridging else 1
         steps = [self.pricing_steps(refs, len(xs)) for _, xs in requests]
         reserved = min(self._bridge_reserve, sum(steps)) if refs == 0 else 0.0
         self._bridge_reserve -= reserved
