@@ -189,7 +189,7 @@ def test_round_trip_keeps_the_slow_tier_and_a_version_4_store_still_reads() -> N
     s = _two_tier_store()
     text = s.to_json()
     doc = json.loads(text)
-    assert doc["version"] == 5
+    assert doc["version"] == 6
     back = ParetoStore.from_json(text)
     assert back.to_json() == text
     for a, b in zip(s.frontiers, back.frontiers, strict=True):
@@ -213,7 +213,7 @@ def test_round_trip_keeps_the_slow_tier_and_a_version_4_store_still_reads() -> N
     for priority in ("frame_rate", "budget"):
         hit = read.lookup((5.0, 5.0, 5.0), direction=(1.0, 0.0, 0.0), error_budget=0.02, priority=priority)
         assert hit.infeasible and hit.meets_fps and hit.error == pytest.approx(0.05, abs=1e-4)
-    bad = dict(doc, version=6)
+    bad = dict(doc, version=7)
     with pytest.raises(ValueError, match="version"):
         ParetoStore.from_dict(bad)
 
@@ -246,7 +246,7 @@ def test_a_real_store_keeps_the_settings_too_slow_for_its_frame_rate() -> None:
                          display_estimator="preview", fps=120.0)
     cache = EvalCache()
     store = optimize_path(scene, path, space, cfg, cache=cache, executor=InProcessExecutor())
-    assert store.fps == 120.0 and store.to_dict()["version"] == 5
+    assert store.fps == 120.0 and store.to_dict()["version"] == 6
     period = 1.0 / store.fps
     slow_tiers = 0
     for fr in store.frontiers:

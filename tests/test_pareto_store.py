@@ -263,7 +263,7 @@ def test_json_roundtrip_and_size() -> None:
 @pytest.mark.parametrize("mutate", [
     lambda d: d.update(version=99),
     lambda d: d.update(format="x"),
-    lambda d: d.pop("children"),
+    lambda d: d.pop("node_splits"),
     lambda d: d.update(frontier_error="<u2:!!"),
     lambda d: d.update(children="<i4:" + "AAAAAA=="),
 ])
@@ -526,7 +526,7 @@ def test_frame_times_round_trip_on_their_side_of_the_frame_period(times: list[li
     s = _timed_store(t, fps)
     text = s.to_json()
     doc = json.loads(text)
-    assert doc["version"] == FORMAT_VERSION == 5 and "frontier_frame_time" in doc
+    assert doc["version"] == FORMAT_VERSION == 6 and "frontier_frame_time" in doc
     back = ParetoStore.from_json(text)
     assert back.frame_times_known and back.to_json() == text
     step = doc["frame_time_scale"] / 65535

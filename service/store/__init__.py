@@ -3,8 +3,9 @@
 - :mod:`.packing`: settings as 4-bit value indices packed in 32 bits, and the parameter descriptions;
 - :mod:`.frame_rate`: the frame-rate rule (a setting meets the store's fps, the frame rate it reaches);
 - :mod:`.frontier`: a Pareto frontier (meeting and slow tiers) and its budget searches;
-- :mod:`.codec`: how numbers are kept (base64 arrays, 16-bit steps, direction and eye codes);
-- :mod:`.format`: the versioned JSON document (reads versions 1-5);
+- :mod:`.codec`: how numbers are kept (base64 arrays, bit-packed integers, 16-bit steps, direction and
+  eye codes);
+- :mod:`.format`: the versioned JSON document (reads versions 1-6, writes 6, or 5 on request);
 - :mod:`.camera`: camera maths shared by every part of the project (rotations, view-cube faces,
   frustum face choice, field of view);
 - :mod:`.lookup`: camera pose + budget -> settings;

@@ -1,7 +1,8 @@
-"""How a store keeps numbers: arrays as little-endian base64 blobs (``"<dtype>:<base64>"``), error,
-power and frame time as 16-bit steps, sample directions as cube-map style integer codes, sample eyes as
-16-bit steps over the root cube. The optimiser renders with the quantised cameras, so a loaded store
-reports exactly the camera each frontier was measured at."""
+"""How a store keeps numbers: arrays as little-endian base64 blobs (``"<dtype>:<base64>"``, or, since
+store format 6, non-negative integers at the fewest bits that hold them: ``"b<width>:<count>:<base64>"``,
+:func:`encode_bits`), error, power and frame time as 16-bit steps, sample directions as cube-map style
+integer codes, sample eyes as 16-bit steps over the root cube. The optimiser renders with the quantised
+cameras, so a loaded store reports exactly the camera each frontier was measured at."""
 
 from __future__ import annotations
 
@@ -23,7 +24,10 @@ def encode(arr: Any, dtype: str) -> str:
 
 
 def decode(text: str) -> np.ndarray:
+    """The array of a blob written by :func:`encode` or :func:`encode_bits`."""
     dtype, _, data = str(text).partition(":")
+    if dtype[:1] == "b":
+        return _decode_bits(dtype, data)
     if dtype not in _DTYPES:
         raise ValueError(f"unsupported array dtype {dtype!r} in store")
     try:
@@ -33,6 +37,47 @@ def decode(text: str) -> np.ndarray:
     if len(raw) % np.dtype(dtype).itemsize:
         raise ValueError("corrupt array length in store")
     return np.frombuffer(raw, dtype=dtype)
+
+
+MAX_BITS = 32  # the widest bit-packed integers (packed settings are 32 bits)
+
+
+def encode_bits(values: Any, width: int | None = None) -> str:
+    """Non-negative integers (< 2**32) packed at ``width`` bits each (default: the fewest that hold the
+    largest, at least 1), least significant bit first, the bits of consecutive values consecutive
+    (little-endian bit order, zero padding to a whole byte): ``"b<width>:<count>:<base64>"``. Exact:
+    :func:`decode` gives the values back as int64."""
+    v = np.asarray(values)
+    if v.size and not np.issubdtype(v.dtype, np.integer):
+        if not np.array_equal(v, np.rint(v)):
+            raise ValueError("only integers can be bit-packed")
+    v = v.astype(np.int64).reshape(-1)
+    top = int(v.max()) if v.size else 0
+    w = max(1, top.bit_length()) if width is None else int(width)
+    if v.size and v.min() < 0:
+        raise ValueError("only non-negative integers can be bit-packed")
+    if not 1 <= w <= MAX_BITS or top >= 1 << w:
+        raise ValueError(f"bit width {w} cannot hold {top} (1..{MAX_BITS} bits)")
+    bits = ((v[:, None] >> np.arange(w, dtype=np.int64)) & 1).astype(np.uint8).reshape(-1)
+    raw = np.packbits(bits, bitorder="little")
+    return f"b{w}:{v.size}:" + base64.b64encode(raw.tobytes()).decode("ascii")
+
+
+def _decode_bits(dtype: str, data: str) -> np.ndarray:
+    width, (count_text, _, payload) = dtype[1:], data.partition(":")
+    if not (width.isdigit() and count_text.isdigit() and 1 <= int(width) <= MAX_BITS):
+        raise ValueError(f"unsupported bit-packed array {dtype!r} in store")
+    w, count = int(width), int(count_text)
+    try:
+        raw = base64.b64decode(payload.encode("ascii"), validate=True)
+    except ValueError as exc:
+        raise ValueError(f"corrupt base64 array in store: {exc}") from exc
+    if len(raw) != (count * w + 7) // 8:
+        raise ValueError("corrupt bit-packed array length in store")
+    bits = np.unpackbits(np.frombuffer(raw, dtype=np.uint8), bitorder="little")
+    if bits[count * w:].any():
+        raise ValueError("corrupt bit-packed array padding in store")
+    return bits[:count * w].reshape(count, w).astype(np.int64) @ (np.int64(1) << np.arange(w, dtype=np.int64))
 
 
 def uint_dtype(max_value: int) -> str:

@@ -39,7 +39,27 @@ Layout (power-budget paper, sec. 4.2 and 6):
 - ``parameters`` (names, values, maximum-quality index), ``profile``, ``fps``, ``vfov``, ``aspect``
   and the optimiser's ``meta``.
 
-Arrays are little-endian base64 blobs (:mod:`service.store.codec`). Readers accept versions 1-5.
+Arrays are little-endian base64 blobs (:mod:`service.store.codec`). Readers accept versions 1-6.
+
+Version 6 holds the same codes in about two thirds of the bytes (bench/RESULTS.md, "The store's size
+with per-camera figures"); every decoded figure is what version 5's document of the same store decodes
+to, and ``to_dict(store, 5)`` still writes version 5 byte for byte as before, for readers of versions 1-5:
+
+- small integers (``corner_views``, ``settings``, ``frontier_sizes``, ``frontier_settings``,
+  ``priced_cameras``, ``corners``) are bit-packed at the fewest bits that hold the largest
+  (:func:`service.store.codec.encode_bits`);
+- ``node_splits`` (one bit per node: split or leaf) replaces ``children`` where every split node's
+  children follow the previous split's, as the optimiser numbers them; ``corners`` is left out where
+  the corners are in the order the optimiser's lattice creates them (:func:`lattice_corners`);
+- per-camera figures: a frontier's stored figures are the worst over its cameras, so one camera of
+  each point holds the frontier's own code. ``priced_error_worst`` gives, for every point of a
+  frontier priced at several cameras, the first camera at the frontier's error code, and
+  ``priced_error_below`` every other camera's code as its distance below it (camera major within a
+  frontier); the same for power (``priced_power_worst``, ``priced_power_below``). A frontier priced at
+  one camera has its own codes there.
+
+Each of these is written only where the store allows it; otherwise the field is written as version 5
+wrote it (``children``, ``corners``, ``priced_error`` / ``priced_power``) and read as before.
 
 Adding a field: write it in :func:`to_dict` (optional fields only when set, so older readers and
 byte-identical stores are unaffected), read it in :func:`fields_from_dict` (absent -> the old
@@ -49,6 +69,7 @@ older readers would misread a store that has it, and extend ``tests/test_pareto_
 
 from __future__ import annotations
 
+import itertools
 import json
 from typing import Any
 
@@ -61,15 +82,22 @@ from .packing import StoredParameter
 from .priced import PricedFigures
 
 FORMAT_NAME = "render-budget/pareto-store"
-FORMAT_VERSION = 5
+FORMAT_VERSION = 6
 #: Versions this reader accepts (version 1 stores have axis-aligned sample views at the corners,
 #: version 2 adds sample directions, version 3 sample eyes, version 4 frame times, version 5 the slow
-#: tier of settings that miss the frame rate).
-READABLE_VERSIONS = (1, 2, 3, 4, 5)
+#: tier of settings that miss the frame rate, version 6 the compact encodings: the same figures).
+READABLE_VERSIONS = (1, 2, 3, 4, 5, 6)
+#: Versions :func:`to_dict` writes (5: the layout before the compact encodings, for readers of 1-5).
+WRITABLE_VERSIONS = (5, 6)
 
 
-def to_dict(store: Any) -> dict[str, Any]:
-    """The versioned JSON document of a ``ParetoStore``."""
+def to_dict(store: Any, version: int = FORMAT_VERSION) -> dict[str, Any]:
+    """The versioned JSON document of a ``ParetoStore``: format :data:`FORMAT_VERSION`, or ``version`` 5
+    (the layout before the compact encodings: what readers of versions 1-5 read, byte for byte what
+    this module wrote then)."""
+    if version not in WRITABLE_VERSIONS:
+        raise ValueError(f"cannot write store version {version!r} (writer: {WRITABLE_VERSIONS})")
+    compact = version >= 6
     frontiers = store.frontiers
     all_packed = np.concatenate([f.packed for f in frontiers]) if frontiers else np.zeros(0)
     table, inverse = np.unique(all_packed.astype(np.uint32), return_inverse=True)
@@ -93,14 +121,15 @@ def to_dict(store: Any) -> dict[str, Any]:
         extra["frontier_eyes"] = codec.encode(
             codec.eye_codes(store.frontier_eyes, store.root_min, store.root_size).reshape(-1), "<u2")
     if store.priced is not None:
-        extra.update(_priced_fields(store, power_scale))
+        extra.update(_priced_fields(store, power_scale, eq, pq, compact))
     if store.frame_times_known:
         codes, scale = codec.frame_time_codes(np.concatenate([f.frame_time_s for f in frontiers]), store.fps)
         extra["frontier_frame_time"] = codec.encode(codes, "<u2")
         extra["frame_time_scale"] = scale
+    ints = codec.encode_bits if compact else None  # small integers: bit-packed since version 6
     return {
         "format": FORMAT_NAME,
-        "version": FORMAT_VERSION,
+        "version": version,
         "profile": store.profile,
         "fps": store.fps,
         "vfov": store.vfov,
@@ -110,12 +139,16 @@ def to_dict(store: Any) -> dict[str, Any]:
         "root_min": [float(c) for c in store.root_min],
         "root_size": store.root_size,
         "lattice_depth": store.lattice_depth,
-        "children": codec.encode(store.children, "<i4"),
-        "corners": codec.encode(store.corner_coords, codec.uint_dtype(side)),
-        "corner_views": codec.encode(store.corner_views, codec.uint_dtype(max(len(frontiers), 1))),
-        "settings": codec.encode(table, "<u4"),
-        "frontier_sizes": codec.encode(sizes, codec.uint_dtype(int(sizes.max()) if sizes.size else 0)),
-        "frontier_settings": codec.encode(inverse, codec.uint_dtype(max(table.size, 1))),
+        **(_tree_fields(store) if compact else {
+            "children": codec.encode(store.children, "<i4"),
+            "corners": codec.encode(store.corner_coords, codec.uint_dtype(side))}),
+        "corner_views": ints(store.corner_views) if ints else codec.encode(
+            store.corner_views, codec.uint_dtype(max(len(frontiers), 1))),
+        "settings": ints(table) if ints else codec.encode(table, "<u4"),
+        "frontier_sizes": ints(sizes) if ints else codec.encode(
+            sizes, codec.uint_dtype(int(sizes.max()) if sizes.size else 0)),
+        "frontier_settings": ints(inverse) if ints else codec.encode(
+            inverse, codec.uint_dtype(max(table.size, 1))),
         "frontier_error": codec.encode(eq, "<u2"),
         "frontier_power": codec.encode(pq, "<u2"),
         "power_scale": power_scale,
@@ -124,8 +157,76 @@ def to_dict(store: Any) -> dict[str, Any]:
     }
 
 
-def _priced_fields(store: Any, power_scale: float) -> dict[str, Any]:
-    """The per-camera figures' fields (:mod:`service.store.priced`)."""
+def lattice_corners(children: np.ndarray, lattice_depth: int) -> np.ndarray:
+    """The corners of an octree in the order the optimiser's lattice creates them
+    (:class:`service.octree.lattice.Lattice`): the root's eight (child order: x if ``k & 1``, y if
+    ``k & 2``, z if ``k & 4``), then, for each split node in the order of its first child, the new ones
+    among its 27 lattice points (x slowest, z fastest). (C, 3) int64 lattice coordinates; ValueError
+    if the tree is deeper than its lattice or a node is split before it exists."""
+    side = 1 << int(lattice_depth)
+    ch = np.asarray(children, dtype=np.int64).reshape(-1)
+    boxes: dict[int, tuple[int, int, int, int]] = {0: (0, 0, 0, side)}
+    index: dict[tuple[int, int, int], int] = {}
+    for k in range(8):
+        index.setdefault((side * (k & 1), side * ((k >> 1) & 1), side * ((k >> 2) & 1)), len(index))
+    split = np.flatnonzero(ch >= 0)
+    for n in split[np.argsort(ch[split], kind="stable")].tolist():
+        box = boxes.get(n)
+        if box is None:
+            raise ValueError("a node is split before it is created")
+        x, y, z, size = box
+        h = size // 2
+        if h == 0 or size % 2:
+            raise ValueError("the octree is deeper than its lattice")
+        first = int(ch[n])
+        for k in range(8):
+            boxes[first + k] = (x + h * (k & 1), y + h * ((k >> 1) & 1), z + h * ((k >> 2) & 1), h)
+        for i, j, k in itertools.product(range(3), repeat=3):
+            index.setdefault((x + h * i, y + h * j, z + h * k), len(index))
+    return np.asarray(list(index), dtype=np.int64).reshape(-1, 3)
+
+
+def _tree_fields(store: Any) -> dict[str, Any]:
+    """The octree and its corners (version 6): ``node_splits`` when every split node's children follow
+    the previous split's (the lattice's creation order), else ``children``; ``corners`` only when they
+    are not the lattice's order (:func:`lattice_corners`)."""
+    ch = np.asarray(store.children, dtype=np.int64)
+    split = np.flatnonzero(ch >= 0)
+    out: dict[str, Any] = {}
+    first = 1 + 8 * np.arange(split.size)
+    if np.array_equal(ch[split], first) and ch.size == 1 + 8 * split.size and np.all(split < first):
+        out["node_splits"] = codec.encode_bits(ch >= 0, 1)
+    else:
+        out["children"] = codec.encode(ch, "<i4")
+    try:
+        derived = lattice_corners(ch, store.lattice_depth)
+    except ValueError:
+        derived = None
+    if derived is None or not np.array_equal(derived, store.corner_coords):
+        out["corners"] = codec.encode_bits(store.corner_coords)
+    return out
+
+
+def _children(d: dict[str, Any]) -> np.ndarray:
+    """The octree's first-child array: ``children`` or (version 6) ``node_splits``."""
+    if "node_splits" not in d:
+        return codec.decode(d["children"])
+    if "children" in d:
+        raise ValueError("a store gives its octree once: children or node_splits")
+    split = codec.decode(d["node_splits"])
+    nodes = np.flatnonzero(split)
+    first = 1 + 8 * np.arange(nodes.size, dtype=np.int64)
+    if split.max(initial=0) > 1 or split.size != 1 + 8 * nodes.size or np.any(nodes >= first):
+        raise ValueError("node_splits is not an octree in creation order")
+    ch = np.full(split.size, -1, dtype=np.int64)
+    ch[nodes] = first
+    return ch
+
+
+def _priced_fields(store: Any, power_scale: float, eq: np.ndarray, pq: np.ndarray,
+                   compact: bool) -> dict[str, Any]:
+    """The per-camera figures' fields (:mod:`service.store.priced`); ``eq`` / ``pq``: the frontiers'
+    16-bit codes (each point's worst figures), which ``compact`` (version 6) encodes them against."""
     if store.frontier_eyes is None or store.frontier_dirs is None:
         raise ValueError("per-camera figures need the frontiers' sample cameras (frontier_eyes and dirs)")
     counts, scales, eyes, dirs, err, pw = [], [], [], [], [], []
@@ -144,19 +245,90 @@ def _priced_fields(store: Any, power_scale: float) -> dict[str, Any]:
     if p.size and (p.min() < 0 or p.max() > power_scale * (1 + 1e-9)):
         raise ValueError("per-camera power must lie in [0, the frontiers' largest power] to be stored")
     eyes_a, dirs_a = np.concatenate(eyes).reshape(-1, 3), np.concatenate(dirs).reshape(-1, 3)
-    return {
-        "priced_cameras": codec.encode(np.asarray(counts), "<u1"),
+    e_codes = np.rint(e * codec.QMAX).astype(np.int64)
+    p_codes = np.minimum(np.rint(p / power_scale * codec.QMAX), codec.QMAX).astype(np.int64)
+    out = {
+        "priced_cameras": codec.encode_bits(counts) if compact else codec.encode(np.asarray(counts), "<u1"),
         "priced_scale": codec.encode(np.asarray(scales), "<f4"),
         "priced_eyes": codec.encode(codec.eye_codes(eyes_a, store.root_min, store.root_size).reshape(-1),
                                     "<u2"),
         "priced_dirs": codec.encode(codec.direction_codes(dirs_a, codec.DIR_Q16).reshape(-1), "<i2"),
-        "priced_error": codec.encode(np.rint(e * codec.QMAX), "<u2"),
-        "priced_power": codec.encode(np.minimum(np.rint(p / power_scale * codec.QMAX), codec.QMAX), "<u2"),
     }
+    sizes = [len(f) for f in store.frontiers]
+    for name, codes, worst in (("error", e_codes, eq), ("power", p_codes, pq)):
+        split = _below_worst(codes, worst, counts, sizes) if compact else None
+        if split is None:
+            out[f"priced_{name}"] = codec.encode(codes, "<u2")
+        else:
+            out[f"priced_{name}_worst"], out[f"priced_{name}_below"] = (codec.encode_bits(a) for a in split)
+    return out
 
 
-def to_json(store: Any) -> str:
-    return json.dumps(to_dict(store), separators=(",", ":"), allow_nan=False)
+def _below_worst(codes: np.ndarray, worst: np.ndarray, counts: list[int], sizes: list[int]
+                 ) -> tuple[np.ndarray, np.ndarray] | None:
+    """Per-camera codes (each priced frontier's K x n, camera major) as what they add to the
+    frontier's own codes ``worst`` (the worst over its cameras, one camera holding it): for every point
+    of a frontier priced at several cameras the first camera at the worst code, and every other
+    camera's code as its distance below the worst (camera major). None when some point's worst code is
+    not its cameras' largest (then the codes are stored as they are)."""
+    at, below = [], []
+    v = w = 0
+    for k, n in zip(counts, sizes, strict=True):
+        if k == 0:
+            w += n
+            continue
+        c = codes[v:v + k * n].reshape(k, n)
+        top = worst[w:w + n]
+        if not np.array_equal(c.max(axis=0), top):
+            return None
+        if k > 1:
+            first = c.argmax(axis=0)
+            others = np.ones((k, n), dtype=bool)
+            others[first, np.arange(n)] = False
+            at.append(first)
+            below.append((top[None, :] - c)[others])
+        v, w = v + k * n, w + n
+    empty = np.zeros(0, dtype=np.int64)
+    return (np.concatenate(at) if at else empty), (np.concatenate(below) if below else empty)
+
+
+def _priced_codes(d: dict[str, Any], name: str, counts: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+    """The per-camera 16-bit codes of ``name`` (error or power), camera major per frontier, from
+    ``priced_<name>`` or (version 6) from the frontiers' codes with ``priced_<name>_worst`` / ``_below``."""
+    if f"priced_{name}" in d:
+        return codec.decode(d[f"priced_{name}"]).astype(np.int64)
+    worst = codec.decode(d[f"frontier_{name}"]).astype(np.int64)
+    at = codec.decode(d[f"priced_{name}_worst"])
+    below = codec.decode(d[f"priced_{name}_below"])
+    multi = counts > 1
+    if (worst.size != int(sizes.sum()) or at.size != int(sizes[multi].sum())
+            or below.size != int(((counts[multi] - 1) * sizes[multi]).sum())):
+        raise ValueError(f"per-camera {name} figures disagree in length with their cameras and frontiers")
+    out = []
+    a = b = w = 0
+    for k, n in zip(counts.tolist(), sizes.tolist(), strict=True):
+        top = worst[w:w + n]
+        w += n
+        if k == 0:
+            continue
+        c = np.repeat(top[None, :], k, axis=0)
+        if k > 1:
+            first = at[a:a + n]
+            if first.max(initial=0) >= k:
+                raise ValueError(f"per-camera {name} figures name a missing camera")
+            others = np.ones((k, n), dtype=bool)
+            others[first, np.arange(n)] = False
+            c[others] -= below[b:b + (k - 1) * n]
+            a, b = a + n, b + (k - 1) * n
+        out.append(c.reshape(-1))
+    codes = np.concatenate(out) if out else np.zeros(0, dtype=np.int64)
+    if codes.size and codes.min() < 0:
+        raise ValueError(f"per-camera {name} figures below zero")
+    return codes
+
+
+def to_json(store: Any, version: int = FORMAT_VERSION) -> str:
+    return json.dumps(to_dict(store, version), separators=(",", ":"), allow_nan=False)
 
 
 def _frontiers(d: dict[str, Any]) -> list[Frontier]:
@@ -212,8 +384,9 @@ def _priced(d: dict[str, Any], frontiers: list[Frontier], cams: dict[str, Any]) 
     scales = codec.decode(d["priced_scale"]).astype(np.float64)
     eyes = codec.decode_eyes(d["priced_eyes"], d["root_min"], d["root_size"])
     dirs = codec.decode(d["priced_dirs"]).astype(np.float64).reshape(-1, 3)
-    err = codec.decode(d["priced_error"]).astype(np.float64) / codec.QMAX
-    pw = codec.decode(d["priced_power"]).astype(np.float64) / codec.QMAX * float(d["power_scale"])
+    sizes = np.asarray([len(f) for f in frontiers], dtype=np.int64)
+    err = _priced_codes(d, "error", counts, sizes).astype(np.float64) / codec.QMAX
+    pw = _priced_codes(d, "power", counts, sizes).astype(np.float64) / codec.QMAX * float(d["power_scale"])
     priced = counts > 0
     guards = int((counts[priced] - 1).sum())
     values = int(sum(int(k) * len(f) for k, f in zip(counts, frontiers, strict=True)))
@@ -243,13 +416,15 @@ def fields_from_dict(d: dict[str, Any]) -> dict[str, Any]:
     try:
         frontiers = _frontiers(d)
         cams = _sample_cameras(d)
+        children = _children(d)
         return {
             "parameters": tuple(StoredParameter.from_dict(p) for p in d["parameters"]),
             "root_min": np.asarray(d["root_min"], dtype=np.float64),
             "root_size": float(d["root_size"]),
             "lattice_depth": int(d["lattice_depth"]),
-            "children": codec.decode(d["children"]),
-            "corner_coords": codec.decode(d["corners"]),
+            "children": children,
+            "corner_coords": (codec.decode(d["corners"]) if "corners" in d
+                              else lattice_corners(children, int(d["lattice_depth"]))),
             "corner_views": codec.decode(d["corner_views"]),
             "frontiers": frontiers,
             "vfov": float(d["vfov"]),
