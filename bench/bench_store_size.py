@@ -1,0 +1,167 @@
+"""Where a store's bytes go, and the same stores re-encoded in the current store format.
+
+For each store file: the bytes of each section of its JSON document (as read: the file's own format
+version) and of the same store written again by the current writer (``ParetoStore.from_json`` then
+``to_json``), and a check that nothing the store answers changed:
+
+- every decoded array is identical (octree, corners, corner views, frontier settings, error, power and
+  frame times, sample cameras, per-camera cameras and figures);
+- writing the loaded store as format 5 gives the file's bytes back (for a version-5 file);
+- lookups: at every frontier's sample camera and every pricing camera, and at ``--perturbed`` randomly
+  moved and turned copies of each, under power budgets (5 from the least to the most power stored, 0
+  and twice the most) and error budgets (0, 0.005, 0.01, 0.02, 0.05, 0.2, 1), both priorities, the
+  whole ``LookupResult`` (settings, frontier, rank, stored and expected error and power, frame time,
+  weights) and every ``budget_points`` entry with its ``expected`` figures compared exactly between
+  the file as read and the re-encoded store.
+
+Run: .venv/bin/python bench/bench_store_size.py STORE.json [STORE.json ...] [--perturbed N] [--seed S]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from service.store import FORMAT_VERSION, ParetoStore
+from service.store import format as store_format
+
+#: Sections of the document, by field (every field not listed is "parameters, meta, scalars").
+SECTIONS = (
+    ("octree", ("children", "node_splits")),
+    ("corners", ("corners",)),
+    ("corner views", ("corner_views", "view_dirs")),
+    ("frontier settings", ("settings", "frontier_sizes", "frontier_settings")),
+    ("frontier figures", ("frontier_error", "frontier_power", "frontier_frame_time", "power_scale",
+                          "frame_time_scale")),
+    ("sample cameras", ("frontier_eyes", "frontier_dirs")),
+    ("per-camera cameras", ("priced_cameras", "priced_scale", "priced_eyes", "priced_dirs")),
+    ("per-camera figures", ("priced_error", "priced_power", "priced_error_worst", "priced_error_below",
+                            "priced_power_worst", "priced_power_below")),
+)
+OTHER = "parameters, meta, scalars"
+
+
+def section_bytes(text: str) -> dict[str, int]:
+    """Bytes of each section of a compact JSON document (each field with its key, colon and comma; the
+    braces less the last comma under OTHER): they add up to the document's length."""
+    doc = json.loads(text)
+    where = {field: name for name, fields in SECTIONS for field in fields}
+    out = {name: 0 for name, _ in SECTIONS} | {OTHER: 1}
+    for key, value in doc.items():
+        item = json.dumps({key: value}, separators=(",", ":"), allow_nan=False)
+        out[where.get(key, OTHER)] += len(item) - 2 + 1
+    if sum(out.values()) != len(text.encode()):
+        raise AssertionError("the sections do not add up to the document (not a compact JSON document?)")
+    return out
+
+
+def assert_same_store(a: ParetoStore, b: ParetoStore) -> None:
+    """Every decoded array of two stores identical."""
+    for name in ("children", "corner_coords", "corner_views", "frontier_eyes", "frontier_dirs", "view_dirs"):
+        x, y = getattr(a, name), getattr(b, name)
+        if (x is None) != (y is None) or (x is not None and not np.array_equal(x, y)):
+            raise AssertionError(f"{name} differs")
+    for x, y in zip(a.frontiers, b.frontiers, strict=True):
+        for name in ("packed", "error", "power_w", "frame_time_s"):
+            if not np.array_equal(getattr(x, name), getattr(y, name)):
+                raise AssertionError(f"a frontier's {name} differs")
+    if (a.priced is None) != (b.priced is None):
+        raise AssertionError("per-camera figures kept by one store only")
+    for x, y in zip(a.priced or [], b.priced or [], strict=True):
+        if (x is None) != (y is None):
+            raise AssertionError("a frontier's per-camera figures kept by one store only")
+        if x is not None and not (x.scale == y.scale and all(
+                np.array_equal(getattr(x, n), getattr(y, n)) for n in ("eyes", "forwards", "packed", "error",
+                                                                       "power_w"))):
+            raise AssertionError("a frontier's per-camera figures differ")
+
+
+def query_cameras(store: ParetoStore, perturbed: int, rng: np.random.Generator) -> list[tuple]:
+    """(eye, unit forward): each frontier's sample camera and other pricing cameras (else every corner,
+    looking along a fixed direction), and ``perturbed`` moved and turned copies of each."""
+    cams: list[tuple] = []
+    if store.frontier_eyes is not None:
+        cams += list(zip(store.frontier_eyes, store.frontier_dirs, strict=True))
+    for pf in store.priced or []:
+        if pf is not None:
+            cams += list(zip(pf.eyes[1:], pf.forwards[1:], strict=True))
+    if not cams:
+        cams = [(p, np.array([1.0, 0.3, -0.2]) / np.linalg.norm([1.0, 0.3, -0.2]))
+                for p in store.corner_positions()]
+    out = []
+    for eye, fwd in cams:
+        out.append((np.asarray(eye, dtype=np.float64), np.asarray(fwd, dtype=np.float64)))
+        for _ in range(perturbed):
+            d = np.asarray(fwd, dtype=np.float64) + rng.normal(0.0, 0.15, 3)
+            out.append((np.asarray(eye, dtype=np.float64) + rng.normal(0.0, 0.02 * store.root_size, 3),
+                        d / np.linalg.norm(d)))
+    return out
+
+
+def lookups(store: ParetoStore, cams: list[tuple]) -> list[str]:
+    """Every lookup's result and allowed points with their predictions, as exact text (repr)."""
+    most = max(float(f.power_w.max()) for f in store.frontiers)
+    least = min(float(f.power_w.min()) for f in store.frontiers)
+    budgets = {"power_budget": [*np.linspace(least, most, 5).tolist(), 0.0, 2.0 * most],
+               "error_budget": [0.0, 0.005, 0.01, 0.02, 0.05, 0.2, 1.0]}
+    out = []
+    for eye, fwd in cams:
+        for mode, values in budgets.items():
+            for b in values:
+                for priority in ("frame_rate", "budget"):
+                    hit = store.lookup(eye, direction=fwd, priority=priority, **{mode: b})
+                    points = [(p, store.expected(hit, p)) for p in store.budget_points(hit)]
+                    out.append(repr((hit, points)))
+    return out
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("stores", nargs="+", type=Path)
+    ap.add_argument("--perturbed", type=int, default=2, help="moved copies of each camera (default 2)")
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args()
+    names = [p.stem for p in args.stores]
+    sections: dict[str, list[tuple[int, int]]] = {name: [] for name, _ in SECTIONS} | {OTHER: []}
+    summary = []
+    failed = False
+    for path in args.stores:
+        text = path.read_text()
+        version = json.loads(text).get("version")
+        store = ParetoStore.from_json(text)
+        again = store.to_json()
+        back = ParetoStore.from_json(again)
+        assert_same_store(store, back)
+        if back.to_json() != again:
+            raise AssertionError(f"{path.name}: the re-encoded store is not stable")
+        v5_same = store_format.to_json(store, 5) == text if version == 5 else None
+        before, after = section_bytes(text), section_bytes(again)
+        for name in sections:
+            sections[name].append((before[name], after[name]))
+        cams = query_cameras(store, args.perturbed, np.random.default_rng(args.seed))
+        a, b = lookups(store, cams), lookups(back, cams)
+        same = sum(x == y for x, y in zip(a, b, strict=True))
+        failed |= same != len(a) or v5_same is False
+        summary.append((path.stem, version, len(text.encode()), len(again.encode()), v5_same, len(cams),
+                        len(a), same))
+    print(f"Bytes per section, as read -> re-encoded (format {FORMAT_VERSION}):\n")
+    print("| section | " + " | ".join(names) + " |")
+    print("|---|" + "---|" * len(names))
+    for name, cells in sections.items():
+        print(f"| {name} | " + " | ".join(f"{x:,} -> {y:,}" for x, y in cells) + " |")
+    print("\n| store | version read | bytes as read | re-encoded | change | format-5 rewrite "
+          "byte-identical | cameras | lookups | identical |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for name, version, n0, n1, v5, cams, total, same in summary:
+        v5_text = "n/a" if v5 is None else "yes" if v5 else "NO"
+        print(f"| {name} | {version} | {n0:,} ({n0 / 1024:.1f} KB) | {n1:,} ({n1 / 1024:.1f} KB) | "
+              f"{100 * (n1 - n0) / n0:+.1f} % | {v5_text} | {cams:,} | {total:,} | {same:,} |")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
