@@ -423,6 +423,12 @@ def test_same_seed_gives_the_recorded_store(scene, name, monkeypatch) -> None:
                                               guard_frames=0)
     store = optimize_path(scene, path, SPACE, opts, cache=EvalCache(), executor=InProcessExecutor())
     assert _digest(store) == RECORDED[name]
+    # format 6 finds the optimiser's tree and corners in creation order: one bit a node, no corner list
+    doc = store.to_dict()
+    assert "node_splits" in doc and "children" not in doc and "corners" not in doc
+    back = ParetoStore.from_dict(doc)
+    assert np.array_equal(back.children, store.children)
+    assert np.array_equal(back.corner_coords, store.corner_coords)
     assert store.meta["probe_evaluations"] > 0
     # the probes add slow points only: their meeting tiers are the unprobed store's, bar the run's counts
     from service.octree.search import Search
