@@ -109,3 +109,51 @@ def test_the_builder_prices_a_bridge_and_the_error_budget_picks_it_over_max() ->
     bridging = [r.fraction for r in reports if r.phase == "price between the priced points"]
     assert fractions == sorted(fractions) and fractions[-1] == 1.0
     assert bridging and bridging[0] < min(bridging[-1], FRACTION_BEFORE_DONE)
+
+
+def test_a_bridging_rounds_time_left_goes_by_the_pricing_before_it(monkeypatch) -> None:
+    """The time left a bridging round first reports is the rounds before it's pace, times what it prices:
+    the search's pace counts the display pricing's time over the search's own renders, and over a search
+    answered from the evaluation cache (one render here) gave days for minutes. A stand-in clock: each
+    setting priced at a camera takes 1 s."""
+    import time as time_module
+
+    from service.params import default_space
+
+    space = default_space().subset(["sampling", "max_depth", "resolution_scale"])
+    searched = [(space.expand(x), e, p, 0.02)
+                for x, e, p in (((0, 0, 0), 0.2, 15.0), ((3, 2, 3), 0.005, 26.5), ((4, 3, 3), 0.0, 30.0))]
+    clock = [1000.0]
+    priced_at: dict[str, float] = {}  # phase -> seconds its pricing took (the stand-in clock's)
+    phase = [""]
+
+    class Pricer:
+        ev = SimpleNamespace(executor=None)
+
+        def price(self, requests):
+            took = float(sum(len(xs) for _, xs in requests))
+            clock[0] += took
+            priced_at[phase[0]] = priced_at.get(phase[0], 0.0) + took
+            return [[SimpleNamespace(error=e, power_w=p, frame_time_s=0.02)
+                     for e, p in (_figures(space.restrict(x)) for x in xs)] for _, xs in requests]
+
+    reports = []
+
+    def progress(r) -> None:
+        phase[0] = r.phase
+        reports.append(r)
+
+    monkeypatch.setattr(time_module, "perf_counter", lambda: clock[0])
+    import service.octree.builder as builder_module
+
+    real_init = builder_module.OctreeBuilder.__init__
+
+    def init(self, evaluator, *args, **kwargs):  # a search that rendered one evaluation of its own
+        real_init(self, SimpleNamespace(fps=FPS, evaluations=1, cache_hits=0), *args, **kwargs)
+
+    monkeypatch.setattr(builder_module.OctreeBuilder, "__init__", init)
+    b = _run_one_frontier_builder(searched, Pricer(), progress, display_points=8, bridge_points=4)
+    assert b.bridged_points > 0
+    first = next(r for r in reports if r.phase == "price between the priced points")
+    took = priced_at["price between the priced points"]
+    assert first.estimate_s is not None and took / 2 <= first.estimate_s <= 2 * took

@@ -343,6 +343,7 @@ class OctreeBuilder:
         search.steps_planned += self._bridge_reserve
         self.bridged_points = 0
         first_count: dict[int, int] = {}  # per frontier, the points its first round priced
+        pace_s: float | None = None  # seconds a pricing render took in the rounds so far
         for round_ in range(1 + (bridge.ROUNDS if self.cfg.bridge_points > 0 else 0)):
             if round_:
                 asked = {}
@@ -354,7 +355,7 @@ class OctreeBuilder:
                 if not asked:
                     break
                 self.bridged_points += sum(len(xs) for xs in asked.values())
-            self._price_round(jobs, asked, bridging=round_ > 0)
+            pace_s = self._price_round(jobs, asked, bridging=round_ > 0, pace_s=pace_s)
             if not round_:
                 first_count = {fid: len(xs) for fid, (_, xs, _) in jobs.items()}
         self.priced = {}
@@ -374,9 +375,11 @@ class OctreeBuilder:
                 for x, e, p, t in zip(xs, err.max(axis=0), pw.max(axis=0), ft.max(axis=0), strict=True)]
 
     def _price_round(self, jobs: dict[int, tuple[list[CameraSpec], list[Indices], list[np.ndarray]]],
-                     asked: dict[int, list[Indices]], bridging: bool) -> None:
+                     asked: dict[int, list[Indices]], bridging: bool, pace_s: float | None) -> float | None:
         """Price ``asked`` (settings per frontier) at their frontiers' cameras and append them and their
-        figures to ``jobs``, reporting progress per batch."""
+        figures to ``jobs``, reporting progress per batch. ``pace_s``: seconds a pricing render (in
+        :meth:`_pricing_renders`' units) took in the rounds before, the time left's first guess for a
+        bridging round; returns this round's."""
         search = self.search
         requests = [(cam, xs) for fid, xs in asked.items() for cam in jobs[fid][0]]
         # what each camera priced at display resolution costs in search steps (the fraction done, and the
@@ -392,8 +395,12 @@ class OctreeBuilder:
         search.check_cancel()
         # (the first round's estimate includes the most the bridging may price, as the search's did)
         most = sum(len(jobs[fid][0]) for fid in asked) * self.cfg.bridge_points if refs else 0
-        search.report(phase, remaining_s=self.pricing_time(search.state, len(requests),
-                                                           sum(len(xs) for _, xs in requests) + most))
+        points = sum(len(xs) for _, xs in requests)
+        # a bridging round goes by the rounds before it: the search's pace, taken over its renders,
+        # counts the display pricing's time too, and over a search answered from the cache gave hours
+        renders = self._pricing_renders(refs * len(requests), points)
+        search.report(phase, remaining_s=(pace_s * renders if bridging and pace_s is not None
+                                          else self.pricing_time(search.state, len(requests), points + most)))
         # cameras per batch: several per worker, so that a batch's last camera (whose cost varies with
         # its points) leaves the other workers idle for a small share of the batch only
         chunk = max(2, 8 * int(getattr(self.pricer.ev.executor, "workers", 1) or 1))  # type: ignore[union-attr]
@@ -408,6 +415,7 @@ class OctreeBuilder:
             # the first batch on, the time left is this phase's own measured pace
             search.report(phase, remaining_s=time_left(time.perf_counter() - started, len(results),
                                                        len(requests)))
+        round_pace_s = (time.perf_counter() - started) / renders if renders > 0 else pace_s
         res = iter(results)
         for fid, xs in asked.items():
             cams, have, figs = jobs[fid]
@@ -417,6 +425,7 @@ class OctreeBuilder:
                    for name in ("error", "power_w", "frame_time_s")]
             jobs[fid] = (cams, have + list(xs), [np.concatenate((a, b), axis=1) for a, b in zip(figs, new,
                                                                                                strict=True)])
+        return round_pace_s
 
     def _priced_figures(self, fid: int, frontier: Frontier) -> PricedFigures | None:
         """The per-camera figures of lattice frontier ``fid`` for its store frontier (the points it
