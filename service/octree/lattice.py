@@ -14,6 +14,7 @@ import numpy as np
 
 from service.params import Indices, ParameterSpace
 from service.store import Frontier, ParetoStore
+from service.store.format import box_corners, split_points
 
 N_VIEWS = 6
 # The 12 edges of a cube as pairs of corner numbers (bit 0: +x, bit 1: +y, bit 2: +z).
@@ -90,8 +91,8 @@ class Lattice:
         """The root node and its eight corners."""
         self.nodes.append(((0, 0, 0), self.side, 0))
         self.children.append(-1)
-        for k in range(8):
-            self.corner((self.side * (k & 1), self.side * ((k >> 1) & 1), self.side * ((k >> 2) & 1)))
+        for xyz in box_corners((0, 0, 0), self.side):
+            self.corner(xyz)
 
     def corner(self, xyz: tuple[int, int, int]) -> tuple[int, bool]:
         """The corner at lattice point ``xyz`` (created if new): (id, created)."""
@@ -115,22 +116,19 @@ class Lattice:
         return lo, lo + size * self.cell
 
     def node_corners(self, node: int) -> list[int]:
-        (x, y, z), s, _ = self.nodes[node]
-        return [self.corner_index[(x + s * (k & 1), y + s * ((k >> 1) & 1), z + s * ((k >> 2) & 1))]
-                for k in range(8)]
+        origin, s, _ = self.nodes[node]
+        return [self.corner_index[xyz] for xyz in box_corners(origin, s)]
 
     def depth(self, node: int) -> int:
         return self.nodes[node][2]
 
     def add_children(self, node: int, child_depth: int) -> list[int]:
         """Append ``node``'s eight children (consecutive, in the store's child order); return them."""
-        (x, y, z), s, _ = self.nodes[node]
-        h = s // 2
+        origin, s, _ = self.nodes[node]
         first = len(self.nodes)
         self.children[node] = first
-        for k in range(8):
-            self.nodes.append(((x + h * (k & 1), y + h * ((k >> 1) & 1), z + h * ((k >> 2) & 1)), h,
-                               child_depth))
+        for child in box_corners(origin, s // 2):
+            self.nodes.append((child, s // 2, child_depth))
             self.children.append(-1)
         return list(range(first, first + 8))
 
@@ -138,11 +136,10 @@ class Lattice:
         """Split ``nodes`` and create their new corners (nothing measured); return the children."""
         children = []
         for n in nodes:
-            (x, y, z), s, _ = self.nodes[n]
-            h = s // 2
+            origin, s, _ = self.nodes[n]
             children += self.add_children(n, child_depth)
-            for i, j, k in itertools.product(range(3), repeat=3):
-                self.corner((x + h * i, y + h * j, z + h * k))
+            for xyz in split_points(origin, s):
+                self.corner(xyz)
         return children
 
     def set_frontier(self, corner: int, view: int, points: list[tuple[Indices, float, float, float]]) -> None:

@@ -157,6 +157,24 @@ def to_dict(store: Any, version: int = FORMAT_VERSION) -> dict[str, Any]:
     }
 
 
+Point = tuple[int, int, int]
+
+
+def box_corners(origin: Point, size: int) -> list[Point]:
+    """The eight corners of the lattice box at ``origin`` with side ``size``, in the store's child order
+    (x if ``k & 1``, y if ``k & 2``, z if ``k & 4``); with half the side, the origins of its children."""
+    x, y, z = origin
+    return [(x + size * (k & 1), y + size * ((k >> 1) & 1), z + size * ((k >> 2) & 1)) for k in range(8)]
+
+
+def split_points(origin: Point, size: int) -> list[Point]:
+    """The 27 lattice points of a box split in two along each axis (x slowest, z fastest): the order in
+    which a split creates its new corners."""
+    x, y, z = origin
+    h = size // 2
+    return [(x + h * i, y + h * j, z + h * k) for i, j, k in itertools.product(range(3), repeat=3)]
+
+
 def lattice_corners(children: np.ndarray, lattice_depth: int) -> np.ndarray:
     """The corners of an octree in the order the optimiser's lattice creates them
     (:class:`service.octree.lattice.Lattice`): the root's eight (child order: x if ``k & 1``, y if
@@ -165,24 +183,23 @@ def lattice_corners(children: np.ndarray, lattice_depth: int) -> np.ndarray:
     if the tree is deeper than its lattice or a node is split before it exists."""
     side = 1 << int(lattice_depth)
     ch = np.asarray(children, dtype=np.int64).reshape(-1)
-    boxes: dict[int, tuple[int, int, int, int]] = {0: (0, 0, 0, side)}
-    index: dict[tuple[int, int, int], int] = {}
-    for k in range(8):
-        index.setdefault((side * (k & 1), side * ((k >> 1) & 1), side * ((k >> 2) & 1)), len(index))
+    boxes: dict[int, tuple[Point, int]] = {0: ((0, 0, 0), side)}
+    index: dict[Point, int] = {}
+    for xyz in box_corners((0, 0, 0), side):
+        index.setdefault(xyz, len(index))
     split = np.flatnonzero(ch >= 0)
     for n in split[np.argsort(ch[split], kind="stable")].tolist():
         box = boxes.get(n)
         if box is None:
             raise ValueError("a node is split before it is created")
-        x, y, z, size = box
-        h = size // 2
-        if h == 0 or size % 2:
+        origin, size = box
+        if size < 2 or size % 2:
             raise ValueError("the octree is deeper than its lattice")
         first = int(ch[n])
-        for k in range(8):
-            boxes[first + k] = (x + h * (k & 1), y + h * ((k >> 1) & 1), z + h * ((k >> 2) & 1), h)
-        for i, j, k in itertools.product(range(3), repeat=3):
-            index.setdefault((x + h * i, y + h * j, z + h * k), len(index))
+        for k, child in enumerate(box_corners(origin, size // 2)):
+            boxes[first + k] = (child, size // 2)
+        for xyz in split_points(origin, size):
+            index.setdefault(xyz, len(index))
     return np.asarray(list(index), dtype=np.int64).reshape(-1, 3)
 
 
