@@ -14,13 +14,29 @@ Candidate values (``--candidates``) are settings outside the default space, name
 (the values below); ``--greedy`` also walks down from Max one step at a time (each step the cheapest
 single-parameter step down whose mean error over the cameras stays within ``--budget``) and prints the
 path it took.
+
+``--neighbourhood K`` answers whether the space holds settings that keep the frame rate within the error
+budget at given path frames (``--frames``): every setting within L1 index distance K of Max (the sum over
+parameters of how many steps each is below its maximum-quality value; parameters the simulator reports
+inert for the scene stay at Max, as in the product's search) is priced at every frame, and per frame it
+prints how many keep ``--fps`` and ``--budget``, the cheapest of them and the most accurate setting that
+keeps ``--fps``. Settings that differ only in the normal threshold or multi-rate under a non-adaptive
+sampling mode (FSAA, 1 spp), which the renderer does not read there, are rendered once (checked on the
+first frame at start). The answer is exact for the neighbourhood; ``--rows FILE`` keeps every priced
+setting (JSON lines) so that a stopped or larger run resumes from it.
+
+    .venv/bin/python bench/bench_space_steps.py lab --profile desktop --size 320x180 --threads 1 \\
+        --frames 73,438 --neighbourhood 3 --rows lab_space.jsonl
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import itertools
+import json
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -31,7 +47,9 @@ from addon.core.report import preset_indices
 from service.camera_path import CameraPath
 from service.display_pricing.tracing import Renderer
 from service.evaluation import CameraSpec, _price, image_error, read_scene
-from service.params import default_space
+from service.optimize import resolve_space
+from service.params import ParameterSpace, default_space
+from service.store.frame_rate import meets_frame_rate
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -53,13 +71,16 @@ def built_scene(name: str) -> tuple[Any, CameraPath]:
     return read_scene(d / "scene.rbscene"), CameraPath.load(d / "path.json")
 
 
-def cameras(path: CameraPath, n: int, size: tuple[int, int], step: int = 0) -> list[tuple[int, CameraSpec]]:
+def cameras(path: CameraPath, n: int, size: tuple[int, int], step: int = 0,
+            frames: Sequence[int] = ()) -> list[tuple[int, CameraSpec]]:
     """``n`` path frames spread evenly (the middle of ``n`` equal parts), or with ``step`` every
-    ``step``-th frame from the first (the main job's evaluated frames)."""
+    ``step``-th frame from the first (the main job's evaluated frames), or the path frames ``frames``."""
     out = []
-    numbers = (range(0, len(path), step) if step > 0 else
+    numbers = (list(frames) if frames else range(0, len(path), step) if step > 0 else
                [round((k + 0.5) * (len(path) - 1) / n) for k in range(n)])
     for i in numbers:
+        if not 0 <= i < len(path):
+            raise ValueError(f"path frame {i} is not on the path (0..{len(path) - 1})")
         f = path.frames[i]
         m = np.asarray(f.matrix_world, dtype=np.float64)
         out.append((i, CameraSpec(tuple(m[:3, 3]), tuple(-m[:3, 2]), tuple(m[:3, 1]), f.vfov, *size)))
@@ -70,10 +91,10 @@ class Pricer:
     """Whole-frame pricing of RenderSettings at a few cameras, Max rendered once per camera."""
 
     def __init__(self, scene: Any, cams: list[tuple[int, CameraSpec]], profile: str, fps: float,
-                 metric: str, threads: int | None) -> None:
+                 metric: str, threads: int | None, space: ParameterSpace | None = None) -> None:
         self.r = Renderer(scene, threads)
         self.cams, self.profile, self.fps, self.metric = cams, profile, fps, metric
-        self.space = default_space()
+        self.space = space or default_space()
         self.max = self.space.to_settings(self.space.max_quality_indices())
         self.refs = [self.r.frame(c.to_camera(), self.max) for _, c in cams]
         self.seen: dict[tuple, dict[str, Any]] = {}
@@ -85,21 +106,23 @@ class Pricer:
         key = (tuple(sorted(dataclasses.asdict(settings).items())), filtered)
         if key in self.seen:
             return self.seen[key]
-        errs, powers, fpss, energy, rays = [], [], [], {}, {}
+        errs, powers, fpss, times, energy, rays = [], [], [], [], {}, {}
         for (_, cam), ref in zip(self.cams, self.refs, strict=True):
             res = ref if settings == self.max else self.r.frame(cam.to_camera(), settings)
             img = _pixel_filter(res.image) if filtered else res.image
             errs.append(0.0 if res is ref else image_error(self.metric, ref.image, img))
-            p, _, b = _price(res, self.profile, self.fps)
+            p, frame_time, b = _price(res, self.profile, self.fps)
             powers.append(p)
             fpss.append(b["fps"])
+            times.append(frame_time)
             for k, v in b.items():
                 if k.startswith("energy_j.") and k != "energy_j.static":
                     energy[k[9:]] = energy.get(k[9:], 0.0) + v / len(self.cams)
             for k in ("rays_primary", "rays_shadow", "rays_ao", "rays_reflection", "rays_refraction"):
                 rays[k[5:]] = rays.get(k[5:], 0.0) + res.counters[k] / len(self.cams)
         out = {"errors": errs, "error": float(np.mean(errs)), "power": float(np.mean(powers)),
-               "fps": float(np.mean(fpss)), "energy": energy, "rays": rays}
+               "fps": float(np.mean(fpss)), "energy": energy, "rays": rays,
+               "powers": powers, "fps_per_camera": fpss, "frame_times": times}
         self.seen[key] = out
         return out
 
@@ -115,6 +138,137 @@ def _pixel_filter(img: np.ndarray) -> np.ndarray:
     p = np.pad(img, ((1, 1), (1, 1), (0, 0)), mode="edge")
     h = w[0] * p[:, :-2] + w[1] * p[:, 1:-1] + w[2] * p[:, 2:]
     return (w[0] * h[:-2] + w[1] * h[1:-1] + w[2] * h[2:]).astype(np.float32)
+
+
+# -- the neighbourhood of Max ------------------------------------------------------------------------
+
+#: Sampling modes whose renders read the normal threshold and multi-rate (``RenderSettings.adaptive``).
+ADAPTIVE_MODES = ("undersample", "supersample")
+
+
+def distance(space: ParameterSpace, indices: Sequence[int]) -> int:
+    """L1 index distance from the space's maximum quality: steps below Max summed over the parameters."""
+    return sum(abs(m - int(i)) for m, i in zip(space.max_quality_indices(), indices, strict=True))
+
+
+def neighbourhood(space: ParameterSpace, k: int) -> list[tuple[int, ...]]:
+    """Every settings vector within distance ``k`` of Max, fixed parameters at their value, nearest
+    first (then in index order)."""
+    mq = space.max_quality_indices()
+    pos = space.free_positions
+    out = []
+    for free in itertools.product(*(range(len(space.parameters[i].values)) for i in pos)):
+        idx = list(mq)
+        for i, v in zip(pos, free, strict=True):
+            idx[i] = v
+        if distance(space, idx) <= k:
+            out.append(tuple(idx))
+    return sorted(out, key=lambda t: (distance(space, t), t))
+
+
+def canonical(settings: Any, ref: Any) -> Any:
+    """``settings`` with the fields its sampling mode does not read set as in ``ref``: the normal
+    threshold and multi-rate act only in the adaptive modes, so under FSAA or 1 spp they render alike."""
+    if settings.mode in ADAPTIVE_MODES:
+        return settings
+    return dataclasses.replace(settings, normal_threshold_deg=ref.normal_threshold_deg,
+                               multirate=ref.multirate)
+
+
+def _settings_key(settings: Any) -> str:
+    return json.dumps(sorted(dataclasses.asdict(settings).items()))
+
+
+def _check_canonical(pr: Pricer) -> None:
+    """Render Max with the normal threshold and multi-rate changed at the first camera: the same image and
+    counters as Max, or ``canonical`` would merge settings that render differently."""
+    if pr.max.mode in ADAPTIVE_MODES:
+        return
+    cam, ref = pr.cams[0][1], pr.refs[0]
+    other = dataclasses.replace(pr.max, normal_threshold_deg=pr.max.normal_threshold_deg + 17.0,
+                                multirate=not pr.max.multirate)
+    res = pr.r.frame(cam.to_camera(), other)
+    if not (np.array_equal(res.image, ref.image) and dict(res.counters) == dict(ref.counters)):
+        raise RuntimeError(f"{pr.max.mode} reads the normal threshold or multi-rate: cannot merge settings")
+
+
+def _changed(space: ParameterSpace, idx: Sequence[int]) -> str:
+    mq = space.values_of(space.max_quality_indices())
+    vals = space.values_of(idx)
+    return ", ".join(f"{k}={v}" for k, v in vals.items() if v != mq[k]) or "Max"
+
+
+def neighbourhood_table(space: ParameterSpace, rows: list[tuple[tuple[int, ...], dict[str, Any]]],
+                        frames: Sequence[int], fps: float, budget: float) -> list[str]:
+    """Per path frame: Max's fps and power, how many of ``rows`` keep ``fps``, how many keep ``fps`` with
+    error <= ``budget`` (and the nearest distance of one), the cheapest of those, the most accurate one
+    that keeps ``fps``. ``rows``: (indices, price) with per-camera lists, Max first."""
+    out = [f"| frame | Max: fps, power (W) | settings keeping {fps:g} fps | of them error <= {budget:g} "
+           "(nearest distance) | cheapest such: saved vs Max, error, fps, power (W), setting | "
+           f"most accurate at {fps:g} fps: error, power (W), setting |",
+           "|---|---|---|---|---|---|"]
+    mx = next(r for idx, r in rows if distance(space, idx) == 0)
+    for j, frame in enumerate(frames):
+        rt = [(idx, r) for idx, r in rows if meets_frame_rate(r["frame_times"][j], fps)]
+        ok = [(idx, r) for idx, r in rt if r["errors"][j] <= budget]
+        cheap = "none"
+        if ok:
+            idx, r = min(ok, key=lambda t: (t[1]["powers"][j], t[1]["errors"][j]))
+            saved = 100.0 * (1.0 - r["powers"][j] / mx["powers"][j])
+            cheap = (f"{saved:.1f} %, {r['errors'][j]:.4f}, {r['fps_per_camera'][j]:.1f}, "
+                     f"{r['powers'][j]:.2f}, {_changed(space, idx)}")
+        best = "none"
+        if rt:
+            idx, r = min(rt, key=lambda t: (t[1]["errors"][j], t[1]["powers"][j]))
+            best = f"{r['errors'][j]:.4f}, {r['powers'][j]:.2f}, {_changed(space, idx)}"
+        near = f" ({min(distance(space, idx) for idx, _ in ok)})" if ok else ""
+        out.append(f"| {frame} | {mx['fps_per_camera'][j]:.1f}, {mx['powers'][j]:.2f} | {len(rt)} | "
+                   f"{len(ok)}{near} | {cheap} | {best} |")
+    return out
+
+
+def run_neighbourhood(pr: Pricer, k: int, budget: float, rows_path: Path | None,
+                      header: dict[str, Any]) -> None:
+    """Price every setting within distance ``k`` of Max at ``pr``'s cameras, nearest first, and print the
+    per-frame table after each whole distance (exact for the distances done)."""
+    space = pr.space
+    _check_canonical(pr)
+    done: dict[str, dict[str, Any]] = {}
+    if rows_path is not None and rows_path.exists():
+        with rows_path.open() as f:
+            lines = [json.loads(line) for line in f if line.strip()]
+        if lines and lines[0] != header:
+            raise SystemExit(f"{rows_path} holds another run ({lines[0]}); this one is {header}")
+        done = {r["key"]: r for r in lines[1:]}
+    sink = None
+    if rows_path is not None:
+        sink = rows_path.open("a")
+        if not done and rows_path.stat().st_size == 0:
+            sink.write(json.dumps(header) + "\n")
+    frames = [i for i, _ in pr.cams]
+    todo = neighbourhood(space, k)
+    rows: list[tuple[tuple[int, ...], dict[str, Any]]] = []
+    t0, c0, renders = time.time(), time.process_time(), 0
+    for n, idx in enumerate(todo):
+        key = _settings_key(canonical(space.to_settings(idx), pr.max))
+        if key not in done:
+            r = pr.price(canonical(space.to_settings(idx), pr.max))
+            renders += 0 if distance(space, idx) == 0 else len(frames)
+            done[key] = {"key": key, "errors": r["errors"], "powers": r["powers"],
+                         "fps_per_camera": r["fps_per_camera"], "frame_times": r["frame_times"]}
+            if sink is not None:
+                sink.write(json.dumps(done[key]) + "\n")
+                sink.flush()
+        rows.append((idx, done[key]))
+        d = distance(space, idx)
+        if n + 1 == len(todo) or distance(space, todo[n + 1]) > d:
+            unique = len({_settings_key(canonical(space.to_settings(i), pr.max)) for i, _ in rows})
+            print(f"\nwithin distance {d} of Max: {len(rows)} settings ({unique} distinct renders a frame); "
+                  f"{renders} renders this run, {time.process_time() - c0:.0f} CPU-s, "
+                  f"{time.time() - t0:.0f} s", flush=True)
+            print("\n".join(neighbourhood_table(space, rows, frames, pr.fps, budget)), flush=True)
+    if sink is not None:
+        sink.close()
 
 
 def fmt(name: str, r: dict[str, Any], mx: dict[str, Any]) -> str:
@@ -139,6 +293,12 @@ def main() -> None:
     ap.add_argument("--cameras", type=int, default=4)
     ap.add_argument("--frame-step", type=int, default=0,
                     help="every N-th path frame instead of --cameras (the main job: 19 for 1680)")
+    ap.add_argument("--frames", type=lambda v: [int(x) for x in v.split(",")], default=[],
+                    help="these path frames (comma-separated) instead of --cameras")
+    ap.add_argument("--neighbourhood", type=int, default=None, metavar="K",
+                    help="only price every setting within index distance K of Max (see above)")
+    ap.add_argument("--rows", type=Path, default=None,
+                    help="with --neighbourhood: JSON lines of every priced setting, read back to resume")
     ap.add_argument("--no-steps", action="store_true", help="skip the single steps and the Max-Mid preset")
     ap.add_argument("--fps", type=float, default=30.0)
     ap.add_argument("--metric", default="ssim")
@@ -154,7 +314,19 @@ def main() -> None:
     args = ap.parse_args()
     t0 = time.time()
     scene, path = built_scene(args.scene)
-    cams = cameras(path, args.cameras, args.size, args.frame_step)
+    cams = cameras(path, args.cameras, args.size, args.frame_step, args.frames)
+    if args.neighbourhood is not None:
+        space = resolve_space(scene, default_space(), path, args.threads)
+        pr = Pricer(scene, cams, args.profile, args.fps, args.metric, args.threads, space)
+        print(f"{args.scene}, {args.size[0]}x{args.size[1]}, profile {args.profile} at {args.fps:g} fps, "
+              f"metric {args.metric}, error budget {args.budget:g}; path frames {[i for i, _ in cams]}; "
+              f"fixed as inert: {', '.join(space.fixed) or 'none'}; settings within distance "
+              f"{args.neighbourhood} of Max: {len(neighbourhood(space, args.neighbourhood))}", flush=True)
+        header = {"scene": args.scene, "size": list(args.size), "profile": args.profile, "fps": args.fps,
+                  "metric": args.metric, "frames": [i for i, _ in cams], "fixed": dict(space.fixed)}
+        run_neighbourhood(pr, args.neighbourhood, args.budget, args.rows, header)
+        print(f"({time.time() - t0:.0f} s, {time.process_time():.0f} CPU-s)")
+        return
     pr = Pricer(scene, cams, args.profile, args.fps, args.metric, args.threads)
     space = pr.space
     mq = space.max_quality_indices()

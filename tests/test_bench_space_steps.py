@@ -1,0 +1,118 @@
+"""bench/bench_space_steps.py's neighbourhood of Max: the enumeration (count and distance), the merging of
+settings a sampling mode renders alike, and the per-frame table's choices."""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from tracer_scenes import teapot_scene
+
+import sim_core
+from service.params import default_space
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "bench"))
+import bench_space_steps as bss
+
+
+def _all_distances(space):
+    mq = space.max_quality_indices()
+    free = space.free_positions
+    out = []
+    for t in itertools.product(*(range(len(p.values)) for p in space.parameters)):
+        if any(t[i] != mq[i] for i in range(len(t)) if i not in free):
+            continue
+        out.append(sum(abs(a - b) for a, b in zip(t, mq, strict=True)))
+    return out
+
+
+@pytest.mark.parametrize("fixed", [(), ("env_filter", "multirate")])
+def test_neighbourhood_counts_and_distances(fixed) -> None:
+    space = default_space()
+    if fixed:
+        space = space.fix_inert({name: "inert" for name in fixed})
+    dists = _all_distances(space)
+    assert len(dists) == space.size
+    far = max(dists)
+    for k in range(far + 2):
+        nb = bss.neighbourhood(space, k)
+        assert len(nb) == sum(d <= k for d in dists)
+        assert len(set(nb)) == len(nb)
+        ds = [bss.distance(space, idx) for idx in nb]
+        assert all(d <= k for d in ds) and ds == sorted(ds)
+        for idx in nb:
+            space.validate(idx)
+            assert all(idx[space.names.index(name)] == space.max_quality_indices()[space.names.index(name)]
+                       for name in fixed)
+    assert bss.neighbourhood(space, 0) == [space.max_quality_indices()]
+    assert len(bss.neighbourhood(space, far)) == space.size
+    # one step: one setting a free parameter
+    assert len(bss.neighbourhood(space, 1)) == 1 + len(space.free_positions)
+
+
+def test_canonical_merges_only_what_the_mode_does_not_read() -> None:
+    space = default_space()
+    mx = space.to_settings(space.max_quality_indices())
+    nt, mr = space.names.index("normal_threshold_deg"), space.names.index("multirate")
+    samp = space.names.index("sampling")
+    for s_i, mode_name in enumerate(space.parameters[samp].values):
+        keys = set()
+        for n_i, m_i in itertools.product(range(3), range(2)):
+            idx = list(space.max_quality_indices())
+            idx[samp], idx[nt], idx[mr] = s_i, n_i, m_i
+            keys.add(bss._settings_key(bss.canonical(space.to_settings(idx), mx)))
+        adaptive = mode_name.startswith(("undersample", "adaptive"))
+        assert len(keys) == (6 if adaptive else 1), mode_name
+
+
+@pytest.mark.parametrize("mode", ["fsaa", "1spp"])
+def test_non_adaptive_modes_render_alike_whatever_the_threshold(mode) -> None:
+    """What ``canonical`` relies on: the renderer does not read the threshold or multi-rate there."""
+    scene = teapot_scene()
+    cam = sim_core.Camera.look_at((0.0, -6.0, 3.0), (0.0, 0.0, 0.5), (0.0, 0.0, 1.0), math.radians(40.0),
+                                  48, 27)
+    base = dataclasses.replace(sim_core.RenderSettings.max_quality(), mode=mode, block=2)
+    ref = sim_core.render(scene, cam, base, threads=1)
+    for nt, mr in ((45.0, False), (5.0, True), (-1.0, True)):
+        other = dataclasses.replace(base, normal_threshold_deg=nt, multirate=mr)
+        r = sim_core.render(scene, cam, other, threads=1)
+        assert np.array_equal(r.image, ref.image)
+        assert dict(r.counters) == dict(ref.counters)
+
+
+def _row(errors, powers, fps_list):
+    return {"errors": errors, "powers": powers, "fps_per_camera": fps_list,
+            "frame_times": [1.0 / f for f in fps_list]}
+
+
+def test_neighbourhood_table_picks_per_frame() -> None:
+    space = default_space()
+    mq = space.max_quality_indices()
+    shadow = space.names.index("shadow_samples")
+    ao = space.names.index("ao_samples")
+    s4 = tuple(v - (i == shadow) for i, v in enumerate(mq))
+    a8 = tuple(v - (i == ao) for i, v in enumerate(mq))
+    both = tuple(v - (i in (shadow, ao)) for i, v in enumerate(mq))
+    rows = [
+        (mq, _row([0.0, 0.0], [40.0, 38.0], [25.0, 30.0])),      # Max: slow at the first frame only
+        (s4, _row([0.001, 0.03], [35.0, 30.0], [30.0, 30.0])),   # fast; over budget at the second
+        (a8, _row([0.0005, 0.002], [37.0, 36.0], [28.0, 30.0])),  # slow at the first
+        (both, _row([0.025, 0.01], [30.0, 29.0], [30.0, 30.0])),  # over budget at the first
+    ]
+    table = bss.neighbourhood_table(space, rows, [10, 20], 30.0, 0.02)
+    first, second = table[2], table[3]
+    assert first.startswith("| 10 | 25.0, 40.00 | 2 | 1 (1) | 12.5 %, 0.0010, 30.0, 35.00, "
+                            "shadow_samples=4 |")
+    assert first.endswith("| 0.0010, 35.00, shadow_samples=4 |")
+    assert second.startswith("| 20 | 30.0, 38.00 | 4 | 3 (0) |")
+    saved = 100.0 * (1.0 - 29.0 / 38.0)
+    assert f"{saved:.1f} %, 0.0100, 30.0, 29.00, shadow_samples=4, ao_samples=8 |" in second
+    assert second.endswith("| 0.0000, 38.00, Max |")
+    none = bss.neighbourhood_table(space, rows[:1], [10], 30.0, 0.02)[2]
+    assert none == "| 10 | 25.0, 40.00 | 0 | 0 | none | none |"
+    assert math.isclose(bss.distance(space, both), 2)
