@@ -23,7 +23,9 @@ prints how many keep ``--fps`` and ``--budget``, the cheapest of them and the mo
 keeps ``--fps``. Settings that differ only in the normal threshold or multi-rate under a non-adaptive
 sampling mode (FSAA, 1 spp), which the renderer does not read there, are rendered once (checked on the
 first frame at start). The answer is exact for the neighbourhood; ``--rows FILE`` keeps every priced
-setting (JSON lines) so that a stopped or larger run resumes from it.
+setting (JSON lines) so that a stopped or larger run resumes from it. ``--store STORE`` prints instead,
+per path frame, what a store's frontier for that camera holds (no renders): Max's stored frame rate, the
+least error of its real-time points and how many are within the budget.
 
     .venv/bin/python bench/bench_space_steps.py lab --profile desktop --size 320x180 --threads 1 \\
         --frames 73,438 --neighbourhood 3 --rows lab_space.jsonl
@@ -271,6 +273,33 @@ def run_neighbourhood(pr: Pricer, k: int, budget: float, rows_path: Path | None,
         sink.close()
 
 
+def store_frontiers(store_path: Path, path: CameraPath, frames: Sequence[int], budget: float) -> list[str]:
+    """Per path frame, what a store holds for it: the frontier its lookup reads at the frame's camera
+    (``ParetoStore.locate``), Max's stored frame rate there, the least error of its real-time points and
+    how many of them are within ``budget``."""
+    from service.store.pareto import ParetoStore
+
+    store = ParetoStore.from_json(store_path.read_text())
+    space = default_space()
+    mq = space.pack(space.max_quality_indices())
+    out = [f"| frame | frontier (points) | Max stored: fps | least error at {store.fps:g} fps | "
+           f"real-time within {budget:g} |", "|---|---|---|---|---|"]
+    for i in frames:
+        f = path.frames[i]
+        m = np.asarray(f.matrix_world, dtype=np.float64)
+        corner, view = store.locate(m[:3, 3], matrix=m, fov=f.vfov)
+        fid = store._index.views[corner][view]
+        fr = store.frontiers[fid]
+        rt = [j for j in range(len(fr.packed)) if fr.frame_time_s is not None
+              and meets_frame_rate(float(fr.frame_time_s[j]), store.fps)]
+        mx = [j for j in range(len(fr.packed)) if int(fr.packed[j]) == mq]
+        mx_fps = f"{1.0 / float(fr.frame_time_s[mx[0]]):.1f}" if mx and fr.frame_time_s is not None else "-"
+        least = f"{min(float(fr.error[j]) for j in rt):.4f}" if rt else "-"
+        within = sum(float(fr.error[j]) <= budget for j in rt)
+        out.append(f"| {i} | {fid} ({len(fr.packed)}) | {mx_fps} | {least} | {within} |")
+    return out
+
+
 def fmt(name: str, r: dict[str, Any], mx: dict[str, Any]) -> str:
     saved = 100.0 * (1.0 - r["power"] / mx["power"])
     top = sorted(r["energy"].items(), key=lambda kv: -kv[1])[:3]
@@ -299,6 +328,8 @@ def main() -> None:
                     help="only price every setting within index distance K of Max (see above)")
     ap.add_argument("--rows", type=Path, default=None,
                     help="with --neighbourhood: JSON lines of every priced setting, read back to resume")
+    ap.add_argument("--store", type=Path, default=None,
+                    help="only print what this store's frontiers hold at the path frames (no renders)")
     ap.add_argument("--no-steps", action="store_true", help="skip the single steps and the Max-Mid preset")
     ap.add_argument("--fps", type=float, default=30.0)
     ap.add_argument("--metric", default="ssim")
@@ -315,6 +346,9 @@ def main() -> None:
     t0 = time.time()
     scene, path = built_scene(args.scene)
     cams = cameras(path, args.cameras, args.size, args.frame_step, args.frames)
+    if args.store is not None:
+        print("\n".join(store_frontiers(args.store, path, [i for i, _ in cams], args.budget)))
+        return
     if args.neighbourhood is not None:
         space = resolve_space(scene, default_space(), path, args.threads)
         pr = Pricer(scene, cams, args.profile, args.fps, args.metric, args.threads, space)
