@@ -277,11 +277,11 @@ def store_frontiers(store_path: Path, path: CameraPath, frames: Sequence[int], b
     """Per path frame, what a store holds for it: the frontier its lookup reads at the frame's camera
     (``ParetoStore.locate``), Max's stored frame rate there, the least error of its real-time points and
     how many of them are within ``budget``."""
+    from service.store import pack_indices
     from service.store.pareto import ParetoStore
 
     store = ParetoStore.from_json(store_path.read_text())
-    space = default_space()
-    mq = space.pack(space.max_quality_indices())
+    mq = pack_indices([p.max_quality for p in store.parameters])
     out = [f"| frame | frontier (points) | Max stored: fps | least error at {store.fps:g} fps | "
            f"real-time within {budget:g} |", "|---|---|---|---|---|"]
     for i in frames:

@@ -116,3 +116,32 @@ def test_neighbourhood_table_picks_per_frame() -> None:
     none = bss.neighbourhood_table(space, rows[:1], [10], 30.0, 0.02)[2]
     assert none == "| 10 | 25.0, 40.00 | 0 | 0 | none | none |"
     assert math.isclose(bss.distance(space, both), 2)
+
+
+def test_store_frontiers_agree_with_the_lookup(tmp_path) -> None:
+    """``--store``: per frame the frontier the lookup reads, and real-time points within the budget
+    exactly where the lookup (frame rate first) finds the budget feasible."""
+    from service.camera_path import CameraPath
+    from service.store.pareto import ParetoStore
+
+    src = Path(__file__).resolve().parent / "data" / "store_v5_priced.json"
+    store = ParetoStore.from_json(src.read_text())
+    eyes, dirs = [], []
+    for corner in range(store.corner_views.shape[0]):
+        for view in range(store.corner_views.shape[1]):
+            eye, forward, _ = store.sample_camera(corner, view)
+            eyes.append(eye)
+            dirs.append(forward)
+    path = CameraPath.from_positions(eyes, dirs, vfov=store.vfov)
+    frames = list(range(len(path)))
+    for budget in (0.0, 0.05, 0.1, 0.12):
+        rows = bss.store_frontiers(src, path, frames, budget)[2:]
+        assert len(rows) == len(frames)
+        for i, row in zip(frames, rows, strict=True):
+            cells = [c.strip() for c in row.strip("|").split("|")]
+            f = path.frames[i]
+            m = np.asarray(f.matrix_world)
+            hit = store.lookup(m[:3, 3], matrix=m, fov=f.vfov, error_budget=budget)
+            assert cells[0] == str(i)
+            assert cells[1].startswith(f"{hit.frontier} (")
+            assert (int(cells[4]) > 0) == (bool(hit.meets_fps) and not hit.infeasible)
