@@ -31,6 +31,10 @@ from service.store.priced import camera_dissimilarity
 from .lattice import N_VIEWS, Lattice
 from .search import Search
 
+#: A frontier's figures at each of its pricing cameras: (cameras, the sample first; settings; error,
+#: power and frame time (K, n) of each setting at each camera).
+PerCamera = tuple[list[CameraSpec], list[Indices], np.ndarray, np.ndarray, np.ndarray]
+
 
 class PathSampling:
     """One sample per (corner, face) the path looks up, at the path's own cameras."""
@@ -48,15 +52,16 @@ class PathSampling:
         self.guards: dict[tuple[int, int], list[CameraSpec]] = {}  # each sample's guard cameras
         self.placed = False  # every sample camera and its guards chosen (build, before the searches)
         # guards priced at the search's resolution (no display pricing): per lattice frontier id, its
-        # cameras (the sample first), settings and each setting's error and power (K, n) at each camera
-        self.priced: dict[int, tuple[list[CameraSpec], list[Indices], np.ndarray, np.ndarray]] = {}
+        # cameras (the sample first), settings and each setting's error, power and frame time (K, n) at
+        # each camera
+        self.priced: dict[int, PerCamera] = {}
 
     def pricing_cameras(self) -> dict[int, list[CameraSpec]]:
         """Each sample's frontier with its sample camera and guard cameras."""
         return {self.lattice.corner_views[c][v]: [cam, *self.guards.get((c, v), [])]
                 for (c, v), cam in self.sample_cams.items()}
 
-    def priced_figures(self) -> dict[int, tuple[list[CameraSpec], list[Indices], np.ndarray, np.ndarray]]:
+    def priced_figures(self) -> dict[int, PerCamera]:
         """The guards' per-camera figures where they were priced during the build (no display pricing)."""
         return self.priced
 
@@ -228,7 +233,7 @@ class PathSampling:
             rec.points = [(x, float(ei), float(pi), float(ti)) for x, ei, pi, ti in worst]
             if cams:  # and each camera's own figures, to predict a frame between them
                 self.priced[self.lattice.corner_views[cv[0]][cv[1]]] = ([self.sample_cams[cv], *cams], xs,
-                                                                        err, pw)
+                                                                        err, pw, ft)
 
     def _inherit_unsampled(self) -> None:
         """Views no path frame looks up take the frontier (and sample camera) of the sample nearest to
