@@ -10,7 +10,9 @@ by eye distance over viewing distance plus direction difference); a full search 
 ``path_stride``-th sample along the path and short warm-started ones in between (warm-started from
 the neighbours' meeting tiers); then every frontier
 setting is also priced at ``guard_frames`` more of those frames (the ones least like the chosen ones)
-and the frontier keeps each setting's worst error and power, so it bounds the frames it serves. Faces
+and the frontier keeps each setting's worst error, power and frame time, so it bounds the frames it
+serves (and each camera's own, :class:`service.store.priced.PricedFigures`: the lookup interpolates
+them at a frame, and draws the frame's tiers from the interpolated frame times). Faces
 no path frame reads inherit the frontier of the nearest sample. No frontier-difference comparisons
 are made in this mode.
 """

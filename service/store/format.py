@@ -36,6 +36,10 @@ Layout (power-budget paper, sec. 4.2 and 6):
   ``priced_dirs`` the others' (the same codes), ``priced_scale`` (float32) the distance unit of the
   camera dissimilarity, and ``priced_error`` / ``priced_power`` each point's figures at each camera
   (camera major within a frontier; the same 16-bit steps and ``power_scale`` as the frontier's);
+  optionally (in version 5 and 6 documents; readers that do not know it draw the tiers from the worst
+  frame times, as before) ``priced_frame_time``, each point's frame time at each camera on the
+  frontiers' frame-time steps (``frame_time_scale``, each on its side of the frame period: the lookup
+  draws each frame's tiers from their interpolation, :mod:`service.store.lookup`);
 - ``parameters`` (names, values, maximum-quality index), ``profile``, ``fps``, ``vfov``, ``aspect``
   and the optimiser's ``meta``.
 
@@ -55,8 +59,9 @@ to, and ``to_dict(store, 5)`` still writes version 5 byte for byte as before, fo
   each point holds the frontier's own code. ``priced_error_worst`` gives, for every point of a
   frontier priced at several cameras, the first camera at the frontier's error code, and
   ``priced_error_below`` every other camera's code as its distance below it (camera major within a
-  frontier); the same for power (``priced_power_worst``, ``priced_power_below``). A frontier priced at
-  one camera has its own codes there.
+  frontier); the same for power (``priced_power_worst``, ``priced_power_below``) and frame time
+  (``priced_frame_time_worst``, ``priced_frame_time_below``). A frontier priced at one camera has its
+  own codes there.
 
 Each of these is written only where the store allows it; otherwise the field is written as version 5
 wrote it (``children``, ``corners``, ``priced_error`` / ``priced_power``) and read as before.

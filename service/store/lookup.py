@@ -13,7 +13,25 @@ another rate: then each point's power is repriced for that rate (:func:`.frame_r
 the store's static power) and the frontier's tiers drawn again at that rate (a slow point of the store
 may meet a lower rate). Where a frontier knows its frame times, it has a meeting tier and a slow tier
 (:mod:`.frontier`), and the query's priority (:data:`service.options.QUERY_PRIORITY`) says how they are
-searched:
+searched.
+
+Which points are in which tier: the stored frame time of a path-sampled frontier's point is the worst
+over the cameras the frontier was priced at, so by it a point that keeps up at the sample camera and
+misses the rate at one far guard is slow for every frame the frontier serves. Where the store keeps
+each point's frame time at each pricing camera (:class:`.priced.PricedFigures`), the tiers are the
+*frame's*: each point's frame time is predicted at the query's camera by the same Shepard weights as
+its error and power (:meth:`.priced.PricedFigures.frame_time`), the points predicted to meet the target
+are the frame's meeting tier and the rest its slow tier, both drawn by the one two-tier rule
+(:func:`.frontier.frontier_tiers`) over the stored points' stored, worst error and power (the budgets
+are checked against those, as before). The result's ``frame_time_s``, ``fps`` and ``meets_fps`` are
+then the frame's prediction, and ``LookupResult.meeting`` names the frame's tiers (bit ``j``: stored
+point ``j`` predicted to meet), so :meth:`LookupIndex.budget_points` lists that frame's tier whatever
+was looked up since. The per-query work is small: a point whose cameras all keep up (or all miss)
+needs no interpolation, the few others one sum each, and a frame whose prediction agrees with the
+stored frame times searches the store's own tiers (other frames' tiers are drawn once per frontier,
+rate and mask, and kept: :class:`_FrameTiers`). Without per-camera frame times (stores made before, or
+frontiers priced at one camera) the tiers are the stored frame times', exactly as before. The rules
+below hold for either:
 
 - ``"frame_rate"`` (the default): the budget search runs over the meeting tier (all points when none
   meets the target), so a setting that misses the target is never picked while one meets it;
@@ -23,9 +41,11 @@ searched:
   infeasible, with the same fallback as under ``"frame_rate"``.
 
 The result says whether the chosen setting meets the target and the frame rate it reaches. A store
-keeps, per view, the points of its two tiers at its own ``fps``: another rate chooses among those (at a
-higher rate, a setting the store dropped because it missed its own rate and was less accurate than a
-real-time one is not there to be found).
+keeps, per view, the points of its two tiers at its own ``fps`` by the stored (worst) frame times:
+another rate, and the frame's own tiers, choose among those (at a higher rate, a setting the store
+dropped because it missed its own rate and was less accurate than a real-time one is not there to be
+found; nor is a point the stored slow tier dropped as dominated although it keeps up near its sample
+camera).
 
 :meth:`LookupIndex.budget_points` lists the points of the tier a result came from that keep its budget:
 the settings the temporal filter (:mod:`.temporal`) may show while it moves to the target.
@@ -59,8 +79,11 @@ class LookupResult:
     setting of the frontier does or, under the ``"budget"`` ``priority``, when only settings that miss
     it keep the budget (under ``"frame_rate"`` a missing one is never picked otherwise); None when the
     store does not know frame times (format before 4), as are ``frame_time_s`` and ``fps`` (the frame
-    rate reached). ``frontier``, ``rank`` (the point's place in the tier it came from), ``budget_mode``,
-    ``budget`` and ``priority`` say where it came from (:meth:`LookupIndex.budget_points`).
+    rate reached). Where the store keeps per-camera frame times, these three are the prediction for
+    this camera, and ``meeting`` names this frame's tiers (bit ``j``: the stored frontier's point ``j``
+    is predicted to meet ``fps_target`` here; -1: the tiers of the stored frame times). ``frontier``,
+    ``rank`` (the point's place in the tier it came from), ``budget_mode``, ``budget``, ``priority`` and
+    ``meeting`` say where it came from (:meth:`LookupIndex.budget_points`).
 
     ``error`` and ``power_w`` are the frontier's stored figures, the worst over the cameras it was
     priced at: what the budget was checked against. ``expected_error`` and ``expected_power_w`` are the
@@ -184,7 +207,7 @@ class _FrameTiers:
     without per-camera frame times searches); other masks' tiers are drawn on first use and kept."""
 
     __slots__ = ("error", "figures", "fixed", "fps", "frame_time", "frontier", "masks", "mixed", "packed",
-                 "power", "stored", "worst_mask")
+                 "point", "power", "stored", "worst_mask")
 
     #: masks kept per frontier and rate (a frame's mask changes only where a point's prediction crosses
     #: the frame period: a few per frontier along a path)
@@ -209,6 +232,7 @@ class _FrameTiers:
             elif meets_frame_rate(lo, fps):
                 self.mixed.append(j)
         self.masks: dict[int, _FrontierLists] = {}
+        self.point = {int(p): j for j, p in enumerate(self.packed.tolist())}  # packed -> stored point
 
     def mask(self, weights: Sequence[float]) -> int:
         """The stored points predicted to keep up with ``fps`` at the frame the ``weights`` weigh the
@@ -245,7 +269,7 @@ class _FrameTiers:
     def predicted(self, weights: Sequence[float], packed: int) -> tuple[float, float, bool]:
         """(frame time, frame rate reached, whether it keeps up with ``fps``) of stored setting ``packed``
         predicted at the frame the ``weights`` are for."""
-        j = self.figures.point(packed)
+        j = self.point.get(packed)
         if j is None:
             raise ValueError("not a point of this frontier")
         t = self.figures.frame_time(weights, j)
