@@ -175,6 +175,29 @@ def test_playback_shows_the_frames_real_time_point_and_reports_its_prediction() 
     assert far.active_indices == (0, 0) and far.meets_fps is True
 
 
+def test_the_command_line_query_reports_the_frames_tier_from_the_stored_document(tmp_path, capsys) -> None:
+    """``render-budget query`` on the store's JSON document (per-camera frame times on the document's
+    steps): at the sample camera B, real-time at 25 ms; at the guard the real-time A (infeasible)."""
+    import json
+
+    from service import cli
+
+    f = tmp_path / "store.json"
+    f.write_text(_lab_like().to_json())
+    figures = ParetoStore.from_json(f.read_text()).priced[0]
+    answers = []
+    for eye, fwd in zip(figures.eyes, figures.forwards, strict=True):  # the stored cameras themselves
+        argv = ["query", str(f), "--position", *map(repr, eye.tolist()), "--direction",
+                *map(repr, fwd.tolist()), "--error-budget", "0.02", "--json"]
+        assert cli.main(argv) == 0
+        answers.append(json.loads(capsys.readouterr().out))
+    at_sample, at_guard = answers
+    assert at_sample["settings"] == {"a": 1, "b": 0.5} and not at_sample["infeasible"]
+    assert at_sample["meets_fps"] is True and at_sample["frame_time_s"] == pytest.approx(0.025, rel=1e-3)
+    assert at_guard["settings"] == {"a": 0, "b": 0.5} and at_guard["infeasible"]
+    assert at_guard["frame_time_s"] == pytest.approx(0.011, rel=1e-3)
+
+
 # ------------------------------------------------------------------------------------- properties
 
 
