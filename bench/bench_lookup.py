@@ -6,12 +6,15 @@ with the costliest settings of most frontiers missing 30 fps); the lookup cost
 depends on the octree and frontier sizes, not on where the frontiers came from.
 
 Run: .venv/bin/python bench/bench_lookup.py [STORE.json] [--queries N] [--reference] [--priority P]
+         [--budget-points]
 
 ``--reference`` times the lookup this one replaced (kept in tests/store_reference.py as the slow
 reference the property tests compare with) on the same queries, in the same process. ``--priority``
 passes the query's priority ("frame_rate" or "budget"; not passed when omitted, so the script also
 times trees from before the option); the last column says how many of the queries were answered with a
 setting that misses the frame rate (under "budget": where no real-time setting keeps the budget).
+``--budget-points`` also lists each query's allowed points (``ParetoStore.budget_points``, what playback
+hands the temporal filter on every frame; not for ``--reference``).
 """
 
 from __future__ import annotations
@@ -89,11 +92,12 @@ def _queries(store: ParetoStore, n: int) -> tuple[np.ndarray, np.ndarray, list[n
     return pos, dirs, mats, rng.uniform(0.5, 3.0, n)
 
 
-def _time(lookup: Any, cases: tuple, queries: tuple, repeat: int, extra: dict | None = None
-          ) -> list[tuple[str, float, float, int]]:
+def _time(lookup: Any, cases: tuple, queries: tuple, repeat: int, extra: dict | None = None,
+          points: Any = None) -> list[tuple[str, float, float, int]]:
     """(label, CPU us, wall us, queries answered with a setting that misses the frame rate) per case:
     the best of ``repeat`` runs by CPU time (other processes on a shared machine only ever add time);
-    ``extra``: more keyword arguments of every query."""
+    ``extra``: more keyword arguments of every query; ``points``: called with each result too (the
+    allowed points)."""
     pos, dirs, mats, budgets = queries
     more = extra or {}
     out = []
@@ -108,6 +112,8 @@ def _time(lookup: Any, cases: tuple, queries: tuple, repeat: int, extra: dict | 
                 kw = {"power_budget": budgets[i]} if kind != "e" else {"error_budget": budgets[i] / 20}
                 pose = {"matrix": mats[i]} if kind == "m" else {"direction": dirs[i]}
                 r = lookup(pos[i], **pose, **kw, **more)
+                if points is not None:
+                    points(r)
                 if with_filter:
                     filt.update(r[0] if isinstance(r, tuple) else r.indices, i / 60.0)
                 slow += (r[-1] if isinstance(r, tuple) else r.meets_fps) is False
@@ -126,6 +132,8 @@ def main() -> None:
                     help="also time the lookup this one replaced (tests/store_reference.py), same queries")
     ap.add_argument("--priority", choices=("frame_rate", "budget"),
                     help="the query's priority (default: not passed)")
+    ap.add_argument("--budget-points", action="store_true",
+                    help="also list each query's allowed points (budget_points), as playback does")
     args = ap.parse_args()
     store = ParetoStore.from_json(args.store.read_bytes()) if args.store else generated_store()
     st = store.stats()
@@ -135,7 +143,8 @@ def main() -> None:
     cases = (("lookup (power budget)", False, "p"), ("lookup (error budget)", False, "e"),
              ("lookup + temporal filter", True, "p"), ("lookup by matrix + filter", True, "m"))
     rows = _time(store.lookup, cases, queries, args.repeat,
-                 None if args.priority is None else {"priority": args.priority})
+                 None if args.priority is None else {"priority": args.priority},
+                 store.budget_points if args.budget_points else None)
     ref = None
     if args.reference:
         sys.path.insert(0, str(Path(__file__).resolve().parent.parent))

@@ -36,6 +36,7 @@ from service.metrics import ssim, ssim_map
 from service.optimize import OptimizeConfig, display_resolution, optimize_path
 from service.params import default_space
 from service.store import ParetoStore, unpack_indices, view_up
+from service.store.codec import QMAX
 
 SPACE = default_space()
 SUBSPACE = SPACE.subset(["sampling", "max_depth", "resolution_scale"])
@@ -550,9 +551,9 @@ def test_the_pricing_to_come_counts_each_samples_own_guards(scene, monkeypatch) 
 @pytest.mark.slow
 def test_guarded_frontiers_keep_each_cameras_figures_and_predict_a_frame_at_a_guard_by_them(scene) -> None:
     """With a guard frame a frontier is priced at two cameras and stores each point's worst figures (the
-    budgets' bound); the store also keeps each camera's own figures (``store.priced``), each what an
-    independent render at that camera gives, and a lookup at a guard camera predicts that guard's
-    figures, not the worst (after the JSON document too)."""
+    budgets' bound); the store also keeps each camera's own figures (``store.priced``: error, power and
+    frame time), each what an independent render at that camera gives, and a lookup at a guard camera
+    predicts that guard's figures, not the worst (after the JSON document too)."""
     path = _orbit_path(8, (48, 36))
     store = optimize_path(scene, path, SUBSPACE, _options(display_estimator="full", guard_frames=1,
                                                           display_points=3, path_resolution=1.0),
@@ -562,6 +563,7 @@ def test_guarded_frontiers_keep_each_cameras_figures_and_predict_a_frame_at_a_gu
     priced = [(fid, pf) for fid, pf in enumerate(store.priced) if pf is not None]
     assert priced and all(pf.cameras == 2 for _, pf in priced)
     step = store.stats()["power_step_w"]
+    time_step = max(float(f.frame_time_s.max()) for f in store.frontiers) / QMAX
     looked_up = differs = 0
     for fid, pf in priced:
         fr = store.frontiers[fid]
@@ -569,14 +571,19 @@ def test_guarded_frontiers_keep_each_cameras_figures_and_predict_a_frame_at_a_gu
                                                                                  store.frontier_dirs[fid])
         assert np.array_equal(fr.error, pf.error.max(axis=0))
         assert np.array_equal(fr.power_w, pf.power_w.max(axis=0))
+        assert np.array_equal(fr.frame_time_s, pf.frame_time_s.max(axis=0))
         for k in range(pf.cameras):
             fwd = pf.forwards[k]
             cam = CameraSpec(tuple(pf.eyes[k]), tuple(fwd), tuple(view_up(fwd)), store.vfov, 48, 36)
             for j, packed in enumerate(fr.packed):
                 idx = unpack_indices(int(packed), store.n_params)
-                err, power, _ = _independent(scene, cam, idx, SUBSPACE)
+                err, power, frame_time = _independent(scene, cam, idx, SUBSPACE)
                 assert pf.error[k, j] == pytest.approx(err, abs=2e-3)
                 assert pf.power_w[k, j] == pytest.approx(power, rel=0.01, abs=step)
+                assert pf.frame_time_s[k, j] == pytest.approx(frame_time, rel=0.01)
+                times_back = back.priced[fid].frame_time_s  # the document's steps, each on its side
+                assert (times_back[k, j] <= 1 / store.fps) == (pf.frame_time_s[k, j] <= 1 / store.fps)
+                assert times_back[k, j] == pytest.approx(pf.frame_time_s[k, j], abs=2 * time_step)
         guard = back.priced[fid]
         hit = back.lookup(guard.eyes[1], direction=guard.forwards[1], fov=store.vfov, aspect=48 / 36,
                           power_budget=1e9)
@@ -605,6 +612,14 @@ def test_guards_priced_at_the_search_resolution_keep_each_cameras_figures_too(sc
         fr = store.frontiers[fid]
         assert np.array_equal(fr.error, pf.error.max(axis=0))
         assert np.array_equal(fr.power_w, pf.power_w.max(axis=0))
+        assert np.array_equal(fr.frame_time_s, pf.frame_time_s.max(axis=0))
         assert np.allclose(pf.eyes[0], store.frontier_eyes[fid])
+        # the guard camera's frame times: what an independent render at the search's 16x12 gives,
+        # scaled to the path's 48x36 by the pixel ratio (9), as the search prices
+        fwd = pf.forwards[1]
+        cam = CameraSpec(tuple(pf.eyes[1]), tuple(fwd), tuple(view_up(fwd)), store.vfov, 16, 12)
+        for j, packed in enumerate(fr.packed):
+            _, _, frame_time = _independent(scene, cam, unpack_indices(int(packed), store.n_params), SUBSPACE)
+            assert pf.frame_time_s[1, j] == pytest.approx(9.0 * frame_time, rel=0.01)
     back = ParetoStore.from_json(store.to_json())
     assert [p is None for p in back.priced] == [p is None for p in store.priced]

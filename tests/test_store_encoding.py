@@ -43,12 +43,14 @@ V5_DOCUMENT = Path(__file__).parent / "data" / "store_v5_priced.json"
 
 
 def path_like_store(seed: int, *, max_depth: int = 4, frontiers: int = 40, cameras: int = 2,
-                    worst_is_max: bool = True, split_share: float = 0.4) -> ParetoStore:
+                    worst_is_max: bool = True, split_share: float = 0.4, frame_times: bool = False
+                    ) -> ParetoStore:
     """A store shaped like a path-sampled one: an octree split by the optimiser's lattice (random nodes
     at each depth), ``frontiers`` frontiers of 5-16 points with frame times (some missing ``FPS``), each
-    priced at ``cameras`` cameras (one in twenty at its sample camera only). With ``worst_is_max`` the
-    frontier's figures are, as the path sampler keeps them, the worst over its cameras; otherwise the
-    cameras' figures are anything at or below them."""
+    priced at ``cameras`` cameras (one in twenty at its sample camera only), with each camera's frame
+    times too when ``frame_times``. With ``worst_is_max`` the frontier's figures are, as the path sampler
+    keeps them, the worst over its cameras; otherwise the cameras' figures are anything at or below
+    them."""
     rng = np.random.default_rng(seed)
     root_min, root_size = np.array([-12.0, -9.0, 0.5]), 24.0
     lat = Lattice(root_min, root_size, max_depth)
@@ -70,15 +72,19 @@ def path_like_store(seed: int, *, max_depth: int = 4, frontiers: int = 40, camer
         m = len(fr)
         de = rng.exponential(0.01, (k, m)) * (rng.random((k, m)) < 0.9)
         dp = rng.exponential(2.0, (k, m)) * (rng.random((k, m)) < 0.9)
+        dt = rng.exponential(0.01, (k, m)) * (rng.random((k, m)) < 0.8) if frame_times else None
         if worst_is_max:  # one camera holds each point's worst figures
             at = rng.integers(0, k, m)
             de[at, np.arange(m)] = 0.0
             dp[at, np.arange(m)] = 0.0
+            if dt is not None:
+                dt[rng.integers(0, k, m), np.arange(m)] = 0.0
         eyes = quantise_eyes(rng.uniform(root_min, root_min + root_size, (k, 3)), root_min, root_size)
         fwd = quantise_directions(rng.normal(size=(k, 3)), fine=True)
+        times = None if dt is None else np.clip(fr.frame_time_s[None, :] - dt, 0.0, None)
         priced.append(PricedFigures(eyes, fwd, float(rng.uniform(1.0, 20.0)), fr.packed,
                                     np.clip(fr.error[None, :] - de, 0.0, 1.0),
-                                    np.clip(fr.power_w[None, :] - dp, 0.0, None)))
+                                    np.clip(fr.power_w[None, :] - dp, 0.0, None), times))
     corners = len(lat.corner_coords)
     views = rng.integers(0, frontiers, (corners, 6))
     views.reshape(-1)[:frontiers] = np.arange(frontiers)  # every frontier read somewhere
@@ -102,6 +108,8 @@ def assert_identical(a: ParetoStore, b: ParetoStore) -> None:
             assert x.scale == y.scale
             for name in ("eyes", "forwards", "packed", "error", "power_w"):
                 assert np.array_equal(getattr(x, name), getattr(y, name)), name
+            assert (x.frame_time_s is None) == (y.frame_time_s is None)
+            assert x.frame_time_s is None or np.array_equal(x.frame_time_s, y.frame_time_s)
 
 
 # ------------------------------------------------------------------------------------------ bit packing
@@ -149,13 +157,15 @@ def test_bit_packing_refuses_what_it_cannot_hold() -> None:
 
 @settings(max_examples=40, deadline=None)
 @given(seed=st.integers(0, 2**31), max_depth=st.integers(0, 4), frontiers=st.integers(1, 30),
-       cameras=st.integers(1, 3), worst_is_max=st.booleans(), split_share=st.floats(0.0, 1.0))
+       cameras=st.integers(1, 3), worst_is_max=st.booleans(), split_share=st.floats(0.0, 1.0),
+       frame_times=st.booleans())
 def test_re_encoding_keeps_every_figure(seed: int, max_depth: int, frontiers: int, cameras: int,
-                                        worst_is_max: bool, split_share: float) -> None:
+                                        worst_is_max: bool, split_share: float, frame_times: bool) -> None:
     """Format 6 decodes to exactly what format 5 decodes to (both hold the same 16-bit codes), the
-    document is stable once written, and it takes the compact forms wherever the store allows them."""
+    document is stable once written, and it takes the compact forms wherever the store allows them
+    (per-camera frame times too, when kept)."""
     store = path_like_store(seed, max_depth=max_depth, frontiers=frontiers, cameras=cameras,
-                            worst_is_max=worst_is_max, split_share=split_share)
+                            worst_is_max=worst_is_max, split_share=split_share, frame_times=frame_times)
     text5, text6 = store_format.to_json(store, 5), store.to_json()
     old, new = ParetoStore.from_json(text5), ParetoStore.from_json(text6)
     assert_identical(old, new)
@@ -166,6 +176,10 @@ def test_re_encoding_keeps_every_figure(seed: int, max_depth: int, frontiers: in
     if worst_is_max:
         assert {"priced_error_worst", "priced_power_worst"} <= set(doc)
         assert not {"priced_error", "priced_power"} & set(doc)
+    timed = {"priced_frame_time", "priced_frame_time_worst", "priced_frame_time_below"} & set(doc)
+    assert bool(timed) == frame_times
+    if frame_times and worst_is_max:
+        assert timed == {"priced_frame_time_worst", "priced_frame_time_below"}
     assert len(text6) < len(text5)
 
 
@@ -242,6 +256,73 @@ def test_a_format_5_document_still_loads_and_reads_the_same() -> None:
     for eye, fwd in zip(store.frontier_eyes, store.frontier_dirs, strict=True):
         for budget in ({"error_budget": 0.02}, {"power_budget": 40.0}):
             assert again.lookup(eye, direction=fwd, **budget) == store.lookup(eye, direction=fwd, **budget)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**31), cameras=st.integers(1, 3), worst_is_max=st.booleans())
+def test_per_camera_frame_times_come_back_on_their_side_of_the_frame_period(seed: int, cameras: int,
+                                                                           worst_is_max: bool) -> None:
+    """Each point's frame time at each pricing camera comes back within a step of the frontiers' frame
+    time steps, never across the frame period (a camera where a setting keeps up still keeps up after a
+    round trip, and one where it misses still misses), and never above the point's stored (worst) one
+    when that is the largest of them."""
+    store = path_like_store(seed, max_depth=2, frontiers=12, cameras=cameras, worst_is_max=worst_is_max,
+                            frame_times=True)
+    back = ParetoStore.from_json(store.to_json())
+    step = float(store.to_dict()["frame_time_scale"]) / 65535
+    period = 1.0 / FPS
+    for a, b, fr in zip(store.priced, back.priced, back.frontiers, strict=True):
+        assert b.frame_time_s.shape == a.frame_time_s.shape
+        assert np.all((a.frame_time_s <= period) == (b.frame_time_s <= period))
+        assert np.allclose(a.frame_time_s, b.frame_time_s, atol=2 * step)
+        if worst_is_max:
+            assert np.array_equal(b.frame_time_s.max(axis=0), fr.frame_time_s)
+
+
+def test_a_store_without_per_camera_frame_times_is_written_as_before() -> None:
+    """Per-camera frame times add their own fields only: the same store without them writes every other
+    field as it did, and a document without them reads as a store without them (the lookup then draws
+    its tiers from the stored frame times, as before: tests/test_priced_frame_times.py)."""
+    timed = path_like_store(5, max_depth=2, frontiers=10, frame_times=True)
+    plain = dataclasses.replace(timed, priced=[dataclasses.replace(pf, frame_time_s=None)
+                                               for pf in timed.priced])
+    a, b = timed.to_dict(), plain.to_dict()
+    assert {k: v for k, v in a.items() if not k.startswith("priced_frame_time")} == b
+    assert not plain.priced_frame_times_known and timed.priced_frame_times_known
+    back = ParetoStore.from_dict(b)
+    assert all(pf.frame_time_s is None for pf in back.priced)
+    for version in (5, 6):
+        d = store_format.to_dict(timed, version)
+        assert ParetoStore.from_dict(d).priced_frame_times_known
+
+
+def test_per_camera_frame_times_need_frame_times_for_every_priced_frontier() -> None:
+    timed = path_like_store(5, max_depth=1, frontiers=4, frame_times=True)
+    mixed = [timed.priced[0], *(dataclasses.replace(pf, frame_time_s=None) for pf in timed.priced[1:])]
+    with pytest.raises(ValueError, match="every priced frontier"):
+        dataclasses.replace(timed, priced=mixed)
+    untimed = [dataclasses.replace(f, frame_time_s=None) for f in timed.frontiers]
+    with pytest.raises(ValueError, match="frontiers' frame times"):
+        dataclasses.replace(timed, frontiers=untimed)
+    pf = timed.priced[0]
+    with pytest.raises(ValueError, match="frame times"):
+        dataclasses.replace(pf, frame_time_s=np.full_like(pf.error, -1.0))
+
+
+@pytest.mark.parametrize("mutate", [
+    lambda d: d.update(priced_frame_time_worst=encode_bits([5] * decode(d["priced_frame_time_worst"]).size)),
+    lambda d: d.update(priced_frame_time_below=encode_bits(decode(d["priced_frame_time_below"])[:-1])),
+    lambda d: d.update(priced_frame_time_below=encode_bits(
+        np.full(decode(d["priced_frame_time_below"]).size, 65535))),
+    lambda d: d.pop("priced_frame_time_below"),
+    lambda d: d.pop("frontier_frame_time"),
+])
+def test_corrupt_per_camera_frame_times_are_refused(mutate) -> None:
+    d = path_like_store(3, max_depth=2, frontiers=8, frame_times=True).to_dict()
+    ParetoStore.from_dict(d)
+    mutate(d)
+    with pytest.raises(ValueError):
+        ParetoStore.from_dict(d)
 
 
 @pytest.mark.parametrize("mutate", [

@@ -379,16 +379,18 @@ class QueryResult(BaseModel):
     filtered: bool = Field(description="indices come from the temporal filter, not the raw target")
     target_indices: list[int] = Field(description="the lookup's target before the temporal filter")
     frame_time_s: float | None = Field(
-        default=None, description="predicted frame time of the returned settings (null: the store predates "
-                                  "frame times)")
+        default=None, description="predicted frame time of the returned settings: at this camera where the "
+                                  "store keeps frame times per pricing camera (interpolated as "
+                                  "expected_power_w), else the worst over those cameras (null: the store "
+                                  "predates frame times)")
     fps: float | None = Field(default=None, description="the frame rate the returned settings reach: "
                                                         "fps_target when they keep up, else 1 / frame_time_s")
     fps_target: float = Field(description="the frame rate asked for (the query's fps, else the store's: what "
                                           "its power was priced for)")
     meets_fps: bool | None = Field(
-        default=None, description="the returned settings keep up with fps_target; false only when no "
-                                  "setting of this view does, or (priority budget) none within the budget "
-                                  "does (null: unknown)")
+        default=None, description="the returned settings keep up with fps_target (by frame_time_s); false "
+                                  "only when no setting of this view does, or (priority budget) none within "
+                                  "the budget does (null: unknown)")
     priority: str = Field(default="frame_rate", description="the query's priority, as the lookup applied it")
     expected_power_w: float | None = Field(
         default=None, description="predicted power of the returned settings at this camera: their figures at "

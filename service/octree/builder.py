@@ -22,7 +22,7 @@ from service.store.priced import PricedFigures
 
 from . import bridge
 from .lattice import Lattice, root_cube
-from .path_samples import PathSampling
+from .path_samples import PathSampling, PerCamera
 from .search import Progress, Search
 from .view_cubes import ViewCubeSampling
 
@@ -93,10 +93,10 @@ class CameraSampling(Protocol):
         """Every measured frontier (lattice frontier id) with the cameras its points are priced at
         (its sample first; a frontier keeps each point's worst figures over them)."""
 
-    def priced_figures(self) -> dict[int, tuple[list[CameraSpec], list[Indices], np.ndarray, np.ndarray]]:
+    def priced_figures(self) -> dict[int, PerCamera]:
         """Per-camera figures of the frontiers the strategy priced at several cameras itself (path
         samples' guards when there is no display pricing; the display pricing replaces them): lattice
-        frontier id -> (cameras, sample first; settings; error and power (K, n))."""
+        frontier id -> (cameras, sample first; settings; error, power and frame time (K, n))."""
 
     def pricing_scales(self) -> dict[int, float]:
         """The distance unit of the camera dissimilarity (:func:`service.store.priced.
@@ -222,9 +222,9 @@ class OctreeBuilder:
         self.display_points = 0  # frontier points priced there
         self.bridged_points = 0  # of them, priced between the first ones' error jumps (:mod:`.bridge`)
         self._bridge_reserve = 0.0  # search steps planned for bridging not priced yet
-        # per lattice frontier id priced at several cameras: (cameras, settings, error and power (K, n)
-        # of each setting at each camera), what the store keeps as its per-camera figures
-        self.priced: dict[int, tuple[list[CameraSpec], list[Indices], np.ndarray, np.ndarray]] = {}
+        # per lattice frontier id priced at several cameras: (cameras, settings, error, power and frame
+        # time (K, n) of each setting at each camera), what the store keeps as its per-camera figures
+        self.priced: dict[int, PerCamera] = {}
         # per lattice frontier id: (the points list, fps) it was counted for and the count of its points
         # the display pricing keeps (_kept_count)
         self._kept_counts: dict[int, tuple[list[Any], float | None, int]] = {}
@@ -362,7 +362,7 @@ class OctreeBuilder:
         for fid, (cams, xs, (err, pw, ft)) in jobs.items():
             lat.frontiers[fid].points = self._worst(xs, (err, pw, ft))
             if len(cams) > 1:  # and each camera's, to predict a frame between them
-                self.priced[fid] = (cams, xs, err, pw)
+                self.priced[fid] = (cams, xs, err, pw, ft)
             self.display_points += len(xs)
             self.display_cameras += len(cams)
 
@@ -434,11 +434,11 @@ class OctreeBuilder:
         scale = self.sampling.pricing_scales().get(fid)
         if rec is None or scale is None:
             return None
-        cams, xs, err, pw = rec
+        cams, xs, err, pw, ft = rec
         column = {self.space.pack(x): j for j, x in enumerate(xs)}
         cols = [column[int(p)] for p in frontier.packed]
         return PricedFigures(np.asarray([c.eye for c in cams]), np.asarray([c.forward for c in cams]), scale,
-                             frontier.packed, np.clip(err[:, cols], 0.0, 1.0), pw[:, cols])
+                             frontier.packed, np.clip(err[:, cols], 0.0, 1.0), pw[:, cols], ft[:, cols])
 
     def to_store(self, *, profile: str, fps: float, aspect: float, meta: dict) -> ParetoStore:
         """The runtime store: nodes in creation order (children consecutive), shared frontiers."""

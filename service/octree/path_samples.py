@@ -10,7 +10,9 @@ by eye distance over viewing distance plus direction difference); a full search 
 ``path_stride``-th sample along the path and short warm-started ones in between (warm-started from
 the neighbours' meeting tiers); then every frontier
 setting is also priced at ``guard_frames`` more of those frames (the ones least like the chosen ones)
-and the frontier keeps each setting's worst error and power, so it bounds the frames it serves. Faces
+and the frontier keeps each setting's worst error, power and frame time, so it bounds the frames it
+serves (and each camera's own, :class:`service.store.priced.PricedFigures`: the lookup interpolates
+them at a frame, and draws the frame's tiers from the interpolated frame times). Faces
 no path frame reads inherit the frontier of the nearest sample. No frontier-difference comparisons
 are made in this mode.
 """
@@ -31,6 +33,10 @@ from service.store.priced import camera_dissimilarity
 from .lattice import N_VIEWS, Lattice
 from .search import Search
 
+#: A frontier's figures at each of its pricing cameras: (cameras, the sample first; settings; error,
+#: power and frame time (K, n) of each setting at each camera).
+PerCamera = tuple[list[CameraSpec], list[Indices], np.ndarray, np.ndarray, np.ndarray]
+
 
 class PathSampling:
     """One sample per (corner, face) the path looks up, at the path's own cameras."""
@@ -48,15 +54,16 @@ class PathSampling:
         self.guards: dict[tuple[int, int], list[CameraSpec]] = {}  # each sample's guard cameras
         self.placed = False  # every sample camera and its guards chosen (build, before the searches)
         # guards priced at the search's resolution (no display pricing): per lattice frontier id, its
-        # cameras (the sample first), settings and each setting's error and power (K, n) at each camera
-        self.priced: dict[int, tuple[list[CameraSpec], list[Indices], np.ndarray, np.ndarray]] = {}
+        # cameras (the sample first), settings and each setting's error, power and frame time (K, n) at
+        # each camera
+        self.priced: dict[int, PerCamera] = {}
 
     def pricing_cameras(self) -> dict[int, list[CameraSpec]]:
         """Each sample's frontier with its sample camera and guard cameras."""
         return {self.lattice.corner_views[c][v]: [cam, *self.guards.get((c, v), [])]
                 for (c, v), cam in self.sample_cams.items()}
 
-    def priced_figures(self) -> dict[int, tuple[list[CameraSpec], list[Indices], np.ndarray, np.ndarray]]:
+    def priced_figures(self) -> dict[int, PerCamera]:
         """The guards' per-camera figures where they were priced during the build (no display pricing)."""
         return self.priced
 
@@ -228,7 +235,7 @@ class PathSampling:
             rec.points = [(x, float(ei), float(pi), float(ti)) for x, ei, pi, ti in worst]
             if cams:  # and each camera's own figures, to predict a frame between them
                 self.priced[self.lattice.corner_views[cv[0]][cv[1]]] = ([self.sample_cams[cv], *cams], xs,
-                                                                        err, pw)
+                                                                        err, pw, ft)
 
     def _inherit_unsampled(self) -> None:
         """Views no path frame looks up take the frontier (and sample camera) of the sample nearest to

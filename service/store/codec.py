@@ -126,15 +126,19 @@ def frame_times(codes: np.ndarray, scale: float) -> np.ndarray:
     return np.asarray(codes).astype(np.float64) / QMAX * float(scale)
 
 
-def frame_time_codes(times: Any, fps: float) -> tuple[np.ndarray, float]:
-    """16-bit codes of frame times over [0, scale] (scale: the largest time) and the scale, rounded up
-    except where that would carry a frame time past the frame period 1 / ``fps``: every setting decodes
-    on its own side of the period (one that meets the store's frame rate still meets it after a round
-    trip, one that misses it still misses it, never by less than it did)."""
+def frame_time_codes(times: Any, fps: float, scale: float | None = None) -> tuple[np.ndarray, float]:
+    """16-bit codes of frame times over [0, scale] (``scale``, by default the largest time) and the
+    scale, rounded up except where that would carry a frame time past the frame period 1 / ``fps``:
+    every setting decodes on its own side of the period (one that meets the store's frame rate still
+    meets it after a round trip, one that misses it still misses it, never by less than it did). The
+    codes are non-decreasing in the time (the largest time gets the largest code)."""
     t = np.asarray(times, dtype=np.float64).reshape(-1)
     if not (np.all(np.isfinite(t)) and np.all(t >= 0)):
         raise ValueError("frame times must be finite and >= 0 to be stored")
-    scale = float(t.max()) if t.size and t.max() > 0 else 1.0
+    if scale is None:
+        scale = float(t.max()) if t.size and t.max() > 0 else 1.0
+    elif t.size and t.max() > scale:
+        raise ValueError("frame times above their scale cannot be stored")
     period = 1.0 / fps  # meets_frame_rate's test, vectorised
     q = np.clip(np.rint(t / scale * QMAX), 0, QMAX).astype(np.int64)
     q = np.minimum(q + (frame_times(q, scale) < t), QMAX)  # the smallest code at or above t (stable)

@@ -36,6 +36,10 @@ Layout (power-budget paper, sec. 4.2 and 6):
   ``priced_dirs`` the others' (the same codes), ``priced_scale`` (float32) the distance unit of the
   camera dissimilarity, and ``priced_error`` / ``priced_power`` each point's figures at each camera
   (camera major within a frontier; the same 16-bit steps and ``power_scale`` as the frontier's);
+  optionally (in version 5 and 6 documents; readers that do not know it draw the tiers from the worst
+  frame times, as before) ``priced_frame_time``, each point's frame time at each camera on the
+  frontiers' frame-time steps (``frame_time_scale``, each on its side of the frame period: the lookup
+  draws each frame's tiers from their interpolation, :mod:`service.store.lookup`);
 - ``parameters`` (names, values, maximum-quality index), ``profile``, ``fps``, ``vfov``, ``aspect``
   and the optimiser's ``meta``.
 
@@ -55,8 +59,9 @@ to, and ``to_dict(store, 5)`` still writes version 5 byte for byte as before, fo
   each point holds the frontier's own code. ``priced_error_worst`` gives, for every point of a
   frontier priced at several cameras, the first camera at the frontier's error code, and
   ``priced_error_below`` every other camera's code as its distance below it (camera major within a
-  frontier); the same for power (``priced_power_worst``, ``priced_power_below``). A frontier priced at
-  one camera has its own codes there.
+  frontier); the same for power (``priced_power_worst``, ``priced_power_below``) and frame time
+  (``priced_frame_time_worst``, ``priced_frame_time_below``). A frontier priced at one camera has its
+  own codes there.
 
 Each of these is written only where the store allows it; otherwise the field is written as version 5
 wrote it (``children``, ``corners``, ``priced_error`` / ``priced_power``) and read as before.
@@ -120,12 +125,14 @@ def to_dict(store: Any, version: int = FORMAT_VERSION) -> dict[str, Any]:
             codec.direction_codes(store.frontier_dirs, codec.DIR_Q16).reshape(-1), "<i2")
         extra["frontier_eyes"] = codec.encode(
             codec.eye_codes(store.frontier_eyes, store.root_min, store.root_size).reshape(-1), "<u2")
-    if store.priced is not None:
-        extra.update(_priced_fields(store, power_scale, eq, pq, compact))
+    tq: tuple[np.ndarray, float] | None = None
     if store.frame_times_known:
-        codes, scale = codec.frame_time_codes(np.concatenate([f.frame_time_s for f in frontiers]), store.fps)
-        extra["frontier_frame_time"] = codec.encode(codes, "<u2")
-        extra["frame_time_scale"] = scale
+        tq = codec.frame_time_codes(np.concatenate([f.frame_time_s for f in frontiers]), store.fps)
+    if store.priced is not None:
+        extra.update(_priced_fields(store, power_scale, eq, pq, tq, compact))
+    if tq is not None:
+        extra["frontier_frame_time"] = codec.encode(tq[0], "<u2")
+        extra["frame_time_scale"] = tq[1]
     ints = codec.encode_bits if compact else None  # small integers: bit-packed since version 6
     return {
         "format": FORMAT_NAME,
@@ -241,12 +248,13 @@ def _children(d: dict[str, Any]) -> np.ndarray:
 
 
 def _priced_fields(store: Any, power_scale: float, eq: np.ndarray, pq: np.ndarray,
-                   compact: bool) -> dict[str, Any]:
-    """The per-camera figures' fields (:mod:`service.store.priced`); ``eq`` / ``pq``: the frontiers'
-    16-bit codes (each point's worst figures), which ``compact`` (version 6) encodes them against."""
+                   tq: tuple[np.ndarray, float] | None, compact: bool) -> dict[str, Any]:
+    """The per-camera figures' fields (:mod:`service.store.priced`); ``eq`` / ``pq`` / ``tq`` (frame
+    time codes and their scale, None: no frame times): the frontiers' 16-bit codes (each point's worst
+    figures), which ``compact`` (version 6) encodes them against."""
     if store.frontier_eyes is None or store.frontier_dirs is None:
         raise ValueError("per-camera figures need the frontiers' sample cameras (frontier_eyes and dirs)")
-    counts, scales, eyes, dirs, err, pw = [], [], [], [], [], []
+    counts, scales, eyes, dirs, err, pw, ft = [], [], [], [], [], [], []
     for pf in store.priced:
         counts.append(0 if pf is None else pf.cameras)
         if pf is None:
@@ -256,6 +264,8 @@ def _priced_fields(store: Any, power_scale: float, eq: np.ndarray, pq: np.ndarra
         dirs.append(pf.forwards[1:])
         err.append(pf.error.reshape(-1))
         pw.append(pf.power_w.reshape(-1))
+        if pf.frame_time_s is not None:
+            ft.append(pf.frame_time_s.reshape(-1))
     e, p = np.concatenate(err), np.concatenate(pw)
     if e.size and (e.min() < 0 or e.max() > 1):
         raise ValueError("per-camera errors must lie in [0, 1] to be stored")
@@ -272,7 +282,13 @@ def _priced_fields(store: Any, power_scale: float, eq: np.ndarray, pq: np.ndarra
         "priced_dirs": codec.encode(codec.direction_codes(dirs_a, codec.DIR_Q16).reshape(-1), "<i2"),
     }
     sizes = [len(f) for f in store.frontiers]
-    for name, codes, worst in (("error", e_codes, eq), ("power", p_codes, pq)):
+    figures = [("error", e_codes, eq), ("power", p_codes, pq)]
+    if ft:  # (every priced frontier's or none: ParetoStore checks it) on the frontiers' frame-time steps
+        if tq is None:
+            raise ValueError("per-camera frame times need the frontiers' frame times")
+        figures.append(("frame_time", codec.frame_time_codes(np.concatenate(ft), store.fps, tq[1])[0]
+                        .astype(np.int64), tq[0].astype(np.int64)))
+    for name, codes, worst in figures:
         split = _below_worst(codes, worst, counts, sizes) if compact else None
         if split is None:
             out[f"priced_{name}"] = codec.encode(codes, "<u2")
@@ -310,7 +326,7 @@ def _below_worst(codes: np.ndarray, worst: np.ndarray, counts: list[int], sizes:
 
 
 def _priced_codes(d: dict[str, Any], name: str, counts: np.ndarray, sizes: np.ndarray) -> np.ndarray:
-    """The per-camera 16-bit codes of ``name`` (error or power), camera major per frontier, from
+    """The per-camera 16-bit codes of ``name`` (error, power or frame_time), camera major per frontier, from
     ``priced_<name>`` or (version 6) from the frontiers' codes with ``priced_<name>_worst`` / ``_below``."""
     if f"priced_{name}" in d:
         return codec.decode(d[f"priced_{name}"]).astype(np.int64)
@@ -404,11 +420,16 @@ def _priced(d: dict[str, Any], frontiers: list[Frontier], cams: dict[str, Any]) 
     sizes = np.asarray([len(f) for f in frontiers], dtype=np.int64)
     err = _priced_codes(d, "error", counts, sizes).astype(np.float64) / codec.QMAX
     pw = _priced_codes(d, "power", counts, sizes).astype(np.float64) / codec.QMAX * float(d["power_scale"])
+    ft = None
+    if "priced_frame_time" in d or "priced_frame_time_worst" in d:
+        if d.get("frontier_frame_time") is None:
+            raise ValueError("per-camera frame times need the frontiers' frame times")
+        ft = codec.frame_times(_priced_codes(d, "frame_time", counts, sizes), float(d["frame_time_scale"]))
     priced = counts > 0
     guards = int((counts[priced] - 1).sum())
     values = int(sum(int(k) * len(f) for k, f in zip(counts, frontiers, strict=True)))
     if (scales.size != int(priced.sum()) or eyes.shape[0] != guards or dirs.shape[0] != guards
-            or err.size != values or pw.size != values):
+            or err.size != values or pw.size != values or (ft is not None and ft.size != values)):
         raise ValueError("per-camera figures disagree in length with their cameras and frontiers")
     out: list[Any] = []
     g = v = s = 0
@@ -419,7 +440,7 @@ def _priced(d: dict[str, Any], frontiers: list[Frontier], cams: dict[str, Any]) 
         n = k * len(fr)
         out.append(PricedFigures(np.vstack([cams["frontier_eyes"][f], eyes[g:g + k - 1]]),
                                  np.vstack([cams["frontier_dirs"][f], dirs[g:g + k - 1]]), scales[s],
-                                 fr.packed, err[v:v + n], pw[v:v + n]))
+                                 fr.packed, err[v:v + n], pw[v:v + n], None if ft is None else ft[v:v + n]))
         g, v, s = g + k - 1, v + n, s + 1
     return out
 

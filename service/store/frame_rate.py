@@ -6,7 +6,8 @@ frame rate it reaches is the lower of the two (and its power is the full-speed p
 ``sim_core.sustained_power`` prices power with the same test as ``EnergyReport.deadline_met``). The
 optimiser ranks settings that meet the target ahead of those that miss it, a frontier keeps the ones
 that miss it only in its slow tier (:mod:`.frontier`), and the lookup never picks a missing one while a
-meeting one exists unless the query puts the budget first (:mod:`.lookup`).
+meeting one exists unless the query puts the budget first (:mod:`.lookup`; where the store keeps each
+point's frame time at each pricing camera, "meets" is the prediction at the query's camera).
 """
 
 from __future__ import annotations

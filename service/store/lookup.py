@@ -13,7 +13,25 @@ another rate: then each point's power is repriced for that rate (:func:`.frame_r
 the store's static power) and the frontier's tiers drawn again at that rate (a slow point of the store
 may meet a lower rate). Where a frontier knows its frame times, it has a meeting tier and a slow tier
 (:mod:`.frontier`), and the query's priority (:data:`service.options.QUERY_PRIORITY`) says how they are
-searched:
+searched.
+
+Which points are in which tier: the stored frame time of a path-sampled frontier's point is the worst
+over the cameras the frontier was priced at, so by it a point that keeps up at the sample camera and
+misses the rate at one far guard is slow for every frame the frontier serves. Where the store keeps
+each point's frame time at each pricing camera (:class:`.priced.PricedFigures`), the tiers are the
+*frame's*: each point's frame time is predicted at the query's camera by the same Shepard weights as
+its error and power (:meth:`.priced.PricedFigures.frame_time`), the points predicted to meet the target
+are the frame's meeting tier and the rest its slow tier, both drawn by the one two-tier rule
+(:func:`.frontier.frontier_tiers`) over the stored points' stored, worst error and power (the budgets
+are checked against those, as before). The result's ``frame_time_s``, ``fps`` and ``meets_fps`` are
+then the frame's prediction, and ``LookupResult.meeting`` names the frame's tiers (bit ``j``: stored
+point ``j`` predicted to meet), so :meth:`LookupIndex.budget_points` lists that frame's tier whatever
+was looked up since. The per-query work is small: a point whose cameras all keep up (or all miss)
+needs no interpolation, the few others one sum each, and a frame whose prediction agrees with the
+stored frame times searches the store's own tiers (other frames' tiers are drawn once per frontier,
+rate and mask, and kept: :class:`_FrameTiers`). Without per-camera frame times (stores made before, or
+frontiers priced at one camera) the tiers are the stored frame times', exactly as before. The rules
+below hold for either:
 
 - ``"frame_rate"`` (the default): the budget search runs over the meeting tier (all points when none
   meets the target), so a setting that misses the target is never picked while one meets it;
@@ -23,9 +41,11 @@ searched:
   infeasible, with the same fallback as under ``"frame_rate"``.
 
 The result says whether the chosen setting meets the target and the frame rate it reaches. A store
-keeps, per view, the points of its two tiers at its own ``fps``: another rate chooses among those (at a
-higher rate, a setting the store dropped because it missed its own rate and was less accurate than a
-real-time one is not there to be found).
+keeps, per view, the points of its two tiers at its own ``fps`` by the stored (worst) frame times:
+another rate, and the frame's own tiers, choose among those (at a higher rate, a setting the store
+dropped because it missed its own rate and was less accurate than a real-time one is not there to be
+found; nor is a point the stored slow tier dropped as dominated although it keeps up near its sample
+camera).
 
 :meth:`LookupIndex.budget_points` lists the points of the tier a result came from that keep its budget:
 the settings the temporal filter (:mod:`.temporal`) may show while it moves to the target.
@@ -38,14 +58,17 @@ import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from . import camera
 from .frame_rate import frame_rate_reached, meets_frame_rate, power_at_rate
-from .frontier import Frontier
+from .frontier import Frontier, frontier_tiers
 from .packing import StoredParameter, settings_of, unpack_indices
+
+if TYPE_CHECKING:
+    from .priced import PricedFigures
 
 
 @dataclass(frozen=True)
@@ -56,8 +79,11 @@ class LookupResult:
     setting of the frontier does or, under the ``"budget"`` ``priority``, when only settings that miss
     it keep the budget (under ``"frame_rate"`` a missing one is never picked otherwise); None when the
     store does not know frame times (format before 4), as are ``frame_time_s`` and ``fps`` (the frame
-    rate reached). ``frontier``, ``rank`` (the point's place in the tier it came from), ``budget_mode``,
-    ``budget`` and ``priority`` say where it came from (:meth:`LookupIndex.budget_points`).
+    rate reached). Where the store keeps per-camera frame times, these three are the prediction for
+    this camera, and ``meeting`` names this frame's tiers (bit ``j``: the stored frontier's point ``j``
+    is predicted to meet ``fps_target`` here; -1: the tiers of the stored frame times). ``frontier``,
+    ``rank`` (the point's place in the tier it came from), ``budget_mode``, ``budget``, ``priority`` and
+    ``meeting`` say where it came from (:meth:`LookupIndex.budget_points`).
 
     ``error`` and ``power_w`` are the frontier's stored figures, the worst over the cameras it was
     priced at: what the budget was checked against. ``expected_error`` and ``expected_power_w`` are the
@@ -87,6 +113,7 @@ class LookupResult:
     expected_error: float = math.nan
     expected_power_w: float = math.nan
     weights: tuple[float, ...] = ()
+    meeting: int = -1
 
 
 @dataclass(frozen=True)
@@ -138,6 +165,14 @@ class _FrontierLists:
             self.meets = [meets_frame_rate(t, fps) for t in self.frame_time]  # type: ignore[arg-type]
         self.points: list[FrontierPoint] | None = None  # decoded on first use
 
+    @staticmethod
+    def of_tiers(frontier: Frontier, fps: float, fast: Frontier, slow: Frontier | None) -> _FrontierLists:
+        """The lists of a frontier's two tiers drawn elsewhere (``slow`` None: one tier)."""
+        lists = _FrontierLists(frontier, fps, fast)
+        if slow is not None:
+            lists.slow = _FrontierLists(frontier, fps, slow)
+        return lists
+
     def within(self, mode: str, budget: float) -> list[int]:
         """Ranks of the points that keep a budget (``mode`` "power": power <= budget, "error": error <=
         budget), in frontier order."""
@@ -155,6 +190,90 @@ class _FrontierLists:
             return self.searched.under_error(budget)
         i = bisect.bisect_left(self.neg_error, -budget)
         return (len(self.power) - 1, True) if i >= len(self.power) else (i, False)
+
+
+class _FrameTiers:
+    """A stored frontier at a frame-rate target ``fps`` whose points' frame times are known at each of
+    its pricing cameras (``figures``): what a query needs to draw the tiers of its own frame.
+
+    Each point's frame time at the frame is predicted by the Shepard interpolation of its cameras' frame
+    times (:meth:`.priced.PricedFigures.frame_time`); a point whose cameras all keep up with ``fps`` is
+    predicted to keep up anywhere between them, one whose cameras all miss it to miss it, so only the
+    points whose cameras disagree (``mixed``) are interpolated per query. The frame's tiers are
+    :func:`.frontier.frontier_tiers` of the stored points (their stored, worst error and power at
+    ``fps``: what budgets are checked against) by that prediction, as a bit mask over the stored points
+    (bit ``j``: point ``j`` of the stored frontier is predicted to meet ``fps``). Where the mask is the
+    stored frame times' own (``worst_mask``), they are the store's tiers (``stored``, the lists a store
+    without per-camera frame times searches); other masks' tiers are drawn on first use and kept."""
+
+    __slots__ = ("error", "figures", "fixed", "fps", "frame_time", "frontier", "masks", "mixed", "packed",
+                 "point", "power", "stored", "worst_mask")
+
+    #: masks kept per frontier and rate (a frame's mask changes only where a point's prediction crosses
+    #: the frame period: a few per frontier along a path)
+    MASKS = 256
+
+    def __init__(self, frontier: Frontier, figures: PricedFigures, fps: float, power: Sequence[float],
+                 stored: _FrontierLists) -> None:
+        assert frontier.frame_time_s is not None
+        self.frontier, self.figures, self.fps, self.stored = frontier, figures, fps, stored
+        self.packed = frontier.packed
+        self.error = frontier.error
+        self.power = np.asarray(power, dtype=np.float64)
+        self.frame_time = frontier.frame_time_s
+        self.worst_mask = sum(1 << j for j, t in enumerate(self.frame_time.tolist())
+                              if meets_frame_rate(t, fps))
+        self.fixed = 0  # points whose every camera keeps up
+        self.mixed: list[int] = []  # points kept up with at some of their cameras only
+        for j in range(len(frontier)):
+            lo, hi = figures.frame_time_range(j)
+            if meets_frame_rate(hi, fps):
+                self.fixed |= 1 << j
+            elif meets_frame_rate(lo, fps):
+                self.mixed.append(j)
+        self.masks: dict[int, _FrontierLists] = {}
+        self.point = {int(p): j for j, p in enumerate(self.packed.tolist())}  # packed -> stored point
+
+    def mask(self, weights: Sequence[float]) -> int:
+        """The stored points predicted to keep up with ``fps`` at the frame the ``weights`` weigh the
+        pricing cameras for."""
+        m = self.fixed
+        figures, fps = self.figures, self.fps
+        for j in self.mixed:
+            if meets_frame_rate(figures.frame_time(weights, j), fps):
+                m |= 1 << j
+        return m
+
+    def lists(self, mask: int) -> _FrontierLists:
+        """The lists of the tiers a frame with ``mask`` searches."""
+        if mask == self.worst_mask:
+            return self.stored
+        lists = self.masks.get(mask)
+        if lists is None:
+            n = len(self.frontier)
+            if mask < 0 or mask >> n:
+                raise ValueError("a tier mask names points the frontier does not have")
+            meets = [bool((mask >> j) & 1) for j in range(n)]
+            fast, slow = frontier_tiers(self.error, self.power, meets)
+
+            def tier(idx: list[int]) -> Frontier:
+                k = np.asarray(idx, dtype=np.int64)
+                return Frontier(self.packed[k], self.error[k], self.power[k], self.frame_time[k])
+
+            lists = _FrontierLists.of_tiers(self.frontier, self.fps, tier(fast), tier(slow) if slow else None)
+            if len(self.masks) >= self.MASKS:
+                self.masks.clear()
+            self.masks[mask] = lists
+        return lists
+
+    def predicted(self, weights: Sequence[float], packed: int) -> tuple[float, float, bool]:
+        """(frame time, frame rate reached, whether it keeps up with ``fps``) of stored setting ``packed``
+        predicted at the frame the ``weights`` are for."""
+        j = self.point.get(packed)
+        if j is None:
+            raise ValueError("not a point of this frontier")
+        t = self.figures.frame_time(weights, j)
+        return t, frame_rate_reached(t, self.fps), meets_frame_rate(t, self.fps)
 
 
 class LookupIndex:
@@ -185,6 +304,7 @@ class LookupIndex:
         self._last_frustum: tuple[float, float, tuple[np.ndarray, np.ndarray]] | None = None
         self._frontiers: dict[int, _FrontierLists] = {}
         self._other_rates: dict[tuple[int, float], _FrontierLists] = {}
+        self._frame_tiers: dict[tuple[int, float], _FrameTiers] = {}
         self._decoded: dict[int, tuple[tuple[int, ...], dict[str, Any], bool]] = {}
 
     def _walk(self, children: np.ndarray, corner_coords: np.ndarray) -> None:
@@ -313,31 +433,72 @@ class LookupIndex:
             self._other_rates[key] = lists
         return lists
 
+    def frame_tiers(self, frontier_id: int, frontier: Frontier, figures: PricedFigures, priced_fps: float,
+                    fps: float, static_power_w: float | None) -> _FrameTiers:
+        """What a query at the frame-rate target ``fps`` needs to draw its frame's tiers of a stored
+        frontier (priced for ``priced_fps``) whose per-camera frame times are known (kept per (frontier,
+        fps), as the lists are)."""
+        key = (frontier_id, fps)
+        plan = self._frame_tiers.get(key)
+        if plan is None or plan.frontier is not frontier or plan.figures is not figures:
+            if len(self._frame_tiers) > 4096:
+                self._frame_tiers.clear()
+            if fps == priced_fps:
+                stored = self.frontier_lists(frontier_id, frontier, fps)
+                power = frontier.power_w
+            else:
+                assert frontier.frame_time_s is not None and static_power_w is not None
+                stored = self.frontier_lists_at(frontier_id, frontier, priced_fps, fps, static_power_w)
+                power = [power_at_rate(float(p), float(t), priced_fps, fps, static_power_w)
+                         for p, t in zip(frontier.power_w, frontier.frame_time_s, strict=True)]
+            plan = self._frame_tiers[key] = _FrameTiers(frontier, figures, fps, power, stored)
+        return plan
+
     def lists_of(self, hit: LookupResult) -> _FrontierLists:
-        """The lists of the tier ``hit`` was chosen from (its frontier at the rate it was asked for: the
-        slow tier for a point that misses the rate while the frontier has meeting points)."""
-        lists = self._frontiers.get(hit.frontier)
-        if lists is None or lists.fps != hit.fps_target:
-            lists = self._other_rates.get((hit.frontier, hit.fps_target))
-        if lists is None:
-            raise ValueError("the lookup result's frontier is no longer cached: look the camera up again")
+        """The lists of the tier ``hit`` was chosen from (its frontier at the rate it was asked for, with
+        the tiers of ``hit``'s own frame where they are drawn per frame (``hit.meeting``): the slow tier
+        for a point that misses the rate while the frontier has meeting points)."""
+        if hit.meeting >= 0:
+            plan = self._frame_tiers.get((hit.frontier, hit.fps_target))  # type: ignore[arg-type]
+            if plan is None:
+                raise ValueError("the lookup result's frontier is no longer cached: look the camera up again")
+            lists = plan.lists(hit.meeting)
+        else:
+            lists = self._frontiers.get(hit.frontier)  # type: ignore[assignment]
+            if lists is None or lists.fps != hit.fps_target:
+                lists = self._other_rates.get((hit.frontier, hit.fps_target))  # type: ignore[assignment]
+            if lists is None:
+                raise ValueError("the lookup result's frontier is no longer cached: look the camera up again")
         if lists.slow is not None and hit.meets_fps is False:
             return lists.slow
         return lists
 
     def budget_points(self, hit: LookupResult) -> list[FrontierPoint]:
         """The points of the tier ``hit`` came from (its frontier at its frame-rate target: the meeting
-        tier, or the slow tier when ``hit`` misses the target under the ``"budget"`` priority) that keep
-        its budget, in frontier order (power ascending); only ``hit``'s own point when none does
-        (``hit.infeasible``)."""
+        tier, or the slow tier when ``hit`` misses the target under the ``"budget"`` priority; the tiers
+        of ``hit``'s own frame where they are drawn per frame) that keep its budget, in frontier order
+        (power ascending); only ``hit``'s own point when none does (``hit.infeasible``). Where the tiers
+        are drawn per frame, each point's frame time, frame rate and ``meets_fps`` are its prediction
+        at ``hit``'s camera (``hit.weights``)."""
         lists = self.lists_of(hit)
+        ranks = [hit.rank] if hit.infeasible else lists.within(hit.budget_mode, hit.budget)
+        if hit.meeting >= 0:  # each point's prediction at the hit's camera (plan.predicted, inlined)
+            plan = self._frame_tiers[(hit.frontier, hit.fps_target)]  # type: ignore[index]
+            frame_time, point, weights, fps = plan.figures.frame_time, plan.point, hit.weights, plan.fps
+            period = 1.0 / fps  # meets_frame_rate / frame_rate_reached
+            out = []
+            for k in ranks:
+                pk = lists.packed[k]
+                t = frame_time(weights, point[pk])
+                ok = t <= period
+                out.append(FrontierPoint(self.decoded(pk)[0], pk, lists.power[k], lists.error[k], t,
+                                         fps if ok else 1.0 / t, ok))
+            return out
         if lists.points is None:
             lists.points = [FrontierPoint(self.decoded(pk)[0], pk, lists.power[k], lists.error[k],
                                           lists.frame_time[k], lists.fps_reached[k], lists.meets[k])
                             for k, pk in enumerate(lists.packed)]
-        if hit.infeasible:
-            return [lists.points[hit.rank]]
-        return [lists.points[k] for k in lists.within(hit.budget_mode, hit.budget)]
+        return [lists.points[k] for k in ranks]
 
     def decoded(self, packed: int) -> tuple[tuple[int, ...], dict[str, Any]]:
         """Value indices and a fresh ``{name: value}`` of a packed setting (decoded once per setting;

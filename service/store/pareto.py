@@ -136,6 +136,11 @@ class ParetoStore:
                 raise ValueError("priced figures must list their frontier's points in frontier order")
         if all(pf is None for pf in self.priced):
             self.priced = None
+            return
+        if len({pf.frame_times_known for pf in self.priced if pf is not None}) > 1:
+            raise ValueError("per-camera frame times must be kept for every priced frontier or for none")
+        if self.priced_frame_times_known and not self.frame_times_known:
+            raise ValueError("per-camera frame times need the frontiers' frame times")
 
     # -- what is stored ---------------------------------------------------------------------------
 
@@ -147,6 +152,12 @@ class ParetoStore:
     def frame_times_known(self) -> bool:
         """Whether the frontiers record frame times (stores of format 4 on; older ones do not)."""
         return bool(self.frontiers) and self.frontiers[0].frame_time_s is not None
+
+    @property
+    def priced_frame_times_known(self) -> bool:
+        """Whether the per-camera figures include each point's frame time at each pricing camera (the
+        lookup then draws each frame's tiers from their prediction at its camera: :mod:`.lookup`)."""
+        return self.priced is not None and any(pf is not None and pf.frame_times_known for pf in self.priced)
 
     def corner_positions(self) -> np.ndarray:
         """World positions (C, 3) of the corners."""
@@ -255,7 +266,18 @@ class ParetoStore:
         asp = camera.check_aspect(self.aspect if aspect is None else aspect)
         leaf, corner, view, clamped = index.locate(position, rot, vf, asp)
         fid = index.views[corner][view]
-        if rate == self.fps:
+        figures = None if self.priced is None else self.priced[fid]
+        weights: tuple[float, ...] = ()
+        if figures is not None:
+            forward = (-rot[2], -rot[5], -rot[8])  # the camera looks down its local -Z
+            weights = figures.weights(position, forward)  # (checked finite by the leaf search)
+        plan = None
+        meeting = -1
+        if figures is not None and figures.frame_times_known:  # this frame's tiers, from its prediction
+            plan = index.frame_tiers(fid, self.frontiers[fid], figures, self.fps, rate, self.static_power_w)
+            meeting = plan.mask(weights)
+            fr = plan.lists(meeting)
+        elif rate == self.fps:
             fr = index.frontier_lists(fid, self.frontiers[fid], rate)
         else:
             fr = index.frontier_lists_at(fid, self.frontiers[fid], self.fps, rate,
@@ -272,28 +294,36 @@ class ParetoStore:
         packed = fr.packed[i]
         indices, settings = index.decoded(packed)
         error, power = fr.error[i], fr.power[i]
-        weights: tuple[float, ...] = ()
-        figures = None if self.priced is None else self.priced[fid]
+        frame_time, reached, meets = fr.frame_time[i], fr.fps_reached[i], fr.meets[i]
+        if plan is not None:  # the frame's prediction, which its tiers were drawn from
+            frame_time, reached, meets = plan.predicted(weights, packed)
         if figures is not None:
-            forward = (-rot[2], -rot[5], -rot[8])  # the camera looks down its local -Z
-            weights = figures.weights(position, forward)  # (checked finite by the leaf search)
             error, power = self._expected(figures, weights, packed, error, power, fr.frame_time[i], rate)
         return LookupResult(indices, packed, settings, fr.power[i], fr.error[i], clamped, infeasible,
-                            corner, view, leaf, fr.frame_time[i], fr.fps_reached[i], fr.meets[i], rate,
+                            corner, view, leaf, frame_time, reached, meets, rate,
                             fid, i, "power" if power_budget is not None else "error", budget, priority,
-                            error, power, weights)
+                            error, power, weights, meeting)
 
     def _expected(self, figures: PricedFigures, weights: Sequence[float], packed: int, error: float,
                   power: float, frame_time_s: float | None, rate: float) -> tuple[float, float]:
         """(error, power) of ``packed`` interpolated at a camera (``weights``), its power at the frame
-        rate ``rate`` asked for; ``error`` and ``power`` (the stored figures) when the frontier has no
-        figures for it."""
+        rate ``rate`` asked for (each camera's repriced with its own frame time where those are kept,
+        else the interpolated power with ``frame_time_s``, the stored one); ``error`` and ``power`` (the
+        stored figures) when the frontier has no figures for it."""
+        static = self.static_power_w
+        other = rate != self.fps and static is not None
+        if other and figures.frame_times_known:
+            def reprice(p: float, t: float) -> float:
+                return power_at_rate(p, t, self.fps, rate, static)  # type: ignore[arg-type]
+
+            got = figures.expected(weights, packed, reprice)
+            return (error, power) if got is None else got
         got = figures.expected(weights, packed)
         if got is None:
             return error, power
         e, p = got
-        if rate != self.fps and frame_time_s is not None and self.static_power_w is not None:
-            p = power_at_rate(p, frame_time_s, self.fps, rate, self.static_power_w)
+        if other and frame_time_s is not None:
+            p = power_at_rate(p, frame_time_s, self.fps, rate, static)  # type: ignore[arg-type]
         return e, p
 
     def expected(self, hit: LookupResult, point: FrontierPoint) -> tuple[float, float]:
@@ -304,6 +334,8 @@ class ParetoStore:
         if figures is None or not hit.weights:
             return point.error, point.power_w
         rate = self.fps if hit.fps_target is None else hit.fps_target
+        # (a point's frame time is its stored one unless the frontier keeps per-camera frame times, and
+        # then each camera's own reprices its power)
         return self._expected(figures, hit.weights, point.packed, point.error, point.power_w,
                               point.frame_time_s, rate)
 

@@ -16,13 +16,22 @@ the lookup predicts a frame's error and power as their Shepard interpolation at 
 distance in units of the frames' median viewing distance plus squared difference of the unit view
 directions; the sample camera is the group's medoid in it and the guards its farthest frames). An
 interpolation lies between the cameras' figures, so the prediction never exceeds the bound the budget
-was checked against. Stdlib + numpy only (the add-on carries it).
+was checked against.
+
+The figures may include each point's frame time at each pricing camera (``frame_time_s``; optional: a
+store made before keeps none). The worst frame time over the cameras draws the frontier's stored tiers
+(:mod:`.frontier`: a point slow at one guard camera is in the slow tier for every frame the frontier
+serves); with per-camera frame times the lookup instead predicts each point's frame time at the frame's
+camera by the same interpolation (:meth:`PricedFigures.frame_time`, the same weights) and draws the
+frame's tiers from that prediction (:mod:`.lookup`): a point that keeps up at the sample camera and
+misses the rate only at a far guard is a real-time point at frames near the sample. Stdlib + numpy only
+(the add-on carries it).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -64,8 +73,9 @@ class PricedFigures:
     """One frontier's figures at each of its ``K`` pricing cameras (the sample camera first): ``eyes``
     and unit ``forwards`` (K, 3), the dissimilarity's distance unit ``scale`` (the median viewing
     distance of the frames the frontier serves), and ``error`` / ``power_w`` (K, n) of the frontier's
-    ``n`` points in frontier order (``packed``, the frontier's own settings). The frontier's stored
-    figures are the worst over the cameras."""
+    ``n`` points in frontier order (``packed``, the frontier's own settings), and optionally their frame
+    times ``frame_time_s`` (K, n; None: not kept). The frontier's stored figures are the worst over the
+    cameras."""
 
     eyes: np.ndarray
     forwards: np.ndarray
@@ -73,8 +83,11 @@ class PricedFigures:
     packed: np.ndarray
     error: np.ndarray
     power_w: np.ndarray
-    _column: dict[int, tuple[tuple[float, ...], tuple[float, ...]]] = field(init=False, repr=False,
-                                                                            compare=False)
+    frame_time_s: np.ndarray | None = None
+    _column: dict[int, tuple[int, tuple[float, ...], tuple[float, ...]]] = field(init=False, repr=False,
+                                                                                 compare=False)
+    #: per point (frontier order): its frame time at each camera, and the least and largest of them
+    _times: tuple[tuple[tuple[float, ...], float, float], ...] = field(init=False, repr=False, compare=False)
     _cams: tuple[tuple[float, float, float, float, float, float], ...] = field(init=False, repr=False,
                                                                               compare=False)
 
@@ -98,14 +111,44 @@ class PricedFigures:
             raise ValueError("the pricing cameras' distance scale must be positive and finite")
         if not (np.all(np.isfinite(self.error)) and np.all(np.isfinite(self.power_w))):
             raise ValueError("priced figures must be finite")
+        self._times = ()
+        if self.frame_time_s is not None:
+            self.frame_time_s = np.asarray(self.frame_time_s, dtype=np.float64).reshape(k, n)
+            if not (np.all(np.isfinite(self.frame_time_s)) and np.all(self.frame_time_s >= 0)):
+                raise ValueError("per-camera frame times must be finite and >= 0")
+            self._times = tuple((tuple(col), min(col), max(col)) for col in self.frame_time_s.T.tolist())
         # plain floats for the per-frame lookup (a few cameras: no numpy call per query)
         err, pw = self.error.T.tolist(), self.power_w.T.tolist()
-        self._column = {int(p): (tuple(err[j]), tuple(pw[j])) for j, p in enumerate(self.packed.tolist())}
+        self._column = {int(p): (j, tuple(err[j]), tuple(pw[j])) for j, p in enumerate(self.packed.tolist())}
         self._cams = tuple((*e, *f) for e, f in zip(self.eyes.tolist(), self.forwards.tolist(), strict=True))
 
     @property
     def cameras(self) -> int:
         return int(self.eyes.shape[0])
+
+    @property
+    def frame_times_known(self) -> bool:
+        """Whether each point's frame time at each camera is kept (else only the worst, in the frontier)."""
+        return self.frame_time_s is not None
+
+    def frame_time(self, weights: Sequence[float], point: int) -> float:
+        """The frame time of the frontier's ``point`` (its place in frontier order) interpolated with
+        ``weights``, held within its cameras' least and largest frame time (the weights sum to 1 up to
+        rounding): the prediction the lookup draws a frame's tiers from. Needs :attr:`frame_times_known`."""
+        times, lo, hi = self._times[point]
+        if len(weights) != len(times):
+            raise ValueError("one weight per pricing camera")
+        if lo == hi:  # every camera's the same (what the interpolation, held within them, gives)
+            return lo
+        t = 0.0
+        for w, v in zip(weights, times):  # noqa: B905 (lengths checked)
+            t += w * v
+        return min(max(t, lo), hi)
+
+    def frame_time_range(self, point: int) -> tuple[float, float]:
+        """The least and largest frame time of the frontier's ``point`` over the cameras."""
+        _, lo, hi = self._times[point]
+        return lo, hi
 
     def weights(self, eye: Sequence[float], forward: Sequence[float]) -> tuple[float, ...]:
         """Each pricing camera's weight for a frame at ``eye`` looking along the unit ``forward``."""
@@ -117,15 +160,27 @@ class PricedFigures:
                  for a, b, c, u, v, w in self._cams]
         return shepard_weights(costs)
 
-    def expected(self, weights: Sequence[float], packed: int) -> tuple[float, float] | None:
+    def point(self, packed: int) -> int | None:
+        """The place of setting ``packed`` in frontier order (None: not a point of this frontier)."""
+        col = self._column.get(int(packed))
+        return None if col is None else col[0]
+
+    def expected(self, weights: Sequence[float], packed: int,
+                 reprice: Callable[[float, float], float] | None = None) -> tuple[float, float] | None:
         """(error, power) of setting ``packed`` interpolated with ``weights`` (None: not a point of this
-        frontier)."""
+        frontier). ``reprice(power, frame time)``: each camera's power for another frame rate, applied
+        at each camera with its own frame time before the interpolation (None: as priced; with no
+        per-camera frame times, applied to the interpolated power with the frontier's worst frame time
+        by the caller)."""
         col = self._column.get(int(packed))
         if col is None:
             return None
         if len(weights) != len(self._cams):
             raise ValueError("one weight per pricing camera")
-        err, pw = col
+        j, err, pw = col
+        if reprice is not None and self._times:
+            times = self._times[j][0]
+            pw = tuple(reprice(p, t) for p, t in zip(pw, times, strict=True))
         e = p = 0.0
         for k, w in enumerate(weights):
             e += w * err[k]
