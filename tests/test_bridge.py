@@ -7,7 +7,7 @@ from types import SimpleNamespace
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from service.octree.bridge import ERROR_FLOOR, GAP_RATIO, bridge_candidates, gaps
+from service.octree.bridge import ERROR_FLOOR, GAP_RATIO, bridge_candidates, descents, gaps
 from service.octree.search import FRACTION_BEFORE_DONE
 from tests.test_spread_points import FPS, _run_one_frontier_builder
 
@@ -21,20 +21,48 @@ priced_points = st.lists(st.tuples(indices, st.floats(0.0, 0.5), st.floats(0.0, 
 @given(points=priced_points, k=st.integers(0, 10))
 def test_bridges_are_a_gaps_cheaper_end_with_one_parameter_of_its_dearer_end(points, k) -> None:
     """At most ``k`` settings, none priced already, none twice; each is the cheaper end of a gap of the
-    priced real-time points with exactly one parameter set to the dearer end's value; no gap, no
+    priced real-time points with exactly one parameter set to the dearer end's value, or a descent's
+    slow start with one parameter one value nearer the meeting top's; no gap and no descent, no
     bridge."""
     priced = [pt[0] for pt in points]
     got = bridge_candidates(points, FPS, k, priced)
     found = gaps(points, FPS)
+    down = descents(points, FPS)
     assert len(got) <= max(k, 0) and len(set(got)) == len(got) and not set(got) & set(priced)
     for ratio, cheap, dear in found:
         assert ratio > GAP_RATIO and cheap[2] <= dear[2] and cheap[1] > dear[1]
+    for ratio, start, top in down:
+        assert ratio > GAP_RATIO and start[3] > 1.0 / FPS >= top[3] and start[1] < top[1]
     for x in got:
         assert any(sum(a != b for a, b in zip(x, cheap[0], strict=True)) == 1
                    and all(a in (b, c) for a, b, c in zip(x, cheap[0], dear[0], strict=True))
-                   for _, cheap, dear in found)
-    if not found:
+                   for _, cheap, dear in found) or any(
+            sum(abs(a - b) for a, b in zip(x, start[0], strict=True)) == 1
+            and sum(abs(a - c) for a, c in zip(x, top[0], strict=True))
+            == sum(abs(b - c) for b, c in zip(start[0], top[0], strict=True)) - 1
+            for _, start, top in down)
+    if not found and not down:
         assert got == []
+
+
+def test_a_slow_max_far_more_accurate_than_the_real_time_points_is_stepped_down_toward_them() -> None:
+    """The lab on `desktop`: Max (error 0) misses 30 fps, the most accurate real-time point has error
+    0.05. The bridges step Max one value toward that point in each parameter they differ in (none
+    between two real-time points exists here); the next round starts from the fastest slow point still
+    far more accurate (a step that still misses the rate), not from Max again."""
+    slow_max = ((3, 3, 3), 0.0, 38.0, 0.036)
+    cheap = ((1, 3, 0), 0.05, 20.0, 0.02)
+    assert gaps([cheap, slow_max], FPS) == []
+    assert bridge_candidates([cheap, slow_max], FPS, 8, [cheap[0], slow_max[0]]) == [(2, 3, 3), (3, 3, 2)]
+    step = ((2, 3, 3), 0.004, 37.0, 0.034)  # nearer, still slow
+    (ratio, start, top), = descents([cheap, slow_max, step], FPS)
+    assert start == step and top == cheap and ratio == (0.05 + ERROR_FLOOR) / (0.004 + ERROR_FLOOR)
+    assert bridge_candidates([cheap, slow_max, step], FPS, 8, [cheap[0], slow_max[0], step[0], (3, 3, 2)]) \
+        == [(1, 3, 3), (2, 3, 2)]
+    # a real-time point as accurate as the slow tier (ratio under 2): nothing to descend to
+    assert descents([((2, 3, 3), 0.0005, 30.0, 0.03), slow_max], FPS) == []
+    # no frame rate, or nothing keeps up: one tier, no descent
+    assert descents([cheap, slow_max], None) == [] and descents([slow_max], FPS) == []
 
 
 def test_a_gap_is_measured_with_the_error_floor_so_jumps_near_max_count() -> None:

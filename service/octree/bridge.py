@@ -13,7 +13,17 @@ Where two neighbouring points of the priced meeting tier (power ascending) diffe
 from it), the settings between them are the cheaper point with one parameter taken from the dearer one:
 they keep the cheaper point's savings except where the dearer point differs, one parameter at a time.
 The builder prices them at the frontier's cameras and asks again with what it measured, a few rounds
-(:func:`bridge_candidates`; the store keeps the non-dominated points of all it priced). Pure logic.
+(:func:`bridge_candidates`; the store keeps the non-dominated points of all it priced).
+
+The meeting tier is not the only place the jump shows. Where the GPU cannot run Max at the frame rate
+(the lab and the hall on `desktop` at 320x180: Max at 21-29 fps at their heavy cameras), the priced
+points were a slow Max and then real-time points from error 0.022-0.14 up, while Max with 4 shadow
+samples instead of 16, one step down, keeps 30 fps at error <= 0.0074 at every such frame
+(bench/RESULTS.md, "Real-time settings within 0.02 at the lab's and the hall's slow frames"). Bridging
+between two real-time points never reaches it. So a frontier whose slow tier holds a point far more
+accurate than its meeting tier's most accurate one (:func:`descents`: the same ratio test) also gets that
+slow point stepped one value down toward the meeting point, one parameter at a time: each step saves
+frame time where the two differ, and a step that still misses the rate is the next round's start. Pure logic.
 """
 
 from __future__ import annotations
@@ -56,18 +66,47 @@ def gaps(points: Sequence[tuple[Any, ...]], fps: float | None) -> list[tuple[flo
     return found
 
 
+def descents(points: Sequence[tuple[Any, ...]], fps: float | None) -> list[tuple[float, tuple[Any, ...],
+                                                                                tuple[Any, ...]]]:
+    """(ratio, slow start, meeting top) where the priced slow tier holds points more accurate than the
+    meeting tier's most accurate point (``top``) by more than :data:`GAP_RATIO` (errors with
+    :data:`ERROR_FLOOR`): ``start`` is the fastest of them (least frame time, then least power), the one
+    nearest to keeping up. Empty without a slow tier (no ``fps``, or no point keeps up)."""
+    meeting, slow = split_by_rate(points, fps)
+    if not slow:
+        return []
+    top = min(meeting, key=lambda p: (float(p[1]), float(p[2])))
+    bound = float(top[1]) + ERROR_FLOOR
+    far = [p for p in slow if bound / (float(p[1]) + ERROR_FLOOR) > GAP_RATIO]
+    if not far:
+        return []
+    start = min(far, key=lambda p: (float(p[3]), float(p[2])))
+    return [(bound / (float(start[1]) + ERROR_FLOOR), start, top)]
+
+
+def _step_toward(start: tuple[int, ...], target: tuple[int, ...]) -> list[tuple[int, ...]]:
+    """``start`` with one parameter moved one value toward ``target``'s, for each parameter they differ in."""
+    return [(*start[:p], start[p] + (1 if target[p] > start[p] else -1), *start[p + 1:])
+            for p in range(len(start)) if start[p] != target[p]]
+
+
 def bridge_candidates(points: Sequence[tuple[Any, ...]], fps: float | None, k: int,
                       priced: Collection[tuple[int, ...]]) -> list[tuple[int, ...]]:
     """At most ``k`` settings (index tuples) not in ``priced`` to price between the gaps of ``points``
     ((indices, error, power, frame time) priced at display resolution): for each gap, widest first and
     in turns (one setting of each gap, then the next of each), the cheaper end with one parameter of the
-    dearer end, parameters in the space's order."""
+    dearer end, parameters in the space's order; for a descent (:func:`descents`), ranked by its ratio
+    among the gaps, the slow start with one parameter one value nearer the meeting top's."""
     if k <= 0:
         return []
-    per_gap = []
-    for _, cheap, dear in gaps(points, fps):
+    ranked = []
+    for ratio, cheap, dear in gaps(points, fps):
         lo, hi = tuple(int(v) for v in cheap[0]), tuple(int(v) for v in dear[0])
-        per_gap.append([(*lo[:p], hi[p], *lo[p + 1:]) for p in range(len(lo)) if lo[p] != hi[p]])
+        ranked.append((ratio, [(*lo[:p], hi[p], *lo[p + 1:]) for p in range(len(lo)) if lo[p] != hi[p]]))
+    for ratio, start, top in descents(points, fps):
+        ranked.append((ratio, _step_toward(tuple(int(v) for v in start[0]), tuple(int(v) for v in top[0]))))
+    ranked.sort(key=lambda g: -g[0])
+    per_gap = [cands for _, cands in ranked]
     out: list[tuple[int, ...]] = []
     seen = {tuple(int(v) for v in x) for x in priced}
     for turn in range(max((len(c) for c in per_gap), default=0)):
