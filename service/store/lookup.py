@@ -482,18 +482,11 @@ class LookupIndex:
         at ``hit``'s camera (``hit.weights``)."""
         lists = self.lists_of(hit)
         ranks = [hit.rank] if hit.infeasible else lists.within(hit.budget_mode, hit.budget)
-        if hit.meeting >= 0:  # each point's prediction at the hit's camera (plan.predicted, inlined)
+        if hit.meeting >= 0:  # each point's prediction at the hit's camera
             plan = self._frame_tiers[(hit.frontier, hit.fps_target)]  # type: ignore[index]
-            frame_time, point, weights, fps = plan.figures.frame_time, plan.point, hit.weights, plan.fps
-            period = 1.0 / fps  # meets_frame_rate / frame_rate_reached
-            out = []
-            for k in ranks:
-                pk = lists.packed[k]
-                t = frame_time(weights, point[pk])
-                ok = t <= period
-                out.append(FrontierPoint(self.decoded(pk)[0], pk, lists.power[k], lists.error[k], t,
-                                         fps if ok else 1.0 / t, ok))
-            return out
+            return [FrontierPoint(self.decoded(pk)[0], pk, lists.power[k], lists.error[k],
+                                  *plan.predicted(hit.weights, pk))
+                    for k in ranks for pk in (lists.packed[k],)]
         if lists.points is None:
             lists.points = [FrontierPoint(self.decoded(pk)[0], pk, lists.power[k], lists.error[k],
                                           lists.frame_time[k], lists.fps_reached[k], lists.meets[k])
