@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import itertools
 from types import SimpleNamespace
 
 from hypothesis import given, settings
@@ -18,27 +17,13 @@ priced_points = st.lists(st.tuples(indices, st.floats(0.0, 0.5), st.floats(0.0, 
                          unique_by=lambda pt: pt[0])
 
 
-def _one_step(x, start, target) -> bool:
-    """``x`` is ``start`` with one parameter moved one value toward ``target``'s."""
-    return (sum(abs(a - b) for a, b in zip(x, start, strict=True)) == 1
-            and sum(abs(a - c) for a, c in zip(x, target, strict=True))
-            == sum(abs(b - c) for b, c in zip(start, target, strict=True)) - 1)
-
-
-def _one_of(x, cheap, dear) -> bool:
-    """``x`` is ``cheap`` with exactly one parameter set to ``dear``'s value."""
-    return (sum(a != b for a, b in zip(x, cheap, strict=True)) == 1
-            and all(a in (b, c) for a, b, c in zip(x, cheap, dear, strict=True)))
-
-
 @settings(max_examples=300, deadline=None)
 @given(points=priced_points, k=st.integers(0, 10))
-def test_bridges_are_one_step_from_a_gaps_end_or_down_from_a_slow_point(points, k) -> None:
-    """At most ``k`` settings, none priced already, none twice; each is, for a gap of the priced
-    real-time points, its cheaper end with exactly one parameter set to the dearer end's value or its
-    dearer end with one parameter one value nearer the cheaper end's, or a descent's slow start with one
-    parameter one value nearer the meeting top's; no gap and no descent, no bridge. With room for all,
-    every such setting not priced yet is asked: both ends of every gap are stepped from."""
+def test_bridges_are_a_gaps_cheaper_end_with_one_parameter_of_its_dearer_end(points, k) -> None:
+    """At most ``k`` settings, none priced already, none twice; each is the cheaper end of a gap of the
+    priced real-time points with exactly one parameter set to the dearer end's value, or a descent's
+    slow start with one parameter one value nearer the meeting top's; no gap and no descent, no
+    bridge."""
     priced = [pt[0] for pt in points]
     got = bridge_candidates(points, FPS, k, priced)
     found = gaps(points, FPS)
@@ -48,40 +33,16 @@ def test_bridges_are_one_step_from_a_gaps_end_or_down_from_a_slow_point(points, 
         assert ratio > GAP_RATIO and cheap[2] <= dear[2] and cheap[1] > dear[1]
     for ratio, start, top in down:
         assert ratio > GAP_RATIO and start[3] > 1.0 / FPS >= top[3] and start[1] < top[1]
-
-    def bridges(x) -> bool:
-        between = any(_one_of(x, lo[0], hi[0]) or _one_step(x, hi[0], lo[0]) for _, lo, hi in found)
-        return between or any(_one_step(x, start[0], top[0]) for _, start, top in down)
-
-    assert all(bridges(x) for x in got)
-    grid = set(itertools.product(range(4), repeat=3))
-    every = bridge_candidates(points, FPS, len(grid), priced)
-    assert len(set(every)) == len(every) and set(every) == {x for x in grid if bridges(x)} - set(priced)
-    assert got == every[:len(got)]
+    for x in got:
+        assert any(sum(a != b for a, b in zip(x, cheap[0], strict=True)) == 1
+                   and all(a in (b, c) for a, b, c in zip(x, cheap[0], dear[0], strict=True))
+                   for _, cheap, dear in found) or any(
+            sum(abs(a - b) for a, b in zip(x, start[0], strict=True)) == 1
+            and sum(abs(a - c) for a, c in zip(x, top[0], strict=True))
+            == sum(abs(b - c) for b, c in zip(start[0], top[0], strict=True)) - 1
+            for _, start, top in down)
     if not found and not down:
         assert got == []
-
-
-def test_a_real_time_point_near_max_is_stepped_down_toward_the_next_one() -> None:
-    """The lab on `desktop` after the descent: R (error 0.003) keeps 30 fps, the next real-time point T
-    is at 0.05, Max (error 0) is slow. The gap R-T's settings are asked from both ends, a step down from R
-    first: R with one parameter one value nearer T's, in each parameter they differ in (where cheaper
-    settings well within an error budget of 0.02 are), alternately with T with one of R's parameters."""
-    slow_max = ((3, 3, 3), 0.0, 38.0, 0.036)
-    r = ((3, 3, 2), 0.003, 30.0, 0.03)
-    t = ((1, 2, 0), 0.05, 20.0, 0.02)
-    pts = [t, r, slow_max]
-    (ratio, cheap, dear), = gaps(pts, FPS)
-    assert (cheap, dear) == (t, r) and ratio == (0.05 + ERROR_FLOOR) / (0.003 + ERROR_FLOOR)
-    priced = [t[0], r[0], slow_max[0]]  # the descent from Max (to R) holds nothing new
-    got = bridge_candidates(pts, FPS, 8, priced)
-    assert {(2, 3, 2), (3, 2, 2), (3, 3, 1)} <= set(got)
-    assert got == [(2, 3, 2), (3, 2, 0), (3, 2, 2), (1, 3, 0), (3, 3, 1), (1, 2, 2)]
-    assert bridge_candidates(pts, FPS, 1, priced) == [(2, 3, 2)]
-    # the next round, with R's first step priced (error 0.006, real-time): it is the gap's new dear end
-    step = ((2, 3, 2), 0.006, 27.0, 0.028)
-    got = bridge_candidates([*pts, step], FPS, 8, [*priced, *got])
-    assert got and got[0] == (1, 3, 2)  # down again from the step, toward T
 
 
 def test_a_slow_max_far_more_accurate_than_the_real_time_points_is_stepped_down_toward_them() -> None:
@@ -118,11 +79,10 @@ def test_a_gap_is_measured_with_the_error_floor_so_jumps_near_max_count() -> Non
 
 
 def test_the_widest_gap_gets_the_first_bridges_in_turns() -> None:
-    """Two gaps: the one near Max (0.04 to 0, ratio 41) is asked first, then they take turns; each gap's
-    own list alternates a step down from its dearer end and its cheaper end with one of the dearer's."""
+    """Two gaps: the one near Max (0.04 to 0, ratio 41) is asked first, then they take turns."""
     cheap, mid, best = ((0, 0, 0), 0.28, 1.0, 0.01), ((1, 2, 0), 0.04, 2.0, 0.01), ((3, 3, 3), 0.0, 3.0, 0.01)
     got = bridge_candidates([cheap, mid, best], FPS, 4, [cheap[0], mid[0], best[0]])
-    assert got == [(2, 3, 3), (0, 2, 0), (3, 2, 0), (1, 0, 0)]
+    assert got == [(3, 2, 0), (1, 0, 0), (1, 3, 0), (0, 2, 0)]
 
 
 def _figures(x):

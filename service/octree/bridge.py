@@ -10,18 +10,10 @@ budget of 0.02 then fell back to Max (bench/RESULTS.md, "Chess's error gap on `d
 
 Where two neighbouring points of the priced meeting tier (power ascending) differ in error by more than
 :data:`GAP_RATIO` (each error plus :data:`ERROR_FLOOR`, so that gaps near Max count as much as gaps far
-from it), the settings between them are asked from both ends: the cheaper point with one parameter taken
-from the dearer one (it keeps the cheaper point's savings except where the dearer point differs, one
-parameter at a time), and the dearer point with one parameter one value nearer the cheaper one's (it
-keeps the dearer point's accuracy but for one step). The builder prices them at the frontier's cameras
-and asks again with what it measured, a few rounds (:func:`bridge_candidates`; the store keeps the
-non-dominated points of all it priced), so each side climbs or descends one step a round.
-
-Why both ends, alternately and a step down first: a budget often falls inside a gap near its accurate
-end (the lab's ran from 0.003 to 0.05 for a budget of 0.02), where only steps down from the dearer end
-land; steps up from the cheaper end found chess's bridge, where one parameter held the error. A
-frontier's few points go to its gaps in turns, so alternating gives each gap both kinds in its first two
-turns, whichever side its good settings are on.
+from it), the settings between them are the cheaper point with one parameter taken from the dearer one:
+they keep the cheaper point's savings except where the dearer point differs, one parameter at a time.
+The builder prices them at the frontier's cameras and asks again with what it measured, a few rounds
+(:func:`bridge_candidates`; the store keeps the non-dominated points of all it priced).
 
 The meeting tier is not the only place the jump shows. Where the GPU cannot run Max at the frame rate
 (the lab and the hall on `desktop` at 320x180: Max at 21-29 fps at their heavy cameras), the priced
@@ -102,18 +94,15 @@ def bridge_candidates(points: Sequence[tuple[Any, ...]], fps: float | None, k: i
                       priced: Collection[tuple[int, ...]]) -> list[tuple[int, ...]]:
     """At most ``k`` settings (index tuples) not in ``priced`` to price between the gaps of ``points``
     ((indices, error, power, frame time) priced at display resolution): for each gap, widest first and
-    in turns (one setting of each gap, then the next of each), the dearer end with one parameter one
-    value nearer the cheaper end's and the cheaper end with one parameter of the dearer end, alternately
-    (a step down first), parameters in the space's order; for a descent (:func:`descents`), ranked by
-    its ratio among the gaps, the slow start with one parameter one value nearer the meeting top's."""
+    in turns (one setting of each gap, then the next of each), the cheaper end with one parameter of the
+    dearer end, parameters in the space's order; for a descent (:func:`descents`), ranked by its ratio
+    among the gaps, the slow start with one parameter one value nearer the meeting top's."""
     if k <= 0:
         return []
     ranked = []
     for ratio, cheap, dear in gaps(points, fps):
         lo, hi = tuple(int(v) for v in cheap[0]), tuple(int(v) for v in dear[0])
-        up = [(*lo[:p], hi[p], *lo[p + 1:]) for p in range(len(lo)) if lo[p] != hi[p]]
-        down = _step_toward(hi, lo)
-        ranked.append((ratio, [x for pair in itertools.zip_longest(down, up) for x in pair if x is not None]))
+        ranked.append((ratio, [(*lo[:p], hi[p], *lo[p + 1:]) for p in range(len(lo)) if lo[p] != hi[p]]))
     for ratio, start, top in descents(points, fps):
         ranked.append((ratio, _step_toward(tuple(int(v) for v in start[0]), tuple(int(v) for v in top[0]))))
     ranked.sort(key=lambda g: -g[0])
