@@ -276,6 +276,13 @@ class _FrameTiers:
         return t, frame_rate_reached(t, self.fps), meets_frame_rate(t, self.fps)
 
 
+def _repriced_power(frontier: Frontier, priced_fps: float, fps: float, static_power_w: float) -> list[float]:
+    """Each stored point's power (priced for ``priced_fps``) at the frame-rate target ``fps``."""
+    assert frontier.frame_time_s is not None
+    return [power_at_rate(float(p), float(t), priced_fps, fps, static_power_w)
+            for p, t in zip(frontier.power_w, frontier.frame_time_s, strict=True)]
+
+
 class LookupIndex:
     """Tables derived from a store for fast lookups (built once per store: a store is not changed after
     it is made)."""
@@ -424,8 +431,7 @@ class LookupIndex:
             if len(self._other_rates) > 4096:
                 self._other_rates.clear()
             assert frontier.frame_time_s is not None
-            power = [power_at_rate(float(p), float(t), priced_fps, fps, static_power_w)
-                     for p, t in zip(frontier.power_w, frontier.frame_time_s, strict=True)]
+            power = _repriced_power(frontier, priced_fps, fps, static_power_w)
             repriced = Frontier.from_points(frontier.packed.tolist(), frontier.error.tolist(), power,
                                             frontier.frame_time_s.tolist(), fps)
             lists = _FrontierLists(repriced, fps)
@@ -449,8 +455,7 @@ class LookupIndex:
             else:
                 assert frontier.frame_time_s is not None and static_power_w is not None
                 stored = self.frontier_lists_at(frontier_id, frontier, priced_fps, fps, static_power_w)
-                power = [power_at_rate(float(p), float(t), priced_fps, fps, static_power_w)
-                         for p, t in zip(frontier.power_w, frontier.frame_time_s, strict=True)]
+                power = _repriced_power(frontier, priced_fps, fps, static_power_w)
             plan = self._frame_tiers[key] = _FrameTiers(frontier, figures, fps, power, stored)
         return plan
 
