@@ -207,7 +207,7 @@ class _FrameTiers:
     without per-camera frame times searches); other masks' tiers are drawn on first use and kept."""
 
     __slots__ = ("error", "figures", "fixed", "fps", "frame_time", "frontier", "masks", "mixed", "packed",
-                 "point", "power", "stored", "worst_mask")
+                 "power", "stored", "worst_mask")
 
     #: masks kept per frontier and rate (a frame's mask changes only where a point's prediction crosses
     #: the frame period: a few per frontier along a path)
@@ -232,7 +232,6 @@ class _FrameTiers:
             elif meets_frame_rate(lo, fps):
                 self.mixed.append(j)
         self.masks: dict[int, _FrontierLists] = {}
-        self.point = {int(p): j for j, p in enumerate(self.packed.tolist())}  # packed -> stored point
 
     def mask(self, weights: Sequence[float]) -> int:
         """The stored points predicted to keep up with ``fps`` at the frame the ``weights`` weigh the
@@ -269,7 +268,7 @@ class _FrameTiers:
     def predicted(self, weights: Sequence[float], packed: int) -> tuple[float, float, bool]:
         """(frame time, frame rate reached, whether it keeps up with ``fps``) of stored setting ``packed``
         predicted at the frame the ``weights`` are for."""
-        j = self.point.get(packed)
+        j = self.figures.point(packed)  # the figures list the stored points in frontier order
         if j is None:
             raise ValueError("not a point of this frontier")
         t = self.figures.frame_time(weights, j)
