@@ -1,12 +1,12 @@
 """Where the tile estimator's traced pixels go: the sampled blocks, their SSIM margins, the whole tiles
 that hold them, and the planned windows with their aprons (``service.display_pricing.windows``), as a
-share of the frame, for the apron of whole tiles a window traced before and the pixel apron the native
-core traces now (``sim_core.window_apron``).
+share of the frame: the previous planning (every tile holding a needed pixel traced whole, on the tile
+grid) and the current one (the sampled tiles whole, the margins' tiles cut to the pixels the SSIM reads).
 
 For each scene, evenly spread path frames at the display size, the estimator's sample at each share, at
-the maximum-quality setting (the reference every camera traces). With ``--rays`` the planned windows are
-also rendered: the apron's rays (``render_window(...).extra["apron_rays"]``, real work in no counter)
-against the windows' counted rays.
+the maximum-quality setting (the reference every camera traces). With ``--rays`` both plans' windows
+are also rendered: every ray they trace (counted and apron, ``render_window(...).extra["apron_rays"]``),
+the current plan's against the previous one's.
 
     .venv/bin/python bench/bench_window_area.py teapot chess --size 640x360 --cameras 2 --rays
 """
@@ -43,8 +43,9 @@ def main() -> None:
     args = ap.parse_args()
     space = default_space()
     print(f"display {args.size[0]}x{args.size[1]}, maximum quality, shares of the frame's pixels")
-    print("| scene | camera | share | block / tile px | sampled blocks | + SSIM margins | whole tiles | "
-          "traced, whole-tile apron | traced, pixel apron (px) | windows | apron rays / counted rays |")
+    print("| scene | camera | share | block / tile / apron px | sampled blocks | + SSIM margins | "
+          "whole tiles | traced, whole tiles (before) | traced, margins cut (after) | "
+          "windows before / after | rays after / before |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for name in args.scenes:
         d0 = REPO / "blend_scenes" / "build" / name
@@ -63,7 +64,7 @@ def main() -> None:
                 w, h = sim_core.render_size(full_cam, s)
                 ts = s.tile_size
                 blocks = d.sampled.tolist()
-                need, _owner, _counted, tiles = needed_tiles(d, blocks, w, h, ts)
+                need, _owner, counted, tiles = needed_tiles(d, blocks, w, h, ts)
                 sampled = np.zeros((h, w), dtype=bool)
                 sx, sy = w / d.W, h / d.H
                 for b in blocks:
@@ -73,21 +74,24 @@ def main() -> None:
                 ys, xs = np.nonzero(tiles)
                 tile_px = int(np.sum(np.minimum(ts, w - xs * ts) * np.minimum(ts, h - ys * ts)))
                 a = apron_pixels(s)
-                old = traced_area(plan_windows(tiles, w, h, ts, ts), w, h, ts)
-                windows = plan_windows(tiles, w, h, ts, a)
-                new = traced_area(windows, w, h, a)
+                before = plan_windows(tiles, w, h, ts, a)
+                after = plan_windows(counted, w, h, ts, a, need)
                 frame = w * h
                 rays = "-"
                 if args.rays:
-                    apron = counted = 0
-                    for win in windows:
-                        r = sim_core.render_window(scene, full_cam, s, win, threads=args.threads)
-                        apron += r.extra["apron_rays"]
-                        counted += r.counters["rays_total"]
-                    rays = f"{apron / counted:.3f}" if counted else "-"
-                print(f"| {name} | {k} | {share:g} | {d.B} / {ts} | {sampled.sum() / frame:.2f} | "
-                      f"{need.sum() / frame:.2f} | {tile_px / frame:.2f} | {old / frame:.2f} | "
-                      f"{new / frame:.2f} ({a}) | {len(windows)} | {rays} |", flush=True)
+                    total = []
+                    for windows in (before, after):
+                        n = 0
+                        for win in windows:
+                            r = sim_core.render_window(scene, full_cam, s, win, threads=args.threads)
+                            n += r.counters["rays_total"] + r.extra["apron_rays"]
+                        total.append(n)
+                    rays = f"{total[1] / total[0]:.2f}" if total[0] else "-"
+                print(f"| {name} | {k} | {share:g} | {d.B} / {ts} / {a} | {sampled.sum() / frame:.2f} | "
+                      f"{need.sum() / frame:.2f} | {tile_px / frame:.2f} | "
+                      f"{traced_area(before, w, h, a) / frame:.2f} | "
+                      f"{traced_area(after, w, h, a) / frame:.2f} | "
+                      f"{len(before)} / {len(after)} | {rays} |", flush=True)
 
 
 if __name__ == "__main__":

@@ -201,15 +201,45 @@ def test_a_share_of_the_blocks_estimates_the_whole_frame(scene, eye, seed, size,
 
 
 # -- the windows traced ----------------------------------------------------------------------------------
-def _tile_windows(mask, width, height, tile, apron):
-    """One window per tile: the most aprons any cover pays."""
-    ys, xs = np.nonzero(mask)
+def _tiles_of(mask, width, height, tile, reads=None):
+    """``mask``'s tiles and those holding a pixel of ``reads``."""
+    if reads is None:
+        return np.asarray(mask, dtype=bool)
+    held = np.add.reduceat(np.add.reduceat(reads.astype(np.int32), np.arange(0, height, tile), axis=0),
+                           np.arange(0, width, tile), axis=1) > 0
+    return np.asarray(mask, dtype=bool) | held
+
+
+def _tile_windows(mask, width, height, tile, apron, reads=None):
+    """One window per tile (those of ``mask`` and those holding a pixel of ``reads``, whole): the most
+    aprons any cover pays."""
+    ys, xs = np.nonzero(_tiles_of(mask, width, height, tile, reads))
     return [(x * tile, y * tile, min(tile, width - x * tile), min(tile, height - y * tile))
             for y, x in zip(ys.tolist(), xs.tolist(), strict=True)]
 
 
-def _whole_frame(mask, width, height, tile, apron):
+def _whole_tiles(mask, width, height, tile, apron, reads=None):
+    """The previous planning: every tile holding a needed pixel traced whole, on the tile grid."""
+    return plan_windows(_tiles_of(mask, width, height, tile, reads), width, height, tile, apron)
+
+
+def _whole_frame(mask, width, height, tile, apron, reads=None):
     return [(0, 0, width, height)]
+
+
+def _random_reads(rng, width, height, tile, share):
+    """Sampled tiles and the pixels around them a margin of 1 to 6 pixels reads (as the SSIM's), plus a
+    few stray pixel rectangles."""
+    nty, ntx = -(-height // tile), -(-width // tile)
+    mask = rng.random((nty, ntx)) < share
+    reads = np.zeros((height, width), dtype=bool)
+    for ty, tx in zip(*np.nonzero(mask), strict=True):
+        m = int(rng.integers(1, 7))
+        reads[max(0, ty * tile - m):(ty + 1) * tile + m, max(0, tx * tile - m):(tx + 1) * tile + m] = True
+    for _ in range(int(rng.integers(0, 4))):
+        x, y = int(rng.integers(0, width)), int(rng.integers(0, height))
+        reads[y:y + int(rng.integers(1, 2 * tile)), x:x + int(rng.integers(1, 2 * tile))] = True
+    return mask, reads
 
 
 @settings(max_examples=150, deadline=None)
@@ -238,6 +268,47 @@ def test_planned_windows_cover_the_tiles_and_never_trace_more_than_the_frame(wid
         assert windows == []
 
 
+@settings(max_examples=150, deadline=None)
+@given(st.integers(1, 300), st.integers(1, 200), st.sampled_from([4, 8, 16, 32]), st.integers(0, 12),
+       st.floats(0.0, 0.6), st.integers(0, 10_000))
+def test_planned_windows_trace_margin_tiles_only_where_they_are_read(width, height, tile, apron, share,
+                                                                     seed) -> None:
+    """With the pixels the SSIM reads given, the windows are disjoint, hold every sampled tile whole in
+    one window (its counters are the frame's), cover every pixel read, and never trace more than the
+    previous planning (every tile holding a read pixel whole, on the tile grid) nor the whole frame."""
+    mask, reads = _random_reads(np.random.default_rng(seed), width, height, tile, share)
+    windows = plan_windows(mask, width, height, tile, apron, reads)
+    hits = np.zeros((height, width), dtype=np.int32)
+    for x, y, w, h in windows:
+        assert w >= 1 and h >= 1 and x >= 0 and y >= 0 and x + w <= width and y + h <= height
+        hits[y:y + h, x:x + w] += 1
+    assert hits.max(initial=0) <= 1  # disjoint
+    assert (hits[reads] == 1).all()
+    for ty, tx in zip(*np.nonzero(mask), strict=True):
+        x0, y0 = tx * tile, ty * tile
+        x1, y1 = min(x0 + tile, width), min(y0 + tile, height)
+        assert any(x <= x0 and y <= y0 and x1 <= x + w and y1 <= y + h for x, y, w, h in windows)
+    cost = traced_area(windows, width, height, apron)
+    assert cost <= width * height
+    assert cost <= traced_area(_whole_tiles(mask, width, height, tile, apron, reads), width, height, apron)
+    if not (mask.any() or reads.any()):
+        assert windows == []
+
+
+def test_margin_tiles_are_traced_only_where_the_ssim_reads_them() -> None:
+    """Two sampled 16-px tiles side by side and a 3-pixel margin around them: the margin's tiles are cut
+    to it, so the windows trace the 38 x 22 pixels and their apron, not the 4 x 3 tiles round them."""
+    width, height, tile, apron = 128, 96, 16, 3
+    mask = np.zeros((6, 8), dtype=bool)
+    mask[2, 3:5] = True
+    reads = np.zeros((height, width), dtype=bool)
+    reads[32 - 3:48 + 3, 48 - 3:80 + 3] = True
+    windows = plan_windows(mask, width, height, tile, apron, reads)
+    assert windows == [(45, 29, 38, 22)]
+    assert traced_area(windows, width, height, apron) == 44 * 28
+    assert traced_area(_whole_tiles(mask, width, height, tile, apron, reads), width, height, apron) == 70 * 54
+
+
 def test_traced_area_counts_the_aprons_clipped_to_the_frame() -> None:
     assert traced_area([(16, 16, 16, 16)], 64, 64, 3) == 22 * 22
     assert traced_area([(0, 0, 16, 16)], 64, 64, 3) == 19 * 19
@@ -261,7 +332,8 @@ def test_the_planned_apron_is_the_native_cores(mode, block, ao, apron) -> None:
 @pytest.mark.parametrize("share", [0.25, 1.0])
 def test_the_windows_traced_change_only_the_cost(scene, monkeypatch, share) -> None:
     """The estimator's figures are the same, to the last digit, whether the sampled tiles are traced as
-    planned, as one window each (the most aprons) or as the whole frame."""
+    planned (the margins' tiles only where the SSIM reads them), every needed tile whole on the tile grid
+    (the previous planning), as one window each (the most aprons) or as the whole frame."""
     cam = _camera(192, 112, (3.0, -4.5, 1.8))
     sets = _settings(3, seed=8)
     pricing = DisplayPricing("tiles", fraction=share, seed=3)
@@ -273,31 +345,45 @@ def test_the_windows_traced_change_only_the_cost(scene, monkeypatch, share) -> N
                                       pricing=pricing)]
 
     planned = figures()
-    for plan in (_tile_windows, _whole_frame):
+    for plan in (_whole_tiles, _tile_windows, _whole_frame):
         monkeypatch.setattr(tracing, "plan_windows", plan)
         assert figures() == planned, plan.__name__
     _DESIGNS.clear()
 
 
 def test_the_sampled_tiles_are_the_whole_frames(scene) -> None:
-    """Counters, histograms and pixels of the sampled tiles, traced through the planned windows, equal
-    those of one whole-frame window at every mode the space has."""
+    """Counters, histograms and pixels of the sampled tiles, traced through the planned windows (off the
+    tile grid where they cut the margins' tiles), equal those of one whole-frame window and of the
+    previous planning's whole tiles, in the per-pixel and the adaptive modes."""
     cam = _camera(192, 112, (3.0, -4.5, 1.8))
     pricing = DisplayPricing("tiles", fraction=0.25, seed=3)
     renderer = tracing.Renderer(scene, None)
     d, _ = build_design(renderer, cam, SPACE, pricing, "ssim")
     full_cam, _ = display_cameras(cam, pricing)
     blocks = d.sampled.tolist()
-    for idx in _settings(4, seed=9):
+    modes = set()
+    for idx in _settings(6, seed=9):
         s = SPACE.to_settings(idx)
+        w, h = sim_core.render_size(full_cam, s)
+        ts, apron = s.tile_size, apron_pixels(s)
+        need, _owner, counted, _tiles = tracing.needed_tiles(d, blocks, w, h, ts)
+        windows = plan_windows(counted, w, h, ts, apron, need)
+        # the margins' tiles cut: off the tile grid, fewer pixels than tracing them whole
+        assert any(x % ts or y % ts or (ww % ts and x + ww < w) or (wh % ts and y + wh < h)
+                   for x, y, ww, wh in windows)
+        assert traced_area(windows, w, h, apron) < traced_area(_whole_tiles(counted, w, h, ts, apron, need),
+                                                               w, h, apron)
+        modes.add(s.mode)
         planned = renderer.windows(full_cam, s, blocks, d)
-        whole = renderer.windows(full_cam, s, blocks, d, plan=_whole_frame)
-        for a, b in zip(planned[1:4], whole[1:4], strict=True):
-            np.testing.assert_array_equal(a, b)
-        pa = tracing.display_patches(planned[0], planned[4], d, blocks)
-        pb = tracing.display_patches(whole[0], whole[4], d, blocks)
-        for b in blocks:
-            np.testing.assert_array_equal(pa[b], pb[b])
+        for plan in (_whole_frame, _whole_tiles):
+            other = renderer.windows(full_cam, s, blocks, d, plan=plan)
+            for a, b in zip(planned[1:4], other[1:4], strict=True):
+                np.testing.assert_array_equal(a, b)
+            pa = tracing.display_patches(planned[0], planned[4], d, blocks)
+            pb = tracing.display_patches(other[0], other[4], d, blocks)
+            for b in blocks:
+                np.testing.assert_array_equal(pa[b], pb[b])
+    assert {"fsaa", "undersample", "supersample"} <= modes  # the adaptive modes among them
 
 
 # -- the optimiser's store --------------------------------------------------------------------------------

@@ -4,6 +4,7 @@ per-tile counters (what the display-resolution tile estimator relies on)."""
 from __future__ import annotations
 
 import dataclasses
+import itertools
 
 import numpy as np
 import pytest
@@ -40,15 +41,50 @@ def test_window_on_the_tile_grid_traces_the_frames_tiles(scene, mode, scale):
     assert part.counters["rays_total"] == int(full.tile_counters[rows, 6].sum())
 
 
-def test_window_off_the_grid(scene):
+@pytest.mark.parametrize(("mode", "block", "ao"), [
+    ("1spp", 2, 0), ("1spp", 2, 2), ("fsaa", 2, 0), ("fsaa", 3, 2), ("undersample", 2, 0),
+    ("undersample", 4, 2), ("supersample", 2, 2), ("supersample", 3, 0)])
+def test_a_window_off_the_grid_keeps_the_frames_tile_grid(scene, mode, block, ao):
+    """A window off the tile grid has the frame's pixels and AOVs in every mode (the adaptive ones too:
+    the frame's tile grid is kept inside it); its whole tiles have the frame's counters and histograms, and
+    the tiles its edges cut are reported as their parts, traced with fewer rays than the whole tiles."""
+    cam = effects_camera(72, 52)
+    s = sim_core.RenderSettings(mode=mode, block=block, shadow_samples=2, ao_samples=ao, max_depth=1,
+                                tile_size=8)
+    full = sim_core.render(scene, cam, s, threads=2)
+    by_origin = {(t["x0"], t["y0"]): i for i, t in enumerate(full.tile_stats)}
+    for x, y, ww, wh in ((5, 3, 17, 11), (3, 0, 30, 28), (0, 13, 72, 5), (61, 45, 11, 7), (9, 9, 6, 2)):
+        part = sim_core.render_window(scene, cam, s, (x, y, ww, wh), threads=2)
+        np.testing.assert_array_equal(part.image, full.image[y:y + wh, x:x + ww])
+        for name, aov in part.aovs.items():
+            np.testing.assert_array_equal(aov, full.aovs[name][y:y + wh, x:x + ww], err_msg=name)
+        rects = [(t["x0"], t["y0"], t["width"], t["height"]) for t in part.tile_stats]
+        # the frame's grid clipped to the window, row-major
+        xs = sorted({x, x + ww} | {v for v in range(0, 72, 8) if x < v < x + ww})
+        ys = sorted({y, y + wh} | {v for v in range(0, 52, 8) if y < v < y + wh})
+        assert rects == [(x0, y0, x1 - x0, y1 - y0) for y0, y1 in itertools.pairwise(ys)
+                         for x0, x1 in itertools.pairwise(xs)]
+        size = {(t["x0"], t["y0"]): (t["width"], t["height"]) for t in full.tile_stats}
+        whole = [(i, by_origin[r[:2]]) for i, r in enumerate(rects) if size.get(r[:2]) == r[2:]]
+        cut = [i for i in range(len(rects)) if i not in {a for a, _ in whole}]
+        if whole:
+            a, b = (list(v) for v in zip(*whole, strict=True))
+            np.testing.assert_array_equal(part.tile_counters[a], full.tile_counters[b])
+            np.testing.assert_array_equal(part.tile_histograms[a], full.tile_histograms[b])
+        assert cut  # every window here cuts tiles
+        frame_rays = {(t["x0"] // 8, t["y0"] // 8): int(full.tile_counters[i, RAYS])
+                      for i, t in enumerate(full.tile_stats)}
+        for i in cut:
+            assert part.tile_counters[i, RAYS] <= frame_rays[(rects[i][0] // 8, rects[i][1] // 8)]
+        assert part.counters["rays_total"] == int(part.tile_counters[:, RAYS].sum())
+        if (x, y, ww, wh) == (5, 3, 17, 11):
+            assert part.counters["rays_total"] < int(full.tile_counters[[
+                by_origin[(tx, ty)] for tx in (0, 8, 16) for ty in (0, 8)], RAYS].sum())
+
+
+def test_a_windows_bounds_are_checked(scene):
     cam = effects_camera(48, 32)
     fsaa = sim_core.RenderSettings(mode="fsaa", shadow_samples=4, tile_size=8)
-    full = sim_core.render(scene, cam, fsaa)
-    part = sim_core.render_window(scene, cam, fsaa, (5, 3, 17, 11))
-    np.testing.assert_array_equal(part.image, full.image[3:14, 5:22])
-    with pytest.raises(ValueError, match="tile grid"):
-        sim_core.render_window(scene, cam, sim_core.RenderSettings(mode="undersample", tile_size=8),
-                               (5, 3, 17, 11))
     with pytest.raises(ValueError, match="inside"):
         sim_core.render_window(scene, cam, fsaa, (40, 0, 16, 8))
     with pytest.raises(ValueError, match="window must be"):

@@ -24,13 +24,16 @@ The tile estimator, for one camera and the settings priced there:
    sampling interval is taken with certainty.
 4. **Display-resolution values.** The sampled blocks are traced at display resolution as windows of
    the frame (``sim_core.render_window``: the frame's own pixels and per-tile counters; tiles are cold-
-   cache units, so counters add exactly). SSIM needs half a window of margin around a block: the whole
-   tiles that hold the block and its margin are traced. A window that goes through the resolve pass
-   (FSAA, supersampling, AO) also traces an apron of the few pixels its filters read on each side, so
-   the tiles are traced as few, large windows on the tile grid: the cheapest (aprons included) of bands
-   of rows, bands of columns, the tiles' exact cover by rectangles and the whole frame, so never more
-   than a whole frame (``windows``). y_b = the block's sum of 1 - local SSIM (an SSIM of the block and
-   its margin, whose inner part is the block) and its tiles' counters.
+   cache units, so counters add exactly). SSIM needs half a window of margin around a block: the
+   tiles whose centre lies in the block are traced whole (their counters are the sample's), the margin
+   only where the SSIM reads it (a window keeps the frame's tile grid and traces a tile it cuts only
+   over its part, as the frame has it). A window that goes through the resolve pass (FSAA,
+   supersampling, AO) also traces an apron of the few pixels its filters read on each side, so the
+   pixels are traced as few, large windows: the cheapest (aprons included) of bands of tile rows, bands
+   of tile columns, the tiles' exact cover by rectangles (each window cut to the pixels it must cover)
+   and the whole frame, so never more than a whole frame (``windows``). y_b = the block's sum of
+   1 - local SSIM (an SSIM of the block and its margin, whose inner part is the block) and its tiles'
+   counters.
 5. **Ratio estimators.** Y = X * sum(y_b / pi_b) / sum(x_b / pi_b) over the sampled blocks, for the
    error sum and for each counter (pi_b the inclusion probabilities, X the auxiliary frame's total):
    the sample corrects the auxiliary frame's level, the auxiliary frame spreads the sample's values

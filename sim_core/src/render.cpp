@@ -34,14 +34,38 @@ void FrameBuffers::store(std::size_t p, Vec3 c, const SampleGeometry& g, SampleK
   kind[p] = sample_kind;
 }
 
+namespace {
+
+// Edges of a grid of `ts`-pixel cells over [0, n) with origin `o` (in (-ts, 0]) and the extra `cuts` that
+// fall inside: 0 first, n last, ascending.
+std::vector<int> grid_edges(int n, int ts, int o, const std::vector<int>& cuts) {
+  std::vector<int> e{0};
+  for (int x = o + ts; x < n; x += ts) e.push_back(x);
+  for (const int c : cuts)
+    if (c > 0 && c < n) e.push_back(c);
+  e.push_back(n);
+  std::sort(e.begin(), e.end());
+  e.erase(std::unique(e.begin(), e.end()), e.end());
+  return e;
+}
+
+}  // namespace
+
+TileGrid::TileGrid(int w, int h, int ts, int ox, int oy, const std::vector<int>& cuts_x,
+                   const std::vector<int>& cuts_y)
+    : width(w), height(h), tile_size(ts), origin_x(ox), origin_y(oy), tiles_x(0), tiles_y(0),
+      xs_(grid_edges(w, ts, ox, cuts_x)), ys_(grid_edges(h, ts, oy, cuts_y)) {
+  tiles_x = static_cast<int>(xs_.size()) - 1;
+  tiles_y = static_cast<int>(ys_.size()) - 1;
+}
+
 TileStat TileGrid::tile(std::size_t t) const {
   TileStat s;
-  const int ex = origin_x + static_cast<int>(t % static_cast<std::size_t>(tiles_x)) * tile_size;
-  const int ey = origin_y + static_cast<int>(t / static_cast<std::size_t>(tiles_x)) * tile_size;
-  s.x0 = std::max(0, ex);
-  s.y0 = std::max(0, ey);
-  s.width = std::min(ex + tile_size, width) - s.x0;
-  s.height = std::min(ey + tile_size, height) - s.y0;
+  const std::size_t cx = t % static_cast<std::size_t>(tiles_x), cy = t / static_cast<std::size_t>(tiles_x);
+  s.x0 = xs_[cx];
+  s.y0 = ys_[cy];
+  s.width = xs_[cx + 1] - s.x0;
+  s.height = ys_[cy + 1] - s.y0;
   return s;
 }
 
@@ -131,25 +155,29 @@ RenderOutput render_frame(const Scene& scene, const Camera& camera, const Render
     traced.full_height = camera.frame_height();
   }
   const int wx = camera.crop_x - traced.crop_x, wy = camera.crop_y - traced.crop_y;  // the window in `traced`
-  auto grid_origin = [&](int offset) { return offset % ts == 0 ? 0 : offset % ts - ts; };
-  const TileGrid grid(traced.width, traced.height, ts, grid_origin(wx), grid_origin(wy));
-  // Tile t of `grid` whole (not cut off by the traced area's edges; clipped to the frame's), in the
-  // traced area's pixels: what an adaptive tile's sampling schedule is laid out over.
-  auto whole_tile = [&](std::size_t t) {
-    const int ex = grid.origin_x + static_cast<int>(t % static_cast<std::size_t>(grid.tiles_x)) * ts;
-    const int ey = grid.origin_y + static_cast<int>(t / static_cast<std::size_t>(grid.tiles_x)) * ts;
-    const int x0 = std::max(ex, -traced.crop_x), y0 = std::max(ey, -traced.crop_y);
-    return PixelRect{x0, y0, std::min(ex + ts, traced.frame_width() - traced.crop_x) - x0,
-                     std::min(ey + ts, traced.frame_height() - traced.crop_y) - y0};
+  // The frame's tile grid (edges at multiples of ts in the frame's pixels), here over the traced area and
+  // cut at the window's edges: a window off that grid keeps it, and a tile its edge crosses is traced as
+  // its part in the window (counted) and its part in the apron (not), each as the whole tile has it.
+  auto grid_origin = [&](int crop) { return crop % ts == 0 ? 0 : -(crop % ts); };
+  const TileGrid grid(traced.width, traced.height, ts, grid_origin(traced.crop_x), grid_origin(traced.crop_y),
+                      {wx, wx + camera.width}, {wy, wy + camera.height});
+  // The frame's tile holding `r` whole (not cut off by the traced area's or the window's edges; clipped to
+  // the frame's), in the traced area's pixels: what an adaptive tile's sampling schedule is laid out over.
+  auto whole_tile = [&](const TileStat& r) {
+    const int ex = (traced.crop_x + r.x0) / ts * ts - traced.crop_x;
+    const int ey = (traced.crop_y + r.y0) / ts * ts - traced.crop_y;
+    return PixelRect{ex, ey, std::min(ex + ts, traced.frame_width() - traced.crop_x) - ex,
+                     std::min(ey + ts, traced.frame_height() - traced.crop_y) - ey};
   };
-  const TileGrid window_grid(camera.width, camera.height, ts);
+  const TileGrid window_grid(camera.width, camera.height, ts, grid_origin(camera.crop_x), grid_origin(camera.crop_y));
   // Tile t of `grid`: its index in the window's grid, or -1 in the apron.
   std::vector<std::ptrdiff_t> window_tile(static_cast<std::size_t>(grid.count()), -1);
   std::vector<char> counted(window_tile.size(), 0);
   for (std::size_t t = 0; t < window_tile.size(); ++t) {
     const TileStat r = grid.tile(t);
     if (r.x0 < wx || r.y0 < wy || r.x0 >= wx + camera.width || r.y0 >= wy + camera.height) continue;
-    window_tile[t] = static_cast<std::ptrdiff_t>((r.y0 - wy) / ts) * window_grid.tiles_x + (r.x0 - wx) / ts;
+    window_tile[t] = static_cast<std::ptrdiff_t>((r.y0 - wy - window_grid.origin_y) / ts) * window_grid.tiles_x +
+                     (r.x0 - wx - window_grid.origin_x) / ts;
     counted[t] = 1;
   }
   RenderOutput out;
@@ -165,7 +193,7 @@ RenderOutput render_frame(const Scene& scene, const Camera& camera, const Render
         spacing = multirate_block(previous->block[p], previous->ratio[p], previous->checks[p], settings);
       }
     }
-    const PixelRect tile = whole_tile(t), part{stat.x0, stat.y0, stat.width, stat.height};
+    const PixelRect tile = whole_tile(stat), part{stat.x0, stat.y0, stat.width, stat.height};
     render_tile(ctx, out.fb, tile.x0, tile.y0, tile.width, tile.height, k, spacing, &stat, &part);
   }, texture_cache, &counted);
   for (std::size_t t = 0; t < out.tiles.size(); ++t)

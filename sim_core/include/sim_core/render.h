@@ -62,14 +62,17 @@ struct FrameBuffers {
 
 // The tiles of a frame, row-major: tile t covers [x0, x0 + width) x [y0, y0 + height), clipped to the frame.
 // Tile edges lie at origin + n * tile_size; an origin in (-tile_size, 0] makes the first row/column partial
-// (a window's apron keeps the tile grid of the window it surrounds, its outer tiles cut off by it).
+// (a window's apron keeps the frame's tile grid, its outer tiles cut off by it). Extra cuts (`cuts_x`,
+// `cuts_y`: a window's edges inside its apron, off the grid) split the tiles they cross into parts.
 struct TileGrid {
   int width, height, tile_size, origin_x, origin_y, tiles_x, tiles_y;
-  TileGrid(int w, int h, int ts, int ox = 0, int oy = 0)
-      : width(w), height(h), tile_size(ts), origin_x(ox), origin_y(oy), tiles_x((w - ox + ts - 1) / ts),
-        tiles_y((h - oy + ts - 1) / ts) {}
+  TileGrid(int w, int h, int ts, int ox = 0, int oy = 0, const std::vector<int>& cuts_x = {},
+           const std::vector<int>& cuts_y = {});
   int count() const { return tiles_x * tiles_y; }
   TileStat tile(std::size_t t) const;  // rect set, statistics zero
+
+ private:
+  std::vector<int> xs_, ys_;  // column / row edges: 0 first, width / height last
 };
 
 struct RenderOutput {

@@ -331,11 +331,12 @@ def render_window(
     texture_cache: Any = None,
 ) -> RenderResult:
     """The ``(x, y, width, height)`` window of the frame ``render(scene, camera, settings)`` traces, in
-    pixels of the traced (resolution-scaled) frame, traced alone: rays, sampling seeds and ray cones are
-    the whole frame's. A window on the tile grid (``x``, ``y`` multiples of the tile size, and each side a
-    multiple of it or reaching the frame's edge) traces exactly the frame's tiles there: the same pixels
-    and the same per-tile counters (``tile_counters``, caches cold per tile). Off the grid only the
-    per-pixel modes (1 spp, FSAA) have the frame's pixels there (ValueError for the adaptive ones).
+    pixels of the traced (resolution-scaled) frame, traced alone: rays, sampling seeds, ray cones and the
+    tile grid are the whole frame's, so the window has the frame's pixels anywhere, in every mode. Its
+    tiles are the frame's tiles inside it: a whole tile has the frame's per-tile counters
+    (``tile_counters``, caches cold per tile); a tile the window's edge cuts (a window off the tile grid)
+    is traced only over its part in the window (adaptively, the reference cells holding it), and its
+    ``tile_stats`` rect and counters are that part's.
 
     The result's ``image`` (and AOVs) are the window's pixels at the traced resolution (not upscaled);
     ``render_resolution`` is the whole traced frame's size; ``tile_stats`` carry frame coordinates;
@@ -352,12 +353,6 @@ def render_window(
         raise ValueError(f"window must be (x, y, width, height), got {window!r}") from None
     if ww < 1 or wh < 1 or x < 0 or y < 0 or x + ww > w or y + wh > h:
         raise ValueError(f"window {window!r} is not inside the traced {w}x{h} frame")
-    ts = settings.tile_size
-    on_grid = (x % ts == 0 and y % ts == 0 and (ww % ts == 0 or x + ww == w)
-               and (wh % ts == 0 or y + wh == h))
-    if not on_grid and settings.mode not in ("1spp", "fsaa"):
-        raise ValueError(f"a window of a {settings.mode!r} frame must lie on its {ts}-pixel tile grid, got "
-                         f"{window!r}")
     d = _core.render_frame(scene.native, camera.frame(), camera.vfov, ww, wh, settings.to_native(),
                            _threads(threads), None, *_cache_args(cache),
                            *_cache_args(texture_cache, DEFAULT_TEXTURE_CACHE),
