@@ -112,10 +112,59 @@ void check_windows(const Scene& s) {
     }
 }
 
+// A window off the tile grid keeps the frame's grid: the frame's pixels in every mode (the adaptive ones
+// too), its tiles the frame's cut at its edges, the whole ones with the frame's counters, the cut ones
+// with no more rays than the frame's tiles (fewer in all).
+void check_windows_off_the_grid(const Scene& s) {
+  const Camera cam = test::make_camera(40, 30);
+  RenderSettings st = test::make_settings();  // 8-pixel tiles, AO
+  for (int mode = 0; mode < 4; ++mode)
+    for (int block : {2, 3}) {
+      st.mode = static_cast<SamplingMode>(mode);
+      st.block = block;
+      const RenderOutput whole = render_frame(s, cam, st, 2, nullptr, test::kCache);
+      for (const auto& [x, y, w, h] : {std::array<int, 4>{5, 3, 17, 11}, std::array<int, 4>{3, 10, 37, 20}}) {
+        Camera win = cam;
+        win.crop_x = x;
+        win.crop_y = y;
+        win.width = w;
+        win.height = h;
+        win.full_width = cam.width;
+        win.full_height = cam.height;
+        const RenderOutput part = render_frame(s, win, st, 2, nullptr, test::kCache);
+        bool pixels = part.fb.color.size() == static_cast<std::size_t>(w * h * 3);
+        for (int j = 0; pixels && j < h; ++j)
+          for (int i = 0; i < w * 3; ++i)
+            pixels = pixels && part.fb.color[static_cast<std::size_t>(j * w * 3 + i)] ==
+                                   whole.fb.color[static_cast<std::size_t>(((y + j) * cam.width + x) * 3 + i)];
+        CHECK(pixels);
+        check_tile_sums(part);
+        const int cols = (x + w + 7) / 8 - x / 8, rows = (y + h + 7) / 8 - y / 8;
+        std::uint64_t cut_rays = 0, frame_rays = 0;  // the cut tiles' rays; the frame's tiles there
+        CHECK(part.tiles.size() == static_cast<std::size_t>(cols * rows));
+        for (const TileStat& t : part.tiles) {
+          const int fx = x + t.x0, fy = y + t.y0;  // the tile in the frame's pixels
+          const TileStat& f = whole.tiles[static_cast<std::size_t>(fy / 8 * 5 + fx / 8)];
+          CHECK(t.x0 >= 0 && t.y0 >= 0 && t.x0 + t.width <= w && t.y0 + t.height <= h);
+          if (fx == f.x0 && fy == f.y0 && t.width == f.width && t.height == f.height) {
+            CHECK(t.rays_total == f.rays_total && t.counters.cache_misses == f.counters.cache_misses);
+            CHECK(t.histogram == f.histogram);
+          } else {  // only the reference cells holding its part: never more (adaptively, maybe all)
+            CHECK(t.rays_total <= f.rays_total);
+            cut_rays += t.rays_total;
+            frame_rays += f.rays_total;
+          }
+        }
+        CHECK(cut_rays < frame_rays);
+      }
+    }
+}
+
 }  // namespace
 
 int main() {
   check_render(test::make_scene());
   check_windows(test::make_scene());
+  check_windows_off_the_grid(test::make_scene());
   return check_exit_code();
 }
