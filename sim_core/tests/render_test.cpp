@@ -50,6 +50,29 @@ void check_tile_sums(const RenderOutput& o) {
   CHECK(hist == o.histogram);
 }
 
+// The window [x, x + w) x [y, y + h) of `cam`'s frame.
+Camera window_of(const Camera& cam, int x, int y, int w, int h) {
+  Camera win = cam;
+  win.crop_x = x;
+  win.crop_y = y;
+  win.width = w;
+  win.height = h;
+  win.full_width = cam.width;
+  win.full_height = cam.height;
+  return win;
+}
+
+// Whether a window's pixels are the whole frame's there, bit for bit.
+bool same_pixels(const RenderOutput& part, const RenderOutput& whole, int frame_width, int x, int y, int w,
+                 int h) {
+  bool same = part.fb.color.size() == static_cast<std::size_t>(w * h * 3);
+  for (int j = 0; same && j < h; ++j)
+    for (int i = 0; i < w * 3; ++i)
+      same = same && part.fb.color[static_cast<std::size_t>(j * w * 3 + i)] ==
+                         whole.fb.color[static_cast<std::size_t>(((y + j) * frame_width + x) * 3 + i)];
+  return same;
+}
+
 void check_render(const Scene& s) {
   const Camera cam = test::make_camera();
   const CacheConfig cache = test::kCache;
@@ -86,20 +109,8 @@ void check_windows(const Scene& s) {
       const RenderOutput whole = render_frame(s, cam, st, 2, nullptr, test::kCache);
       const int wx = 8, wy = 8, ww = 16, wh = 8;
       for (const auto& [x, y, w, h] : {std::array<int, 4>{wx, wy, ww, wh}, std::array<int, 4>{0, 16, 40, 14}}) {
-        Camera win = cam;
-        win.crop_x = x;
-        win.crop_y = y;
-        win.width = w;
-        win.height = h;
-        win.full_width = cam.width;
-        win.full_height = cam.height;
-        const RenderOutput part = render_frame(s, win, st, 2, nullptr, test::kCache);
-        bool pixels = part.fb.color.size() == static_cast<std::size_t>(w * h * 3);
-        for (int j = 0; pixels && j < h; ++j)
-          for (int i = 0; i < w * 3; ++i)
-            pixels = pixels && part.fb.color[static_cast<std::size_t>(j * w * 3 + i)] ==
-                                   whole.fb.color[static_cast<std::size_t>(((y + j) * cam.width + x) * 3 + i)];
-        CHECK(pixels);
+        const RenderOutput part = render_frame(s, window_of(cam, x, y, w, h), st, 2, nullptr, test::kCache);
+        CHECK(same_pixels(part, whole, cam.width, x, y, w, h));
         std::uint64_t rays = 0, ring = 0;  // the window's tiles' rays; those of the whole tiles around it
         for (const TileStat& t : whole.tiles) {
           const bool inside = t.x0 >= x && t.x0 < x + w && t.y0 >= y && t.y0 < y + h;
@@ -124,20 +135,8 @@ void check_windows_off_the_grid(const Scene& s) {
       st.block = block;
       const RenderOutput whole = render_frame(s, cam, st, 2, nullptr, test::kCache);
       for (const auto& [x, y, w, h] : {std::array<int, 4>{5, 3, 17, 11}, std::array<int, 4>{3, 10, 37, 20}}) {
-        Camera win = cam;
-        win.crop_x = x;
-        win.crop_y = y;
-        win.width = w;
-        win.height = h;
-        win.full_width = cam.width;
-        win.full_height = cam.height;
-        const RenderOutput part = render_frame(s, win, st, 2, nullptr, test::kCache);
-        bool pixels = part.fb.color.size() == static_cast<std::size_t>(w * h * 3);
-        for (int j = 0; pixels && j < h; ++j)
-          for (int i = 0; i < w * 3; ++i)
-            pixels = pixels && part.fb.color[static_cast<std::size_t>(j * w * 3 + i)] ==
-                                   whole.fb.color[static_cast<std::size_t>(((y + j) * cam.width + x) * 3 + i)];
-        CHECK(pixels);
+        const RenderOutput part = render_frame(s, window_of(cam, x, y, w, h), st, 2, nullptr, test::kCache);
+        CHECK(same_pixels(part, whole, cam.width, x, y, w, h));
         check_tile_sums(part);
         const int cols = (x + w + 7) / 8 - x / 8, rows = (y + h + 7) / 8 - y / 8;
         std::uint64_t cut_rays = 0, frame_rays = 0;  // the cut tiles' rays; the frame's tiles there
