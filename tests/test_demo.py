@@ -53,6 +53,20 @@ def test_demo_searches_and_measures_on_the_profile_it_is_given() -> None:
         demo.parser().parse_args(["--profile", "../etc/passwd"])
 
 
+def test_demo_waits_for_full_size_renders_and_refuses_bad_timeouts() -> None:
+    """One request may take minutes at the path's own size on shared cores (a 300 s limit stopped the
+    valley's main job at 1280x720), so the local service's client waits --request-timeout; timeouts that
+    are not positive finite seconds are refused before anything runs."""
+    from tools import demo
+
+    assert demo.parser().parse_args([]).request_timeout == demo.DEMO_REQUEST_TIMEOUT_S >= 1800.0
+    assert demo.parser().parse_args(["--request-timeout", "90"]).request_timeout == 90.0
+    for flag in ("--request-timeout", "--job-timeout"):
+        for bad in ("0", "-5", "nan", "inf", "soon"):
+            with pytest.raises(SystemExit):
+                demo.parser().parse_args([flag, bad])
+
+
 def test_demo_prices_the_slow_tier_only_when_its_lookups_read_it() -> None:
     """Frame rate first (the default) never picks a setting that misses the rate while one meets it, so
     the demo's store prices max quality alone there (free: the reference render); budget first gets the

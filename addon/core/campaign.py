@@ -62,6 +62,9 @@ ParetoStore = pareto_store.ParetoStore
 
 #: Sample frames are this tall by default (width from the path's aspect).
 SAMPLE_HEIGHT = 72
+#: A sample frame's render may take this long at least, or the client's own timeout if that is longer (the
+#: add-on's preference is 60 s by default; a sample at a large --sample-resolution takes minutes).
+SAMPLE_TIMEOUT_S = 300.0
 
 #: ``progress(pass_label, renders_done, renders_total)``; the counts run over the whole campaign.
 Progress = Callable[[str, int, int], None]
@@ -280,7 +283,7 @@ def write_samples(client: ServiceClient, store: ParetoStore, path: CameraPath, s
                 img = client.render({"scene_id": spec.scene_id, "camera": camera_payload(f, resolution),
                                      "settings": settings, "profile": spec.profile or store.profile,
                                      "fps": measurement_fps(spec.fps, path),
-                                     "format": fmt}, timeout_s=300.0)
+                                     "format": fmt}, timeout_s=max(SAMPLE_TIMEOUT_S, client.timeout_s))
                 target = out_dir / f"frame{i:05d}_{label}.{fmt}"
                 target.write_bytes(img.data)
                 written.append(target)
