@@ -37,7 +37,8 @@ def _default_cache() -> Path:
     return base / "render-budget" / "eval-cache.sqlite"
 
 
-def _positive(text: str) -> float:
+def positive_number(text: str) -> float:
+    """A command-line number that must be positive and finite (a rate, a budget, a timeout)."""
     v = float(text)
     if not (math.isfinite(v) and v > 0):
         raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
@@ -87,7 +88,7 @@ def build_parser() -> argparse.ArgumentParser:
     o.add_argument("--path", type=Path, required=True, help="camera-path JSON")
     o.add_argument("--out", type=Path, required=True, help="where to write the store (JSON)")
     o.add_argument("--profile", default="mobile", help="hardware profile name or file (default: mobile)")
-    o.add_argument("--fps", type=_positive, default=30.0, help="frame rate the power is measured at")
+    o.add_argument("--fps", type=positive_number, default=30.0, help="frame rate the power is measured at")
     options.add_arguments(o)
     o.add_argument("--parameters", default=None, help="comma-separated parameters to search (default: all)")
     o.add_argument("--cache", type=Path, default=None, help=f"evaluation cache (default {_default_cache()})")
@@ -104,7 +105,7 @@ def build_parser() -> argparse.ArgumentParser:
     g = q.add_mutually_exclusive_group(required=True)
     g.add_argument("--direction", type=_finite, nargs=3, metavar=("DX", "DY", "DZ"))
     g.add_argument("--matrix", type=_finite, nargs=16, metavar="M", help="Blender matrix_world, row-major")
-    q.add_argument("--fov", type=_positive, default=None, metavar="DEG", help="vertical field of view")
+    q.add_argument("--fov", type=positive_number, default=None, metavar="DEG", help="vertical field of view")
     b = q.add_mutually_exclusive_group(required=True)
     b.add_argument("--power-budget", type=_finite, metavar="W")
     b.add_argument("--error-budget", type=_finite, metavar="E")
@@ -118,8 +119,8 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--scene", type=Path, required=True, help="the store's scene file")
     v.add_argument("--path", type=Path, required=True, help="camera-path JSON")
     vb = v.add_mutually_exclusive_group(required=True)
-    vb.add_argument("--power-budget", type=_positive, metavar="W")
-    vb.add_argument("--error-budget", type=_positive, metavar="E")
+    vb.add_argument("--power-budget", type=positive_number, metavar="W")
+    vb.add_argument("--error-budget", type=positive_number, metavar="E")
     v.add_argument("--frames", type=int, default=8, help="path frames to render, spread evenly (default 8)")
     v.add_argument("--resolution", type=_size, default=None, metavar="WxH",
                    help="render at this size instead of the path's own")

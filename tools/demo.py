@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import signal
 import subprocess
@@ -40,6 +39,7 @@ from addon.core.job_runner import JobRequest, follow_job
 from addon.core.local_service import LocalService, free_port
 from service import options as option_schema
 from service.camera_path import CameraPath
+from service.cli import positive_number
 from service.verify import markdown
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
@@ -86,8 +86,8 @@ def parser() -> argparse.ArgumentParser:
         option_schema.add_argument(lookup, opt)
     ap.add_argument("--verify-frames", type=int, default=6,
                     help="path frames the store is verified on at its figures' resolution (0: skip)")
-    ap.add_argument("--job-timeout", type=seconds, default=3600.0, help="seconds before giving up")
-    ap.add_argument("--request-timeout", type=seconds, default=DEMO_REQUEST_TIMEOUT_S,
+    ap.add_argument("--job-timeout", type=positive_number, default=3600.0, help="seconds before giving up")
+    ap.add_argument("--request-timeout", type=positive_number, default=DEMO_REQUEST_TIMEOUT_S,
                     help="seconds one request to the local service may take: a render at the path's own "
                          "size of a heavy frame on shared cores takes minutes (default "
                          f"{DEMO_REQUEST_TIMEOUT_S:.0f})")
@@ -121,14 +121,6 @@ DEMO_BRIDGE_POINTS = 0
 #: own 1280x720, with the cores shared with another job, took over the 300 s this was before and stopped a
 #: main job (bench/RESULTS.md, "The valley priced at the path's own 1280x720").
 DEMO_REQUEST_TIMEOUT_S = 1800.0
-
-
-def seconds(text: str) -> float:
-    """A timeout from the command line: a positive, finite number of seconds."""
-    value = float(text)
-    if not (value > 0 and math.isfinite(value)):
-        raise argparse.ArgumentTypeError(f"must be a positive number of seconds, got {text}")
-    return value
 
 
 def demo_slow_points(priority: str) -> int:
