@@ -5,29 +5,38 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 PY     := $(BIN)/python
 STAMP  := $(VENV)/.render-budget-installed
+TEST_STAMP := $(VENV)/.render-budget-test-installed
 NATIVE_SOURCES := $(shell find sim_core -name '*.cpp' -o -name '*.h' -o -name 'CMakeLists.txt' 2>/dev/null) \
                   CMakeLists.txt pyproject.toml
 # A new Python package (or module turned package) changes the editable install's module map: reinstall.
 PY_PACKAGES := $(shell find service sim_core/python -name '__init__.py' 2>/dev/null)
 PYTEST_ARGS ?=
 
-.PHONY: all venv test demo report lint native-tests sanitize bench scenes addon clean
+.PHONY: all venv test-venv test demo report lint native-tests sanitize bench scenes addon clean
 
 all: venv
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
 
-# Build requirements are read from pyproject.toml so that versions stay pinned in one place.
+# Build requirements are read from pyproject.toml so that versions stay pinned in one place. The product
+# and bpy (the scene builds) are what `make demo` needs; the test and bench tools come on top, for the
+# targets that run them (the editable build is incremental then).
 $(STAMP): $(PY) $(NATIVE_SOURCES) $(PY_PACKAGES)
 	flock $(VENV)/.lock sh -c '\
 	  $(PY) -m pip install -q $$($(PY) -c "import tomllib;print(\" \".join(tomllib.load(open(\"pyproject.toml\",\"rb\"))[\"build-system\"][\"requires\"]))") cmake==4.4.4 ninja==1.13.0 && \
-	  $(PY) -m pip install -q --no-build-isolation -e ".[test]"'
+	  $(PY) -m pip install -q --no-build-isolation -e ".[blender]"'
 	touch $(STAMP)
+
+$(TEST_STAMP): $(STAMP)
+	flock $(VENV)/.lock $(PY) -m pip install -q --no-build-isolation -e ".[test]"
+	touch $(TEST_STAMP)
 
 venv: $(STAMP)
 
-test: venv
+test-venv: $(TEST_STAMP)
+
+test: test-venv
 	$(PY) -m pytest $(PYTEST_ARGS)
 
 demo: venv
@@ -48,10 +57,10 @@ report: venv
 	$(PY) -m tools.demo --scene $(SCENE) --out out/$(SCENE)
 
 # Benchmarks print their tables; bench/RESULTS.md records the quoted ones with their commands.
-bench: venv
+bench: test-venv
 	for b in bench/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
 
-lint: venv
+lint: test-venv
 	$(BIN)/ruff check .
 
 # Standalone C++ tests (no Python), optionally under AddressSanitizer + UBSan.
@@ -64,4 +73,4 @@ sanitize: venv
 	  $(BIN)/cmake --build build/sanitize && cd build/sanitize && $(abspath $(BIN))/ctest --output-on-failure
 
 clean:
-	rm -rf build out $(STAMP)
+	rm -rf build out $(STAMP) $(TEST_STAMP)

@@ -20,9 +20,9 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 
 
 def bpy_requirement() -> str:
-    """The bpy pin of the test dependencies (pyproject.toml is the one place versions live)."""
+    """The bpy pin of the ``blender`` extra (pyproject.toml is the one place versions live)."""
     with (REPO_ROOT / "pyproject.toml").open("rb") as fh:
-        deps = tomllib.load(fh)["project"]["optional-dependencies"]["test"]
+        deps = tomllib.load(fh)["project"]["optional-dependencies"]["blender"]
     [pin] = [d for d in deps if d.replace(" ", "").lower().startswith("bpy==")]
     return pin.replace(" ", "")
 
