@@ -19,18 +19,24 @@ all: venv
 $(PY):
 	$(PYTHON) -m venv $(VENV)
 
-# Build requirements are read from pyproject.toml so that versions stay pinned in one place. The product
-# and bpy (the scene builds) are what `make demo` needs; the test and bench tools come on top, for the
-# targets that run them (the editable build is incremental then). --no-compile: Python compiles a module
-# when it is first imported; compiling every installed file up front (bpy ships thousands) took 9 s.
+# The pins are read from pyproject.toml (tools/pins.py) so that versions stay in one place: the installer
+# and build tools (tool.render-budget.bootstrap), the native build's requirements (build-system.requires). uv installs
+# (pip only bootstraps it). The product and bpy (the scene builds) are what `make demo` needs; the test and
+# bench tools come on top, for the targets that run them. uv rebuilds a local package only when its
+# pyproject.toml changed, so the stamp asks it to rebuild this one (ninja's build folder keeps that
+# incremental); the test stamp then finds it installed and adds only the test extra.
+PINS = $(PY) tools/pins.py
+UV_INSTALL = $(BIN)/uv pip install -q --python $(PY)
+
 $(STAMP): $(PY) $(NATIVE_SOURCES) $(PY_PACKAGES)
 	flock $(VENV)/.lock sh -c '\
-	  $(PY) -m pip install -q $$($(PY) -c "import tomllib;print(\" \".join(tomllib.load(open(\"pyproject.toml\",\"rb\"))[\"build-system\"][\"requires\"]))") cmake==4.4.4 ninja==1.13.0 && \
-	  $(PY) -m pip install -q --no-compile --no-build-isolation -e ".[blender]"'
+	  $(PY) -m pip install -q $$($(PINS) installer) && \
+	  $(UV_INSTALL) $$($(PINS) build) && \
+	  $(UV_INSTALL) --no-build-isolation --reinstall-package render-budget -e ".[blender]"'
 	touch $(STAMP)
 
 $(TEST_STAMP): $(STAMP)
-	flock $(VENV)/.lock $(PY) -m pip install -q --no-compile --no-build-isolation -e ".[test]"
+	flock $(VENV)/.lock $(UV_INSTALL) --no-build-isolation -e ".[test]"
 	touch $(TEST_STAMP)
 
 venv: $(STAMP)
