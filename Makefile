@@ -24,19 +24,20 @@ $(PY):
 # (pip only bootstraps it). The product and bpy (the scene builds) are what `make demo` needs; the test and
 # bench tools come on top, for the targets that run them. uv rebuilds a local package only when its
 # pyproject.toml changed, so the stamp asks it to rebuild this one (ninja's build folder keeps that
-# incremental); the test stamp then finds it installed and adds only the test extra.
+# incremental); the test stamp then finds it installed and adds only the test extra. The stamps' lock is
+# not .venv/.lock: uv locks that file itself while it installs.
 PINS = $(PY) tools/pins.py
 UV_INSTALL = $(BIN)/uv pip install -q --python $(PY)
 
 $(STAMP): $(PY) $(NATIVE_SOURCES) $(PY_PACKAGES)
-	flock $(VENV)/.lock sh -c '\
+	flock $(VENV)/.render-budget.lock sh -c '\
 	  $(PY) -m pip install -q $$($(PINS) installer) && \
 	  $(UV_INSTALL) $$($(PINS) build) && \
 	  $(UV_INSTALL) --no-build-isolation --reinstall-package render-budget -e ".[blender]"'
 	touch $(STAMP)
 
 $(TEST_STAMP): $(STAMP)
-	flock $(VENV)/.lock $(UV_INSTALL) --no-build-isolation -e ".[test]"
+	flock $(VENV)/.render-budget.lock $(UV_INSTALL) --no-build-isolation -e ".[test]"
 	touch $(TEST_STAMP)
 
 venv: $(STAMP)
