@@ -22,8 +22,8 @@ $(PY):
 # The pins are read from pyproject.toml (tools/pins.py) so that versions stay in one place: the installer
 # and build tools (tool.render-budget.bootstrap), the native build's requirements (build-system.requires). uv installs
 # (pip only bootstraps it). The product and bpy (the scene builds) are what `make demo` needs; the test and
-# bench tools come on top, for the targets that run them. uv rebuilds a local package only when its
-# pyproject.toml changed, so the stamp asks it to rebuild this one (ninja's build folder keeps that
+# bench tools come on top, for the targets that run them. uv reuses its cached build of a local package until
+# its pyproject.toml changes, so the stamp asks it to rebuild this one (ninja's build folder keeps that
 # incremental); the test stamp then finds it installed and adds only the test extra. The stamps' lock is
 # not .venv/.lock: uv locks that file itself while it installs.
 PINS = $(PY) tools/pins.py
@@ -33,7 +33,7 @@ $(STAMP): $(PY) $(NATIVE_SOURCES) $(PY_PACKAGES)
 	flock $(VENV)/.render-budget.lock sh -c '\
 	  $(PY) -m pip install -q $$($(PINS) installer) && \
 	  $(UV_INSTALL) $$($(PINS) build) && \
-	  $(UV_INSTALL) --no-build-isolation --reinstall-package render-budget -e ".[blender]"'
+	  $(UV_INSTALL) --no-build-isolation --refresh-package render-budget --reinstall-package render-budget -e ".[blender]"'
 	touch $(STAMP)
 
 $(TEST_STAMP): $(STAMP)

@@ -1,6 +1,6 @@
 """A virtual environment that holds only bpy (and what bpy itself needs), never this project: the stand-in
 for a stock Blender in the extension tests. It is kept in build/bpy-venv-<version>/ between runs (a clean
-clone creates it on first use, from pip's download cache when warm) and shared by parallel test workers
+clone creates it on first use with uv, from its cache when warm) and shared by parallel test workers
 through a lock."""
 
 from __future__ import annotations
@@ -51,7 +51,9 @@ def python() -> Path:
             if venv.exists():
                 subprocess.run(["rm", "-rf", str(venv)], check=True)
             subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, env=clean_env())
-            proc = subprocess.run([str(exe), "-m", "pip", "install", "--quiet", bpy_requirement()],
+            # uv, the installer that set up this project's venv (Makefile): bpy from its cache in seconds.
+            uv = Path(sys.executable).parent / "uv"
+            proc = subprocess.run([str(uv), "pip", "install", "--quiet", "--python", str(exe), bpy_requirement()],
                                   capture_output=True, text=True, env=clean_env(), check=False)
             if proc.returncode != 0:
                 raise RuntimeError(f"could not install {bpy_requirement()} into {venv}:\n{proc.stderr}")
