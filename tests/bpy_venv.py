@@ -53,8 +53,8 @@ def python() -> Path:
             subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, env=clean_env())
             # uv, the installer that set up this project's venv (Makefile): bpy from its cache in seconds.
             uv = Path(sys.executable).parent / "uv"
-            proc = subprocess.run([str(uv), "pip", "install", "--quiet", "--python", str(exe), bpy_requirement()],
-                                  capture_output=True, text=True, env=clean_env(), check=False)
+            install = [str(uv), "pip", "install", "--quiet", "--python", str(exe), bpy_requirement()]
+            proc = subprocess.run(install, capture_output=True, text=True, env=clean_env(), check=False)
             if proc.returncode != 0:
                 raise RuntimeError(f"could not install {bpy_requirement()} into {venv}:\n{proc.stderr}")
             freeze = subprocess.run([str(exe), "-m", "pip", "freeze"], capture_output=True, text=True,

@@ -1,11 +1,18 @@
-"""The native core is built and importable from the package, and its files keep one stem per concept."""
+"""The native core is built and importable from the package, its files keep one stem per concept, and the
+venv was set up with the tools pinned in pyproject.toml."""
 
 import re
+import tomllib
+from importlib import metadata
 from pathlib import Path
 
-import sim_core
+import pytest
 
-NATIVE = Path(__file__).resolve().parent.parent / "sim_core"
+import sim_core
+from tools import pins
+
+REPO = Path(__file__).resolve().parent.parent
+NATIVE = REPO / "sim_core"
 
 
 def test_native_core_version_matches_package() -> None:
@@ -29,3 +36,17 @@ def test_native_files_share_concept_stems() -> None:
         text = (NATIVE / "src" / "python" / f"{stem}_py.cpp").read_text()
         assert re.search(rf"void bind_{stem}\(nb::module_& m\)", text), stem
         assert set(re.findall(r"void bind_(\w+)\(", text)) == {stem}, stem
+
+
+def test_set_up_pins_come_from_pyproject() -> None:
+    """The Makefile installs what tools/pins.py prints: every pin in pyproject.toml, exact versions, and the
+    venv running these tests holds exactly those versions."""
+    project = tomllib.loads((REPO / "pyproject.toml").read_text())
+    bootstrap = project["tool"]["render-budget"]["bootstrap"]
+    assert pins.pins("installer") == [bootstrap["installer"]]
+    assert pins.pins("build") == [*project["build-system"]["requires"], *bootstrap["build-tools"]]
+    for requirement in pins.pins("installer") + pins.pins("build"):
+        name, version = requirement.split("==")
+        assert metadata.version(name) == version, requirement
+    with pytest.raises(SystemExit, match="unknown step"):
+        pins.pins("everything")

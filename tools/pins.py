@@ -31,4 +31,4 @@ def pins(step: str) -> list[str]:
 if __name__ == "__main__":
     if len(sys.argv) != 2:
         raise SystemExit(__doc__)
-    print(" ".join(pins(sys.argv[1])))
+    sys.stdout.write(" ".join(pins(sys.argv[1])) + "\n")
