@@ -217,7 +217,7 @@ class Storage:
     @staticmethod
     def _job(row: sqlite3.Row) -> JobRecord:
         return JobRecord(
-            id=row["id"], scene_id=row["scene_id"], spec=json.loads(row["spec"]), state=row["state"],
+            id=row["id"], scene_id=row["scene_id"], spec_json=row["spec"], state=row["state"],
             progress=json.loads(row["progress"]), error=row["error"], store_id=row["store_id"],
             cancel_requested=bool(row["cancel_requested"]), attempts=row["attempts"], created=row["created"],
             started=row["started"], finished=row["finished"], elapsed_s=row["elapsed_s"],

@@ -7,6 +7,7 @@ import base64
 import binascii
 import json
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any, Generic, TypeVar
 
 #: Stored scene files: glTF binaries and render-budget scene files (sim_core.loaders.scene_file).
@@ -60,7 +61,7 @@ class SceneRecord:
 class JobRecord:
     id: str
     scene_id: str
-    spec: dict[str, Any]
+    spec_json: str  # the request as stored: decoded by `spec` when first read, never by a progress poll
     state: str
     progress: dict[str, Any]
     error: str | None
@@ -71,6 +72,12 @@ class JobRecord:
     started: float | None
     finished: float | None
     elapsed_s: float
+
+    @cached_property
+    def spec(self) -> dict[str, Any]:
+        """The job's request. Its camera path can hold thousands of frames, and clients poll jobs several
+        times a second: decoding it on every read was most of the service's own CPU during a job."""
+        return json.loads(self.spec_json)
 
     @property
     def terminal(self) -> bool:
