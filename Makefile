@@ -19,13 +19,14 @@ all: venv
 $(PY):
 	$(PYTHON) -m venv $(VENV)
 
-# The pins are read from pyproject.toml (tools/pins.py) so that versions stay in one place: the installer
-# and build tools (tool.render-budget.bootstrap), the native build's requirements (build-system.requires). uv installs
-# (pip only bootstraps it). The product and bpy (the scene builds) are what `make demo` needs; the test and
-# bench tools come on top, for the targets that run them. uv reuses its cached build of a local package until
-# its pyproject.toml changes, so the stamp asks it to rebuild this one (ninja's build folder keeps that
-# incremental); the test stamp then finds it installed and adds only the test extra. The stamps' lock is
-# not .venv/.lock: uv locks that file itself while it installs.
+# The pins are read from pyproject.toml (tools/pins.py) so that versions stay in one place: the
+# installer and build tools (tool.render-budget.bootstrap), the native build's requirements
+# (build-system.requires). uv installs (pip only bootstraps it) and leaves bytecode to the first import.
+# The product and bpy (the scene builds) are what `make demo` needs; the test and bench tools come on top,
+# for the targets that run them. uv reuses its cached build of a local package until its pyproject.toml
+# changes, so the stamp asks it to rebuild this one (ninja's build folder keeps that incremental); the
+# test stamp then finds it installed and adds only the test extra. The stamps' lock is not .venv/.lock:
+# uv locks that file itself while it installs.
 PINS = $(PY) tools/pins.py
 UV_INSTALL = $(BIN)/uv pip install -q --python $(PY)
 
