@@ -37,6 +37,7 @@ import argparse
 import dataclasses
 import itertools
 import json
+import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -300,6 +301,68 @@ def store_frontiers(store_path: Path, path: CameraPath, frames: Sequence[int], b
     return out
 
 
+def transfer(store_path: Path, scene: Any, path: CameraPath, frames: Sequence[int], size: tuple[int, int],
+             fps: float, budget: float, threads: int | None, error_cap: float, slack: float) -> list[str]:
+    """Whether what a store priced at one display size holds real time within ``budget`` at another
+    (``size``): per path frame, the frontier its lookup reads there (``ParetoStore.locate``); every point
+    of it with stored error <= ``error_cap`` whose stored frame time, scaled by the pixel ratio to
+    ``size``, is within ``slack`` times the frame-rate deadline, rendered whole at ``size`` and priced
+    like the rest of this bench (error against Max at ``size``, on the store's profile and metric). A row
+    a candidate, then a line a frame."""
+    from service.store import unpack_indices
+    from service.store.pareto import ParetoStore
+
+    store = ParetoStore.from_json(store_path.read_text())
+    figures = store.meta.get("figures_resolution")
+    if not figures:
+        raise SystemExit(f"{store_path} records no figures resolution: nothing to scale from")
+    ratio = (size[0] * size[1]) / (int(figures[0]) * int(figures[1]))
+    space = default_space()
+    profile, metric = store.profile, str(store.meta.get("metric", "ssim"))
+    out = [f"store {store_path} ({profile}, {metric}, figures at {figures[0]}x{figures[1]}), priced again at "
+           f"{size[0]}x{size[1]} (pixel ratio {ratio:g}); candidates: stored error <= {error_cap:g}, "
+           f"stored frame time x ratio <= {slack:g} / {fps:g} fps",
+           f"| frame | setting (from Max) | stored error | error at {size[0]}x{size[1]} | "
+           f"stored fps (flat out) | fps at {size[0]}x{size[1]} (flat out) | frame time ratio | "
+           f"power (W) | saved vs Max | {fps:g} fps within {budget:g} |",
+           "|---|---|---|---|---|---|---|---|---|---|"]
+    summary = []
+    for i in frames:
+        f = path.frames[i]
+        m = np.asarray(f.matrix_world, dtype=np.float64)
+        corner, view = store.locate(m[:3, 3], matrix=m, fov=f.vfov)
+        fr = store.frontiers[store._index.views[corner][view]]
+        if fr.frame_time_s is None:
+            raise SystemExit(f"{store_path} records no frame times")
+        picks = [j for j in range(len(fr.packed)) if float(fr.error[j]) <= error_cap
+                 and float(fr.frame_time_s[j]) * ratio <= slack / fps]
+        cam = cameras(path, 0, size, frames=[i])
+        pr = Pricer(scene, cam, profile, fps, metric, threads, space)
+        mx = pr.price(pr.max)
+        kept = []
+        for j in sorted(picks, key=lambda j: float(fr.frame_time_s[j])):
+            idx = space.indices_of(store.settings_of(unpack_indices(int(fr.packed[j]), store.n_params)))
+            r = pr.price(space.to_settings(idx))
+            t = r["frame_times"][0]
+            ok = meets_frame_rate(t, fps) and r["error"] <= budget
+            if ok:
+                kept.append((r["power"], r["error"], _changed(space, idx)))
+            saved = 100.0 * (1.0 - r["power"] / mx["power"])
+            out.append(f"| {i} | {_changed(space, idx)} | {float(fr.error[j]):.4f} | {r['error']:.4f} | "
+                       f"{1.0 / float(fr.frame_time_s[j]):.1f} | {1.0 / t:.1f} | "
+                       f"{t / float(fr.frame_time_s[j]):.2f} | {r['power']:.2f} | {saved:.1f} % | "
+                       f"{'yes' if ok else 'no'} |")
+            print(out[-1], file=sys.stderr, flush=True)  # progress: a 1280x720 row takes a minute
+        best = min(kept) if kept else None
+        head = f"| {i} | {1.0 / mx['frame_times'][0]:.2f}, {mx['power']:.2f} | {len(picks)} | {len(kept)} | "
+        cheapest = (f"{100.0 * (1.0 - best[0] / mx['power']):.1f} %, {best[1]:.4f}, {best[2]}" if best
+                    else "none")
+        summary.append(f"{head}{cheapest} |")
+    return [*out, "", f"| frame | Max at {size[0]}x{size[1]}: fps (flat out), W | candidates | {fps:g} fps "
+                      f"within {budget:g} | cheapest such: saved vs Max, error, setting |",
+                  "|---|---|---|---|---|", *summary]
+
+
 def fmt(name: str, r: dict[str, Any], mx: dict[str, Any]) -> str:
     saved = 100.0 * (1.0 - r["power"] / mx["power"])
     top = sorted(r["energy"].items(), key=lambda kv: -kv[1])[:3]
@@ -330,6 +393,13 @@ def main() -> None:
                     help="with --neighbourhood: JSON lines of every priced setting, read back to resume")
     ap.add_argument("--store", type=Path, default=None,
                     help="only print what this store's frontiers hold at the path frames (no renders)")
+    ap.add_argument("--transfer", type=Path, default=None, metavar="STORE",
+                    help="only price at --size what STORE (priced at another size) holds near real time "
+                         "within the budget at --frames (see transfer())")
+    ap.add_argument("--transfer-error", type=float, default=None,
+                    help="with --transfer: stored error cap (default twice --budget)")
+    ap.add_argument("--transfer-slack", type=float, default=2.0,
+                    help="with --transfer: scaled stored frame time at most this many deadlines")
     ap.add_argument("--no-steps", action="store_true", help="skip the single steps and the Max-Mid preset")
     ap.add_argument("--fps", type=float, default=30.0)
     ap.add_argument("--metric", default="ssim")
@@ -348,6 +418,13 @@ def main() -> None:
     cams = cameras(path, args.cameras, args.size, args.frame_step, args.frames)
     if args.store is not None:
         print("\n".join(store_frontiers(args.store, path, [i for i, _ in cams], args.budget)))
+        return
+    if args.transfer is not None:
+        cap = 2.0 * args.budget if args.transfer_error is None else args.transfer_error
+        lines = transfer(args.transfer, scene, path, [i for i, _ in cams], args.size, args.fps, args.budget,
+                         args.threads, cap, args.transfer_slack)
+        print("\n".join(lines))
+        print(f"({time.time() - t0:.0f} s, {time.process_time():.0f} CPU-s)")
         return
     if args.neighbourhood is not None:
         space = resolve_space(scene, default_space(), path, args.threads)

@@ -145,3 +145,62 @@ def test_store_frontiers_agree_with_the_lookup(tmp_path) -> None:
             assert cells[0] == str(i)
             assert cells[1].startswith(f"{hit.frontier} (")
             assert (int(cells[4]) > 0) == (bool(hit.meets_fps) and not hit.infeasible)
+
+
+@pytest.fixture(scope="module")
+def small_store(tmp_path_factory: pytest.TempPathFactory):
+    """A store priced whole at its path's 96x72 (the teapot on an orbit, as tests/test_verify.py builds)."""
+    from service.eval_cache import EvalCache
+    from service.executors import InProcessExecutor
+    from service.optimize import OptimizeConfig, optimize_path
+    from tests.api_support import teapot_scene_file
+    from tests.test_verify import SPACE, _orbit_path
+
+    d = tmp_path_factory.mktemp("transfer")
+    scene = sim_core.Scene.from_gltf(str(teapot_scene_file(d)))
+    path = _orbit_path(10, (96, 72))
+    opts = OptimizeConfig(threshold_power_w=0.01, threshold_error=0.005, max_depth=3, population=6,
+                          generations=3, exhaustive_limit=0, eval_width=16, eval_height=12, seed=3,
+                          view_sampling="path", path_resolution=0.5, guard_frames=2,
+                          display_estimator="full")
+    store = optimize_path(scene, path, SPACE, opts, cache=EvalCache(), executor=InProcessExecutor())
+    (d / "store.json").write_text(store.to_json(), encoding="utf-8")
+    return d / "store.json", store, scene, path
+
+
+def _transfer_rows(lines: list[str]) -> list[list[str]]:
+    rows = [line.strip("|").split(" | ") for line in lines[3:] if line.startswith("| ")]
+    return [[c.strip() for c in r] for r in rows if len(r) == 10]
+
+
+def test_transfer_at_the_stores_own_size_reproduces_its_figures(small_store) -> None:
+    """At a pricing camera and the store's own size (priced whole) every stored point renders to its stored
+    error and frame time; the verdict column follows the measured figures."""
+    store_file, store, scene, path = small_store
+    eyes = np.asarray(store.frontier_eyes)
+    frame = next(i for i, f in enumerate(path.frames)
+                 if np.min(np.linalg.norm(eyes - np.asarray(f.matrix_world)[:3, 3], axis=1)) < 1e-4)
+    m = np.asarray(path.frames[frame].matrix_world)
+    corner, view = store.locate(m[:3, 3], matrix=m, fov=path.frames[frame].vfov)
+    fr = store.frontiers[store._index.views[corner][view]]
+    lines = bss.transfer(store_file, scene, path, [frame], (96, 72), 30.0, 0.02, 1, 1.0, 1e9)
+    rows = _transfer_rows(lines)
+    assert len(rows) == len(fr.packed) >= 2
+    for r in rows:
+        stored_e, e, stored_fps, fps, ratio = (float(r[k]) for k in (2, 3, 4, 5, 6))
+        assert e == pytest.approx(stored_e, abs=2e-4)
+        assert fps == pytest.approx(stored_fps, rel=2e-3) and ratio == pytest.approx(1.0, abs=0.01)
+        assert r[9] == ("yes" if e <= 0.02 and fps >= 30.0 else "no")
+    summary = lines[-1].strip("|").split(" | ")
+    assert int(summary[2]) == len(rows) and int(summary[3]) == sum(r[9] == "yes" for r in rows)
+    # the caps choose the candidates from the stored figures alone
+    few = _transfer_rows(bss.transfer(store_file, scene, path, [frame], (96, 72), 30.0, 0.02, 1,
+                                      float(np.median(fr.error)), 1e9))
+    assert len(few) == int(np.sum(fr.error <= np.float32(np.median(fr.error))))
+
+
+def test_transfer_to_four_times_the_pixels_scales_frame_time(small_store) -> None:
+    store_file, _, scene, path = small_store
+    rows = _transfer_rows(bss.transfer(store_file, scene, path, [3], (192, 144), 30.0, 0.02, 1, 1.0, 1e9))
+    assert rows
+    assert all(2.5 < float(r[6]) < 5.0 for r in rows)  # per-pixel work dominates a frame's time
