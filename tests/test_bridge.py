@@ -185,3 +185,45 @@ def test_a_bridging_rounds_time_left_goes_by_the_pricing_before_it(monkeypatch) 
     first = next(r for r in reports if r.phase == "price between the priced points")
     took = priced_at["price between the priced points"]
     assert first.estimate_s is not None and took / 2 <= first.estimate_s <= 2 * took
+
+
+def test_a_bridging_round_after_a_cached_round_does_not_promise_no_time_left(monkeypatch) -> None:
+    """A rerun from a copied data folder answers the first pricing round from the evaluation cache in no
+    time; the bridging round after it renders. Its first time left is not that cached round's pace (which
+    said ~0 s for an hour's work at 1280x720) but unknown, or the search's guess. Stand-in clock: each
+    setting rendered takes 1 s, cached ones nothing."""
+    import time as time_module
+
+    from service.params import default_space
+
+    space = default_space().subset(["sampling", "max_depth", "resolution_scale"])
+    searched = [(space.expand(x), e, p, 0.02)
+                for x, e, p in (((0, 0, 0), 0.2, 15.0), ((3, 2, 3), 0.005, 26.5), ((4, 3, 3), 0.0, 30.0))]
+    clock = [1000.0]
+    phase = [""]
+    took = [0.0]
+
+    class Pricer:
+        ev = SimpleNamespace(executor=None)
+        evaluations = 0
+
+        def price(self, requests):
+            n = sum(len(xs) for _, xs in requests)
+            if phase[0] == "price between the priced points":  # the first round came from the cache
+                clock[0] += n
+                took[0] += n
+                self.evaluations += n
+            return [[SimpleNamespace(error=e, power_w=p, frame_time_s=0.02)
+                     for e, p in (_figures(space.restrict(x)) for x in xs)] for _, xs in requests]
+
+    reports = []
+
+    def progress(r) -> None:
+        phase[0] = r.phase
+        reports.append(r)
+
+    monkeypatch.setattr(time_module, "perf_counter", lambda: clock[0])
+    b = _run_one_frontier_builder(searched, Pricer(), progress, display_points=8, bridge_points=4)
+    assert b.bridged_points > 0 and took[0] > 0
+    first = next(r for r in reports if r.phase == "price between the priced points")
+    assert first.estimate_s is None or first.estimate_s >= took[0] / 2

@@ -405,6 +405,7 @@ class OctreeBuilder:
         # its points) leaves the other workers idle for a small share of the batch only
         chunk = max(2, 8 * int(getattr(self.pricer.ev.executor, "workers", 1) or 1))  # type: ignore[union-attr]
         results: list[list[Any]] = []
+        rendered_before = getattr(self.pricer, "evaluations", None)  # settings the pricer rendered so far
         started = time.perf_counter()
         for start in range(0, len(requests), chunk):
             search.check_cancel()
@@ -415,6 +416,10 @@ class OctreeBuilder:
             # the first batch on, the time left is this phase's own measured pace
             search.report(phase, remaining_s=time_left(time.perf_counter() - started, len(results),
                                                        len(requests)))
+        if rendered_before is not None and points > 0:
+            # a round answered from the evaluation cache (a rerun from a copied data folder) has no pace:
+            # taken over what it asked for, it told the bridging after it that an hour's work was ~0 s
+            renders *= (self.pricer.evaluations - rendered_before) / points  # type: ignore[union-attr]
         round_pace_s = (time.perf_counter() - started) / renders if renders > 0 else pace_s
         res = iter(results)
         for fid, xs in asked.items():

@@ -119,8 +119,9 @@ class Search:
         s.elapsed_s = time.perf_counter() - self.t0
         # time per search step (one generation, or one chunk of an enumeration, of one camera) so far,
         # times the steps still planned: warm-started searches are shorter than full ones
+        # (none while every step was answered from the evaluation cache: that pace is no guide to renders)
         s.estimate_s = (s.elapsed_s / self.steps_done * max(self.steps_planned - self.steps_done, 0)
-                        if self.steps_done else None)
+                        if self.steps_done and s.evaluations > 0 else None)
         if remaining_s is not None:
             s.estimate_s = max(0.0, float(remaining_s))
         elif s.estimate_s is not None and s.evaluations > 0:  # (no pace from a search answered by the cache)
