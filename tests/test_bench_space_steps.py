@@ -150,20 +150,10 @@ def test_store_frontiers_agree_with_the_lookup(tmp_path) -> None:
 @pytest.fixture(scope="module")
 def small_store(tmp_path_factory: pytest.TempPathFactory):
     """A store priced whole at its path's 96x72 (the teapot on an orbit, as tests/test_verify.py builds)."""
-    from service.eval_cache import EvalCache
-    from service.executors import InProcessExecutor
-    from service.optimize import OptimizeConfig, optimize_path
-    from tests.api_support import teapot_scene_file
-    from tests.test_verify import SPACE, _orbit_path
+    from tests.test_verify import orbit_store
 
     d = tmp_path_factory.mktemp("transfer")
-    scene = sim_core.Scene.from_gltf(str(teapot_scene_file(d)))
-    path = _orbit_path(10, (96, 72))
-    opts = OptimizeConfig(threshold_power_w=0.01, threshold_error=0.005, max_depth=3, population=6,
-                          generations=3, exhaustive_limit=0, eval_width=16, eval_height=12, seed=3,
-                          view_sampling="path", path_resolution=0.5, guard_frames=2,
-                          display_estimator="full")
-    store = optimize_path(scene, path, SPACE, opts, cache=EvalCache(), executor=InProcessExecutor())
+    _, scene, path, store = orbit_store(d)
     (d / "store.json").write_text(store.to_json(), encoding="utf-8")
     return d / "store.json", store, scene, path
 

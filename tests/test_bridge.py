@@ -139,13 +139,14 @@ def test_the_builder_prices_a_bridge_and_the_error_budget_picks_it_over_max() ->
     assert bridging and bridging[0] < min(bridging[-1], FRACTION_BEFORE_DONE)
 
 
-def test_a_bridging_rounds_time_left_goes_by_the_pricing_before_it(monkeypatch) -> None:
-    """The time left a bridging round first reports is the rounds before it's pace, times what it prices:
-    the search's pace counts the display pricing's time over the search's own renders, and over a search
-    answered from the evaluation cache (one render here) gave days for minutes. A stand-in clock: each
-    setting priced at a camera takes 1 s."""
+def _clocked_bridging(monkeypatch, *, search_evaluations: int, first_round_cached: bool):
+    """A one-frontier build with bridging on a stand-in clock: each setting the pricer renders takes 1 s;
+    with ``first_round_cached`` the first pricing round is answered from the evaluation cache (no time,
+    nothing rendered). ``search_evaluations``: what the search rendered of its own. Returns the
+    builder, its progress reports and the seconds each phase's pricing took."""
     import time as time_module
 
+    import service.octree.builder as builder_module
     from service.params import default_space
 
     space = default_space().subset(["sampling", "max_depth", "resolution_scale"])
@@ -157,61 +158,13 @@ def test_a_bridging_rounds_time_left_goes_by_the_pricing_before_it(monkeypatch) 
 
     class Pricer:
         ev = SimpleNamespace(executor=None)
-
-        def price(self, requests):
-            took = float(sum(len(xs) for _, xs in requests))
-            clock[0] += took
-            priced_at[phase[0]] = priced_at.get(phase[0], 0.0) + took
-            return [[SimpleNamespace(error=e, power_w=p, frame_time_s=0.02)
-                     for e, p in (_figures(space.restrict(x)) for x in xs)] for _, xs in requests]
-
-    reports = []
-
-    def progress(r) -> None:
-        phase[0] = r.phase
-        reports.append(r)
-
-    monkeypatch.setattr(time_module, "perf_counter", lambda: clock[0])
-    import service.octree.builder as builder_module
-
-    real_init = builder_module.OctreeBuilder.__init__
-
-    def init(self, evaluator, *args, **kwargs):  # a search that rendered one evaluation of its own
-        real_init(self, SimpleNamespace(fps=FPS, evaluations=1, cache_hits=0), *args, **kwargs)
-
-    monkeypatch.setattr(builder_module.OctreeBuilder, "__init__", init)
-    b = _run_one_frontier_builder(searched, Pricer(), progress, display_points=8, bridge_points=4)
-    assert b.bridged_points > 0
-    first = next(r for r in reports if r.phase == "price between the priced points")
-    took = priced_at["price between the priced points"]
-    assert first.estimate_s is not None and took / 2 <= first.estimate_s <= 2 * took
-
-
-def test_a_bridging_round_after_a_cached_round_does_not_promise_no_time_left(monkeypatch) -> None:
-    """A rerun from a copied data folder answers the first pricing round from the evaluation cache in no
-    time; the bridging round after it renders. Its first time left is not that cached round's pace (which
-    said ~0 s for an hour's work at 1280x720) but unknown, or the search's guess. Stand-in clock: each
-    setting rendered takes 1 s, cached ones nothing."""
-    import time as time_module
-
-    from service.params import default_space
-
-    space = default_space().subset(["sampling", "max_depth", "resolution_scale"])
-    searched = [(space.expand(x), e, p, 0.02)
-                for x, e, p in (((0, 0, 0), 0.2, 15.0), ((3, 2, 3), 0.005, 26.5), ((4, 3, 3), 0.0, 30.0))]
-    clock = [1000.0]
-    phase = [""]
-    took = [0.0]
-
-    class Pricer:
-        ev = SimpleNamespace(executor=None)
         evaluations = 0
 
         def price(self, requests):
             n = sum(len(xs) for _, xs in requests)
-            if phase[0] == "price between the priced points":  # the first round came from the cache
+            if not (first_round_cached and phase[0] != "price between the priced points"):
                 clock[0] += n
-                took[0] += n
+                priced_at[phase[0]] = priced_at.get(phase[0], 0.0) + n
                 self.evaluations += n
             return [[SimpleNamespace(error=e, power_w=p, frame_time_s=0.02)
                      for e, p in (_figures(space.restrict(x)) for x in xs)] for _, xs in requests]
@@ -223,7 +176,33 @@ def test_a_bridging_round_after_a_cached_round_does_not_promise_no_time_left(mon
         reports.append(r)
 
     monkeypatch.setattr(time_module, "perf_counter", lambda: clock[0])
+    real_init = builder_module.OctreeBuilder.__init__
+
+    def init(self, evaluator, *args, **kwargs):
+        real_init(self, SimpleNamespace(fps=FPS, evaluations=search_evaluations, cache_hits=0), *args,
+                  **kwargs)
+
+    monkeypatch.setattr(builder_module.OctreeBuilder, "__init__", init)
     b = _run_one_frontier_builder(searched, Pricer(), progress, display_points=8, bridge_points=4)
-    assert b.bridged_points > 0 and took[0] > 0
+    assert b.bridged_points > 0
+    return b, reports, priced_at
+
+
+def test_a_bridging_rounds_time_left_goes_by_the_pricing_before_it(monkeypatch) -> None:
+    """The time left a bridging round first reports is the rounds before it's pace, times what it prices:
+    the search's pace counts the display pricing's time over the search's own renders, and over a search
+    answered from the evaluation cache (one render here) gave days for minutes."""
+    _, reports, priced_at = _clocked_bridging(monkeypatch, search_evaluations=1, first_round_cached=False)
     first = next(r for r in reports if r.phase == "price between the priced points")
-    assert first.estimate_s is None or first.estimate_s >= took[0] / 2
+    took = priced_at["price between the priced points"]
+    assert first.estimate_s is not None and took / 2 <= first.estimate_s <= 2 * took
+
+
+def test_a_bridging_round_after_a_cached_round_does_not_promise_no_time_left(monkeypatch) -> None:
+    """A rerun from a copied data folder answers the first pricing round from the evaluation cache in no
+    time; the bridging round after it renders. Its first time left is not that cached round's pace (which
+    said ~0 s for an hour's work at 1280x720) but unknown, or the search's guess."""
+    _, reports, priced_at = _clocked_bridging(monkeypatch, search_evaluations=0, first_round_cached=True)
+    first = next(r for r in reports if r.phase == "price between the priced points")
+    took = priced_at["price between the priced points"]
+    assert took > 0 and (first.estimate_s is None or first.estimate_s >= took / 2)

@@ -30,9 +30,9 @@ def _orbit_path(n: int, resolution: tuple[int, int]) -> CameraPath:
     return CameraPath.from_positions(pos, dirs, vfov=0.7, resolution=resolution)
 
 
-@pytest.fixture(scope="module")
-def setup(tmp_path_factory: pytest.TempPathFactory):
-    d = tmp_path_factory.mktemp("verify")
+def orbit_store(d):
+    """The teapot on a 10-frame orbit at 96x72 and a small store priced whole at that size: the scene
+    file, scene, path and store."""
     scene_file = teapot_scene_file(d)
     scene = sim_core.Scene.from_gltf(str(scene_file))
     path = _orbit_path(10, (96, 72))
@@ -41,6 +41,13 @@ def setup(tmp_path_factory: pytest.TempPathFactory):
                           view_sampling="path", path_resolution=0.5, guard_frames=2,
                           display_estimator="full")
     store = optimize_path(scene, path, SPACE, opts, cache=EvalCache(), executor=InProcessExecutor())
+    return scene_file, scene, path, store
+
+
+@pytest.fixture(scope="module")
+def setup(tmp_path_factory: pytest.TempPathFactory):
+    d = tmp_path_factory.mktemp("verify")
+    scene_file, scene, path, store = orbit_store(d)
     store_file, path_file = d / "store.json", d / "path.json"
     store_file.write_text(store.to_json(), encoding="utf-8")
     path.save(path_file)
