@@ -331,7 +331,7 @@ def transfer(store_path: Path, scene: Any, path: CameraPath, frames: Sequence[in
         f = path.frames[i]
         m = np.asarray(f.matrix_world, dtype=np.float64)
         corner, view = store.locate(m[:3, 3], matrix=m, fov=f.vfov)
-        fr = store.frontiers[store._index.views[corner][view]]
+        fr = store.frontier(corner, view)
         if fr.frame_time_s is None:
             raise SystemExit(f"{store_path} records no frame times")
         picks = [j for j in range(len(fr.packed)) if float(fr.error[j]) <= error_cap

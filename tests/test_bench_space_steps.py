@@ -172,7 +172,7 @@ def test_transfer_at_the_stores_own_size_reproduces_its_figures(small_store) -> 
                  if np.min(np.linalg.norm(eyes - np.asarray(f.matrix_world)[:3, 3], axis=1)) < 1e-4)
     m = np.asarray(path.frames[frame].matrix_world)
     corner, view = store.locate(m[:3, 3], matrix=m, fov=path.frames[frame].vfov)
-    fr = store.frontiers[store._index.views[corner][view]]
+    fr = store.frontier(corner, view)
     lines = bss.transfer(store_file, scene, path, [frame], (96, 72), 30.0, 0.02, 1, 1.0, 1e9)
     rows = _transfer_rows(lines)
     assert len(rows) == len(fr.packed) >= 2

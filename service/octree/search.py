@@ -124,7 +124,7 @@ class Search:
                         if self.steps_done and s.evaluations > 0 else None)
         if remaining_s is not None:
             s.estimate_s = max(0.0, float(remaining_s))
-        elif s.estimate_s is not None and s.evaluations > 0:  # (no pace from a search answered by the cache)
+        elif s.estimate_s is not None:  # (None above when the search was answered by the cache)
             s.estimate_s += later * s.elapsed_s / s.evaluations
         if self._progress_cb is not None:
             self._progress_cb(Progress(**vars(s)))
