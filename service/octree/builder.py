@@ -399,8 +399,9 @@ class OctreeBuilder:
         # a bridging round goes by the rounds before it: the search's pace, taken over its renders,
         # counts the display pricing's time too, and over a search answered from the cache gave hours
         renders = self._pricing_renders(refs * len(requests), points)
-        search.report(phase, remaining_s=(pace_s * renders if bridging and pace_s is not None
-                                          else self.pricing_time(search.state, len(requests), points + most)))
+        guess_s = (pace_s * renders if bridging and pace_s is not None
+                   else self.pricing_time(search.state, len(requests), points + most))
+        search.report(phase, remaining_s=guess_s)
         # cameras per batch: several per worker, so that a batch's last camera (whose cost varies with
         # its points) leaves the other workers idle for a small share of the batch only
         chunk = max(2, 8 * int(getattr(self.pricer.ev.executor, "workers", 1) or 1))  # type: ignore[union-attr]
@@ -413,9 +414,10 @@ class OctreeBuilder:
             search.steps_done = done + sum(steps[:start + chunk])  # at the last batch: every camera's
             # pricing is the last phase, and its cameras cost what the scene makes them cost at display
             # resolution, which pricing_time guesses from the search's pace and pixel counts only: from
-            # the first batch on, the time left is this phase's own measured pace
-            search.report(phase, remaining_s=time_left(time.perf_counter() - started, len(results),
-                                                       len(requests)))
+            # the first batch that renders on, the time left is this phase's own measured pace
+            left_s = self._round_time_left(time.perf_counter() - started, requests, len(results),
+                                           rendered_before)
+            search.report(phase, remaining_s=guess_s if left_s is None else left_s)
         if rendered_before is not None and points > 0:
             # a round answered from the evaluation cache (a rerun from a copied data folder) has no pace:
             # taken over what it asked for, it told the bridging after it that an hour's work was ~0 s
@@ -431,6 +433,20 @@ class OctreeBuilder:
             jobs[fid] = (cams, have + list(xs), [np.concatenate((a, b), axis=1) for a, b in zip(figs, new,
                                                                                                strict=True)])
         return round_pace_s
+
+    def _round_time_left(self, spent_s: float, requests: list[tuple[CameraSpec, list[Indices]]], done: int,
+                         rendered_before: int | None) -> float | None:
+        """Seconds left for a pricing round's ``requests`` once ``done`` of them took ``spent_s``; None
+        while nothing was rendered. Batches the evaluation cache answered took no time: the pace is taken
+        over the share of the settings asked so far that the pricer really rendered (a rerun from a copied
+        data folder whose first bridging batch was cached reported ~0 s left for an hour of renders)."""
+        if rendered_before is None or done >= len(requests):  # (a pricer that does not count its renders)
+            return time_left(spent_s, done, len(requests))
+        rendered = self.pricer.evaluations - rendered_before  # type: ignore[union-attr]
+        asked = sum(len(xs) for _, xs in requests[:done])
+        if rendered <= 0 or asked <= 0:
+            return None
+        return spent_s / (done * min(1.0, rendered / asked)) * max(len(requests) - done, 0)
 
     def _priced_figures(self, fid: int, frontier: Frontier) -> PricedFigures | None:
         """The per-camera figures of lattice frontier ``fid`` for its store frontier (the points it
