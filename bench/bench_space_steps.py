@@ -289,7 +289,7 @@ def store_frontiers(store_path: Path, path: CameraPath, frames: Sequence[int], b
         f = path.frames[i]
         m = np.asarray(f.matrix_world, dtype=np.float64)
         corner, view = store.locate(m[:3, 3], matrix=m, fov=f.vfov)
-        fid = store._index.views[corner][view]
+        fid = int(store.corner_views[corner, view])
         fr = store.frontiers[fid]
         rt = [j for j in range(len(fr.packed)) if fr.frame_time_s is not None
               and meets_frame_rate(float(fr.frame_time_s[j]), store.fps)]
