@@ -7,7 +7,15 @@ from types import SimpleNamespace
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from service.octree.bridge import ERROR_FLOOR, GAP_RATIO, bridge_candidates, descents, gaps
+from service.octree.bridge import (
+    ERROR_FLOOR,
+    GAP_RATIO,
+    NEAR_DEADLINES,
+    bridge_candidates,
+    descents,
+    gaps,
+    nudges,
+)
 from service.octree.search import FRACTION_BEFORE_DONE
 from tests.test_spread_points import FPS, _run_one_frontier_builder
 
@@ -21,13 +29,16 @@ priced_points = st.lists(st.tuples(indices, st.floats(0.0, 0.5), st.floats(0.0, 
 @given(points=priced_points, k=st.integers(0, 10))
 def test_bridges_are_a_gaps_cheaper_end_with_one_parameter_of_its_dearer_end(points, k) -> None:
     """At most ``k`` settings, none priced already, none twice; each is the cheaper end of a gap of the
-    priced real-time points with exactly one parameter set to the dearer end's value, or a descent's
-    slow start with one parameter one value nearer the meeting top's; no gap and no descent, no
-    bridge."""
+    priced real-time points with exactly one parameter set to the dearer end's value, a descent's
+    slow start with one parameter one value nearer the meeting top's, or a nudge's slow start with one
+    parameter one value cheaper; no gap, no descent and no nudge, no bridge."""
     priced = [pt[0] for pt in points]
     got = bridge_candidates(points, FPS, k, priced)
     found = gaps(points, FPS)
     down = descents(points, FPS)
+    nudged = nudges(points, FPS)
+    for _, start, top in nudged:
+        assert 1.0 / FPS < start[3] <= NEAR_DEADLINES / FPS and top[3] <= 1.0 / FPS and start[1] < top[1]
     assert len(got) <= max(k, 0) and len(set(got)) == len(got) and not set(got) & set(priced)
     for ratio, cheap, dear in found:
         assert ratio > GAP_RATIO and cheap[2] <= dear[2] and cheap[1] > dear[1]
@@ -40,8 +51,9 @@ def test_bridges_are_a_gaps_cheaper_end_with_one_parameter_of_its_dearer_end(poi
             sum(abs(a - b) for a, b in zip(x, start[0], strict=True)) == 1
             and sum(abs(a - c) for a, c in zip(x, top[0], strict=True))
             == sum(abs(b - c) for b, c in zip(start[0], top[0], strict=True)) - 1
-            for _, start, top in down)
-    if not found and not down:
+            for _, start, top in down) or any(
+            [b - a for a, b in zip(x, start[0], strict=True) if a != b] == [1] for _, start, _ in nudged)
+    if not found and not down and not nudged:
         assert got == []
 
 
@@ -49,12 +61,13 @@ def test_a_slow_max_far_more_accurate_than_the_real_time_points_is_stepped_down_
     """The lab on `desktop`: Max (error 0) misses 30 fps, the most accurate real-time point has error
     0.05. The bridges step Max one value toward that point in each parameter they differ in (none
     between two real-time points exists here); the next round starts from the fastest slow point still
-    far more accurate (a step that still misses the rate), not from Max again."""
-    slow_max = ((3, 3, 3), 0.0, 38.0, 0.036)
+    far more accurate (a step that still misses the rate), not from Max again. (Both slow points miss
+    the rate by more than NEAR_DEADLINES: no nudges.)"""
+    slow_max = ((3, 3, 3), 0.0, 38.0, 0.045)
     cheap = ((1, 3, 0), 0.05, 20.0, 0.02)
     assert gaps([cheap, slow_max], FPS) == []
     assert bridge_candidates([cheap, slow_max], FPS, 8, [cheap[0], slow_max[0]]) == [(2, 3, 3), (3, 3, 2)]
-    step = ((2, 3, 3), 0.004, 37.0, 0.034)  # nearer, still slow
+    step = ((2, 3, 3), 0.004, 37.0, 0.044)  # nearer, still slow
     (ratio, start, top), = descents([cheap, slow_max, step], FPS)
     assert start == step and top == cheap and ratio == (0.05 + ERROR_FLOOR) / (0.004 + ERROR_FLOOR)
     assert bridge_candidates([cheap, slow_max, step], FPS, 8, [cheap[0], slow_max[0], step[0], (3, 3, 2)]) \
@@ -63,6 +76,24 @@ def test_a_slow_max_far_more_accurate_than_the_real_time_points_is_stepped_down_
     assert descents([((2, 3, 3), 0.0005, 30.0, 0.03), slow_max], FPS) == []
     # no frame rate, or nothing keeps up: one tier, no descent
     assert descents([cheap, slow_max], None) == [] and descents([slow_max], FPS) == []
+
+
+def test_a_slow_point_that_nearly_keeps_up_is_stepped_down_in_each_parameter() -> None:
+    """The valley at 640x360: the most accurate real-time point has error 0.022 (4 shadow rays, no AO);
+    a slow point at 0.016 misses 30 fps by a tenth (27.5 fps). Stepping it toward the real-time point
+    (a descent) would need a ratio over 2 and would only bring back its shadow rays; a nudge prices it
+    one value cheaper in each parameter, where a step may keep the rate at an error under 0.022."""
+    top = ((3, 2, 0), 0.022, 30.0, 0.026)
+    near = ((2, 1, 3), 0.016, 33.0, 1.0 / 27.5)
+    far_slow = ((3, 3, 3), 0.0, 42.0, 0.14)  # Max at 7 fps: a descent's start, not a nudge's
+    assert gaps([top, near], FPS) == [] and descents([top, near], FPS) == []
+    (ratio, start, got_top), = nudges([top, near, far_slow], FPS)
+    assert start == near and got_top == top and ratio == (0.022 + ERROR_FLOOR) / (0.016 + ERROR_FLOOR)
+    assert bridge_candidates([top, near], FPS, 8, [top[0], near[0]]) == [(1, 1, 3), (2, 0, 3), (2, 1, 2)]
+    # no nudge from a slow point less accurate than the top, nor from one slower than NEAR_DEADLINES
+    assert nudges([top, ((2, 1, 3), 0.03, 33.0, 1.0 / 27.5)], FPS) == []
+    assert nudges([top, ((2, 1, 3), 0.016, 33.0, 1.01 * NEAR_DEADLINES / FPS)], FPS) == []
+    assert nudges([top, near], None) == [] and nudges([near], FPS) == []
 
 
 def test_a_gap_is_measured_with_the_error_floor_so_jumps_near_max_count() -> None:

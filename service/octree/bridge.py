@@ -23,7 +23,15 @@ samples instead of 16, one step down, keeps 30 fps at error <= 0.0074 at every s
 between two real-time points never reaches it. So a frontier whose slow tier holds a point far more
 accurate than its meeting tier's most accurate one (:func:`descents`: the same ratio test) also gets that
 slow point stepped one value down toward the meeting point, one parameter at a time: each step saves
-frame time where the two differ, and a step that still misses the rate is the next round's start. Pure logic.
+frame time where the two differ, and a step that still misses the rate is the next round's start.
+
+Neither reaches a trade between two parameters. On the valley at 640x360 (`desktop`), the meeting tier's
+most accurate point at one camera had 4 shadow rays and no AO (error 0.022); the slow tier held an adaptive
+2x2 point with 1 shadow ray and AO 16 at 0.016 and 27.5 fps, and FSAA with 1 shadow ray and AO 4 keeps 30
+fps at 0.018 there (bench/RESULTS.md, "The valley at 640x360 with 16 bridge points"). Stepping toward the
+meeting top only lowers AO and raises the shadow rays again. So a slow point that nearly keeps up (frame
+time within :data:`NEAR_DEADLINES` deadlines) and is more accurate than the meeting top by any margin is
+also stepped one value down in each parameter, toward cheaper settings (:func:`nudges`). Pure logic.
 """
 
 from __future__ import annotations
@@ -38,6 +46,9 @@ from service.store import split_by_rate
 GAP_RATIO = 2.0
 #: Added to both errors of a gap's ends: errors below it (a few thousandths of 1 - SSIM) count as equal.
 ERROR_FLOOR = 0.001
+#: A slow point whose frame time is at most this many frame deadlines nearly keeps up: one value down in
+#: one parameter may keep the rate (:func:`nudges`).
+NEAR_DEADLINES = 1.25
 #: Pricing rounds after the first: a bridge found in one round may open the next one's gap (a parameter
 #: the cheap end needs twice), at most this many times.
 ROUNDS = 3
@@ -84,6 +95,29 @@ def descents(points: Sequence[tuple[Any, ...]], fps: float | None) -> list[tuple
     return [(bound / (float(start[1]) + ERROR_FLOOR), start, top)]
 
 
+def nudges(points: Sequence[tuple[Any, ...]], fps: float | None) -> list[tuple[float, tuple[Any, ...],
+                                                                              tuple[Any, ...]]]:
+    """(ratio, slow start, meeting top) where the priced slow tier holds points more accurate than the
+    meeting tier's most accurate point (``top``) that miss the rate by at most :data:`NEAR_DEADLINES`
+    frame deadlines: ``start`` is the fastest of them (least frame time, then least error); ``ratio`` is
+    top's error over start's (with :data:`ERROR_FLOOR`). Empty without a slow tier."""
+    meeting, slow = split_by_rate(points, fps)
+    if not slow or fps is None:
+        return []
+    top = min(meeting, key=lambda p: (float(p[1]), float(p[2])))
+    near = [p for p in slow if float(p[1]) < float(top[1]) and float(p[3]) <= NEAR_DEADLINES / fps]
+    if not near:
+        return []
+    start = min(near, key=lambda p: (float(p[3]), float(p[1])))
+    return [((float(top[1]) + ERROR_FLOOR) / (float(start[1]) + ERROR_FLOOR), start, top)]
+
+
+def _steps_down(start: tuple[int, ...]) -> list[tuple[int, ...]]:
+    """``start`` with one parameter one value cheaper (values are ordered cheapest first), for each
+    parameter above its cheapest value."""
+    return [(*start[:p], start[p] - 1, *start[p + 1:]) for p in range(len(start)) if start[p] > 0]
+
+
 def _step_toward(start: tuple[int, ...], target: tuple[int, ...]) -> list[tuple[int, ...]]:
     """``start`` with one parameter moved one value toward ``target``'s, for each parameter they differ in."""
     return [(*start[:p], start[p] + (1 if target[p] > start[p] else -1), *start[p + 1:])
@@ -96,7 +130,8 @@ def bridge_candidates(points: Sequence[tuple[Any, ...]], fps: float | None, k: i
     ((indices, error, power, frame time) priced at display resolution): for each gap, widest first and
     in turns (one setting of each gap, then the next of each), the cheaper end with one parameter of the
     dearer end, parameters in the space's order; for a descent (:func:`descents`), ranked by its ratio
-    among the gaps, the slow start with one parameter one value nearer the meeting top's."""
+    among the gaps, the slow start with one parameter one value nearer the meeting top's; for a nudge
+    (:func:`nudges`), likewise ranked, the slow start with one parameter one value cheaper."""
     if k <= 0:
         return []
     ranked = []
@@ -105,6 +140,8 @@ def bridge_candidates(points: Sequence[tuple[Any, ...]], fps: float | None, k: i
         ranked.append((ratio, [(*lo[:p], hi[p], *lo[p + 1:]) for p in range(len(lo)) if lo[p] != hi[p]]))
     for ratio, start, top in descents(points, fps):
         ranked.append((ratio, _step_toward(tuple(int(v) for v in start[0]), tuple(int(v) for v in top[0]))))
+    for ratio, start, _ in nudges(points, fps):
+        ranked.append((ratio, _steps_down(tuple(int(v) for v in start[0]))))
     ranked.sort(key=lambda g: -g[0])
     per_gap = [cands for _, cands in ranked]
     out: list[tuple[int, ...]] = []
