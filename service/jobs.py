@@ -101,7 +101,11 @@ def progress_dict(progress: Any, *, elapsed_s: float, fraction_before: float = 0
     if isinstance(out.get("fraction"), float) and out["fraction"] < 1.0:
         out["fraction"] = max(out["fraction"], min(float(fraction_before), FRACTION_BEFORE_DONE))
     done, planned = int(out.get("views_done", 0)), int(out.get("views_planned", 0))
-    if out.get("estimate_s") is None and 0 < done <= planned:
+    # the views' pace stands in for an optimiser that gave no time left, while views remain: once every
+    # view is done, the phases after them (the display pricing and its bridging, an hour at 1280x720)
+    # have no pace by views, and "0 s left" there was wrong: the time left stays unknown there
+    after_views = done == planned and isinstance(out.get("fraction"), float) and out["fraction"] < 1.0
+    if out.get("estimate_s") is None and 0 < done <= planned and not after_views:
         out["estimate_s"] = round(elapsed_s * (planned - done) / done, 3)
     return out
 

@@ -135,6 +135,22 @@ def test_progress_keeps_total_elapsed_and_estimates() -> None:
     assert "fraction" not in progress_dict({"views_done": 1}, elapsed_s=1.0)  # an optimiser without it
 
 
+def test_progress_after_every_view_does_not_promise_no_time_left() -> None:
+    """Every view searched, the display pricing's bridging still to come and the optimiser without a
+    time left yet (a round answered from the evaluation cache): the job's time left is unknown, not the
+    views' pace (0 s: a 640x360 rerun showed "~0 s left" for its whole bridging). Done, it is 0."""
+    from service.optimize import Progress
+
+    bridging = Progress(views_done=46, views_planned=46, elapsed_s=17.0, fraction=0.39,
+                        phase="price between the priced points")
+    assert progress_dict(bridging, elapsed_s=17.0)["estimate_s"] is None
+    timed = Progress(views_done=46, views_planned=46, elapsed_s=17.0, fraction=0.39, estimate_s=600.0)
+    assert progress_dict(timed, elapsed_s=17.0)["estimate_s"] == 600.0
+    done = Progress(views_done=46, views_planned=46, elapsed_s=90.0, fraction=1.0, phase="done")
+    assert progress_dict(done, elapsed_s=90.0)["estimate_s"] == 0.0
+    assert progress_dict({"views_done": 4, "views_planned": 4}, elapsed_s=1.0)["estimate_s"] == 0.0
+
+
 def test_a_resumed_job_keeps_the_fraction_an_earlier_attempt_reached(storage: Storage, monkeypatch) -> None:
     """The job manager passes the stored progress's fraction on to the next attempt's reports."""
     import service.jobs as jobs_module
