@@ -94,6 +94,16 @@ def test_a_slow_point_that_nearly_keeps_up_is_stepped_down_in_each_parameter() -
     assert nudges([top, ((2, 1, 3), 0.03, 33.0, 1.0 / 27.5)], FPS) == []
     assert nudges([top, ((2, 1, 3), 0.016, 33.0, 1.01 * NEAR_DEADLINES / FPS)], FPS) == []
     assert nudges([top, near], None) == [] and nudges([near], FPS) == []
+    # beside a gap, and a descent (a slow Max within 1.25 deadlines), nudges take only what they leave of k
+    cheapest = ((0, 0, 0), 0.3, 10.0, 0.02)
+    three = [cheapest, top, near]
+    assert bridge_candidates(three, FPS, 2, [pt[0] for pt in three]) == [(3, 0, 0), (0, 2, 0)]
+    assert bridge_candidates(three, FPS, 4, [pt[0] for pt in three]) \
+        == [(3, 0, 0), (0, 2, 0), (1, 1, 3), (2, 0, 3)]
+    slow_max, cheap = ((3, 3, 3), 0.0, 38.0, 0.036), ((1, 3, 0), 0.05, 20.0, 0.02)
+    assert bridge_candidates([cheap, slow_max], FPS, 2, [cheap[0], slow_max[0]]) == [(2, 3, 3), (3, 3, 2)]
+    assert bridge_candidates([cheap, slow_max], FPS, 8, [cheap[0], slow_max[0]]) \
+        == [(2, 3, 3), (3, 3, 2), (3, 2, 3)]
 
 
 def test_a_gap_is_measured_with_the_error_floor_so_jumps_near_max_count() -> None:

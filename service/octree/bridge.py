@@ -31,7 +31,8 @@ most accurate point at one camera had 4 shadow rays and no AO (error 0.022); the
 fps at 0.018 there (bench/RESULTS.md, "The valley at 640x360 with 16 bridge points"). Stepping toward the
 meeting top only lowers AO and raises the shadow rays again. So a slow point that nearly keeps up (frame
 time within :data:`NEAR_DEADLINES` deadlines) and is more accurate than the meeting top by any margin is
-also stepped one value down in each parameter, toward cheaper settings (:func:`nudges`). Pure logic.
+also stepped one value down in each parameter, toward cheaper settings (:func:`nudges`), with the
+points the gaps and descents leave. Pure logic.
 """
 
 from __future__ import annotations
@@ -130,8 +131,9 @@ def bridge_candidates(points: Sequence[tuple[Any, ...]], fps: float | None, k: i
     ((indices, error, power, frame time) priced at display resolution): for each gap, widest first and
     in turns (one setting of each gap, then the next of each), the cheaper end with one parameter of the
     dearer end, parameters in the space's order; for a descent (:func:`descents`), ranked by its ratio
-    among the gaps, the slow start with one parameter one value nearer the meeting top's; for a nudge
-    (:func:`nudges`), likewise ranked, the slow start with one parameter one value cheaper."""
+    among the gaps, the slow start with one parameter one value nearer the meeting top's; then, with
+    what the gaps and descents leave of ``k``, for a nudge (:func:`nudges`) the slow start with one
+    parameter one value cheaper."""
     if k <= 0:
         return []
     ranked = []
@@ -140,17 +142,18 @@ def bridge_candidates(points: Sequence[tuple[Any, ...]], fps: float | None, k: i
         ranked.append((ratio, [(*lo[:p], hi[p], *lo[p + 1:]) for p in range(len(lo)) if lo[p] != hi[p]]))
     for ratio, start, top in descents(points, fps):
         ranked.append((ratio, _step_toward(tuple(int(v) for v in start[0]), tuple(int(v) for v in top[0]))))
-    for ratio, start, _ in nudges(points, fps):
-        ranked.append((ratio, _steps_down(tuple(int(v) for v in start[0]))))
     ranked.sort(key=lambda g: -g[0])
-    per_gap = [cands for _, cands in ranked]
     out: list[tuple[int, ...]] = []
     seen = {tuple(int(v) for v in x) for x in priced}
-    for turn in range(max((len(c) for c in per_gap), default=0)):
-        for cands in per_gap:
-            if turn < len(cands) and cands[turn] not in seen:
-                seen.add(cands[turn])
-                out.append(cands[turn])
-                if len(out) == k:
-                    return out
+    # nudges after every gap's and descent's setting, with the points they leave: taking turns with them,
+    # nudges displaced the bridge that served a valley frame at 640x360 (bench/RESULTS.md, "Bridging nudges")
+    nudged = [_steps_down(tuple(int(v) for v in start[0])) for _, start, _ in nudges(points, fps)]
+    for per_gap in ([cands for _, cands in ranked], nudged):
+        for turn in range(max((len(c) for c in per_gap), default=0)):
+            for cands in per_gap:
+                if turn < len(cands) and cands[turn] not in seen:
+                    seen.add(cands[turn])
+                    out.append(cands[turn])
+                    if len(out) == k:
+                        return out
     return out
