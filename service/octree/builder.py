@@ -418,10 +418,11 @@ class OctreeBuilder:
             left_s = self._round_time_left(time.perf_counter() - started, requests, len(results),
                                            rendered_before)
             search.report(phase, remaining_s=guess_s if left_s is None else left_s)
-        if rendered_before is not None and points > 0:
+        share = self._rendered_share(rendered_before, points)
+        if share is not None:
             # a round answered from the evaluation cache (a rerun from a copied data folder) has no pace:
             # taken over what it asked for, it told the bridging after it that an hour's work was ~0 s
-            renders *= (self.pricer.evaluations - rendered_before) / points  # type: ignore[union-attr]
+            renders *= share
         round_pace_s = (time.perf_counter() - started) / renders if renders > 0 else pace_s
         res = iter(results)
         for fid, xs in asked.items():
@@ -442,11 +443,18 @@ class OctreeBuilder:
         data folder whose first bridging batch was cached reported ~0 s left for an hour of renders)."""
         if rendered_before is None or done >= len(requests):  # (a pricer that does not count its renders)
             return time_left(spent_s, done, len(requests))
-        rendered = self.pricer.evaluations - rendered_before  # type: ignore[union-attr]
-        asked = sum(len(xs) for _, xs in requests[:done])
-        if rendered <= 0 or asked <= 0:
+        share = self._rendered_share(rendered_before, sum(len(xs) for _, xs in requests[:done]))
+        if not share:
             return None
-        return spent_s / (done * min(1.0, rendered / asked)) * max(len(requests) - done, 0)
+        return spent_s / (done * share) * max(len(requests) - done, 0)
+
+    def _rendered_share(self, rendered_before: int | None, asked: int) -> float | None:
+        """Share of the ``asked`` settings the pricer really rendered since it had rendered
+        ``rendered_before`` (the evaluation cache answered the rest); None when the pricer does not count
+        its renders or nothing was asked."""
+        if rendered_before is None or asked <= 0:
+            return None
+        return min(1.0, (self.pricer.evaluations - rendered_before) / asked)  # type: ignore[union-attr]
 
     def _priced_figures(self, fid: int, frontier: Frontier) -> PricedFigures | None:
         """The per-camera figures of lattice frontier ``fid`` for its store frontier (the points it
