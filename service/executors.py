@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import ctypes
+import itertools
 import multiprocessing
 import os
 import signal
@@ -26,12 +27,18 @@ T = TypeVar("T")
 R = TypeVar("R")
 
 
+#: ``on_done(finished)``: called in the caller's thread with the indices (into ``items``) of the tasks that
+#: just finished, per task or per chunk of tasks, so that a long batch can report progress before it ends.
+OnDone = Callable[[range], None]
+
+
 class Executor(Protocol):
     """Runs a batch of independent tasks; results come back in input order."""
 
     name: str
 
-    def map(self, fn: Callable[[Any, Any], R], shared: Any, items: Sequence[Any]) -> list[R]: ...
+    def map(self, fn: Callable[[Any, Any], R], shared: Any, items: Sequence[Any],
+            on_done: OnDone | None = None) -> list[R]: ...
 
     def close(self) -> None: ...
 
@@ -46,13 +53,25 @@ def _chunks(items: Sequence[T], n: int) -> list[Sequence[T]]:
     return [items[i:i + size] for i in range(0, len(items), size)]
 
 
+def _spans(chunks: Sequence[Sequence[Any]]) -> list[range]:
+    """The item indices each of ``chunks`` (consecutive slices of the items) holds."""
+    starts = [0, *itertools.accumulate(len(c) for c in chunks)]
+    return [range(a, b) for a, b in itertools.pairwise(starts)]
+
+
 class InProcessExecutor:
     """Runs tasks in the calling thread (the default; the tracer itself is multithreaded)."""
 
     name = "in-process"
 
-    def map(self, fn: Callable[[Any, Any], R], shared: Any, items: Sequence[Any]) -> list[R]:
-        return [fn(shared, x) for x in items]
+    def map(self, fn: Callable[[Any, Any], R], shared: Any, items: Sequence[Any],
+            on_done: OnDone | None = None) -> list[R]:
+        out: list[R] = []
+        for i, x in enumerate(items):
+            out.append(fn(shared, x))
+            if on_done is not None:
+                on_done(range(i, i + 1))
+        return out
 
     def close(self) -> None:
         pass
@@ -103,10 +122,17 @@ class ProcessPoolExecutor:
         self._pool = cf.ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn"),
                                             initializer=die_with_parent, initargs=(os.getpid(),))
 
-    def map(self, fn: Callable[[Any, Any], R], shared: Any, items: Sequence[Any]) -> list[R]:
+    def map(self, fn: Callable[[Any, Any], R], shared: Any, items: Sequence[Any],
+            on_done: OnDone | None = None) -> list[R]:
         if not items:
             return []
-        futures = [self._pool.submit(_run_chunk, fn, shared, c) for c in _chunks(items, 4 * self.workers)]
+        chunks = _chunks(items, 4 * self.workers)
+        futures = [self._pool.submit(_run_chunk, fn, shared, c) for c in chunks]
+        if on_done is not None:
+            spans = dict(zip(futures, _spans(chunks), strict=True))
+            for f in cf.as_completed(futures):
+                f.result()  # a failed task raises here, before later progress is reported
+                on_done(spans[f])
         out: list[R] = []
         for f in futures:
             out.extend(f.result())
@@ -156,7 +182,8 @@ class DaskExecutor:
         except TypeError:  # older signature
             return max(1, len(self.client.scheduler_info().get("workers", {})))
 
-    def map(self, fn: Callable[[Any, Any], R], shared: Any, items: Sequence[Any]) -> list[R]:
+    def map(self, fn: Callable[[Any, Any], R], shared: Any, items: Sequence[Any],
+            on_done: OnDone | None = None) -> list[R]:
         if not items:
             return []
         # Scatter the payload as ONE object: scattering a dict would scatter its values under their own
@@ -164,6 +191,13 @@ class DaskExecutor:
         [shared_f] = self.client.scatter([shared], broadcast=True, hash=False)
         chunks = _chunks(items, 2 * self._n_workers())
         futures = [self.client.submit(_run_chunk, fn, shared_f, c, pure=False) for c in chunks]
+        if on_done is not None:
+            from distributed import as_completed
+
+            spans = {f.key: span for f, span in zip(futures, _spans(chunks), strict=True)}
+            for f in as_completed(futures):
+                f.result()
+                on_done(spans[f.key])
         out: list[R] = []
         for part in self.client.gather(futures):
             out.extend(part)

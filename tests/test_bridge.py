@@ -148,7 +148,7 @@ def test_the_builder_prices_a_bridge_and_the_error_budget_picks_it_over_max() ->
     class Pricer:
         ev = SimpleNamespace(executor=None)
 
-        def price(self, requests):
+        def price(self, requests, on_progress=None):
             out = []
             for _, xs in requests:
                 asked.extend(space.restrict(x) for x in xs)
@@ -207,7 +207,7 @@ def _clocked_bridging(monkeypatch, *, search_evaluations: int, first_round_cache
 
         bridging_batches = 0
 
-        def price(self, requests):
+        def price(self, requests, on_progress=None):
             n = sum(len(xs) for _, xs in requests)
             bridging = phase[0] == "price between the priced points"
             self.bridging_batches += bridging

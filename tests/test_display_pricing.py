@@ -475,9 +475,11 @@ class _SlowClock:
 
 @pytest.mark.slow
 def test_the_time_left_while_pricing_follows_the_pricings_own_pace(scene, monkeypatch) -> None:
-    """Display pricing is the last phase and costs what the scene makes it cost: once a batch is priced,
-    the job's estimate is that batch's pace times the cameras left (the search steps' pace, the guess
-    before, was 8x low on the village), and it reaches 0 with the last batch."""
+    """Display pricing is the last phase and costs what the scene makes it cost: from its first camera on,
+    the job's estimate is the pricing's own pace (per setting rendered) times the settings left (the
+    search steps' pace, the guess before, was 8x low on the village), and it reaches 0 with the last
+    batch. Progress is reported as each camera of a batch is priced, not only once the batch is done (a
+    batch of the village at 640x360 showed nothing for over ten minutes)."""
     import service.octree.builder as builder_module
 
     monkeypatch.setattr(builder_module, "time", _SlowClock())
@@ -485,14 +487,21 @@ def test_the_time_left_while_pricing_follows_the_pricings_own_pace(scene, monkey
     store = _priced_orbit(scene, updates)
     total = store.meta["display_cameras"]
     assert total > 8, "the path must need more than one pricing batch (8 cameras) for this test"
-    pricing = [u.estimate_s for u in updates if u.phase == "price at display resolution"]
-    # the first report (before any batch) keeps the steps' guess; then one per batch of 8 cameras
-    batches = pricing[1:]
-    assert len(batches) == -(-total // 8)
-    for b, left in enumerate(batches, start=1):
-        done = min(8 * b, total)
-        assert left == pytest.approx(100.0 * b / done * (total - done))
-    assert batches[-1] == 0.0
+    reports = [u for u in updates if u.phase == "price at display resolution"]
+    # the first report (before any camera) keeps the steps' guess; then one per camera as it is priced
+    # (the in-process executor's tasks) and one per batch of 8 cameras done, each reading the clock once:
+    # every camera prices the same settings here, so the pace is 100 s per clock reading per camera
+    expected, readings, rendered = [], 0, 0
+    for start in range(0, total, 8):
+        for _ in range(min(8, total - start)):
+            readings, rendered = readings + 1, rendered + 1
+            expected.append(100.0 * readings / rendered * (total - rendered))
+        readings += 1
+        expected.append(100.0 * readings / rendered * (total - rendered))
+    assert [u.estimate_s for u in reports[1:]] == pytest.approx(expected)
+    assert reports[-1].estimate_s == 0.0
+    done = [u.fraction for u in reports]
+    assert done == sorted(done) and len(set(done)) > -(-total // 8) + 1  # moves within a batch
 
 
 @pytest.mark.slow
@@ -558,7 +567,7 @@ def test_the_fraction_done_covers_the_display_pricing(scene) -> None:
     (each camera priced weighted by its points and the pixel ratio), from the start: it never decreases,
     it does not jump when the pricing starts (the pricing to come was counted during the search), it is
     well short of 1 then although every view is done (the views' count, the progress shown before, reads
-    100 % through the pricing), it grows with every batch priced and reads 1 only when the job is done.
+    100 % through the pricing), it grows with every camera priced and reads 1 only when the job is done.
     The add-on's progress line and bar follow it."""
     from addon.core.job_runner import describe
     from service.jobs import progress_dict
@@ -571,13 +580,14 @@ def test_the_fraction_done_covers_the_display_pricing(scene) -> None:
     assert fractions == sorted(fractions) and fractions[0] == 0.0
     assert updates[-1].phase == "done" and fractions[-1] == 1.0 and max(fractions[:-1]) < 1.0
     pricing = [i for i, u in enumerate(updates) if u.phase == "price at display resolution"]
-    assert len(pricing) == 1 + -(-cameras // 8)  # the phase's start, then one report per batch
+    # the phase's start, then one report per camera priced and one per batch of 8 done
+    assert len(pricing) == 1 + cameras + -(-cameras // 8)
     start = updates[pricing[0]]
     assert start.views_done == start.views_planned > 0
     assert start.fraction == pytest.approx(updates[pricing[0] - 1].fraction, rel=1e-9)
     assert 0.0 < start.fraction < 0.5
     priced = [updates[i].fraction for i in pricing]
-    assert priced == sorted(set(priced))  # rising with every batch
+    assert priced == sorted(priced) and len(set(priced)) == 1 + cameras  # rising with every camera
     body = {"state": "running", "progress": progress_dict(start, elapsed_s=start.elapsed_s)}
     line = describe(body, evals_per_view=6 * 3)
     assert line.fraction == pytest.approx(start.fraction) and f": {100 * start.fraction:.0f} %, " in line.text

@@ -18,12 +18,34 @@ SHARED = {"weights": np.linspace(0.0, 1.0, 257)}
 ITEMS = list(range(37))
 
 
+class _Finished:
+    """An ``on_done`` callback: records the item indices each call reports finished."""
+
+    def __init__(self) -> None:
+        self.calls: list[list[int]] = []
+
+    def __call__(self, finished: range) -> None:
+        self.calls.append(list(finished))
+
+    def check(self, n: int, at_least_calls: int) -> None:
+        """Every item reported finished exactly once, over several calls (progress within the batch)."""
+        assert sorted(i for c in self.calls for i in c) == list(range(n))
+        assert len(self.calls) >= at_least_calls
+
+
 def test_in_process_and_pool_agree() -> None:
-    want = InProcessExecutor().map(_task, SHARED, ITEMS)
+    finished = _Finished()
+    want = InProcessExecutor().map(_task, SHARED, ITEMS, on_done=finished)
     assert [w[0] for w in want] == ITEMS
+    finished.check(len(ITEMS), at_least_calls=len(ITEMS))  # one call per task, in order
+    assert finished.calls == [[i] for i in ITEMS]
     with ProcessPoolExecutor(2) as ex:
         assert ex.map(_task, SHARED, ITEMS) == want
-        assert ex.map(_task, SHARED, []) == []
+        finished = _Finished()
+        assert ex.map(_task, SHARED, ITEMS, on_done=finished) == want
+        finished.check(len(ITEMS), at_least_calls=8)  # per chunk of tasks (4 a worker)
+        calls = len(finished.calls)
+        assert ex.map(_task, SHARED, [], on_done=finished) == [] and len(finished.calls) == calls
 
 
 def test_dask_local_cluster_agrees() -> None:
@@ -35,6 +57,9 @@ def test_dask_local_cluster_agrees() -> None:
             Client(cl) as client:
         ex = DaskExecutor(client=client)
         assert ex.map(_task, SHARED, ITEMS) == want
+        finished = _Finished()
+        assert ex.map(_task, SHARED, ITEMS, on_done=finished) == want
+        finished.check(len(ITEMS), at_least_calls=4)  # per chunk of tasks (2 a worker)
         ex.close()  # does not close a client it did not open
         assert client.status == "running"
         by_address = DaskExecutor(cl.scheduler_address)

@@ -186,7 +186,7 @@ def test_the_builder_prices_the_spread_points_and_draws_the_tiers_from_their_dis
         def __init__(self) -> None:
             self.asked: list[list[tuple[int, ...]]] = []
 
-        def price(self, requests):
+        def price(self, requests, on_progress=None):
             self.asked += [list(xs) for _, xs in requests]
             return [[SimpleNamespace(error=display[x][0], power_w=display[x][1], frame_time_s=display[x][2])
                      for x in xs] for _, xs in requests]
@@ -240,7 +240,7 @@ def test_the_builder_prices_max_quality_alone_in_the_slow_tier_with_one_slow_poi
     class Pricer:
         ev = SimpleNamespace(executor=None)
 
-        def price(self, requests):
+        def price(self, requests, on_progress=None):
             asked.extend(list(xs) for _, xs in requests)
             return [[SimpleNamespace(error=e, power_w=p, frame_time_s=t)
                      for x in xs for (s, e, p, t) in meeting + slow if s == x] for _, xs in requests]

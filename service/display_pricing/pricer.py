@@ -3,7 +3,7 @@ the executor, one task per camera."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from service.display_pricing.camera import price_camera
@@ -54,8 +54,11 @@ class DisplayPricer:
         return CacheKey(self.ev.scene.content_hash, camera.key(), self.metric_key, self.ctx.profile,
                         camera.width, camera.height, self.ctx.fps)
 
-    def price(self, requests: Sequence[tuple[CameraSpec, Sequence[Indices]]]) -> list[list[Evaluation]]:
-        """Evaluations of every request's settings, in order; cached ones are not priced again."""
+    def price(self, requests: Sequence[tuple[CameraSpec, Sequence[Indices]]],
+              on_progress: Callable[[int, int], None] | None = None) -> list[list[Evaluation]]:
+        """Evaluations of every request's settings, in order; cached ones are not priced again.
+        ``on_progress(rendered, to_render)``: settings rendered so far of those the cache did not hold,
+        as camera tasks finish (a batch of cameras at display resolution can take many minutes)."""
         space = self.ev.space
         reqs = [(cam, [tuple(int(i) for i in x) for x in xs]) for cam, xs in requests]
         found: dict[tuple[str, int], Evaluation] = {}
@@ -72,7 +75,16 @@ class DisplayPricer:
                 entry[1].extend(x for x in missing if x not in entry[1])
         if todo:
             items = list(todo.values())
-            results = self.ev.executor.map(_price_task, self.ctx, items)
+            to_render = sum(len(xs) for _, xs in items)
+            rendered = 0
+
+            def done(finished: range) -> None:
+                nonlocal rendered
+                rendered += sum(len(items[i][1]) for i in finished)
+                if on_progress is not None:
+                    on_progress(rendered, to_render)
+
+            results = self.ev.executor.map(_price_task, self.ctx, items, on_done=done)
             self.cameras += len(items)
             for (cam, xs), evs in zip(items, results, strict=True):
                 pairs = [(space.pack(x), e) for x, e in zip(xs, evs, strict=True)]

@@ -5,6 +5,7 @@ or the path's own cameras, :mod:`.path_samples`) put together into a runtime sto
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -408,21 +409,30 @@ class OctreeBuilder:
         results: list[list[Any]] = []
         rendered_before = getattr(self.pricer, "evaluations", None)  # settings the pricer rendered so far
         started = time.perf_counter()
+
+        def report(start: int, rendered: int | None = None, to_render: int = 0) -> None:
+            # progress in the batch of cameras requests[start:start + chunk]: ``rendered`` of its
+            # ``to_render`` uncached settings while it renders (a batch at display resolution took over ten
+            # minutes on the village at 640x360 with nothing shown), or the batch done (None)
+            end = min(start + chunk, len(requests))
+            part = 1.0 if rendered is None else rendered / to_render if to_render > 0 else 0.0
+            search.steps_done = done + sum(steps[:start]) + part * sum(steps[start:end])
+            # pricing is the last phase, and its cameras cost what the scene makes them cost at display
+            # resolution, which pricing_time guesses from the search's pace and pixel counts only: from the
+            # first render on, the time left is this round's own pace
+            left_s = self._round_time_left(time.perf_counter() - started, requests, end, rendered_before,
+                                           rendered, to_render)
+            search.report(phase, remaining_s=guess_s if left_s is None else left_s)
+
         for start in range(0, len(requests), chunk):
             search.check_cancel()
-            results += self.pricer.price(requests[start:start + chunk])  # type: ignore[union-attr]
-            search.steps_done = done + sum(steps[:start + chunk])  # at the last batch: every camera's
-            # pricing is the last phase, and its cameras cost what the scene makes them cost at display
-            # resolution, which pricing_time guesses from the search's pace and pixel counts only: from
-            # the first batch that renders on, the time left is this phase's own measured pace
-            left_s = self._round_time_left(time.perf_counter() - started, requests, len(results),
-                                           rendered_before)
-            search.report(phase, remaining_s=guess_s if left_s is None else left_s)
-        share = self._rendered_share(rendered_before, points)
-        if share is not None:
+            results += self.pricer.price(requests[start:start + chunk],  # type: ignore[union-attr]
+                                         on_progress=functools.partial(report, start))
+            report(start)
+        if rendered_before is not None and points > 0:
             # a round answered from the evaluation cache (a rerun from a copied data folder) has no pace:
             # taken over what it asked for, it told the bridging after it that an hour's work was ~0 s
-            renders *= share
+            renders *= (self.pricer.evaluations - rendered_before) / points  # type: ignore[union-attr]
         round_pace_s = (time.perf_counter() - started) / renders if renders > 0 else pace_s
         res = iter(results)
         for fid, xs in asked.items():
@@ -435,26 +445,26 @@ class OctreeBuilder:
                                                                                                strict=True)])
         return round_pace_s
 
-    def _round_time_left(self, spent_s: float, requests: list[tuple[CameraSpec, list[Indices]]], done: int,
-                         rendered_before: int | None) -> float | None:
-        """Seconds left for a pricing round's ``requests`` once ``done`` of them took ``spent_s``; None
-        while nothing was rendered. Batches the evaluation cache answered took no time: the pace is taken
-        over the share of the settings asked so far that the pricer really rendered (a rerun from a copied
-        data folder whose first bridging batch was cached reported ~0 s left for an hour of renders)."""
-        if rendered_before is None or done >= len(requests):  # (a pricer that does not count its renders)
-            return time_left(spent_s, done, len(requests))
-        share = self._rendered_share(rendered_before, sum(len(xs) for _, xs in requests[:done]))
-        if not share:
+    def _round_time_left(self, spent_s: float, requests: list[tuple[CameraSpec, list[Indices]]], end: int,
+                         rendered_before: int | None, rendered: int | None = None,
+                         to_render: int = 0) -> float | None:
+        """Seconds left for a pricing round's ``requests`` after ``spent_s``, in the batch that ends at
+        ``requests[end]``: ``rendered`` of its ``to_render`` uncached settings so far, or all of it done
+        (None); None while nothing was rendered. Settings the evaluation cache answered take no time: the
+        pace is per setting rendered, and the requests after the batch are expected to need rendering in
+        the share the round's requests up to ``end`` did (a rerun from a copied data folder whose first
+        bridging batch was cached reported ~0 s left for an hour of renders)."""
+        if rendered_before is None:  # (a pricer that does not count its renders)
+            return time_left(spent_s, end, len(requests)) if rendered is None else None
+        counted = self.pricer.evaluations - rendered_before  # type: ignore[union-attr]  # (batches done)
+        rendered_so_far = counted + (0 if rendered is None else rendered)
+        batch_left = 0 if rendered is None else to_render - rendered
+        asked = sum(len(xs) for _, xs in requests[:end])
+        if rendered_so_far <= 0 or asked <= 0:
             return None
-        return spent_s / (done * share) * max(len(requests) - done, 0)
-
-    def _rendered_share(self, rendered_before: int | None, asked: int) -> float | None:
-        """Share of the ``asked`` settings the pricer really rendered since it had rendered
-        ``rendered_before`` (the evaluation cache answered the rest); None when the pricer does not count
-        its renders or nothing was asked."""
-        if rendered_before is None or asked <= 0:
-            return None
-        return min(1.0, (self.pricer.evaluations - rendered_before) / asked)  # type: ignore[union-attr]
+        share = min(1.0, (counted + (0 if rendered is None else to_render)) / asked)
+        later = sum(len(xs) for _, xs in requests[end:])
+        return spent_s / rendered_so_far * (batch_left + share * later)
 
     def _priced_figures(self, fid: int, frontier: Frontier) -> PricedFigures | None:
         """The per-camera figures of lattice frontier ``fid`` for its store frontier (the points it
