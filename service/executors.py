@@ -128,15 +128,20 @@ class ProcessPoolExecutor:
             return []
         chunks = _chunks(items, 4 * self.workers)
         futures = [self._pool.submit(_run_chunk, fn, shared, c) for c in chunks]
-        if on_done is not None:
-            spans = dict(zip(futures, _spans(chunks), strict=True))
-            for f in cf.as_completed(futures):
-                f.result()  # a failed task raises here, before later progress is reported
-                on_done(spans[f])
-        out: list[R] = []
-        for f in futures:
-            out.extend(f.result())
-        return out
+        try:
+            if on_done is not None:
+                spans = dict(zip(futures, _spans(chunks), strict=True))
+                for f in cf.as_completed(futures):
+                    f.result()  # a failed task raises here, before later progress is reported
+                    on_done(spans[f])
+            out: list[R] = []
+            for f in futures:
+                out.extend(f.result())
+            return out
+        except BaseException:  # (a failed task, or on_done raising to cancel): the queued tasks never start
+            for f in futures:
+                f.cancel()
+            raise
 
     def close(self, timeout_s: float = 5.0) -> None:
         """Cancel queued tasks and stop the workers now (SIGTERM, then SIGKILL after ``timeout_s``): a
@@ -191,17 +196,21 @@ class DaskExecutor:
         [shared_f] = self.client.scatter([shared], broadcast=True, hash=False)
         chunks = _chunks(items, 2 * self._n_workers())
         futures = [self.client.submit(_run_chunk, fn, shared_f, c, pure=False) for c in chunks]
-        if on_done is not None:
-            from distributed import as_completed
+        try:
+            if on_done is not None:
+                from distributed import as_completed
 
-            spans = {f.key: span for f, span in zip(futures, _spans(chunks), strict=True)}
-            for f in as_completed(futures):
-                f.result()
-                on_done(spans[f.key])
-        out: list[R] = []
-        for part in self.client.gather(futures):
-            out.extend(part)
-        return out
+                spans = {f.key: span for f, span in zip(futures, _spans(chunks), strict=True)}
+                for f in as_completed(futures):
+                    f.result()
+                    on_done(spans[f.key])
+            out: list[R] = []
+            for part in self.client.gather(futures):
+                out.extend(part)
+            return out
+        except BaseException:
+            self.client.cancel(futures)
+            raise
 
     def close(self) -> None:
         if self._own:

@@ -275,3 +275,47 @@ def test_cached_pricing_batches_do_not_promise_no_time_left(monkeypatch) -> None
     assert after_cached.estimate_s is None or after_cached.estimate_s >= took / 2
     after_rendered = bridging[2]  # after the second batch, which rendered: its own pace, 4 cameras left
     assert after_rendered.estimate_s is not None and 0 < after_rendered.estimate_s <= took
+
+
+def test_a_cancel_stops_a_pricing_batch_between_its_cameras(monkeypatch) -> None:
+    """A cancel requested while a batch of cameras is priced at display resolution stops the batch at its
+    next camera, not once the batch is done (a batch of the village at 640x360 took over ten minutes);
+    until then each camera priced moves the fraction done."""
+    import pytest
+
+    from service.octree.search import Cancelled
+    from service.octree.view_cubes import ViewCubeSampling
+    from service.params import default_space
+
+    space = default_space().subset(["sampling", "max_depth", "resolution_scale"])
+    searched = [(space.expand(x), e, p, 0.02)
+                for x, e, p in (((0, 0, 0), 0.2, 15.0), ((3, 2, 3), 0.005, 26.5), ((4, 3, 3), 0.0, 30.0))]
+    priced = []  # cameras priced
+
+    class Pricer:
+        ev = SimpleNamespace(executor=None)
+        evaluations = 0
+
+        def price(self, requests, on_progress=None):
+            out = []
+            n = sum(len(xs) for _, xs in requests)
+            for _, xs in requests:
+                out.append([SimpleNamespace(error=e, power_w=p, frame_time_s=0.02)
+                            for e, p in (_figures(space.restrict(x)) for x in xs)])
+                priced.append(len(xs))
+                if on_progress is not None:
+                    on_progress(sum(len(x) for _, x in requests[:len(out)]), n)
+            self.evaluations += n
+            return out
+
+    one_camera = ViewCubeSampling.pricing_cameras
+    monkeypatch.setattr(ViewCubeSampling, "pricing_cameras",
+                        lambda self: {fid: cams * 20 for fid, cams in one_camera(self).items()})
+    reports = []
+    with pytest.raises(Cancelled):
+        _run_one_frontier_builder(searched, Pricer(), reports.append, should_cancel=lambda: len(priced) >= 3,
+                                  display_points=8)
+    assert len(priced) == 3  # of a batch of 8 cameras
+    assert reports[-1].phase == "cancelled"
+    pricing = [r.fraction for r in reports if r.phase == "price at display resolution"]
+    assert pricing == sorted(pricing) and len(set(pricing)) == 3  # the start, then the 2 cameras before

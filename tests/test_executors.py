@@ -48,6 +48,37 @@ def test_in_process_and_pool_agree() -> None:
         assert ex.map(_task, SHARED, [], on_done=finished) == [] and len(finished.calls) == calls
 
 
+def _mark(folder: str, item: int) -> int:
+    """A slow task that leaves a file behind, so a test can tell which tasks ran."""
+    import pathlib
+    import time
+
+    time.sleep(0.02)
+    (pathlib.Path(folder) / str(item)).touch()
+    return item
+
+
+class _Stop(Exception):
+    pass
+
+
+def test_a_raising_on_done_stops_the_pools_queued_tasks(tmp_path) -> None:
+    """``on_done`` raising (how a job cancels a batch of cameras between them) ends ``map`` with that
+    error, and the tasks still queued never run: the pool is free for the next job."""
+    items = list(range(80))
+
+    def stop(finished: range) -> None:
+        raise _Stop
+
+    with ProcessPoolExecutor(2) as ex:
+        with pytest.raises(_Stop):
+            ex.map(_mark, str(tmp_path), items, on_done=stop)
+        assert ex.map(_task, SHARED, ITEMS[:3]) == InProcessExecutor().map(_task, SHARED, ITEMS[:3])
+    ran = len(list(tmp_path.iterdir()))
+    # 8 chunks of 10 for 2 workers: the first done, not all (the pool's own queue holds a few, which run)
+    assert 10 <= ran < len(items)
+
+
 def test_dask_local_cluster_agrees() -> None:
     """Threaded workers keep the test cheap; pickling to other processes is covered by the pool test."""
     from distributed import Client, LocalCluster

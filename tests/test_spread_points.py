@@ -121,10 +121,10 @@ def _one_frontier_store(points: list[tuple]) -> ParetoStore:
                        [fr], fps=FPS, meta={"static_power_w": 0.1})
 
 
-def _run_one_frontier_builder(points: list[tuple], pricer, progress=None, **options):
+def _run_one_frontier_builder(points: list[tuple], pricer, progress=None, should_cancel=None, **options):
     """An octree builder whose one measured frontier holds ``points`` and that every view reads, run with
-    a stand-in ``pricer`` (its display pricing alone does work) and ``progress`` callback: the builder,
-    after its run."""
+    a stand-in ``pricer`` (its display pricing alone does work), ``progress`` and ``should_cancel``
+    callbacks: the builder, after its run."""
     from service.octree.builder import OctreeBuilder, OctreeConfig, PathFrames
     from service.params import default_space
 
@@ -133,7 +133,7 @@ def _run_one_frontier_builder(points: list[tuple], pricer, progress=None, **opti
                        **options)
     b = OctreeBuilder(SimpleNamespace(fps=FPS, evaluations=0, cache_hits=0), space,  # type: ignore[arg-type]
                       PathFrames(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])), cfg, progress=progress,
-                      pricer=pricer)
+                      pricer=pricer, should_cancel=should_cancel)
 
     def build() -> None:  # one measured frontier, every view of the root's corners reads it
         b.lattice.add_root()

@@ -413,7 +413,9 @@ class OctreeBuilder:
         def report(start: int, rendered: int | None = None, to_render: int = 0) -> None:
             # progress in the batch of cameras requests[start:start + chunk]: ``rendered`` of its
             # ``to_render`` uncached settings while it renders (a batch at display resolution took over ten
-            # minutes on the village at 640x360 with nothing shown), or the batch done (None)
+            # minutes on the village at 640x360 with nothing shown, nor any cancel seen), or the batch done
+            if rendered is not None:  # a cancel stops the batch itself (its cameras take minutes)
+                search.check_cancel()
             end = min(start + chunk, len(requests))
             part = 1.0 if rendered is None else rendered / to_render if to_render > 0 else 0.0
             search.steps_done = done + sum(steps[:start]) + part * sum(steps[start:end])
