@@ -91,6 +91,13 @@ def test_dask_local_cluster_agrees() -> None:
         finished = _Finished()
         assert ex.map(_task, SHARED, ITEMS, on_done=finished) == want
         finished.check(len(ITEMS), at_least_calls=4)  # per chunk of tasks (2 a worker)
+
+        def stop(finished: range) -> None:
+            raise _Stop
+
+        with pytest.raises(_Stop):  # the rest of the batch is cancelled; the cluster serves the next one
+            ex.map(_task, SHARED, ITEMS, on_done=stop)
+        assert ex.map(_task, SHARED, ITEMS) == want
         ex.close()  # does not close a client it did not open
         assert client.status == "running"
         by_address = DaskExecutor(cl.scheduler_address)
