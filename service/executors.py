@@ -198,7 +198,7 @@ class DaskExecutor:
         futures = [self.client.submit(_run_chunk, fn, shared_f, c, pure=False) for c in chunks]
         try:
             if on_done is not None:
-                from distributed import as_completed
+                from distributed import as_completed  # lazy, as in __init__: only this executor needs dask
 
                 spans = {f.key: span for f, span in zip(futures, _spans(chunks), strict=True)}
                 for f in as_completed(futures):
