@@ -319,3 +319,15 @@ def test_a_cancel_stops_a_pricing_batch_between_its_cameras(monkeypatch) -> None
     assert reports[-1].phase == "cancelled"
     pricing = [r.fraction for r in reports if r.phase == "price at display resolution"]
     assert pricing == sorted(pricing) and len(set(pricing)) == 3  # the start, then the 2 cameras before
+
+
+def test_a_pricing_round_answered_from_the_cache_ends_with_nothing_left(monkeypatch) -> None:
+    """A rerun from a copied data folder: the first pricing round is answered from the evaluation cache,
+    nothing rendered, so it has no pace. Once its last camera is done its time left is 0, not unknown or
+    the round's first guess."""
+    import service.octree.builder as builder_module
+
+    monkeypatch.setattr(builder_module.OctreeBuilder, "pricing_time", lambda self, *args: 50.0)  # the guess
+    _, reports, _ = _clocked_bridging(monkeypatch, search_evaluations=1, first_round_cached=True, cameras=20)
+    pricing = [r for r in reports if r.phase == "price at display resolution"]
+    assert len(pricing) >= 3 and pricing[-1].estimate_s == 0.0

@@ -456,6 +456,8 @@ class OctreeBuilder:
         pace is per setting rendered, and the requests after the batch are expected to need rendering in
         the share the round's requests up to ``end`` did (a rerun from a copied data folder whose first
         bridging batch was cached reported ~0 s left for an hour of renders)."""
+        if rendered is None and end >= len(requests):  # the round is done, cached or not
+            return 0.0
         if rendered_before is None:  # (a pricer that does not count its renders)
             return time_left(spent_s, end, len(requests)) if rendered is None else None
         counted = self.pricer.evaluations - rendered_before  # type: ignore[union-attr]  # (batches done)
