@@ -460,15 +460,15 @@ class OctreeBuilder:
             return 0.0
         if rendered_before is None:  # (a pricer that does not count its renders)
             return time_left(spent_s, end, len(requests)) if rendered is None else None
+        if rendered is None:  # the batch is done, and the pricer has counted its renders
+            rendered = to_render = 0
         counted = self.pricer.evaluations - rendered_before  # type: ignore[union-attr]  # (batches done)
-        rendered_so_far = counted + (0 if rendered is None else rendered)
-        batch_left = 0 if rendered is None else to_render - rendered
         asked = sum(len(xs) for _, xs in requests[:end])
-        if rendered_so_far <= 0 or asked <= 0:
+        if counted + rendered <= 0 or asked <= 0:
             return None
-        share = min(1.0, (counted + (0 if rendered is None else to_render)) / asked)
+        share = min(1.0, (counted + to_render) / asked)
         later = sum(len(xs) for _, xs in requests[end:])
-        return spent_s / rendered_so_far * (batch_left + share * later)
+        return spent_s / (counted + rendered) * (to_render - rendered + share * later)
 
     def _priced_figures(self, fid: int, frontier: Frontier) -> PricedFigures | None:
         """The per-camera figures of lattice frontier ``fid`` for its store frontier (the points it
