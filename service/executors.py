@@ -27,9 +27,10 @@ T = TypeVar("T")
 R = TypeVar("R")
 
 
-#: ``on_done(finished)``: called in the caller's thread with the indices (into ``items``) of the tasks that
-#: just finished, per task or per chunk of tasks, so that a long batch can report progress before it ends.
-OnDone = Callable[[range], None]
+#: ``on_done(finished, results)``: called in the caller's thread with the indices (into ``items``) of the
+#: tasks that just finished and their results, per task or per chunk of tasks, so that a long batch can
+#: report progress, and keep what it has, before it ends (``on_done`` raising stops the batch).
+OnDone = Callable[[range, Sequence[Any]], None]
 
 
 class Executor(Protocol):
@@ -70,7 +71,7 @@ class InProcessExecutor:
         for i, x in enumerate(items):
             out.append(fn(shared, x))
             if on_done is not None:
-                on_done(range(i, i + 1))
+                on_done(range(i, i + 1), out[i:])
         return out
 
     def close(self) -> None:
@@ -132,8 +133,7 @@ class ProcessPoolExecutor:
             if on_done is not None:
                 spans = dict(zip(futures, _spans(chunks), strict=True))
                 for f in cf.as_completed(futures):
-                    f.result()  # a failed task raises here, before later progress is reported
-                    on_done(spans[f])
+                    on_done(spans[f], f.result())  # a failed task raises here, before later progress
             out: list[R] = []
             for f in futures:
                 out.extend(f.result())
@@ -201,9 +201,11 @@ class DaskExecutor:
                 from distributed import as_completed  # lazy, as in __init__: only this executor needs dask
 
                 spans = {f.key: span for f, span in zip(futures, _spans(chunks), strict=True)}
-                for f in as_completed(futures):
-                    f.result()
-                    on_done(spans[f.key])
+                parts: dict[Any, list[R]] = {}
+                for f, part in as_completed(futures, with_results=True):  # each part fetched once
+                    parts[f.key] = part
+                    on_done(spans[f.key], part)
+                return [r for f in futures for r in parts[f.key]]
             out: list[R] = []
             for part in self.client.gather(futures):
                 out.extend(part)

@@ -177,6 +177,41 @@ def test_whole_frames_and_every_block_traced_equal_independent_renders(scene) ->
     assert full[0].error == 0.0 and len({round(f.error, 6) for f in full}) > 2
 
 
+def test_a_cancelled_pricing_batch_keeps_its_finished_cameras(scene, tmp_path) -> None:
+    """A cancel (raised from the progress callback, as a job's is) partway through a batch of cameras: the
+    cameras priced before it are in the cache file, so the rerun renders only the others, and its figures
+    are those of a batch never interrupted. (A batch of 16 cameras at 640x360 takes over ten minutes.)"""
+    from service.display_pricing import DisplayPricer
+    from service.evaluation import Evaluator
+
+    class Stop(Exception):
+        pass
+
+    def stop(rendered: int, to_render: int) -> None:
+        raise Stop
+
+    cams = [_camera(48, 32, eye) for eye in ((0.0, -6.0, 2.5), (4.0, -3.5, 1.2), (-3.0, -4.0, 3.0))]
+    sets = [SUBSPACE.max_quality_indices(), SUBSPACE.expand((0, 0, 0)), SUBSPACE.expand((1, 1, 1))]
+    requests = [(cam, sets) for cam in cams]
+    path = tmp_path / "evaluations.sqlite"
+
+    def pricer(cache: EvalCache) -> DisplayPricer:
+        return DisplayPricer(Evaluator(scene, SUBSPACE, cache=cache), DisplayPricing("full"))
+
+    with EvalCache(path) as cache:
+        first = pricer(cache)
+        with pytest.raises(Stop):
+            first.price(requests, on_progress=stop)
+        assert first.cameras == 1 and first.evaluations == len(sets)
+    with EvalCache(path) as cache:
+        rerun = pricer(cache)
+        got = rerun.price(requests)
+        assert rerun.cameras == len(cams) - 1 and rerun.ev.cache_hits == len(sets)
+    whole = pricer(EvalCache()).price(requests)
+    assert [[(e.error, e.power_w, e.frame_time_s) for e in row] for row in got] == \
+        [[(e.error, e.power_w, e.frame_time_s) for e in row] for row in whole]
+
+
 @pytest.mark.parametrize("eye,seed,size,share", [
     ((0.0, -6.0, 2.5), 5, (256, 144), 0.25),
     pytest.param((4.0, -3.5, 1.2), 6, (512, 288), 0.1, marks=pytest.mark.slow),

@@ -19,31 +19,37 @@ ITEMS = list(range(37))
 
 
 class _Finished:
-    """An ``on_done`` callback: records the item indices each call reports finished."""
+    """An ``on_done`` callback: records the item indices each call reports finished, and their results."""
 
     def __init__(self) -> None:
         self.calls: list[list[int]] = []
+        self.results: dict[int, object] = {}
 
-    def __call__(self, finished: range) -> None:
+    def __call__(self, finished: range, results) -> None:
         self.calls.append(list(finished))
+        assert len(results) == len(finished)
+        self.results.update(zip(finished, results, strict=True))
 
-    def check(self, n: int, at_least_calls: int) -> None:
-        """Every item reported finished exactly once, over several calls (progress within the batch)."""
+    def check(self, n: int, at_least_calls: int, want: list | None = None) -> None:
+        """Every item reported finished exactly once, over several calls (progress within the batch), with
+        the result ``map`` returns for it (a caller can keep it before the batch ends)."""
         assert sorted(i for c in self.calls for i in c) == list(range(n))
         assert len(self.calls) >= at_least_calls
+        if want is not None:
+            assert [self.results[i] for i in range(n)] == want
 
 
 def test_in_process_and_pool_agree() -> None:
     finished = _Finished()
     want = InProcessExecutor().map(_task, SHARED, ITEMS, on_done=finished)
     assert [w[0] for w in want] == ITEMS
-    finished.check(len(ITEMS), at_least_calls=len(ITEMS))  # one call per task, in order
+    finished.check(len(ITEMS), at_least_calls=len(ITEMS), want=want)  # one call per task, in order
     assert finished.calls == [[i] for i in ITEMS]
     with ProcessPoolExecutor(2) as ex:
         assert ex.map(_task, SHARED, ITEMS) == want
         finished = _Finished()
         assert ex.map(_task, SHARED, ITEMS, on_done=finished) == want
-        finished.check(len(ITEMS), at_least_calls=8)  # per chunk of tasks (4 a worker)
+        finished.check(len(ITEMS), at_least_calls=8, want=want)  # per chunk of tasks (4 a worker)
         calls = len(finished.calls)
         assert ex.map(_task, SHARED, [], on_done=finished) == [] and len(finished.calls) == calls
 
@@ -67,7 +73,7 @@ def test_a_raising_on_done_stops_the_pools_queued_tasks(tmp_path) -> None:
     error, and the tasks still queued never run: the pool is free for the next job."""
     items = list(range(80))
 
-    def stop(finished: range) -> None:
+    def stop(finished: range, results) -> None:
         raise _Stop
 
     with ProcessPoolExecutor(2) as ex:
@@ -90,9 +96,9 @@ def test_dask_local_cluster_agrees() -> None:
         assert ex.map(_task, SHARED, ITEMS) == want
         finished = _Finished()
         assert ex.map(_task, SHARED, ITEMS, on_done=finished) == want
-        finished.check(len(ITEMS), at_least_calls=4)  # per chunk of tasks (2 a worker)
+        finished.check(len(ITEMS), at_least_calls=4, want=want)  # per chunk of tasks (2 a worker)
 
-        def stop(finished: range) -> None:
+        def stop(finished: range, results) -> None:
             raise _Stop
 
         with pytest.raises(_Stop):  # the rest of the batch is cancelled; the cluster serves the next one

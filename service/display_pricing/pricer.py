@@ -47,7 +47,7 @@ class DisplayPricer:
                                 ctx.threads)
         self.metric_key = (f"{ctx.metric}:{PIPELINE_VERSION}:{space_fingerprint(evaluator.space)}:"
                            f"display={pricing.key(ctx.metric)}")
-        self.evaluations = 0  # settings actually priced
+        self.evaluations = 0  # settings actually priced, in calls to price that ended (or were cancelled)
         self.cameras = 0  # camera tasks run
 
     def _key(self, camera: CameraSpec) -> CacheKey:
@@ -76,21 +76,25 @@ class DisplayPricer:
         if todo:
             items = list(todo.values())
             to_render = sum(len(xs) for _, xs in items)
-            rendered = 0
+            rendered = cameras = 0
 
-            def done(finished: range) -> None:
-                nonlocal rendered
-                rendered += sum(len(items[i][1]) for i in finished)
+            def done(finished: range, results: Sequence[list[Evaluation]]) -> None:
+                # Cached as each camera finishes, before progress is reported: a cancel (raised from
+                # on_progress) or a failure later in the batch loses none of the finished cameras.
+                nonlocal rendered, cameras
+                for i, evs in zip(finished, results, strict=True):
+                    cam, xs = items[i]
+                    pairs = [(space.pack(x), e) for x, e in zip(xs, evs, strict=True)]
+                    self.ev.cache.put_many(self._key(cam), pairs)
+                    found.update(((cam.key(), p), e) for p, e in pairs)
+                    rendered, cameras = rendered + len(pairs), cameras + 1
                 if on_progress is not None:
                     on_progress(rendered, to_render)
 
-            results = self.ev.executor.map(_price_task, self.ctx, items, on_done=done)
-            self.cameras += len(items)
-            for (cam, xs), evs in zip(items, results, strict=True):
-                pairs = [(space.pack(x), e) for x, e in zip(xs, evs, strict=True)]
-                self.evaluations += len(pairs)
-                self.ev.evaluations += len(pairs)
-                for p, e in pairs:
-                    found[(cam.key(), p)] = e
-                self.ev.cache.put_many(self._key(cam), pairs)
+            try:
+                self.ev.executor.map(_price_task, self.ctx, items, on_done=done)
+            finally:  # the counters move once the call ends (the builder reads them between batches)
+                self.cameras += cameras
+                self.evaluations += rendered
+                self.ev.evaluations += rendered
         return [[found[(cam.key(), space.pack(x))] for x in xs] for cam, xs in reqs]
