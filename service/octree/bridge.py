@@ -78,16 +78,25 @@ def gaps(points: Sequence[tuple[Any, ...]], fps: float | None) -> list[tuple[flo
     return found
 
 
+def _slow_tier_and_top(points: Sequence[tuple[Any, ...]], fps: float | None
+                       ) -> tuple[list[tuple[Any, ...]], tuple[Any, ...] | None]:
+    """The priced slow tier and the meeting tier's most accurate point (least error, then least power),
+    the point descents and nudges compare the slow tier with; ``([], None)`` without a slow tier."""
+    meeting, slow = split_by_rate(points, fps)
+    if not slow:
+        return [], None
+    return slow, min(meeting, key=lambda p: (float(p[1]), float(p[2])))
+
+
 def descents(points: Sequence[tuple[Any, ...]], fps: float | None) -> list[tuple[float, tuple[Any, ...],
                                                                                 tuple[Any, ...]]]:
     """(ratio, slow start, meeting top) where the priced slow tier holds points more accurate than the
     meeting tier's most accurate point (``top``) by more than :data:`GAP_RATIO` (errors with
     :data:`ERROR_FLOOR`): ``start`` is the fastest of them (least frame time, then least power), the one
     nearest to keeping up. Empty without a slow tier (no ``fps``, or no point keeps up)."""
-    meeting, slow = split_by_rate(points, fps)
-    if not slow:
+    slow, top = _slow_tier_and_top(points, fps)
+    if top is None:
         return []
-    top = min(meeting, key=lambda p: (float(p[1]), float(p[2])))
     bound = float(top[1]) + ERROR_FLOOR
     far = [p for p in slow if bound / (float(p[1]) + ERROR_FLOOR) > GAP_RATIO]
     if not far:
@@ -102,10 +111,9 @@ def nudges(points: Sequence[tuple[Any, ...]], fps: float | None) -> list[tuple[f
     meeting tier's most accurate point (``top``) that miss the rate by at most :data:`NEAR_DEADLINES`
     frame deadlines: ``start`` is the fastest of them (least frame time, then least error); ``ratio`` is
     top's error over start's (with :data:`ERROR_FLOOR`). Empty without a slow tier."""
-    meeting, slow = split_by_rate(points, fps)
-    if not slow or fps is None:
+    slow, top = _slow_tier_and_top(points, fps)
+    if top is None or fps is None:
         return []
-    top = min(meeting, key=lambda p: (float(p[1]), float(p[2])))
     near = [p for p in slow if float(p[1]) < float(top[1]) and float(p[3]) <= NEAR_DEADLINES / fps]
     if not near:
         return []
