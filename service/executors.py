@@ -39,7 +39,11 @@ class Executor(Protocol):
     name: str
 
     def map(self, fn: Callable[[Any, Any], R], shared: Any, items: Sequence[Any],
-            on_done: OnDone | None = None) -> list[R]: ...
+            on_done: OnDone | None = None, *, chunks: int | None = None) -> list[R]:
+        """``fn(shared, item)`` for every item. ``chunks``: how many tasks a pool or cluster splits the
+        items into (default a few per worker, for short tasks; ``len(items)`` for tasks of minutes, so
+        that each reports as it ends and a worker that is free takes the next)."""
+        ...
 
     def close(self) -> None: ...
 
@@ -66,7 +70,7 @@ class InProcessExecutor:
     name = "in-process"
 
     def map(self, fn: Callable[[Any, Any], R], shared: Any, items: Sequence[Any],
-            on_done: OnDone | None = None) -> list[R]:
+            on_done: OnDone | None = None, *, chunks: int | None = None) -> list[R]:
         out: list[R] = []
         for i, x in enumerate(items):
             out.append(fn(shared, x))
@@ -124,14 +128,14 @@ class ProcessPoolExecutor:
                                             initializer=die_with_parent, initargs=(os.getpid(),))
 
     def map(self, fn: Callable[[Any, Any], R], shared: Any, items: Sequence[Any],
-            on_done: OnDone | None = None) -> list[R]:
+            on_done: OnDone | None = None, *, chunks: int | None = None) -> list[R]:
         if not items:
             return []
-        chunks = _chunks(items, 4 * self.workers)
-        futures = [self._pool.submit(_run_chunk, fn, shared, c) for c in chunks]
+        parts = _chunks(items, chunks or 4 * self.workers)
+        futures = [self._pool.submit(_run_chunk, fn, shared, c) for c in parts]
         try:
             if on_done is not None:
-                spans = dict(zip(futures, _spans(chunks), strict=True))
+                spans = dict(zip(futures, _spans(parts), strict=True))
                 for f in cf.as_completed(futures):
                     on_done(spans[f], f.result())  # a failed task raises here, before later progress
             out: list[R] = []
@@ -188,24 +192,24 @@ class DaskExecutor:
             return max(1, len(self.client.scheduler_info().get("workers", {})))
 
     def map(self, fn: Callable[[Any, Any], R], shared: Any, items: Sequence[Any],
-            on_done: OnDone | None = None) -> list[R]:
+            on_done: OnDone | None = None, *, chunks: int | None = None) -> list[R]:
         if not items:
             return []
         # Scatter the payload as ONE object: scattering a dict would scatter its values under their own
         # keys ("weights", ...), which collide across calls and clients and get released under us.
         [shared_f] = self.client.scatter([shared], broadcast=True, hash=False)
-        chunks = _chunks(items, 2 * self._n_workers())
-        futures = [self.client.submit(_run_chunk, fn, shared_f, c, pure=False) for c in chunks]
+        parts = _chunks(items, chunks or 2 * self._n_workers())
+        futures = [self.client.submit(_run_chunk, fn, shared_f, c, pure=False) for c in parts]
         try:
             if on_done is not None:
                 from distributed import as_completed  # lazy, as in __init__: only this executor needs dask
 
-                spans = {f.key: span for f, span in zip(futures, _spans(chunks), strict=True)}
-                parts: dict[Any, list[R]] = {}
+                spans = {f.key: span for f, span in zip(futures, _spans(parts), strict=True)}
+                got: dict[Any, list[R]] = {}
                 for f, part in as_completed(futures, with_results=True):  # each part fetched once
-                    parts[f.key] = part
+                    got[f.key] = part
                     on_done(spans[f.key], part)
-                return [r for f in futures for r in parts[f.key]]
+                return [r for f in futures for r in got[f.key]]
             out: list[R] = []
             for part in self.client.gather(futures):
                 out.extend(part)

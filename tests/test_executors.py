@@ -52,6 +52,9 @@ def test_in_process_and_pool_agree() -> None:
         finished.check(len(ITEMS), at_least_calls=8, want=want)  # per chunk of tasks (4 a worker)
         calls = len(finished.calls)
         assert ex.map(_task, SHARED, [], on_done=finished) == [] and len(finished.calls) == calls
+        finished = _Finished()  # one task an item (long tasks: display pricing's cameras)
+        assert ex.map(_task, SHARED, ITEMS, on_done=finished, chunks=len(ITEMS)) == want
+        finished.check(len(ITEMS), at_least_calls=len(ITEMS), want=want)
 
 
 def _mark(folder: str, item: int) -> int:
@@ -97,6 +100,9 @@ def test_dask_local_cluster_agrees() -> None:
         finished = _Finished()
         assert ex.map(_task, SHARED, ITEMS, on_done=finished) == want
         finished.check(len(ITEMS), at_least_calls=4, want=want)  # per chunk of tasks (2 a worker)
+        finished = _Finished()
+        assert ex.map(_task, SHARED, ITEMS, on_done=finished, chunks=len(ITEMS)) == want
+        finished.check(len(ITEMS), at_least_calls=len(ITEMS), want=want)
 
         def stop(finished: range, results) -> None:
             raise _Stop

@@ -92,7 +92,8 @@ class DisplayPricer:
                     on_progress(rendered, to_render)
 
             try:
-                self.ev.executor.map(_price_task, self.ctx, items, on_done=done)
+                # one task a camera (each takes seconds to minutes): reported as it ends, load balanced
+                self.ev.executor.map(_price_task, self.ctx, items, on_done=done, chunks=len(items))
             finally:  # the counters move once the call ends (the builder reads them between batches)
                 self.cameras += cameras
                 self.evaluations += rendered
