@@ -5,16 +5,17 @@
     python -m addon.batch --blend scene.blend --url http://host:8765 optimize     # on a remote service
     python -m addon.batch --blend scene.blend --workers 2 evaluate --out report/
 
-Where jobs run (--url, --token, --workers, --data-dir, --timeout) comes before the command: by default on
-this computer with the bundled core, or on the remote service at --url. Each command's own options come
-after it (`python -m addon.batch optimize --help`). ``evaluate`` runs the evaluation campaign of ``make
-demo`` under the scene's power and error budgets and the store lookup's frame-rate target and priority
-(``--fps``, ``--priority``: kept in the .blend, as playback and the render engine use them; left out,
-the .blend's values stay, and ``--fps store`` sets a saved frame rate back to the store's own) and writes
-the same report folder. Every option whose default is derived has a word that sets a value saved in the
-.blend back to it: ``--fps store``, ``--eval-width auto`` (from the path's aspect), ``--display-height
-path`` (the path's own resolution). Prints a text progress bar; exits non-zero (with the reason on
-stderr) on any failure.
+Where jobs run (--url, --token, --workers, --data-dir, --timeout, --stall-timeout) comes before the
+command: by default on this computer with the bundled core, or on the remote service at --url. Each
+command's own options come after it (`python -m addon.batch optimize --help`). A job is given up when it
+makes no progress for --stall-timeout seconds (or after --timeout in all, if given). ``evaluate`` runs the
+evaluation campaign of ``make demo`` under the scene's power and error budgets and the store lookup's
+frame-rate target and priority (``--fps``, ``--priority``: kept in the .blend, as playback and the render
+engine use them; left out, the .blend's values stay, and ``--fps store`` sets a saved frame rate back to
+the store's own) and writes the same report folder. Every option whose default is derived has a word that
+sets a value saved in the .blend back to it: ``--fps store``, ``--eval-width auto`` (from the path's
+aspect), ``--display-height path`` (the path's own resolution). Prints a text progress bar; exits non-zero
+(with the reason on stderr) on any failure.
 """
 
 from __future__ import annotations
@@ -158,7 +159,12 @@ def parser() -> argparse.ArgumentParser:
     svc.add_argument("--workers", type=int, help="local evaluation processes (default: one per CPU core)")
     svc.add_argument("--data-dir", help="local jobs' scenes and evaluation cache (default: the extension's "
                                         "user folder)")
-    svc.add_argument("--timeout", type=float, default=3600.0, help="seconds before giving up on a job")
+    schema = _option_schema()
+    svc.add_argument("--timeout", type=schema.positive_number, default=None,
+                     help="seconds before giving up on a job however it progresses (default: no limit)")
+    svc.add_argument("--stall-timeout", type=schema.positive_number, default=schema.JOB_STALL_TIMEOUT_S,
+                     help="seconds a running job may go without progress before it is given up (default "
+                          f"{schema.JOB_STALL_TIMEOUT_S:.0f})")
     sub = ap.add_subparsers(dest="command", required=True)
 
     def budget(p: argparse.ArgumentParser) -> None:
@@ -245,7 +251,8 @@ def cmd_optimize(bpy: ModuleType, ext: str, args: argparse.Namespace) -> int:
     client = sp.client_for(bpy.context)
     bar = ProgressBar("optimize")
     t0 = time.monotonic()
-    applied = ops.run_sync(scene, client, progress=lambda u: bar(u.fraction, u.text), timeout_s=args.timeout)
+    applied = ops.run_sync(scene, client, progress=lambda u: bar(u.fraction, u.text), timeout_s=args.timeout,
+                           stall_s=args.stall_timeout)
     bar.done()
     sys.stdout.write(f"store: {applied.summary} ({time.monotonic() - t0:.1f} s)\n")
     if applied.shortfall:

@@ -177,12 +177,13 @@ def fill_parameters(scene: bpy.types.Scene, inert: dict[str, str],
 
 
 def run_sync(scene: bpy.types.Scene, client: ServiceClient | LocalClient,
-             progress: Callable[[JobUpdate], None] | None = None, timeout_s: float | None = None) -> Applied:
+             progress: Callable[[JobUpdate], None] | None = None, timeout_s: float | None = None,
+             stall_s: float | None = None) -> Applied:
     """The whole optimisation on the calling (main) thread: for background mode, batch and tests."""
     prep = prepare(scene)
     try:
         outcome = run_job(client, prep.scene_file, prep.path.to_dict(), prep.request, progress=progress,
-                          timeout_s=timeout_s)
+                          timeout_s=timeout_s, stall_s=stall_s)
     finally:
         prep.tmpdir.cleanup()
     return apply_outcome(scene, outcome, prep.path)

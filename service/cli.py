@@ -25,6 +25,7 @@ from service.eval_cache import DEFAULT_MAX_BYTES, EvalCache
 from service.evaluation import load_scene, read_scene
 from service.executors import make_executor
 from service.optimize import OptimizeConfig, optimize_path
+from service.options import positive_number
 from service.params import default_space
 from service.serve_options import add_serve_arguments, serve_overrides
 from service.storage import EVAL_CACHE_NAME, read_active_scene_hashes
@@ -35,14 +36,6 @@ from service.verify import verify_store
 def _default_cache() -> Path:
     base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
     return base / "render-budget" / "eval-cache.sqlite"
-
-
-def positive_number(text: str) -> float:
-    """A command-line number that must be positive and finite (a rate, a budget, a timeout)."""
-    v = float(text)
-    if not (math.isfinite(v) and v > 0):
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
-    return v
 
 
 _SIZE_UNITS = {"": 1, "k": 1024, "m": 1024**2, "g": 1024**3, "t": 1024**4}

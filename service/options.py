@@ -239,6 +239,20 @@ QUERY_BY_NAME: dict[str, Option] = {o.name: o for o in QUERY_OPTIONS}
 PRIORITY_LABELS: dict[str, str] = dict(zip(PRIORITIES, QUERY_PRIORITY.choice_labels, strict=True))
 
 
+#: Seconds a running optimisation job may go without progress before a command-line client gives it up.
+#: A job reports each view searched and each camera priced (minutes at most, even at 1280x720), while a
+#: heavy scene's whole job takes hours: a bound on the total time stopped healthy jobs.
+JOB_STALL_TIMEOUT_S = 1800.0
+
+
+def positive_number(text: str) -> float:
+    """A command-line number that must be positive and finite (a rate, a budget, a timeout)."""
+    v = float(text)
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
+    return v
+
+
 def check_query(values: Mapping[str, Any]) -> dict[str, Any]:
     """Every query option (:data:`QUERY_OPTIONS`): the defaults with ``values`` (validated, unknown names
     refused) on top, as keyword arguments of ``ParetoStore.lookup``."""

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from addon.core import client as client_mod
-from addon.core.job_runner import JobRequest, describe
+from addon.core.job_runner import JobRequest, describe, follow_job
 from addon.core.local_service import free_port, serve_command
 from addon.core.path_sampling import build_path, frame_times
 from addon.core.playback_logic import (
@@ -199,6 +199,72 @@ def test_describe_follows_the_services_fraction_through_the_display_pricing() ->
     assert describe({"state": "running", "progress": {**pricing, "fraction": None}}).fraction == 1.0
     done = describe({"state": "done", "progress": {**pricing, "fraction": 1.0, "phase": "done"}})
     assert done.fraction == 1.0 and done.text == "done: 9/9 views, 180 evaluations (4 cached)"
+
+
+class _ScriptedJobs:
+    """A service's GET /jobs/{id} answers in turn (the last one repeated) and the cancels it was asked."""
+
+    def __init__(self, bodies) -> None:
+        self.bodies, self.cancels = iter(bodies), []
+        self.last: dict = {}
+
+    def job(self, job_id: str) -> dict:
+        self.last = next(self.bodies, self.last)
+        return self.last
+
+    def cancel_job(self, job_id: str) -> dict:
+        self.cancels.append(job_id)
+        self.bodies, self.last = iter(()), {**self.last, "state": "cancelled"}
+        return self.last
+
+
+def _running(fraction: float, elapsed_s: float) -> dict:
+    return {"id": "j", "state": "running", "progress": {
+        "views_done": 9, "views_planned": 9, "evaluations": 180, "phase": "price at display resolution",
+        "fraction": fraction, "elapsed_s": elapsed_s, "estimate_s": 600.0 - elapsed_s}}
+
+
+class _Clock:
+    """``time`` for the job runner: sleeping moves the clock, nothing else does."""
+
+    def __init__(self) -> None:
+        self.now = 0.0
+
+    def monotonic(self) -> float:
+        return self.now
+
+    def sleep(self, seconds: float) -> None:
+        self.now += seconds
+
+
+def test_a_job_is_given_up_when_it_stops_progressing_not_when_it_takes_long(monkeypatch) -> None:
+    """Command-line clients give a job up when its progress stands still for ``stall_s`` (its clock
+    fields alone moving), not after a total time: a heavy scene's healthy job runs for hours (a one-hour
+    limit stopped the lab's 320x180 main job in its bridging). A queued job is not stalled: it waits its
+    turn. The job given up is cancelled on the service first."""
+    from addon.core import job_runner
+
+    monkeypatch.setattr(job_runner, "time", _Clock())
+    stall_s, poll_s = 0.25, 0.01
+    # moving for 0.8 s of polling, three times the stall limit, then done
+    moving = [_running(i / 1000, float(i)) for i in range(80)] + [{"id": "j", "state": "done", "progress": {}}]
+    jobs = _ScriptedJobs(moving)
+    assert follow_job(jobs, moving[0], poll_s=poll_s, stall_s=stall_s)["state"] == "done" and not jobs.cancels
+    # queued as long, then running and done
+    queued = [{"id": "j", "state": "queued", "progress": {}}] * 80 + moving[:3] + moving[-1:]
+    jobs = _ScriptedJobs(queued)
+    assert follow_job(jobs, queued[0], poll_s=poll_s, stall_s=stall_s)["state"] == "done" and not jobs.cancels
+    # stuck at one camera: only the elapsed time and the estimate change
+    stuck = [_running(0.5, float(i)) for i in range(10_000)]
+    jobs = _ScriptedJobs(stuck)
+    with pytest.raises(TimeoutError, match="made no progress for 0.25 s"):
+        follow_job(jobs, stuck[0], poll_s=poll_s, stall_s=stall_s)
+    assert jobs.cancels == ["j"]
+    # a total limit still applies when one is given
+    jobs = _ScriptedJobs(moving)
+    with pytest.raises(TimeoutError, match="did not finish within 0.1 s"):
+        follow_job(jobs, moving[0], poll_s=poll_s, timeout_s=0.1, stall_s=stall_s)
+    assert jobs.cancels == ["j"]
 
 
 def test_serve_command(tmp_path) -> None:

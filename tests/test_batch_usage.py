@@ -52,3 +52,18 @@ def test_the_removed_serve_flag_is_refused() -> None:
     """Jobs run on this computer by default now: the old `--serve` is an error, not silently ignored."""
     with pytest.raises(SystemExit):
         batch.parser().parse_args(["--serve", "optimize"])
+
+
+def test_a_job_is_given_up_on_a_stall_not_after_an_hour() -> None:
+    """A heavy scene's optimisation runs for hours while it progresses: no total limit by default, a stall
+    limit instead; limits that are not positive finite seconds are refused."""
+    from service.options import JOB_STALL_TIMEOUT_S
+
+    args = batch.parser().parse_args(["optimize"])
+    assert args.timeout is None and args.stall_timeout == JOB_STALL_TIMEOUT_S
+    args = batch.parser().parse_args(["--timeout", "7200", "--stall-timeout", "600", "optimize"])
+    assert (args.timeout, args.stall_timeout) == (7200.0, 600.0)
+    for flag in ("--timeout", "--stall-timeout"):
+        for bad in ("0", "-1", "nan", "inf", "soon"):
+            with pytest.raises(SystemExit):
+                batch.parser().parse_args([flag, bad, "optimize"])

@@ -61,7 +61,10 @@ def test_demo_waits_for_full_size_renders_and_refuses_bad_timeouts() -> None:
 
     assert demo.parser().parse_args([]).request_timeout == demo.DEMO_REQUEST_TIMEOUT_S >= 1800.0
     assert demo.parser().parse_args(["--request-timeout", "90"]).request_timeout == 90.0
-    for flag in ("--request-timeout", "--job-timeout"):
+    # the job itself: no limit on its total time (a heavy scene's takes hours), only on a stall
+    args = demo.parser().parse_args([])
+    assert args.job_timeout is None and args.stall_timeout == demo.JOB_STALL_TIMEOUT_S >= 600.0
+    for flag in ("--request-timeout", "--job-timeout", "--stall-timeout"):
         for bad in ("0", "-5", "nan", "inf", "soon"):
             with pytest.raises(SystemExit):
                 demo.parser().parse_args([flag, bad])

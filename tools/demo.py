@@ -39,7 +39,7 @@ from addon.core.job_runner import JobRequest, follow_job
 from addon.core.local_service import LocalService, free_port
 from service import options as option_schema
 from service.camera_path import CameraPath
-from service.cli import positive_number
+from service.options import JOB_STALL_TIMEOUT_S, positive_number
 from service.verify import markdown
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
@@ -86,7 +86,12 @@ def parser() -> argparse.ArgumentParser:
         option_schema.add_argument(lookup, opt)
     ap.add_argument("--verify-frames", type=int, default=6,
                     help="path frames the store is verified on at its figures' resolution (0: skip)")
-    ap.add_argument("--job-timeout", type=positive_number, default=3600.0, help="seconds before giving up")
+    ap.add_argument("--job-timeout", type=positive_number, default=None,
+                    help="seconds before giving up on the optimisation job however it progresses (default: "
+                         "no limit; a heavy scene's job runs for hours)")
+    ap.add_argument("--stall-timeout", type=positive_number, default=JOB_STALL_TIMEOUT_S,
+                    help="seconds the running job may go without progress before it is given up "
+                         f"(default {JOB_STALL_TIMEOUT_S:.0f}; it reports each view and camera done)")
     ap.add_argument("--request-timeout", type=positive_number, default=DEMO_REQUEST_TIMEOUT_S,
                     help="seconds one request to the local service may take: a render at the path's own "
                          "size of a heavy frame on shared cores takes minutes (default "
@@ -236,7 +241,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
         per_view = request.option("population") * request.option("generations")
         job = follow_job(client, job, evals_per_view=per_view, progress=show, poll_s=1.0,
-                         timeout_s=args.job_timeout)
+                         timeout_s=args.job_timeout, stall_s=args.stall_timeout)
         opt = clock.stop("optimise", t)
         store_text = client.store_text(job["store_id"])
         measured_at, power_at = campaign.measurement_sizes(store_text, resolution, path)

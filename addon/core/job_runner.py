@@ -111,7 +111,8 @@ def run_job(client: ServiceClient, scene_path: str | Path, path_doc: dict[str, A
             progress: Callable[[JobUpdate], None] | None = None,
             should_cancel: Callable[[], bool] | None = None,
             on_submitted: Callable[[str, str], None] | None = None,
-            poll_s: float = 0.5, timeout_s: float | None = None) -> JobOutcome:
+            poll_s: float = 0.5, timeout_s: float | None = None,
+            stall_s: float | None = None) -> JobOutcome:
     """Upload, submit, poll until a terminal state; return the store text (raises on failure/cancel)."""
     report = progress or (lambda _u: None)
     cancelled = should_cancel or (lambda: False)
@@ -125,22 +126,35 @@ def run_job(client: ServiceClient, scene_path: str | Path, path_doc: dict[str, A
         on_submitted(scene_id, str(job["id"]))
     per_view = request.option("population") * request.option("generations")
     job = follow_job(client, job, evals_per_view=per_view, progress=report,
-                     should_cancel=cancelled, poll_s=poll_s, timeout_s=timeout_s)
+                     should_cancel=cancelled, poll_s=poll_s, timeout_s=timeout_s, stall_s=stall_s)
     store_id = str(job["store_id"])
     return JobOutcome(str(job["id"]), scene_id, store_id, client.store_text(store_id), scene, job)
+
+
+#: Progress fields that move with the clock alone: a job whose other fields stand still is not progressing.
+_CLOCK_FIELDS = ("elapsed_s", "estimate_s")
+
+
+def _progress_mark(job: dict[str, Any]) -> tuple[Any, ...]:
+    """What changes when a job gets on: its state and its progress but for the clock's fields."""
+    p = job.get("progress") or {}
+    return (job.get("state"), *sorted((k, repr(v)) for k, v in p.items() if k not in _CLOCK_FIELDS))
 
 
 def follow_job(client: ServiceClient, job: dict[str, Any], *, evals_per_view: int | None = None,
                progress: Callable[[JobUpdate], None] | None = None,
                should_cancel: Callable[[], bool] | None = None, poll_s: float = 0.5,
-               timeout_s: float | None = None) -> dict[str, Any]:
+               timeout_s: float | None = None, stall_s: float | None = None) -> dict[str, Any]:
     """Poll a submitted job until it is done and return its last GET /jobs/{id} body. Raises JobFailed,
-    JobCancelled, or TimeoutError; a cancel request, the timeout and Ctrl-C (KeyboardInterrupt) cancel the
-    job on the service first."""
+    JobCancelled, or TimeoutError; a cancel request, a timeout and Ctrl-C (KeyboardInterrupt) cancel the
+    job on the service first. ``timeout_s`` bounds the whole wait; ``stall_s`` gives up on a running job
+    whose progress has not moved for that long. (A heavy scene's job runs for hours and reports each
+    camera priced, so a stall, not the total time, tells a stuck job; a queued job waits its turn.)"""
     report = progress or (lambda _u: None)
     cancelled = should_cancel or (lambda: False)
     job_id = str(job["id"])
     deadline = None if timeout_s is None else time.monotonic() + timeout_s
+    mark, moved = _progress_mark(job), time.monotonic()
     try:
         while True:
             update = describe(job, evals_per_view)
@@ -151,9 +165,15 @@ def follow_job(client: ServiceClient, job: dict[str, Any], *, evals_per_view: in
                 raise JobFailed(f"job {job_id} failed: {job.get('error') or 'no message'}")
             if update.state == "cancelled":
                 raise JobCancelled(f"job {job_id} was cancelled")
-            if deadline is not None and time.monotonic() > deadline:
+            now = time.monotonic()
+            if _progress_mark(job) != mark or update.state != "running":
+                mark, moved = _progress_mark(job), now
+            if deadline is not None and now > deadline:
                 state = cancel_and_wait(client, job_id)
-                raise TimeoutError(f"job {job_id} did not finish within {timeout_s} s ({state})")
+                raise TimeoutError(f"job {job_id} did not finish within {timeout_s:g} s ({state})")
+            if stall_s is not None and now - moved > stall_s:
+                state = cancel_and_wait(client, job_id)
+                raise TimeoutError(f"job {job_id} made no progress for {stall_s:g} s ({state})")
             # sleep in small steps so a cancel request is honoured quickly
             wake = time.monotonic() + poll_s
             while time.monotonic() < wake:
