@@ -75,7 +75,7 @@ class InProcessExecutor:
         for i, x in enumerate(items):
             out.append(fn(shared, x))
             if on_done is not None:
-                on_done(range(i, i + 1), out[i:])
+                on_done(range(i, i + 1), out[-1:])
         return out
 
     def close(self) -> None:
