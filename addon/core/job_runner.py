@@ -165,9 +165,9 @@ def follow_job(client: ServiceClient, job: dict[str, Any], *, evals_per_view: in
                 raise JobFailed(f"job {job_id} failed: {job.get('error') or 'no message'}")
             if update.state == "cancelled":
                 raise JobCancelled(f"job {job_id} was cancelled")
-            now = time.monotonic()
-            if _progress_mark(job) != mark or update.state != "running":
-                mark, moved = _progress_mark(job), now
+            now, current = time.monotonic(), _progress_mark(job)
+            if current != mark or update.state != "running":
+                mark, moved = current, now
             if deadline is not None and now > deadline:
                 state = cancel_and_wait(client, job_id)
                 raise TimeoutError(f"job {job_id} did not finish within {timeout_s:g} s ({state})")
