@@ -12,9 +12,10 @@ import pytest
 
 from service.evaluation import CameraSpec
 from service.nsga import NSGAConfig
+from service.octree.builder import pricing_candidates, spread_points
 from service.octree.search import PROBE_CHAIN, Search
 from service.params import default_space
-from service.store import Frontier, ParetoStore, meets_frame_rate
+from service.store import Frontier, ParetoStore, meets_frame_rate, split_by_rate
 
 FPS = 30.0
 SPACE = default_space().subset(["sampling", "max_depth", "resolution_scale"])  # 5 x 4 x 4 settings
@@ -50,6 +51,24 @@ class Model:
         return out
 
 
+class SamplerModel(Model):
+    """The valley's case on `desktop` at 320x180: only the best sampler is slow near max quality, so the
+    probe one sampler value below max quality keeps up, more accurate than any real-time setting the
+    search itself met."""
+
+    def evaluate(self, requests):
+        top = SPACE.max_quality_indices()
+        out = []
+        for _, x in requests:
+            g = _gap(x)
+            self.evaluations += 1
+            self.asked.append(tuple(x))
+            slow = x[0] == top[0] and g < 0.5
+            out.append(SimpleNamespace(error=0.05 * g, power_w=1.1 - g / 3,
+                                       frame_time_s=0.045 if slow else 0.02))
+        return out
+
+
 def _search(model: Model) -> Search:
     return Search(model, SPACE, NSGAConfig(population=4, generations=2, seed=1), exhaustive_limit=0)  # type: ignore[arg-type]
 
@@ -70,10 +89,10 @@ def test_probes_put_intermediate_points_in_the_slow_tier_and_budget_first_picks_
     kept with one of those, not with max quality. The meeting tier is the search's either way."""
     with monkeypatch.context() as m:
         m.setattr(Search, "probes", lambda self, archive: [])
-        plain = _search(Model()).run([CAM], [[]], "search")[0]
+        plain = _search(Model()).run([CAM], [[]], "search")[0].points
     model = Model()
     search = _search(model)
-    probed = search.run([CAM], [[]], "search")[0]
+    probed = search.run([CAM], [[]], "search")[0].points
 
     def tiers(points):
         return ([pt for pt in points if meets_frame_rate(pt[3], FPS)],
@@ -107,7 +126,7 @@ def test_no_probes_when_every_setting_keeps_up() -> None:
     """At 10 fps every setting keeps up: no slow tier to fill, no probe evaluated."""
     model = Model(fps=10.0)
     search = _search(model)
-    points = search.run([CAM], [[]], "search")[0]
+    points = search.run([CAM], [[]], "search")[0].points
     assert search.probes_evaluated == 0
     assert all(meets_frame_rate(pt[3], 10.0) for pt in points)
 
@@ -133,3 +152,29 @@ def test_probes_are_max_stepped_down_then_a_chain_towards_the_best_real_time_set
     exact.add(top, (0.0, 1.1), False)
     exact.add((3, 3, 3), (0.0, 0.9), True)
     assert search.probes(exact) == []
+
+
+def test_probes_that_keep_up_are_returned_beside_the_frontier_for_the_display_pricing() -> None:
+    """A probe that keeps up stays out of the search's frontier (its warm starts and comparisons read
+    the meeting tier the search found) but is returned beside it; the display pricing's candidates then
+    hold it as the most accurate real-time setting, and the spread prices it even with max quality
+    alone in the slow tier (the demo's ``slow_points`` 1). Before, it was dropped: the priced meeting
+    tier began at the search's best, 0.033, with a slow Max above it."""
+    model = SamplerModel()
+    found = _search(model).run([CAM], [[]], "search")[0]
+    top = SPACE.max_quality_indices()
+    step = (top[0] - 1, *top[1:])  # the sampler one value below max quality
+    assert [pt[0] for pt in found.kept_up] == [step]
+    assert all(meets_frame_rate(pt[3], FPS) for pt in found.kept_up)
+    assert not {pt[0] for pt in found.kept_up} & {pt[0] for pt in found.points}
+    meeting, slow = split_by_rate(found.points, FPS)
+    assert found.kept_up[0][1] < min(pt[1] for pt in meeting)  # more accurate than the search's best
+    assert slow and slow[-1][0] == top
+    assert model.asked.count(step) == 1 and found.kept_up[0][1:] == (0.05 * 0.25, 1.1 - 0.25 / 3, 0.02)
+
+    candidates = pricing_candidates(found.points, found.kept_up, FPS)
+    fast, _ = split_by_rate(candidates, FPS)
+    assert min(fast, key=lambda pt: pt[1])[0] == step
+    priced = [pt[0] for pt in spread_points(candidates, 4, FPS, 1)]
+    assert step in priced and top in priced
+    assert step not in [pt[0] for pt in spread_points(found.points, 4, FPS, 1)]  # what was priced before

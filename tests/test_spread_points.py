@@ -15,9 +15,16 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from service.octree.builder import spread_points
+from service.octree.builder import pricing_candidates, spread_points
 from service.octree.search import Search
-from service.store import Frontier, ParetoStore, meets_frame_rate, pack_indices, split_by_rate
+from service.store import (
+    Frontier,
+    ParetoStore,
+    frontier_tiers,
+    meets_frame_rate,
+    pack_indices,
+    split_by_rate,
+)
 from tests.test_store_lookup import PARAMS
 
 FPS = 30.0
@@ -121,8 +128,10 @@ def _one_frontier_store(points: list[tuple]) -> ParetoStore:
                        [fr], fps=FPS, meta={"static_power_w": 0.1})
 
 
-def _run_one_frontier_builder(points: list[tuple], pricer, progress=None, should_cancel=None, **options):
-    """An octree builder whose one measured frontier holds ``points`` and that every view reads, run with
+def _run_one_frontier_builder(points: list[tuple], pricer, progress=None, should_cancel=None, kept_up=(),
+                              **options):
+    """An octree builder whose one measured frontier holds ``points`` (and the search's probes that kept
+    up, ``kept_up``) and that every view reads, run with
     a stand-in ``pricer`` (its display pricing alone does work), ``progress`` and ``should_cancel``
     callbacks: the builder, after its run."""
     from service.octree.builder import OctreeBuilder, OctreeConfig, PathFrames
@@ -137,7 +146,7 @@ def _run_one_frontier_builder(points: list[tuple], pricer, progress=None, should
 
     def build() -> None:  # one measured frontier, every view of the root's corners reads it
         b.lattice.add_root()
-        b.lattice.set_frontier(0, 0, points)
+        b.lattice.set_frontier(0, 0, points, kept_up)
         for views in b.lattice.corner_views:
             views[:] = [0] * len(views)
 
@@ -309,3 +318,77 @@ def test_the_builders_counted_points_are_the_spread_of_each_frontiers_points(lis
             check()
     finally:
         builder_module.spread_points = spread
+
+
+@settings(max_examples=300, deadline=None)
+@given(points=point_lists,
+       kept_up=st.lists(st.tuples(st.floats(0.0, 1.0), st.floats(0.0, 5.0)), max_size=8))
+def test_the_pricing_candidates_are_the_two_tier_frontier_of_points_and_probes(points, kept_up) -> None:
+    """Without probes the candidates are the frontier's points as they are; with them, the two-tier
+    frontier of both (the one rule, ``frontier_tiers``): every probe not dominated by a real-time point
+    is a candidate, no meeting candidate dominates another, and the slow candidates are more accurate
+    than every meeting one."""
+    assert pricing_candidates(points, [], FPS) is points
+    probes = [((100 + i,), e, p, 1 / FPS) for i, (e, p) in enumerate(kept_up)]  # probes keep up
+    got = pricing_candidates(points, probes, FPS)
+    union = [*points, *probes]
+    fast, slow = frontier_tiers([pt[1] for pt in union], [pt[2] for pt in union],
+                                [meets_frame_rate(pt[3], FPS) for pt in union])
+    if not probes:
+        assert got is points
+        return
+    assert got == [union[i] for i in fast + slow]
+    meeting, slower = split_by_rate(got, FPS)
+    for a in meeting:
+        assert not any(b is not a and b[1] <= a[1] and b[2] <= a[2] and (b[1], b[2]) != (a[1], a[2])
+                       for b in meeting)
+    if meeting:
+        assert all(pt[1] < min(m[1] for m in meeting) for pt in slower)
+    all_meeting = [pt for pt in union if meets_frame_rate(pt[3], FPS)]
+    for pr in probes:
+        dominated = any(b[1] <= pr[1] and b[2] <= pr[2] and (b[1], b[2]) != (pr[1], pr[2])
+                        for b in all_meeting)
+        assert dominated or any((c[1], c[2]) == (pr[1], pr[2]) for c in got)
+
+
+def test_the_builder_prices_a_probe_that_kept_up_and_the_error_budget_keeps_the_frame_rate_with_it() -> None:
+    """The valley's missed frames at 320x180 without bridging: the search's meeting tier begins at error
+    0.04 and its slow tier is a slow max quality; the probe one step below max quality kept up at 0.007
+    but was left out of the frontier. With ``slow_points`` 1 (max quality alone there) the builder now
+    prices it, and an error budget of 0.02, frame rate first, is kept at 30 fps with it; before, the
+    lookup had nothing real time within the budget."""
+    import itertools
+
+    from service.params import default_space
+
+    space = default_space().subset(["sampling", "max_depth", "resolution_scale"])
+    settings_ = [space.expand(f) for f in itertools.product(*(range(n) for n in space.free_n_values))][:12]
+    meeting = [(settings_[j], e, p, 0.02) for j, (e, p) in enumerate(((0.3, 0.2), (0.1, 0.4), (0.04, 0.6)))]
+    top = space.max_quality_indices()
+    slow_max = (top, 0.0, 1.0, 0.045)
+    probe = (settings_[5], 0.007, 0.8, 0.03)
+    figures = {pt[0]: pt[1:] for pt in (*meeting, slow_max, probe)}
+
+    def run(kept_up):
+        asked: list[list[tuple[int, ...]]] = []
+
+        class Pricer:
+            ev = SimpleNamespace(executor=None)
+
+            def price(self, requests, on_progress=None):
+                asked.extend(list(xs) for _, xs in requests)
+                return [[SimpleNamespace(error=figures[x][0], power_w=figures[x][1],
+                                         frame_time_s=figures[x][2]) for x in xs] for _, xs in requests]
+
+        b = _run_one_frontier_builder([*meeting, slow_max], Pricer(), kept_up=kept_up, display_points=4,
+                                      slow_points=1)
+        store = b.to_store(profile="mobile", fps=FPS, aspect=16 / 9, meta={"static_power_w": 0.1})
+        return asked, store.lookup((0.5, 0.0, 0.0), direction=(1.0, 0.0, 0.0), error_budget=0.02)
+
+    asked, hit = run([probe])
+    assert len(asked) == 1 and probe[0] in asked[0] and top in asked[0]
+    assert not hit.infeasible and hit.meets_fps and hit.indices == tuple(probe[0])
+    assert round(hit.error, 3) == 0.007
+    asked, hit = run([])  # the frontier alone, as priced before
+    assert probe[0] not in asked[0]
+    assert hit.infeasible and hit.meets_fps and round(hit.error, 3) == 0.04

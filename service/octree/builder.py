@@ -18,7 +18,7 @@ from service.display_pricing import DisplayPricer
 from service.evaluation import CameraSpec, Evaluator
 from service.nsga import NSGAConfig
 from service.params import Indices, ParameterSpace
-from service.store import Frontier, ParetoStore, split_by_rate
+from service.store import Frontier, ParetoStore, frontier_tiers, meets_frame_rate, split_by_rate
 from service.store.priced import PricedFigures
 
 from . import bridge
@@ -172,6 +172,22 @@ def spread_points(points: list[tuple[Any, ...]], k: int, fps: float | None = Non
             + (list(slow) if k_slow <= 0 else _spread(slow, k_slow)))
 
 
+def pricing_candidates(points: list[tuple[Any, ...]], kept_up: Sequence[tuple[Any, ...]],
+                       fps: float | None) -> list[tuple[Any, ...]]:
+    """The points a frontier's display pricing chooses from (:func:`spread_points`): its search
+    frontier with the probes that kept up at its sample camera (:class:`.search.Found`), as one two-tier
+    frontier (:func:`service.store.frontier_tiers`), meeting tier then slow tier, each power ascending;
+    ``points`` itself when there are none. The search leaves those probes out of its frontier, yet they
+    are often its most accurate real-time settings: priced, they give an error budget a setting between
+    a slow Max and the search's meeting tier."""
+    if not kept_up:
+        return points
+    pts = [*points, *kept_up]
+    meets = None if fps is None else [meets_frame_rate(float(pt[3]), fps) for pt in pts]
+    fast, slow = frontier_tiers([float(pt[1]) for pt in pts], [float(pt[2]) for pt in pts], meets)
+    return [pts[i] for i in fast + slow]
+
+
 def time_left(spent_s: float, done: int, total: int) -> float | None:
     """Seconds left for ``total`` equal jobs when ``done`` of them took ``spent_s`` (None before the
     first is done)."""
@@ -306,10 +322,12 @@ class OctreeBuilder:
         changed in place, so a list other than the one counted (the guards' worst figures, the pricing's
         spread and figures) is counted again. The counted list is kept with its count, so its identity
         is not reused while the count stands."""
-        points, fps = self.lattice.frontiers[fid].points, self.search.ev.fps
+        rec, fps = self.lattice.frontiers[fid], self.search.ev.fps
+        points = rec.points
         hit = self._kept_counts.get(fid)
         if hit is None or hit[0] is not points or hit[1] != fps:
-            n = len(spread_points(points, self.cfg.display_points, fps, self.cfg.slow_points))
+            n = len(spread_points(pricing_candidates(points, rec.kept_up, fps), self.cfg.display_points,
+                                  fps, self.cfg.slow_points))
             hit = self._kept_counts[fid] = (points, fps, n)
         return hit[2]
 
@@ -317,11 +335,11 @@ class OctreeBuilder:
         """Every measured frontier's points priced again at the path's resolution at the frontier's
         cameras (its sample, and for path samples its guards), keeping each point's worst error, power
         and frame time there: the store's figures are the display resolution's, the search's only chose
-        the points (:func:`spread_points`: at most ``display_points`` of the meeting tier and
-        ``slow_points`` of the slow tier). Then, where the priced meeting tier's errors jump, up to
-        ``bridge_points`` more settings between them, a few rounds (:mod:`.bridge`). The store's tiers
-        are drawn again from the display figures (``Frontier.from_points``): a point may meet the rate at
-        one resolution and miss it at the other."""
+        the points (:func:`spread_points` of :func:`pricing_candidates`: at most ``display_points`` of the
+        meeting tier and ``slow_points`` of the slow tier). Then, where the priced meeting tier's errors
+        jump, up to ``bridge_points`` more settings between them, a few rounds (:mod:`.bridge`). The
+        store's tiers are drawn again from the display figures (``Frontier.from_points``): a point may meet
+        the rate at one resolution and miss it at the other."""
         assert self.pricer is not None and self.cfg.display is not None
         width, height = self.cfg.display
         search, lat = self.search, self.lattice
@@ -331,8 +349,9 @@ class OctreeBuilder:
         jobs: dict[int, tuple[list[CameraSpec], list[Indices], list[np.ndarray]]] = {}
         asked: dict[int, list[Indices]] = {}
         for fid, cams in sorted(self.sampling.pricing_cameras().items()):
-            keep = spread_points(lat.frontiers[fid].points, self.cfg.display_points, fps,
-                                 self.cfg.slow_points)
+            rec = lat.frontiers[fid]
+            keep = spread_points(pricing_candidates(rec.points, rec.kept_up, fps), self.cfg.display_points,
+                                 fps, self.cfg.slow_points)
             jobs[fid] = ([dataclasses.replace(c, width=width, height=height) for c in cams], [],
                          [np.zeros((len(cams), 0)) for _ in range(3)])
             asked[fid] = [pt[0] for pt in keep]

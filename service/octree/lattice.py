@@ -7,7 +7,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -61,11 +61,14 @@ def densify(points: np.ndarray, step: float) -> np.ndarray:
 
 @dataclass
 class FrontierRecord:
-    """A frontier as measured at one camera sample: full index vectors with error, power and frame time."""
+    """A frontier as measured at one camera sample: full index vectors with error, power and frame time;
+    ``kept_up``: the search's probes that kept up with the frame rate there, left out of ``points``
+    (:class:`.search.Found`), which only the display pricing reads."""
 
     corner: int
     view: int
     points: list[tuple[Indices, float, float, float]]
+    kept_up: list[tuple[Indices, float, float, float]] = field(default_factory=list)
 
     def settings(self) -> list[Indices]:
         return [pt[0] for pt in self.points]
@@ -142,9 +145,10 @@ class Lattice:
                 self.corner(xyz)
         return children
 
-    def set_frontier(self, corner: int, view: int, points: list[tuple[Indices, float, float, float]]) -> None:
-        """Record a frontier measured for (corner, view)."""
-        self.frontiers.append(FrontierRecord(corner, view, points))
+    def set_frontier(self, corner: int, view: int, points: list[tuple[Indices, float, float, float]],
+                     kept_up: Sequence[tuple[Indices, float, float, float]] = ()) -> None:
+        """Record a frontier measured for (corner, view), with the search's probes that kept up there."""
+        self.frontiers.append(FrontierRecord(corner, view, points, list(kept_up)))
         self.corner_views[corner][view] = len(self.frontiers) - 1
 
     def frontier(self, corner: int, view: int) -> FrontierRecord:

@@ -169,8 +169,8 @@ class PathSampling:
                   generations: int | None = None, planned: bool = False) -> None:
         found = self.search.run([self.sample_cams[(c, v)] for c, v, _ in jobs], [w for _, _, w in jobs],
                                 phase, generations, planned)
-        for (c, v, _), points in zip(jobs, found, strict=True):
-            self.lattice.set_frontier(c, v, points)
+        for (c, v, _), got in zip(jobs, found, strict=True):
+            self.lattice.set_frontier(c, v, got.points, got.kept_up)
 
     def _view_distances(self) -> np.ndarray:
         d = np.linalg.norm(self.path.targets - self.path.positions, axis=1)

@@ -15,8 +15,13 @@ the ~250 settings a camera evaluates), so the slow tier was often the maximum-qu
 an error budget no real-time setting keeps was kept with Max. After each search that left settings on
 both sides of the frame rate, a few deterministic *probes* (:meth:`Search.probes`) between the most
 accurate real-time setting and Max are evaluated; those that miss the rate join the archive, so the slow
-tier can hold intermediate points. Probes that happen to keep up are dropped: the meeting tier, which
-the warm starts and frontier comparisons read, stays what the search found. The scheduler
+tier can hold intermediate points. Probes that happen to keep up stay out of the frontier: the meeting
+tier, which the warm starts and frontier comparisons read, stays what the search found. They are
+returned beside it (:class:`Found`), since they are often the most accurate real-time settings the search
+met: on the valley (`desktop`, 320x180) the sampler one step below Max kept up at error 0.007 where the
+search's meeting tier began at 0.034, and with them dropped the display pricing had nothing between a
+slow Max and 0.034 at six path frames (bench/RESULTS.md, "The valley's missed frames without
+bridging"). The display pricing chooses from both (:mod:`.builder`). The scheduler
 knows cameras and settings, not corners or views: the sampling strategies (:mod:`.view_cubes`,
 :mod:`.path_samples`) decide what to search where.
 """
@@ -47,6 +52,15 @@ FRACTION_BEFORE_DONE = 0.99
 #: Where the probes' chain from Max towards the most accurate real-time setting stops (fractions of the
 #: way, per parameter index).
 PROBE_CHAIN = (0.25, 0.5, 0.75)
+
+
+@dataclass(frozen=True)
+class Found:
+    """One camera's search: its two-tier frontier, and the probes that kept up with the frame rate,
+    which the frontier leaves out (not dominated-checked against it)."""
+
+    points: Points
+    kept_up: Points
 
 
 class Cancelled(Exception):
@@ -158,8 +172,9 @@ class Search:
     # -- the searches -------------------------------------------------------------------------------
 
     def run(self, cameras: Sequence[CameraSpec], warm: Sequence[list[Indices]], phase: str,
-            generations: int | None = None, planned: bool = False) -> list[Points]:
-        """The frontier of each camera (warm-started from ``warm``), all searches in lockstep;
+            generations: int | None = None, planned: bool = False) -> list[Found]:
+        """The frontier of each camera (warm-started from ``warm``) and its probes that kept up, all
+        searches in lockstep;
         ``generations`` overrides the configured number (short searches from a good warm start);
         ``planned``: their steps were already counted in the progress estimate."""
         if not cameras:
@@ -169,12 +184,14 @@ class Search:
         if not planned:
             self.steps_planned += stage_steps
         times: list[dict[Indices, float]] = [{} for _ in cameras]  # frame time of every evaluated setting
+        kept_up: list[Points] = [[] for _ in cameras]
         if self.exhaustive:
             archives = self._enumerate(cameras, phase, times)
         else:
             archives = self._nsga(cameras, warm, phase, generations, times)
-            self._probe(cameras, archives, times, phase)
-        found = [self.frontier(arch, t) for arch, t in zip(archives, times, strict=True)]
+            kept_up = self._probe(cameras, archives, times, phase)
+        found = [Found(self.frontier(arch, t), k)
+                 for arch, t, k in zip(archives, times, kept_up, strict=True)]
         self.state.views_done += len(cameras)
         self.steps_done = max(self.steps_done, steps_before + stage_steps)  # searches that ended early
         self.report(phase)
@@ -230,14 +247,15 @@ class Search:
         return [x for x in dict.fromkeys(out) if x not in archive]
 
     def _probe(self, cameras: Sequence[CameraSpec], archives: list[Archive],
-               times: list[dict[Indices, float]], phase: str) -> None:
+               times: list[dict[Indices, float]], phase: str) -> list[Points]:
         """Every camera's :meth:`probes`, as one batch; those that miss the frame rate join its
-        archive (the slow tier's candidates), those that keep up are dropped (the meeting tier stays
-        the search's). One progress step per camera probed."""
+        archive (the slow tier's candidates), those that keep up are returned, per camera, and stay out
+        of it (the meeting tier stays the search's). One progress step per camera probed."""
+        kept_up: list[Points] = [[] for _ in cameras]
         jobs = [(j, self.probes(a)) for j, a in enumerate(archives)]
         jobs = [(j, xs) for j, xs in jobs if xs]
         if not jobs:
-            return
+            return kept_up
         self.check_cancel()
         res = iter(self.evaluate([(cameras[j], self.space.expand(x)) for j, xs in jobs for x in xs]))
         for j, xs in jobs:
@@ -246,9 +264,13 @@ class Search:
                 if not self.keeps_up(ev):
                     archives[j].add(x, (ev.error, ev.power_w), False)
                     times[j][x] = ev.frame_time_s
+                else:
+                    kept_up[j].append((self.space.expand(x), float(ev.error), float(ev.power_w),
+                                       float(ev.frame_time_s)))
             self.probes_evaluated += len(xs)
         self.steps_done += len(jobs)
         self.report(phase)
+        return kept_up
 
     def _enumerate(self, cameras: Sequence[CameraSpec], phase: str, times: list[dict[Indices, float]]
                    ) -> list[Archive]:
