@@ -1,7 +1,7 @@
 """What an error budget can pick from a store's frontier at one camera, against what the setting space
 holds: the product's own search (NSGA-II at the evaluation size, inert parameters fixed, power judged for
-the display size), the points the display pricing keeps of its frontier and the probes that kept up
-(``spread_points`` of ``pricing_candidates``), those points
+the display size), the points the display pricing keeps of its frontier (``spread_points``) and of the
+search's probes that kept up (``kept_up_to_price``), those points
 and the whole frontier priced as whole frames at display resolution, and the error-budget pick (the
 cheapest priced point within the budget).
 
@@ -25,7 +25,7 @@ from service.display_pricing import DisplayPricing, price_camera
 from service.eval_cache import EvalCache
 from service.evaluation import Evaluator
 from service.nsga import NSGAConfig
-from service.octree.builder import pricing_candidates, spread_points
+from service.octree.builder import kept_up_to_price, spread_points
 from service.octree.search import Search
 from service.optimize import resolve_space
 from service.params import default_space
@@ -65,8 +65,9 @@ def main() -> None:
                        threads=args.threads, target_pixels=args.size[0] * args.size[1])
         search = Search(ev, space, NSGAConfig(seed=0), exhaustive_limit=512)
         got = search.run([small], [[]], "root")[0]
-        front = pricing_candidates(got.points, got.kept_up, args.fps)  # what the display pricing reads
-        kept = spread_points(front, args.points, args.fps, args.slow_points)
+        extra = kept_up_to_price(got.points, got.kept_up, args.fps)  # probes priced besides the spread
+        front = got.points + extra
+        kept = spread_points(got.points, args.points, args.fps, args.slow_points) + extra
         kept_idx = {p[0] for p in kept}
         todo = [p[0] for p in front] + [x for _, x in named if x not in {p[0] for p in front}]
         if mq not in todo:

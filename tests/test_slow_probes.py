@@ -12,7 +12,7 @@ import pytest
 
 from service.evaluation import CameraSpec
 from service.nsga import NSGAConfig
-from service.octree.builder import pricing_candidates, spread_points
+from service.octree.builder import kept_up_to_price, spread_points
 from service.octree.search import PROBE_CHAIN, Search
 from service.params import default_space
 from service.store import Frontier, ParetoStore, meets_frame_rate, split_by_rate
@@ -156,10 +156,10 @@ def test_probes_are_max_stepped_down_then_a_chain_towards_the_best_real_time_set
 
 def test_probes_that_keep_up_are_returned_beside_the_frontier_for_the_display_pricing() -> None:
     """A probe that keeps up stays out of the search's frontier (its warm starts and comparisons read
-    the meeting tier the search found) but is returned beside it; the display pricing's candidates then
-    hold it as the most accurate real-time setting, and the spread prices it even with max quality
-    alone in the slow tier (the demo's ``slow_points`` 1). Before, it was dropped: the priced meeting
-    tier began at the search's best, 0.033, with a slow Max above it."""
+    the meeting tier the search found) but is returned beside it, and the display pricing prices it
+    besides the frontier's spread, which holds max quality alone of the slow tier with the demo's
+    ``slow_points`` 1. Before, it was dropped: the priced meeting tier began at the search's best,
+    0.033, with a slow Max above it."""
     model = SamplerModel()
     found = _search(model).run([CAM], [[]], "search")[0]
     top = SPACE.max_quality_indices()
@@ -172,9 +172,7 @@ def test_probes_that_keep_up_are_returned_beside_the_frontier_for_the_display_pr
     assert slow and slow[-1][0] == top
     assert model.asked.count(step) == 1 and found.kept_up[0][1:] == (0.05 * 0.25, 1.1 - 0.25 / 3, 0.02)
 
-    candidates = pricing_candidates(found.points, found.kept_up, FPS)
-    fast, _ = split_by_rate(candidates, FPS)
-    assert min(fast, key=lambda pt: pt[1])[0] == step
-    priced = [pt[0] for pt in spread_points(candidates, 4, FPS, 1)]
-    assert step in priced and top in priced
-    assert step not in [pt[0] for pt in spread_points(found.points, 4, FPS, 1)]  # what was priced before
+    extra = kept_up_to_price(found.points, found.kept_up, FPS)
+    assert [pt[0] for pt in extra] == [step]  # priced besides the spread, which never holds it
+    spread = [pt[0] for pt in spread_points(found.points, 4, FPS, 1)]
+    assert step not in spread and top in spread

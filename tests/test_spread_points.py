@@ -15,12 +15,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from service.octree.builder import pricing_candidates, spread_points
+from service.octree.builder import kept_up_to_price, spread_points
 from service.octree.search import Search
 from service.store import (
     Frontier,
     ParetoStore,
-    frontier_tiers,
     meets_frame_rate,
     pack_indices,
     split_by_rate,
@@ -323,40 +322,39 @@ def test_the_builders_counted_points_are_the_spread_of_each_frontiers_points(lis
 @settings(max_examples=300, deadline=None)
 @given(points=point_lists,
        kept_up=st.lists(st.tuples(st.floats(0.0, 1.0), st.floats(0.0, 5.0)), max_size=8))
-def test_the_pricing_candidates_are_the_two_tier_frontier_of_points_and_probes(points, kept_up) -> None:
-    """Without probes the candidates are the frontier's points as they are; with them, the two-tier
-    frontier of both (the one rule, ``frontier_tiers``): every probe not dominated by a real-time point
-    is a candidate, no meeting candidate dominates another, and the slow candidates are more accurate
-    than every meeting one."""
-    assert pricing_candidates(points, [], FPS) is points
+def test_the_probes_priced_are_those_more_accurate_than_the_meeting_tier_that_none_dominates(points,
+                                                                                           kept_up) -> None:
+    """A probe that kept up is priced besides the spread exactly when it is more accurate than every
+    real-time point of the frontier and no real-time point or other probe dominates it; none without
+    real-time points or a frame-rate target; power ascending, each once."""
     probes = [((100 + i,), e, p, 1 / FPS) for i, (e, p) in enumerate(kept_up)]  # probes keep up
-    got = pricing_candidates(points, probes, FPS)
-    union = [*points, *probes]
-    fast, slow = frontier_tiers([pt[1] for pt in union], [pt[2] for pt in union],
-                                [meets_frame_rate(pt[3], FPS) for pt in union])
-    if not probes:
-        assert got is points
+    got = kept_up_to_price(points, probes, FPS)
+    assert kept_up_to_price(points, probes, None) == [] and kept_up_to_price(points, [], FPS) == []
+    meeting = [pt for pt in points if meets_frame_rate(pt[3], FPS)]
+    if not meeting:
+        assert got == []
         return
-    assert got == [union[i] for i in fast + slow]
-    meeting, slower = split_by_rate(got, FPS)
-    for a in meeting:
-        assert not any(b is not a and b[1] <= a[1] and b[2] <= a[2] and (b[1], b[2]) != (a[1], a[2])
-                       for b in meeting)
-    if meeting:
-        assert all(pt[1] < min(m[1] for m in meeting) for pt in slower)
-    all_meeting = [pt for pt in union if meets_frame_rate(pt[3], FPS)]
-    for pr in probes:
-        dominated = any(b[1] <= pr[1] and b[2] <= pr[2] and (b[1], b[2]) != (pr[1], pr[2])
-                        for b in all_meeting)
-        assert dominated or any((c[1], c[2]) == (pr[1], pr[2]) for c in got)
+    best = min(pt[1] for pt in meeting)
+    pool = [*meeting, *probes]
+
+    def dominated(a) -> bool:
+        return any(b is not a and b[1] <= a[1] and b[2] <= a[2] and (b[1], b[2]) != (a[1], a[2])
+                   for b in pool)
+
+    want = {pr[0] for pr in probes if pr[1] < best and not dominated(pr)}
+    ties = {pr[0] for pr in probes if pr[1] < best and not dominated(pr)
+            and any(q is not pr and (q[1], q[2]) == (pr[1], pr[2]) for q in pool)}
+    assert want - ties <= {pt[0] for pt in got} <= want  # of equal figures, one is kept
+    assert len({pt[0] for pt in got}) == len(got) and all(pt in probes for pt in got)
+    assert [pt[2] for pt in got] == sorted(pt[2] for pt in got)
 
 
 def test_the_builder_prices_a_probe_that_kept_up_and_the_error_budget_keeps_the_frame_rate_with_it() -> None:
     """The valley's missed frames at 320x180 without bridging: the search's meeting tier begins at error
     0.04 and its slow tier is a slow max quality; the probe one step below max quality kept up at 0.007
     but was left out of the frontier. With ``slow_points`` 1 (max quality alone there) the builder now
-    prices it, and an error budget of 0.02, frame rate first, is kept at 30 fps with it; before, the
-    lookup had nothing real time within the budget."""
+    prices it besides the frontier's spread, and an error budget of 0.02, frame rate first, is kept at
+    30 fps with it; before, the lookup had nothing real time within the budget."""
     import itertools
 
     from service.params import default_space
@@ -387,6 +385,7 @@ def test_the_builder_prices_a_probe_that_kept_up_and_the_error_budget_keeps_the_
 
     asked, hit = run([probe])
     assert len(asked) == 1 and probe[0] in asked[0] and top in asked[0]
+    assert asked[0][:-1] == [pt[0] for pt in spread_points([*meeting, slow_max], 4, FPS, 1)]  # and the probe
     assert not hit.infeasible and hit.meets_fps and hit.indices == tuple(probe[0])
     assert round(hit.error, 3) == 0.007
     asked, hit = run([])  # the frontier alone, as priced before
