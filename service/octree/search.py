@@ -18,10 +18,11 @@ accurate real-time setting and Max are evaluated; those that miss the rate join 
 tier can hold intermediate points. Probes that happen to keep up stay out of the frontier: the meeting
 tier, which the warm starts and frontier comparisons read, stays what the search found. They are
 returned beside it (:class:`Found`), since they are often the most accurate real-time settings the search
-met: on the valley (`desktop`, 320x180) the sampler one step below Max kept up at error 0.007 where the
-search's meeting tier began at 0.034, and with them dropped the display pricing had nothing between a
-slow Max and 0.034 at six path frames (bench/RESULTS.md, "The valley's missed frames without
-bridging"). The display pricing chooses from both (:mod:`.builder`). The scheduler
+met: on the valley (`desktop`) the sampler one step below Max kept up at error 0.007 in the search's
+64x36 images at a camera whose priced frontier went from a slow Max to real-time points at 0.034 and
+over (320x180); with them dropped, an unbridged store missed the error budget at six path frames
+(bench/RESULTS.md, "The valley's missed frames without bridging"). The display pricing prices them
+besides the frontier's spread (:mod:`.builder`). The scheduler
 knows cameras and settings, not corners or views: the sampling strategies (:mod:`.view_cubes`,
 :mod:`.path_samples`) decide what to search where.
 """
