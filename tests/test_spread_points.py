@@ -349,25 +349,28 @@ def test_the_probes_priced_are_those_more_accurate_than_the_meeting_tier_that_no
     assert [pt[2] for pt in got] == sorted(pt[2] for pt in got)
 
 
-def test_the_builder_prices_a_probe_that_kept_up_and_the_error_budget_keeps_the_frame_rate_with_it() -> None:
+def test_the_builder_prices_a_probe_that_kept_up_where_the_real_time_points_are_far_from_max() -> None:
     """The valley's missed frames at 320x180 without bridging: the search's meeting tier begins at error
     0.04 and its slow tier is a slow max quality; the probe one step below max quality kept up at 0.007
-    but was left out of the frontier. With ``slow_points`` 1 (max quality alone there) the builder now
-    prices it besides the frontier's spread, and an error budget of 0.02, frame rate first, is kept at
-    30 fps with it; before, the lookup had nothing real time within the budget."""
+    but was left out of the frontier. With ``slow_points`` 1 (max quality alone there) and no bridging
+    the builder now prices it in a second round, since the most accurate real-time point priced is
+    further than the store's error resolution (``threshold_error`` 0.01) from max quality, and an error
+    budget of 0.02, frame rate first, is kept at 30 fps with it; before, the lookup had nothing real time
+    within the budget. Where the real-time points priced reach 0.008, the probe is not priced."""
     import itertools
 
     from service.params import default_space
 
     space = default_space().subset(["sampling", "max_depth", "resolution_scale"])
     settings_ = [space.expand(f) for f in itertools.product(*(range(n) for n in space.free_n_values))][:12]
-    meeting = [(settings_[j], e, p, 0.02) for j, (e, p) in enumerate(((0.3, 0.2), (0.1, 0.4), (0.04, 0.6)))]
     top = space.max_quality_indices()
     slow_max = (top, 0.0, 1.0, 0.045)
     probe = (settings_[5], 0.007, 0.8, 0.03)
-    figures = {pt[0]: pt[1:] for pt in (*meeting, slow_max, probe)}
 
-    def run(kept_up):
+    def run(best: float, kept_up):
+        meeting = [(settings_[j], e, p, 0.02)
+                   for j, (e, p) in enumerate(((0.3, 0.2), (0.1, 0.4), (best, 0.6)))]
+        figures = {pt[0]: pt[1:] for pt in (*meeting, slow_max, probe)}
         asked: list[list[tuple[int, ...]]] = []
 
         class Pricer:
@@ -381,13 +384,16 @@ def test_the_builder_prices_a_probe_that_kept_up_and_the_error_budget_keeps_the_
         b = _run_one_frontier_builder([*meeting, slow_max], Pricer(), kept_up=kept_up, display_points=4,
                                       slow_points=1)
         store = b.to_store(profile="mobile", fps=FPS, aspect=16 / 9, meta={"static_power_w": 0.1})
-        return asked, store.lookup((0.5, 0.0, 0.0), direction=(1.0, 0.0, 0.0), error_budget=0.02)
+        hit = store.lookup((0.5, 0.0, 0.0), direction=(1.0, 0.0, 0.0), error_budget=0.02)
+        return asked, hit, b, [pt[0] for pt in spread_points([*meeting, slow_max], 4, FPS, 1)]
 
-    asked, hit = run([probe])
-    assert len(asked) == 1 and probe[0] in asked[0] and top in asked[0]
-    assert asked[0][:-1] == [pt[0] for pt in spread_points([*meeting, slow_max], 4, FPS, 1)]  # and the probe
+    asked, hit, b, spread = run(0.04, [probe])
+    assert asked == [spread, [probe[0]]] and top in spread and b.probed_points == 1 and b.bridged_points == 0
     assert not hit.infeasible and hit.meets_fps and hit.indices == tuple(probe[0])
     assert round(hit.error, 3) == 0.007
-    asked, hit = run([])  # the frontier alone, as priced before
-    assert probe[0] not in asked[0]
+    asked, hit, b, spread = run(0.04, [])  # the frontier alone, as priced before
+    assert asked == [spread] and b.probed_points == 0
     assert hit.infeasible and hit.meets_fps and round(hit.error, 3) == 0.04
+    asked, hit, b, spread = run(0.008, [probe])  # a real-time point priced within 0.01 of max quality
+    assert asked == [spread] and b.probed_points == 0
+    assert not hit.infeasible and round(hit.error, 3) == 0.008

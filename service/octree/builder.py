@@ -244,6 +244,7 @@ class OctreeBuilder:
         self.display_cameras = 0  # cameras priced at display resolution
         self.display_points = 0  # frontier points priced there
         self.bridged_points = 0  # of them, priced between the first ones' error jumps (:mod:`.bridge`)
+        self.probed_points = 0  # of them, the search's probes that kept up (:meth:`_probes_to_price`)
         self._bridge_reserve = 0.0  # search steps planned for bridging not priced yet
         # per lattice frontier id priced at several cameras: (cameras, settings, error, power and frame
         # time (K, n) of each setting at each camera), what the store keeps as its per-camera figures
@@ -338,20 +339,33 @@ class OctreeBuilder:
 
     def _to_price(self, fid: int) -> list[tuple[Any, ...]]:
         """The points of lattice frontier ``fid`` its display pricing prices first: the spread of its
-        points (:func:`spread_points`), then its probes that kept up more accurate than any of them
-        (:func:`kept_up_to_price`)."""
-        rec, fps = self.lattice.frontiers[fid], self.search.ev.fps
-        return (spread_points(rec.points, self.cfg.display_points, fps, self.cfg.slow_points)
-                + kept_up_to_price(rec.points, rec.kept_up, fps))
+        points (:func:`spread_points`)."""
+        return spread_points(self.lattice.frontiers[fid].points, self.cfg.display_points, self.search.ev.fps,
+                             self.cfg.slow_points)
+
+    def _probes_to_price(self, fid: int, priced: list[tuple[Any, ...]]) -> list[Indices]:
+        """The search's probes that kept up (:func:`kept_up_to_price`) that frontier ``fid`` prices
+        after its first pricing round: all of them where the most accurate real-time point priced
+        (``priced``, display figures) is further than the store's error resolution
+        (``threshold_error``) from max quality, none elsewhere. Near Max they are costly renders (the
+        teapot's demo took 2.3 minutes more with every frontier's priced) that no error budget needs
+        where a real-time point that accurate was already priced."""
+        fps = self.search.ev.fps
+        meeting, slow = split_by_rate(priced, fps)
+        if not meeting or not slow or min(float(pt[1]) for pt in meeting) <= self.cfg.threshold_error:
+            return []
+        rec = self.lattice.frontiers[fid]
+        return [pt[0] for pt in kept_up_to_price(rec.points, rec.kept_up, fps)]
 
     def _price_at_display(self) -> None:
         """Every measured frontier's points priced again at the path's resolution at the frontier's
         cameras (its sample, and for path samples its guards), keeping each point's worst error, power
         and frame time there: the store's figures are the display resolution's, the search's only chose
         the points (:func:`spread_points`: at most ``display_points`` of the meeting tier and
-        ``slow_points`` of the slow tier; and :func:`kept_up_to_price`). Then, where the priced meeting
-        tier's errors jump, up to ``bridge_points`` more settings between them, a few rounds
-        (:mod:`.bridge`). The store's tiers are drawn again from the display figures
+        ``slow_points`` of the slow tier). Then, in a second round, the search's probes that kept up
+        where the priced real-time points are far from max quality (:meth:`_probes_to_price`), and where
+        the priced meeting tier's errors jump, up to ``bridge_points`` more settings between them, a few
+        rounds (:mod:`.bridge`). The store's tiers are drawn again from the display figures
         (``Frontier.from_points``): a point may meet the rate at one resolution and miss it at the
         other."""
         assert self.pricer is not None and self.cfg.display is not None
@@ -374,19 +388,25 @@ class OctreeBuilder:
                                    for cams, _, _ in jobs.values())
         search.steps_planned += self._bridge_reserve
         self.bridged_points = 0
-        first_count: dict[int, int] = {}  # per frontier, the points its first round priced
+        self.probed_points = 0
+        first_count: dict[int, int] = {}  # per frontier, the points its first round and probes priced
         pace_s: float | None = None  # seconds a pricing render took in the rounds so far
-        for round_ in range(1 + (bridge.ROUNDS if self.cfg.bridge_points > 0 else 0)):
+        probing = any(self.lattice.frontiers[fid].kept_up for fid in jobs)
+        for round_ in range(1 + (bridge.ROUNDS if self.cfg.bridge_points > 0 else int(probing))):
             if round_:
                 asked = {}
                 for fid, (_, xs, figs) in jobs.items():
-                    left = self.cfg.bridge_points - (len(xs) - first_count[fid])
-                    more = bridge.bridge_candidates(self._worst(xs, figs), fps, left, xs)
+                    priced = self._worst(xs, figs)
+                    probes = self._probes_to_price(fid, priced) if round_ == 1 else []
+                    first_count[fid] += len(probes)  # the bridges' count is their own
+                    left = self.cfg.bridge_points - (len(xs) + len(probes) - first_count[fid])
+                    more = probes + bridge.bridge_candidates(priced, fps, left, [*xs, *probes])
+                    self.probed_points += len(probes)
+                    self.bridged_points += len(more) - len(probes)
                     if more:
                         asked[fid] = more
                 if not asked:
                     break
-                self.bridged_points += sum(len(xs) for xs in asked.values())
             pace_s = self._price_round(jobs, asked, bridging=round_ > 0, pace_s=pace_s)
             if not round_:
                 first_count = {fid: len(xs) for fid, (_, xs, _) in jobs.items()}
