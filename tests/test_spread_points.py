@@ -15,7 +15,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from service.octree.builder import kept_up_to_price, spread_points
+from service.octree.builder import PROBE_ERROR, kept_up_to_price, spread_points
 from service.octree.search import Search
 from service.store import (
     Frontier,
@@ -353,10 +353,10 @@ def test_the_builder_prices_a_probe_that_kept_up_where_the_real_time_points_are_
     """The valley's missed frames at 320x180 without bridging: the search's meeting tier begins at error
     0.04 and its slow tier is a slow max quality; the probe one step below max quality kept up at 0.007
     but was left out of the frontier. With ``slow_points`` 1 (max quality alone there) and no bridging
-    the builder now prices it in a second round, since the most accurate real-time point priced is
-    further than the store's error resolution (``threshold_error`` 0.01) from max quality, and an error
-    budget of 0.02, frame rate first, is kept at 30 fps with it; before, the lookup had nothing real time
-    within the budget. Where the real-time points priced reach 0.008, the probe is not priced."""
+    the builder now prices it in a second round, since the most accurate real-time point priced is over
+    ``PROBE_ERROR`` (0.02), and an error budget of 0.02, frame rate first, is kept at 30 fps with it;
+    before, the lookup had nothing real time within the budget. Where the real-time points priced reach
+    0.019, the probe is not priced."""
     import itertools
 
     from service.params import default_space
@@ -394,6 +394,7 @@ def test_the_builder_prices_a_probe_that_kept_up_where_the_real_time_points_are_
     asked, hit, b, spread = run(0.04, [])  # the frontier alone, as priced before
     assert asked == [spread] and b.probed_points == 0
     assert hit.infeasible and hit.meets_fps and round(hit.error, 3) == 0.04
-    asked, hit, b, spread = run(0.008, [probe])  # a real-time point priced within 0.01 of max quality
+    assert PROBE_ERROR == 0.02
+    asked, hit, b, spread = run(0.019, [probe])  # a real-time point priced within 0.02 already
     assert asked == [spread] and b.probed_points == 0
-    assert not hit.infeasible and round(hit.error, 3) == 0.008
+    assert not hit.infeasible and round(hit.error, 3) == 0.019
