@@ -22,7 +22,7 @@ met: on the valley (`desktop`) the sampler one step below Max kept up at error 0
 64x36 images at a camera whose priced frontier went from a slow Max to real-time points at 0.034 and
 over (320x180); with them dropped, an unbridged store missed the error budget at six path frames
 (bench/RESULTS.md, "The valley's missed frames without bridging"). The display pricing prices them
-besides the frontier's spread (:mod:`.builder`). The scheduler
+where the frontier's real-time points stay over error 0.02 (:mod:`.builder`). The scheduler
 knows cameras and settings, not corners or views: the sampling strategies (:mod:`.view_cubes`,
 :mod:`.path_samples`) decide what to search where.
 """
