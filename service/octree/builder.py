@@ -336,8 +336,7 @@ class OctreeBuilder:
         changed in place, so a list other than the one counted (the guards' worst figures, the pricing's
         spread and figures) is counted again. The counted list is kept with its count, so its identity
         is not reused while the count stands."""
-        rec, fps = self.lattice.frontiers[fid], self.search.ev.fps
-        points = rec.points
+        points, fps = self.lattice.frontiers[fid].points, self.search.ev.fps
         hit = self._kept_counts.get(fid)
         if hit is None or hit[0] is not points or hit[1] != fps:
             n = len(self._to_price(fid))
@@ -360,7 +359,8 @@ class OctreeBuilder:
         to 10.9, for an error budget of 0.02 its store already kept on every frame."""
         fps = self.search.ev.fps
         meeting, slow = split_by_rate(priced, fps)
-        if not meeting or not slow or min(float(pt[1]) for pt in meeting) <= PROBE_ERROR:
+        best = min((float(pt[1]) for pt in meeting), default=0.0)
+        if best <= PROBE_ERROR or not any(float(pt[1]) < best for pt in slow):
             return []
         rec = self.lattice.frontiers[fid]
         return [pt[0] for pt in kept_up_to_price(rec.points, rec.kept_up, fps)]
@@ -399,15 +399,15 @@ class OctreeBuilder:
         self.probed_points = 0
         first_count: dict[int, int] = {}  # per frontier, the points its first round and probes priced
         pace_s: float | None = None  # seconds a pricing render took in the rounds so far
-        probing = any(self.lattice.frontiers[fid].kept_up for fid in jobs)
+        probing = any(lat.frontiers[fid].kept_up for fid in jobs)
         for round_ in range(1 + (bridge.ROUNDS if self.cfg.bridge_points > 0 else int(probing))):
             if round_:
                 asked = {}
                 for fid, (_, xs, figs) in jobs.items():
                     priced = self._worst(xs, figs)
                     probes = self._probes_to_price(fid, priced) if round_ == 1 else []
-                    first_count[fid] += len(probes)  # the bridges' count is their own
-                    left = self.cfg.bridge_points - (len(xs) + len(probes) - first_count[fid])
+                    left = self.cfg.bridge_points - (len(xs) - first_count[fid])
+                    first_count[fid] += len(probes)  # probes do not count against the bridges
                     more = probes + bridge.bridge_candidates(priced, fps, left, [*xs, *probes])
                     self.probed_points += len(probes)
                     self.bridged_points += len(more) - len(probes)
