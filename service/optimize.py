@@ -8,9 +8,11 @@ along the path (:mod:`service.octree`), and pack the result into a :class:`Paret
 from __future__ import annotations
 
 import math
+import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import field, make_dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -105,6 +107,14 @@ def path_targets(scene: Any, path: CameraPath) -> tuple[np.ndarray, np.ndarray]:
     return fwd, eye + fwd * t[:, None]
 
 
+def _references_parent(cache: EvalCache) -> Path | None:
+    """Where a build keeps its cameras' references (MBs each at 1280x720): the data directory's tmp/
+    beside an evaluation cache file, on the data disk and emptied when the service starts (after a
+    crash), else the system's temporary directory."""
+    tmp = None if cache.path is None else cache.path.parent / "tmp"
+    return tmp if tmp is not None and tmp.is_dir() else None
+
+
 def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, config: OptimizeConfig, *,
                   cache: EvalCache, executor: Executor,
                   progress: Callable[[Progress], None] | None = None,
@@ -142,12 +152,15 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, config: O
         display_points=config.display_points, slow_points=config.slow_points,
         bridge_points=config.bridge_points,
     )
-    pricing = pricer = None
+    pricing = pricer = references = None
     if config.display_estimator != "preview":
         small = display[0] * display[1] < config.display_tiles_min_pixels
         estimator = "full" if small else config.display_estimator
         pricing = DisplayPricing(estimator, config.display_fraction, seed=config.seed)
-        pricer = DisplayPricer(evaluator, pricing)
+        # each pricing camera's reference, rendered in its first round, read by the later ones
+        references = tempfile.TemporaryDirectory(prefix="render-budget-references-",
+                                                 dir=_references_parent(cache))
+        pricer = DisplayPricer(evaluator, pricing, references.name)
     forwards = targets = None
     if config.view_sampling in ("aimed", "path"):
         forwards, targets = path_targets(handle.get(), path)
@@ -155,7 +168,11 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, config: O
                            np.stack([np.asarray(f.matrix_world, dtype=np.float64) for f in frames]),
                            np.asarray([f.vfov for f in frames]), np.asarray([f.aspect for f in frames]))
     builder = OctreeBuilder(evaluator, space, frames_in, cfg, progress, should_cancel, pricer)
-    builder.run()
+    try:
+        builder.run()
+    finally:  # a build's references are its own (a resumed job renders them again)
+        if references is not None:
+            references.cleanup()
     meta = {
         "thresholds": {"power_w": config.threshold_power_w, "error": config.threshold_error},
         "max_depth": config.max_depth,

@@ -5,6 +5,7 @@ traced, within its stated bound when a share is), and the optimiser's store pric
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -29,6 +30,7 @@ from service.display_pricing import (
 )
 from service.display_pricing.camera import _DESIGNS
 from service.display_pricing.design import build_design, display_cameras
+from service.display_pricing.references import ReferenceStore
 from service.eval_cache import EvalCache
 from service.evaluation import CameraSpec
 from service.executors import InProcessExecutor
@@ -421,6 +423,77 @@ def test_the_sampled_tiles_are_the_whole_frames(scene) -> None:
     assert {"fsaa", "undersample", "supersample"} <= modes  # the adaptive modes among them
 
 
+# -- references kept between pricing rounds ---------------------------------------------------------------
+def _counting_renders(monkeypatch) -> dict[str, int]:
+    """Counts the pricing's renders by kind: whole frames (the auxiliary ones included) and windows."""
+    counts = {"frame": 0, "windows": 0}
+    for name in counts:
+        original = getattr(tracing.Renderer, name)
+
+        def counted(self, *args, _name=name, _original=original, **kw):
+            counts[_name] += 1
+            return _original(self, *args, **kw)
+        monkeypatch.setattr(tracing.Renderer, name, counted)
+    return counts
+
+
+def _figures(evaluations) -> list[tuple]:
+    return [(e.error, e.power_w, e.frame_time_s, sorted(e.breakdown.items())) for e in evaluations]
+
+
+@pytest.mark.parametrize("estimator", ["full", "tiles"])
+def test_a_camera_priced_again_reads_its_reference_instead_of_rendering_it(scene, tmp_path, monkeypatch,
+                                                                           estimator) -> None:
+    """A later pricing round at a camera (in another worker process: the in-process designs are gone)
+    renders only its new settings, not the reference again, and its figures are those of a camera priced
+    from scratch, to the last digit."""
+    cam = _camera(128, 72, (3.0, -4.5, 1.8))
+    first, later = _settings(3, seed=21), _settings(2, seed=22)[1:]
+    pricing = DisplayPricing(estimator, fraction=0.25, seed=5)
+
+    def price(sets, references=None):
+        return price_camera(scene, cam, sets, SPACE, profile="mobile", fps=30.0, metric="ssim",
+                            pricing=pricing, references=references)
+
+    _DESIGNS.clear()
+    fresh = _figures(price(later))
+    store = ReferenceStore(tmp_path)
+    _DESIGNS.clear()
+    price(first, store)
+    assert len(list(tmp_path.iterdir())) == 1
+    _DESIGNS.clear()
+    counts = _counting_renders(monkeypatch)
+    again = _figures(price(later, store))
+    # per new setting a whole frame, or its windows and its auxiliary frame; nothing for the reference
+    assert counts == ({"frame": len(later), "windows": 0} if estimator == "full" else
+                      {"frame": len(later), "windows": len(later)})
+    assert again == fresh
+    _DESIGNS.clear()
+
+
+def test_a_damaged_or_missing_reference_is_rendered_again(scene, tmp_path, monkeypatch) -> None:
+    """A reference file cut short is not read (the reference is rendered again, the figures unchanged),
+    and a reference directory that does not exist (a worker on another machine) keeps nothing."""
+    cam = _camera(96, 64)
+    sets = _settings(2, seed=23)[1:]
+    pricing = DisplayPricing("tiles", fraction=0.5, seed=1)
+
+    def price(references):
+        _DESIGNS.clear()
+        return _figures(price_camera(scene, cam, sets, SPACE, profile="mobile", fps=30.0, metric="ssim",
+                                     pricing=pricing, references=references))
+
+    fresh = price(None)
+    assert price(ReferenceStore(tmp_path / "elsewhere")) == fresh and not (tmp_path / "elsewhere").exists()
+    assert price(ReferenceStore(tmp_path)) == fresh
+    (saved,) = tmp_path.iterdir()
+    saved.write_bytes(saved.read_bytes()[:1000])
+    counts = _counting_renders(monkeypatch)
+    assert price(ReferenceStore(tmp_path)) == fresh
+    assert counts["windows"] == len(sets) + 1  # the reference's windows traced again
+    _DESIGNS.clear()
+
+
 # -- the optimiser's store --------------------------------------------------------------------------------
 def _orbit_path(n: int, resolution: tuple[int, int]) -> CameraPath:
     ang = np.linspace(-0.6, 0.9, n)
@@ -444,6 +517,27 @@ def _options(**kw) -> OptimizeConfig:
                 path_resolution=0.5, guard_frames=0, skip_inert=False)
     base.update(kw)
     return OptimizeConfig(**base)
+
+
+def test_the_later_pricing_rounds_read_the_references_the_first_saved(scene, tmp_path, monkeypatch) -> None:
+    """A build whose bridging prices cameras again reads their references from the data directory's
+    tmp/ (beside the evaluation cache file) instead of rendering them again, and leaves nothing there."""
+    (tmp_path / "tmp").mkdir()
+    reads: list[tuple[Path, bool]] = []
+    original = ReferenceStore.load_frame
+
+    def load_frame(self, key):
+        image = original(self, key)
+        reads.append((self.directory, image is not None))
+        return image
+    monkeypatch.setattr(ReferenceStore, "load_frame", load_frame)
+    with EvalCache(tmp_path / "eval_cache.sqlite3") as cache:
+        store = optimize_path(scene, _orbit_path(16, (48, 36)), SUBSPACE,
+                              _options(display_estimator="full", display_points=2, path_resolution=0.02,
+                                       bridge_points=2), cache=cache, executor=InProcessExecutor())
+    assert store.meta["bridged_points"] > 0
+    assert reads and all(hit for _, hit in reads)  # every camera priced again read its reference
+    assert {d.parent for d, _ in reads} == {tmp_path / "tmp"} and not any((tmp_path / "tmp").iterdir())
 
 
 @pytest.mark.slow

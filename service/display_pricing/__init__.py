@@ -47,13 +47,15 @@ Only the SSIM metrics can be estimated from tiles; FLIP is priced on whole frame
 The package, by concept: ``config`` (the estimator's settings), ``sampling`` (blocks and the systematic
 PPS sample), ``tracing`` (whole frames, auxiliary frames, display windows), ``windows`` (which windows to
 trace), ``design`` (one camera's
-sample and reference), ``estimator`` (the ratio estimators), ``camera`` (every setting at one camera)
+sample and reference), ``estimator`` (the ratio estimators), ``camera`` (every setting at one camera),
+``references`` (each camera's reference kept on disk between the builder's pricing rounds)
 and ``pricer`` (the driver through the evaluation cache and executor).
 """
 
 from service.display_pricing.camera import price_camera
 from service.display_pricing.config import BLOCKS, ESTIMATOR_VERSION, ESTIMATORS, DisplayPricing
 from service.display_pricing.pricer import DisplayPricer
+from service.display_pricing.references import ReferenceStore
 from service.display_pricing.sampling import (
     cover_rects,
     inclusion_probabilities,
@@ -65,5 +67,5 @@ from service.display_pricing.tracing import AUX_TILE
 from service.display_pricing.windows import apron_pixels, plan_windows, traced_area
 
 __all__ = ["AUX_TILE", "BLOCKS", "ESTIMATORS", "ESTIMATOR_VERSION", "DisplayPricer", "DisplayPricing",
-           "apron_pixels", "cover_rects", "inclusion_probabilities", "plan_windows", "price_camera",
-           "sample_start", "serpentine", "systematic_sample", "traced_area"]
+           "ReferenceStore", "apron_pixels", "cover_rects", "inclusion_probabilities", "plan_windows",
+           "price_camera", "sample_start", "serpentine", "systematic_sample", "traced_area"]

@@ -11,6 +11,7 @@ import numpy as np
 from service.display_pricing.config import DisplayPricing
 from service.display_pricing.design import aux_measure, build_design, display_cameras, probes
 from service.display_pricing.estimator import estimate
+from service.display_pricing.references import ReferenceStore
 from service.display_pricing.sampling import CameraDesign
 from service.display_pricing.tracing import Renderer, display_patches
 from service.eval_cache import Evaluation
@@ -28,19 +29,25 @@ _DESIGNS: LRUCache[tuple[str, ...], tuple[CameraDesign, dict]] = LRUCache(4)
 
 def price_camera(scene: Any, camera: CameraSpec, settings: Sequence[Indices], space: ParameterSpace, *,
                  profile: str, fps: float, metric: str, pricing: DisplayPricing,
-                 threads: int | None = None, scene_hash: str | None = None) -> list[Evaluation]:
+                 threads: int | None = None, scene_hash: str | None = None,
+                 references: ReferenceStore | None = None) -> list[Evaluation]:
     """Error, power and frame time of every setting at ``camera`` (display resolution), priced as
-    ``pricing`` says; the maximum-quality reference is rendered once for all of them."""
+    ``pricing`` says; the maximum-quality reference is rendered once for all of them, and with
+    ``references`` once for every call at this camera (the builder's later pricing rounds)."""
     renderer = Renderer(scene, threads)
-    if pricing.key(metric).startswith("full"):
-        return _price_whole_frames(renderer, camera, settings, space, profile=profile, fps=fps, metric=metric)
     mq = space.max_quality_indices()
-    key = (scene_hash or str(scene.content_hash), camera.key(), pricing.key(metric),
-           repr(sorted(space.fields_of(mq).items())), repr(probes(space)))
+    key = (scene_hash or str(scene.content_hash), camera.key(), metric, pricing.key(metric),
+           repr(sorted(space.fields_of(mq).items())))
+    if pricing.key(metric).startswith("full"):
+        return _price_whole_frames(renderer, camera, settings, space, profile=profile, fps=fps, metric=metric,
+                                   references=references, key=key)
+    key = (*key, repr(probes(space)))
     cached = _DESIGNS.get(key)
+    if cached is None and references is not None:
+        cached = references.load_design(key)
     if cached is None:
         cached = build_design(renderer, camera, space, pricing, metric)
-        _DESIGNS.put(key, cached)
+    _DESIGNS.put(key, cached)
     d, probe_measures = cached
     full_cam, aux_cam = display_cameras(camera, pricing)
     blocks = d.sampled.tolist()
@@ -48,6 +55,8 @@ def price_camera(scene: Any, camera: CameraSpec, settings: Sequence[Indices], sp
         canvas, cnt, hist, owner, size = renderer.windows(full_cam, space.to_settings(mq), blocks, d)
         d.reference.update(display_patches(canvas, size, d, blocks))
         d.reference_tiles = (cnt, hist, owner, size)
+        if references is not None:
+            references.save_design(key, d, probe_measures)
     gaussian = metric == "ssim_gaussian"
     out = []
     traced_pixels = sum((r[2] - r[0]) * (r[3] - r[1]) for r in d.regions.values())
@@ -77,14 +86,26 @@ def price_camera(scene: Any, camera: CameraSpec, settings: Sequence[Indices], sp
 
 
 def _price_whole_frames(renderer: Renderer, camera: CameraSpec, settings: Sequence[Indices],
-                        space: ParameterSpace, *, profile: str, fps: float, metric: str) -> list[Evaluation]:
-    """Every setting and the reference rendered whole at display resolution: exact, and as slow."""
+                        space: ParameterSpace, *, profile: str, fps: float, metric: str,
+                        references: ReferenceStore | None, key: tuple[str, ...]) -> list[Evaluation]:
+    """Every setting and the reference rendered whole at display resolution: exact, and as slow. The
+    reference image comes from ``references`` where an earlier call at this camera saved it (unless max
+    quality is priced itself, whose render is the reference)."""
     mq = space.max_quality_indices()
-    ref = renderer.frame(camera.to_camera(), space.to_settings(mq))
+    rendered: dict[Indices, Any] = {}
+    ref_image = None
+    if references is not None and mq not in {tuple(int(i) for i in idx) for idx in settings}:
+        ref_image = references.load_frame(key)
+    if ref_image is None:
+        rendered[mq] = renderer.frame(camera.to_camera(), space.to_settings(mq))
+        ref_image = rendered[mq].image
+        if references is not None:
+            references.save_frame(key, ref_image)
     out = []
     for idx in settings:
-        r = ref if tuple(idx) == mq else renderer.frame(camera.to_camera(), space.to_settings(idx))
-        err = 0.0 if tuple(idx) == mq else image_error(metric, ref.image, r.image)
+        idx = tuple(int(i) for i in idx)
+        r = rendered[idx] if idx in rendered else renderer.frame(camera.to_camera(), space.to_settings(idx))
+        err = 0.0 if idx == mq else image_error(metric, ref_image, r.image)
         power, frame_time, breakdown = _price(r, profile, fps)
         breakdown.update(_labels(camera, r.render_resolution, fraction=1.0))
         out.append(Evaluation(err, power, frame_time, breakdown))

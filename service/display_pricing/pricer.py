@@ -5,9 +5,11 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 from service.display_pricing.camera import price_camera
 from service.display_pricing.config import DisplayPricing
+from service.display_pricing.references import ReferenceStore
 from service.eval_cache import CacheKey, Evaluation
 from service.evaluation import PIPELINE_VERSION, CameraSpec, Evaluator, SceneHandle, space_fingerprint
 from service.params import Indices, ParameterSpace
@@ -24,27 +26,32 @@ class _TaskContext:
     metric: str
     pricing: DisplayPricing
     threads: int | None
+    references: str | None  # the build's reference directory (ReferenceStore), if any
 
 
 def _price_task(ctx: _TaskContext, item: tuple[CameraSpec, list[Indices]]) -> list[Evaluation]:
     camera, settings = item
     return price_camera(ctx.scene.get(), camera, settings, ctx.space, profile=ctx.profile, fps=ctx.fps,
                         metric=ctx.metric, pricing=ctx.pricing, threads=ctx.threads,
-                        scene_hash=ctx.scene.content_hash)
+                        scene_hash=ctx.scene.content_hash,
+                        references=None if ctx.references is None else ReferenceStore(ctx.references))
 
 
 class DisplayPricer:
     """Prices (display-resolution camera, settings) at display resolution for an :class:`Evaluator`'s
     scene, space, profile, frame rate and metric, through its evaluation cache and executor: one task
     per camera (its reference is traced once for all its settings), cached per setting under a key
-    that names the display resolution and the estimator."""
+    that names the display resolution and the estimator. With ``references`` (an existing directory the
+    workers see, one build's), a camera priced again in a later call reads its reference from there
+    instead of rendering it again (:class:`ReferenceStore`)."""
 
-    def __init__(self, evaluator: Evaluator, pricing: DisplayPricing) -> None:
+    def __init__(self, evaluator: Evaluator, pricing: DisplayPricing, references: str | Path | None = None
+                 ) -> None:
         self.ev = evaluator
         self.pricing = pricing
         ctx = evaluator.ctx
         self.ctx = _TaskContext(evaluator.scene, evaluator.space, ctx.profile, ctx.fps, ctx.metric, pricing,
-                                ctx.threads)
+                                ctx.threads, None if references is None else str(references))
         self.metric_key = (f"{ctx.metric}:{PIPELINE_VERSION}:{space_fingerprint(evaluator.space)}:"
                            f"display={pricing.key(ctx.metric)}")
         self.evaluations = 0  # settings actually priced, in calls to price that ended (or were cancelled)

@@ -354,9 +354,11 @@ class OctreeBuilder:
         after its first pricing round: all of them where the most accurate real-time point priced
         (``priced``, display figures) is over :data:`PROBE_ERROR` and the slow tier holds a more
         accurate one, none elsewhere. Near Max they are costly renders, and a pricing round of its own
-        renders each camera's reference again: priced at every frontier they took the teapot's demo from
-        9.5 to 11.8 minutes, and where the real-time points priced were over 0.01 (13 of 66 frontiers)
-        to 10.9, for an error budget of 0.02 its store already kept on every frame."""
+        then rendered each camera's reference again too (read from the build's reference store since,
+        :class:`~service.display_pricing.references.ReferenceStore`): priced at every frontier they took
+        the teapot's demo from 9.5 to 11.8 minutes, and where the real-time points priced were over 0.01
+        (13 of 66 frontiers) to 10.9, for an error budget of 0.02 its store already kept on every
+        frame."""
         fps = self.search.ev.fps
         meeting, slow = split_by_rate(priced, fps)
         best = min((float(pt[1]) for pt in meeting), default=0.0)
@@ -445,7 +447,7 @@ class OctreeBuilder:
         requests = [(cam, xs) for fid, xs in asked.items() for cam in jobs[fid][0]]
         # what each camera priced at display resolution costs in search steps (the fraction done, and the
         # time left when the search rendered nothing to take a pace from, pricing_time)
-        # (a bridging round's cameras have their reference rendered already)
+        # (a bridging round's cameras read their reference from the pricer's reference store)
         phase = "price between the priced points" if bridging else "price at display resolution"
         refs = 0 if bridging else 1
         steps = [self.pricing_steps(refs, len(xs)) for _, xs in requests]
