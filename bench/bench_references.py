@@ -18,14 +18,11 @@ import time
 from pathlib import Path
 
 import numpy as np
+from bench_space_steps import built_scene, cameras
 
 from addon.core.campaign import parse_size
-from service.camera_path import CameraPath
 from service.display_pricing import DisplayPricing, ReferenceStore, camera, price_camera
-from service.evaluation import CameraSpec, read_scene
 from service.params import default_space
-
-REPO = Path(__file__).resolve().parent.parent
 
 
 def main() -> None:
@@ -48,16 +45,11 @@ def main() -> None:
           "reference file (MB) | same figures |")
     print("|---|---|---|---|---|---|")
     for name in args.scenes:
-        d = REPO / "blend_scenes" / "build" / name
-        scene = read_scene(d / "scene.rbscene")
-        path = CameraPath.load(d / "path.json")
+        scene, path = built_scene(name)
         rng = np.random.default_rng(args.seed)
         again = read = 0.0
         sizes, same = [], True
-        for k in range(args.cameras):
-            f = path.frames[round((k + 0.5) * (len(path) - 1) / args.cameras)]
-            m = np.asarray(f.matrix_world, dtype=np.float64)
-            cam = CameraSpec(tuple(m[:3, 3]), tuple(-m[:3, 2]), tuple(m[:3, 1]), f.vfov, *args.size)
+        for _, cam in cameras(path, args.cameras, args.size):
             first = [space.max_quality_indices()] + [tuple(int(v) for v in rng.integers(0, counts))
                                                      for _ in range(args.first)]
             later = [tuple(int(v) for v in rng.integers(0, counts)) for _ in range(args.later)]

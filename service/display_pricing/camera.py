@@ -92,9 +92,10 @@ def _price_whole_frames(renderer: Renderer, camera: CameraSpec, settings: Sequen
     reference image comes from ``references`` where an earlier call at this camera saved it (unless max
     quality is priced itself, whose render is the reference)."""
     mq = space.max_quality_indices()
+    settings = [tuple(int(i) for i in idx) for idx in settings]
     rendered: dict[Indices, Any] = {}
     ref_image = None
-    if references is not None and mq not in {tuple(int(i) for i in idx) for idx in settings}:
+    if references is not None and mq not in settings:
         ref_image = references.load_frame(key)
     if ref_image is None:
         rendered[mq] = renderer.frame(camera.to_camera(), space.to_settings(mq))
@@ -103,7 +104,6 @@ def _price_whole_frames(renderer: Renderer, camera: CameraSpec, settings: Sequen
             references.save_frame(key, ref_image)
     out = []
     for idx in settings:
-        idx = tuple(int(i) for i in idx)
         r = rendered[idx] if idx in rendered else renderer.frame(camera.to_camera(), space.to_settings(idx))
         err = 0.0 if idx == mq else image_error(metric, ref_image, r.image)
         power, frame_time, breakdown = _price(r, profile, fps)
