@@ -81,8 +81,7 @@ def main() -> None:
         for i in picks:
             f = path.frames[int(i)]
             m = np.asarray(f.matrix_world, dtype=np.float64)
-            cam = CameraSpec(eye=tuple(m[:3, 3]), forward=tuple(-m[:3, 2]), up=tuple(m[:3, 1]), vfov=f.vfov,
-                             width=width, height=height)
+            cam = CameraSpec.from_matrix(m, f.vfov, width, height)
 
             def evaluate(batch: list[tuple[int, ...]], cam: CameraSpec = cam) -> np.ndarray:
                 full = [space.expand(x) for x in batch]

@@ -170,7 +170,7 @@ def measured_table(args: argparse.Namespace, store: ParetoStore, path: CameraPat
                     chosen = store.settings_of(key[1])
                     full = tuple(p.values.index(chosen[p.name]) if p.name in chosen else p.max_quality
                                  for p in space.parameters)
-                    cam = CameraSpec(tuple(m[:3, 3]), tuple(-m[:3, 2]), tuple(m[:3, 1]), f.vfov, w, h)
+                    cam = CameraSpec.from_matrix(m, f.vfov, w, h)
                     r = evaluate(scene, cam, full, space, fps=path.fps, target_pixels=pw * ph,
                                  threads=args.threads)
                     measured[key] = (r.error, r.power_w)

@@ -161,7 +161,7 @@ def around(scene_name: str, store: ParetoStore, summary: dict, path: CameraPath,
     print(f"\nframe {frame}'s power-mode setting ({row['settings']}) at the frames around it, {w}x{h}:")
     for n in range(max(0, frame - reach), min(len(path), frame + reach)):
         m = np.asarray(path.frames[n].matrix_world, dtype=np.float64)
-        cam = CameraSpec(tuple(m[:3, 3]), tuple(-m[:3, 2]), tuple(m[:3, 1]), path.frames[n].vfov, w, h)
+        cam = CameraSpec.from_matrix(m, path.frames[n].vfov, w, h)
         ev = evaluate(scene, cam, idx, space, profile=store.profile, fps=float(summary["fps_target"]),
                       metric="ssim", reference_indices=best)
         print(f"  {n}: error {ev.error:.4f}, power {ev.power_w:.3f} W")

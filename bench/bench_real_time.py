@@ -79,8 +79,7 @@ def main() -> None:
         for i in picks:
             f = path.frames[int(i)]
             m = np.asarray(f.matrix_world, dtype=np.float64)
-            camera = CameraSpec(eye=tuple(m[:3, 3]), forward=tuple(-m[:3, 2]), up=tuple(m[:3, 1]),
-                                vfov=f.vfov, width=width, height=height)
+            camera = CameraSpec.from_matrix(m, f.vfov, width, height)
             result = sim_core.render(scene, camera.to_camera(), settings, threads=args.threads)
             rep = sim_core.price(result, prof, path.fps)
             energy = rep.dynamic_energy_j * ratio

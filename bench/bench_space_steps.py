@@ -86,7 +86,7 @@ def cameras(path: CameraPath, n: int, size: tuple[int, int], step: int = 0,
             raise ValueError(f"path frame {i} is not on the path (0..{len(path) - 1})")
         f = path.frames[i]
         m = np.asarray(f.matrix_world, dtype=np.float64)
-        out.append((i, CameraSpec(tuple(m[:3, 3]), tuple(-m[:3, 2]), tuple(m[:3, 1]), f.vfov, *size)))
+        out.append((i, CameraSpec.from_matrix(m, f.vfov, *size)))
     return out
 
 

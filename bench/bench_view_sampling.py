@@ -56,7 +56,7 @@ def main() -> None:
         for i in picks:
             f = path.frames[int(i)]
             m = np.asarray(f.matrix_world)
-            cams.append(CameraSpec(tuple(m[:3, 3]), tuple(-m[:3, 2]), tuple(m[:3, 1]), f.vfov, 64, 36))
+            cams.append(CameraSpec.from_matrix(m, f.vfov, 64, 36))
         mq = ev.evaluate([(c, space.max_quality_indices()) for c in cams])
         mn = ev.evaluate([(c, space.min_quality_indices()) for c in cams])
         p_max = float(np.mean([r.power_w for r in mq]))

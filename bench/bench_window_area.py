@@ -64,7 +64,7 @@ def main() -> None:
         for k in range(args.cameras):
             f = path.frames[round((k + 0.5) * (len(path) - 1) / args.cameras)]
             m = np.asarray(f.matrix_world, dtype=np.float64)
-            cam = CameraSpec(tuple(m[:3, 3]), tuple(-m[:3, 2]), tuple(m[:3, 1]), f.vfov, *args.size)
+            cam = CameraSpec.from_matrix(m, f.vfov, *args.size)
             timed = [space.max_quality_indices()] + [tuple(int(v) for v in rng.integers(0, counts))
                                                      for _ in range(args.cpu or 0)]
             for share in args.fraction:

@@ -84,6 +84,15 @@ class CameraSpec:
         f = ",".join(f"{c:.6f}" for c in (*self.eye, *self.forward, *self.up, self.vfov))
         object.__setattr__(self, "_key", f"{f}|{self.width}x{self.height}")
 
+    @classmethod
+    def from_matrix(cls, matrix_world: Any, vfov: float, width: int, height: int) -> CameraSpec:
+        """The camera of a Blender camera world matrix (it looks down its local -Z, up its local +Y), as
+        path frames, add-on payloads and REST bodies carry it."""
+        m = np.asarray(matrix_world, dtype=np.float64)
+        if m.shape != (4, 4):
+            raise ValueError("camera matrix_world must be 4x4")
+        return cls(tuple(m[:3, 3]), tuple(-m[:3, 2]), tuple(m[:3, 1]), vfov, width, height)
+
     def key(self) -> str:
         """Stable text key (values rounded to 1e-6) used by caches."""
         return self._key  # type: ignore[attr-defined,no-any-return]

@@ -180,7 +180,7 @@ def verify_store(scene: Any, store: ParetoStore, path: CameraPath, *, error_budg
         r = store.lookup(f.position, matrix=m, fov=f.vfov, aspect=f.aspect, error_budget=error_budget,
                          power_budget=power_budget, **query)
         size = (rw, rh) if resolution is not None else tuple(f.resolution)
-        cam = CameraSpec(tuple(m[:3, 3]), tuple(-m[:3, 2]), tuple(m[:3, 1]), f.vfov, *size)
+        cam = CameraSpec.from_matrix(m, f.vfov, *size)
         ev = evaluate(scene, cam, space.indices_of(r.settings), space, profile=store.profile, fps=rate,
                       metric=metric, threads=threads, reference_indices=best)
         within = ev.error <= value if mode == "error" else ev.power_w <= value

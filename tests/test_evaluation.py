@@ -241,3 +241,23 @@ def test_a_worker_without_the_scene_file_loads_the_shipped_bytes_and_keeps_no_co
     with pytest.raises(ValueError, match="self-contained"):
         evaluation._load_scene(str(tmp_path / "gone.gltf"), external, False)
     assert list(system_tmp.iterdir()) == []
+
+
+def test_a_camera_from_a_blender_matrix_is_the_one_the_tracer_builds_from_it(scene) -> None:
+    """Path frames, add-on payloads and REST bodies give the camera as Blender's matrix_world; the
+    evaluation camera made from it must see what ``Camera.from_blender`` sees."""
+    eye, fwd, up = np.array([0.5, -9.0, 5.0]), np.array([0.0, 9.0, -4.0]), np.array([0.0, 0.0, 1.0])
+    f = fwd / np.linalg.norm(fwd)
+    right = np.cross(f, up)
+    right /= np.linalg.norm(right)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = right, np.cross(right, f), -f, eye
+    spec = CameraSpec.from_matrix(m, 0.7, 32, 24)
+    assert np.allclose(spec.eye, eye) and np.allclose(spec.forward, f)
+    assert np.dot(spec.up, up) > 0.9
+    settings = sim_core.RenderSettings()
+    ours = sim_core.render(scene, spec.to_camera(), settings).image
+    blender = sim_core.render(scene, sim_core.Camera.from_blender(m, 0.7, 32, 24), settings).image
+    assert np.allclose(np.asarray(ours), np.asarray(blender), atol=1e-5)
+    with pytest.raises(ValueError, match="4x4"):
+        CameraSpec.from_matrix(m[:3], 0.7, 32, 24)

@@ -273,8 +273,7 @@ class LocalClient:
 
         cam = payload["camera"]
         m = _camera_matrix(cam["matrix_world"])
-        spec = CameraSpec(eye=tuple(m[:3, 3]), forward=tuple(-m[:3, 2]), up=tuple(m[:3, 1]), vfov=cam["vfov"],
-                          width=cam["width"], height=cam["height"])
+        spec = CameraSpec.from_matrix(m, cam["vfov"], cam["width"], cam["height"])
         space, indices = preview.settings_indices(payload.get("settings"))
         ev = evaluate(self._scene(str(payload["scene_id"])), spec, indices, space,
                       profile=str(payload.get("profile", "mobile")), fps=float(payload.get("fps", 30.0)),

@@ -107,8 +107,7 @@ def evaluate_settings(body: EvaluateRequest, storage: StorageDep, scenes: Scenes
     scene = scene_or_404(storage, scenes, body.scene_id)
     space, indices = settings_indices(body.settings)
     try:
-        spec = CameraSpec(eye=tuple(m[:3, 3]), forward=tuple(-m[:3, 2]), up=tuple(m[:3, 1]), vfov=cam.vfov,
-                          width=cam.width, height=cam.height)
+        spec = CameraSpec.from_matrix(m, cam.vfov, cam.width, cam.height)
         pixels = None if body.power_resolution is None else math.prod(body.power_resolution)
         evaluator = Evaluator(scene, space, cache=jobs.eval_cache(), profile=body.profile, fps=body.fps,
                               threads=settings.render_threads, target_pixels=pixels)
