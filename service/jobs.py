@@ -16,6 +16,7 @@ import queue
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 from service import executors, options
@@ -304,6 +305,7 @@ class JobManager:
             store = run_optimisation(
                 job.spec, scene=handle, cache=self.eval_cache(), executor=self.executor(),
                 progress=on_progress, should_cancel=should_cancel, threads=self.render_threads,
+                scratch_dir=self.storage.tmp_dir,
             )
             if should_cancel():
                 raise JobCancelled
@@ -390,10 +392,11 @@ def validate_job_spec(spec: dict[str, Any]) -> None:
 def run_optimisation(
     spec: dict[str, Any], *, scene: Any, cache: Any, executor: Any,
     progress: Callable[[Any], None], should_cancel: Callable[[], bool], threads: int | None = None,
+    scratch_dir: Path | None = None,
 ) -> Any:
     """Turn a stored job request into the optimiser's inputs and run it; returns a ParetoStore.
     Raises ``service.optimize.Cancelled`` when ``should_cancel`` turns true."""
     path = CameraPath.from_dict(spec["camera_path"])
     config = OptimizeConfig(**spec_options(spec), profile=spec["profile"], fps=path.fps, threads=threads)
     return optimize_path(scene, path, build_space(spec), config, cache=cache, executor=executor,
-                         progress=progress, should_cancel=should_cancel)
+                         progress=progress, should_cancel=should_cancel, scratch_dir=scratch_dir)

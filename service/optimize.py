@@ -107,19 +107,16 @@ def path_targets(scene: Any, path: CameraPath) -> tuple[np.ndarray, np.ndarray]:
     return fwd, eye + fwd * t[:, None]
 
 
-def _references_parent(cache: EvalCache) -> Path | None:
-    """Where a build keeps its cameras' references (MBs each at 1280x720): the data directory's tmp/
-    beside an evaluation cache file, on the data disk and emptied when the service starts (after a
-    crash), else the system's temporary directory."""
-    tmp = None if cache.path is None else cache.path.parent / "tmp"
-    return tmp if tmp is not None and tmp.is_dir() else None
-
-
 def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, config: OptimizeConfig, *,
                   cache: EvalCache, executor: Executor,
                   progress: Callable[[Progress], None] | None = None,
-                  should_cancel: Callable[[], bool] | None = None) -> ParetoStore:
+                  should_cancel: Callable[[], bool] | None = None,
+                  scratch_dir: Path | None = None) -> ParetoStore:
     """Pareto store for ``path`` in ``scene`` (a ``sim_core.Scene`` or a :class:`SceneHandle`).
+
+    ``scratch_dir`` holds the build's camera references while it runs (MBs each at 1280x720): the
+    service passes its data directory's tmp/, on the data disk and emptied when it starts after a crash;
+    None means the system's temporary directory.
 
     Raises :class:`Cancelled` when ``should_cancel`` returns true; everything evaluated so far stays in
     ``cache``, so calling again with the same arguments resumes without re-rendering."""
@@ -158,8 +155,7 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, config: O
         estimator = "full" if small else config.display_estimator
         pricing = DisplayPricing(estimator, config.display_fraction, seed=config.seed)
         # each pricing camera's reference, rendered in its first round, read by the later ones
-        references = tempfile.TemporaryDirectory(prefix="render-budget-references-",
-                                                 dir=_references_parent(cache))
+        references = tempfile.TemporaryDirectory(prefix="render-budget-references-", dir=scratch_dir)
         pricer = DisplayPricer(evaluator, pricing, references.name)
     forwards = targets = None
     if config.view_sampling in ("aimed", "path"):

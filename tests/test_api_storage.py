@@ -254,3 +254,25 @@ def test_active_scene_hashes_name_what_eviction_must_keep(storage: Storage) -> N
     storage.update_job(job_id=a.id, state="done")
     storage.update_job(job_id=b.id, state="running")
     assert storage.active_scene_hashes() == ["d"]
+
+
+def test_a_job_keeps_its_camera_references_in_the_data_directory(storage: Storage, monkeypatch) -> None:
+    """The optimiser gets the data directory's tmp/ (on the data disk, emptied at start after a crash)
+    for the references its pricing rounds share, not the system's temporary directory."""
+    import service.jobs as jobs_module
+
+    job = storage.create_job(scene_id=SCENE, spec={})
+    seen: dict[str, object] = {}
+
+    def attempt(spec, *, scratch_dir, **_kw):
+        seen["scratch_dir"] = scratch_dir
+        raise jobs_module.Cancelled("stopped")
+
+    monkeypatch.setattr(jobs_module, "run_optimisation", attempt)
+    monkeypatch.setattr(jobs_module, "SceneHandle", lambda *_a, **_kw: None)
+    manager = JobManager(storage, SceneCache(storage), workers=0)
+    monkeypatch.setattr(manager.scenes, "get", lambda _id: None)
+    monkeypatch.setattr(manager, "executor", lambda: None)
+    monkeypatch.setattr(manager, "eval_cache", lambda: None)
+    manager._run(job.id)
+    assert seen["scratch_dir"] == storage.tmp_dir and storage.tmp_dir.is_dir()

@@ -520,8 +520,8 @@ def _options(**kw) -> OptimizeConfig:
 
 
 def test_the_later_pricing_rounds_read_the_references_the_first_saved(scene, tmp_path, monkeypatch) -> None:
-    """A build whose bridging prices cameras again reads their references from the data directory's
-    tmp/ (beside the evaluation cache file) instead of rendering them again, and leaves nothing there."""
+    """A build whose bridging prices cameras again reads their references from its scratch directory
+    (the service's data directory's tmp/) instead of rendering them again, and leaves nothing there."""
     (tmp_path / "tmp").mkdir()
     reads: list[tuple[Path, bool]] = []
     original = ReferenceStore.load_frame
@@ -534,7 +534,8 @@ def test_the_later_pricing_rounds_read_the_references_the_first_saved(scene, tmp
     with EvalCache(tmp_path / "eval_cache.sqlite3") as cache:
         store = optimize_path(scene, _orbit_path(16, (48, 36)), SUBSPACE,
                               _options(display_estimator="full", display_points=2, path_resolution=0.02,
-                                       bridge_points=2), cache=cache, executor=InProcessExecutor())
+                                       bridge_points=2), cache=cache, executor=InProcessExecutor(),
+                              scratch_dir=tmp_path / "tmp")
     assert store.meta["bridged_points"] > 0
     assert reads and all(hit for _, hit in reads)  # every camera priced again read its reference
     assert {d.parent for d, _ in reads} == {tmp_path / "tmp"} and not any((tmp_path / "tmp").iterdir())
