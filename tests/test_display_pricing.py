@@ -494,6 +494,31 @@ def test_a_damaged_or_missing_reference_is_rendered_again(scene, tmp_path, monke
     _DESIGNS.clear()
 
 
+def test_references_are_not_kept_past_the_disk_cap(scene, tmp_path) -> None:
+    """A reference that would take the directory past ``max_bytes`` is not kept (nor its half-written
+    file): the camera is priced with the same figures, and rendered again when asked later."""
+    cams = [_camera(96, 64), _camera(96, 64, (3.0, -4.5, 1.8))]
+    sets = _settings(2, seed=24)[1:]
+    pricing = DisplayPricing("tiles", fraction=0.5, seed=2)
+
+    def price(cam, references):
+        _DESIGNS.clear()
+        return _figures(price_camera(scene, cam, sets, SPACE, profile="mobile", fps=30.0, metric="ssim",
+                                     pricing=pricing, references=references))
+
+    fresh = [price(cam, None) for cam in cams]
+    (tmp_path / "none").mkdir()
+    assert price(cams[0], ReferenceStore(tmp_path / "none", max_bytes=1)) == fresh[0]
+    assert not any((tmp_path / "none").iterdir())
+    (tmp_path / "one").mkdir()
+    assert price(cams[0], ReferenceStore(tmp_path / "one")) == fresh[0]
+    (first,) = (tmp_path / "one").iterdir()
+    capped = ReferenceStore(tmp_path / "one", max_bytes=first.stat().st_size * 3 // 2)
+    assert price(cams[1], capped) == fresh[1]
+    assert list((tmp_path / "one").iterdir()) == [first]
+    _DESIGNS.clear()
+
+
 # -- the optimiser's store --------------------------------------------------------------------------------
 def _orbit_path(n: int, resolution: tuple[int, int]) -> CameraPath:
     ang = np.linspace(-0.6, 0.9, n)

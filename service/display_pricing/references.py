@@ -9,7 +9,9 @@ this store every such round rendered each camera's reference again, the costlies
 Files are numpy ``.npz`` archives (no pickle), written under a temporary name and renamed, so a reader
 sees a whole file or none. A file that is missing or unreadable is rendered again: the figures are the
 same either way, bit for bit. The directory belongs to one build and must exist: a worker that does not
-see it (a Dask worker on another machine) reads and writes nothing and renders as before.
+see it (a Dask worker on another machine) reads and writes nothing and renders as before. The
+directory holds at most ``max_bytes`` (:data:`MAX_BYTES`: a 1280x720 design takes about 9 MB, so 150
+cameras about 1.4 GB); a reference that would pass it is not kept, and is rendered again when asked.
 """
 
 from __future__ import annotations
@@ -32,13 +34,28 @@ Measure = tuple[Any, ...]
 
 _INTS = ("W", "H", "B", "nbx", "nby", "pad", "interior")
 
+#: The most a build's references take on disk: beyond it they are rendered again instead of read.
+MAX_BYTES = 2 << 30
+
 
 class ReferenceStore:
     """Whole-frame references and tile-estimator designs of a build's cameras, by a key naming all they
     depend on (scene, camera and its size, estimator, metric, the space's max quality)."""
 
-    def __init__(self, directory: str | Path) -> None:
+    def __init__(self, directory: str | Path, max_bytes: int = MAX_BYTES) -> None:
         self.directory = Path(directory)
+        self.max_bytes = int(max_bytes)
+
+    def _used_bytes(self) -> int:
+        """What the directory holds now (every worker's files, half-written ones included)."""
+        total = 0
+        with os.scandir(self.directory) as entries:
+            for entry in entries:
+                try:
+                    total += entry.stat().st_size
+                except OSError:  # renamed or removed meanwhile
+                    continue
+        return total
 
     def _path(self, kind: str, key: tuple[str, ...]) -> Path:
         digest = hashlib.sha256(repr((kind, *key)).encode()).hexdigest()[:32]
@@ -61,6 +78,9 @@ class ReferenceStore:
         try:
             with open(tmp, "wb") as f:
                 np.savez(f, key=np.asarray(repr(key)), **arrays)
+            if self._used_bytes() > self.max_bytes:  # over the cap with this one: render it again
+                tmp.unlink(missing_ok=True)
+                return
             os.replace(tmp, path)
         except OSError:  # a full disk costs renders, not the pricing
             tmp.unlink(missing_ok=True)
