@@ -26,7 +26,7 @@ from service.evaluation import load_scene, read_scene
 from service.executors import make_executor
 from service.optimize import OptimizeConfig, optimize_path
 from service.options import positive_number
-from service.params import default_space
+from service.params import add_space_argument, search_space, space_from_arguments
 from service.serve_options import add_serve_arguments, serve_overrides
 from service.storage import EVAL_CACHE_NAME, read_active_scene_hashes
 from service.store import ParetoStore
@@ -84,6 +84,7 @@ def build_parser() -> argparse.ArgumentParser:
     o.add_argument("--fps", type=positive_number, default=30.0, help="frame rate the power is measured at")
     options.add_arguments(o)
     o.add_argument("--parameters", default=None, help="comma-separated parameters to search (default: all)")
+    add_space_argument(o)
     o.add_argument("--cache", type=Path, default=None, help=f"evaluation cache (default {_default_cache()})")
     o.add_argument("--cache-max-bytes", type=byte_size, default=DEFAULT_MAX_BYTES, metavar="SIZE",
                    help="evaluation cache cap; least recently used cameras are evicted past it (default 2G)")
@@ -171,7 +172,7 @@ class _Bar:
 def _optimize(args: argparse.Namespace) -> int:
     path = CameraPath.load(args.path)
     handle = load_scene(args.scene, ship_bytes=bool(args.dask_scheduler))
-    space = default_space()
+    space = search_space(space_from_arguments(args.space))
     if args.parameters:
         space = space.subset([n.strip() for n in args.parameters.split(",") if n.strip()])
     config = OptimizeConfig(**options.from_arguments(args), profile=args.profile, fps=args.fps,

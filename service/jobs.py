@@ -26,7 +26,7 @@ from service.evaluation import SceneHandle, read_scene
 from service.lru import LRUCache
 from service.octree.search import FRACTION_BEFORE_DONE
 from service.optimize import Cancelled, OptimizeConfig, optimize_path
-from service.params import Parameter, ParameterSpace, default_space
+from service.params import search_space
 
 from .storage import JobRecord, Storage
 
@@ -338,27 +338,14 @@ class JobManager:
 
 # -- the bridge to the optimiser (service.optimize and friends) ------------------------------------------
 def build_space(spec: dict[str, Any]) -> Any:
-    """The job's ParameterSpace: the default space, each parameter named in ``space`` cut down to the
-    given values (kept in the default order), and only ``parameters`` searched (others fixed at their
-    maximum quality). Raises ValueError naming an unknown parameter or value."""
-    base = default_space()
-    wanted = spec.get("space") or {}
-    unknown = sorted(set(wanted) - set(base.names))
-    if unknown:
-        raise ValueError(f"space: unknown parameters {unknown}; known: {list(base.names)}")
-    params = []
-    for p in base.parameters:
-        if p.name not in wanted:
-            params.append(p)
-            continue
-        try:
-            idx = sorted({base.index_of(p.name, v) for v in wanted[p.name]})
-        except ValueError as exc:
-            raise ValueError(f"space: {exc}") from None
-        best = min(range(len(idx)), key=lambda k: abs(idx[k] - p.max_quality))
-        params.append(Parameter(p.name, tuple(p.values[i] for i in idx), best,
-                                tuple(p.fields[i] for i in idx)))
-    space = ParameterSpace(tuple(params))
+    """The job's ParameterSpace: DESIGN.md's values (``DEFAULT_VALUES``), each parameter named in
+    ``space`` given those values instead (any of ``renderable_space()``'s, kept in its order), and only
+    ``parameters`` searched (others fixed at their maximum quality). Raises ValueError naming an unknown
+    parameter or value."""
+    try:
+        space = search_space(spec.get("space"))
+    except ValueError as exc:
+        raise ValueError(f"space: {exc}") from None
     if spec.get("parameters"):
         space = space.subset(spec["parameters"])
     return space

@@ -7,11 +7,13 @@ by :mod:`service.store` (the one packing implementation). Parameters found inert
 (``sim_core.inert_parameters``) are *fixed* at their maximum-quality value: they stay in the packed
 vector, so stores from different scenes read alike, but the search skips them.
 
-Adding a parameter: add a row to :func:`default_space` with the RenderSettings fields of each value.
+Adding a parameter: add a row to :func:`renderable_space` with the RenderSettings fields of each value,
+and its default values to :data:`DEFAULT_VALUES`.
 """
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import math
 from collections.abc import Iterable, Mapping, Sequence
@@ -228,6 +230,28 @@ class ParameterSpace:
                 reasons[p.name] = "not searched"
         return ParameterSpace(self.parameters, fixed, reasons)
 
+    def with_values(self, wanted: Mapping[str, Sequence[Any]]) -> ParameterSpace:
+        """Each named parameter cut down to the given values (kept in this space's order, the best kept
+        value as its maximum quality); the others as they are. ValueError names an unknown parameter or
+        value."""
+        unknown = sorted(set(wanted) - set(self.names))
+        if unknown:
+            raise ValueError(f"unknown parameters {unknown}; known: {list(self.names)}")
+        if self.fixed:
+            raise ValueError("cut the values before fixing parameters")
+        params = []
+        for p in self.parameters:
+            if p.name not in wanted:
+                params.append(p)
+                continue
+            if not wanted[p.name]:
+                raise ValueError(f"parameter {p.name!r} needs at least one value")
+            idx = sorted({self.index_of(p.name, v) for v in wanted[p.name]})
+            best = min(range(len(idx)), key=lambda k: abs(idx[k] - p.max_quality))
+            params.append(Parameter(p.name, tuple(p.values[i] for i in idx), best,
+                                    tuple(p.fields[i] for i in idx)))
+        return ParameterSpace(tuple(params))
+
     def fix_inert(self, inert: Mapping[str, str]) -> ParameterSpace:
         """Fix parameters all of whose RenderSettings fields are inert (``{field: reason}``)."""
         fixed = dict(self.fixed)
@@ -270,20 +294,118 @@ _SAMPLING = (
 )
 
 
-def default_space() -> ParameterSpace:
-    """The DESIGN.md table mapped onto ``sim_core.RenderSettings`` fields (8 parameters, 23,040
-    settings). Values are ordered cheapest first, so the maximum quality is the last value; parameter
-    names are the RenderSettings field they set (``sampling`` sets ``mode`` and ``block``). The
-    similarity threshold is the normal angle in degrees: loose 45, medium 20, strict 5."""
+#: DESIGN.md's table of values (cheapest first), what a job searches unless its ``space`` says otherwise.
+DEFAULT_VALUES: dict[str, tuple[Any, ...]] = {
+    "sampling": tuple(n for n, _ in _SAMPLING),
+    "normal_threshold_deg": (45.0, 20.0, 5.0),
+    "max_depth": (0, 1, 2, 3),
+    "shadow_samples": (0, 1, 4, 16),
+    "resolution_scale": (0.7, 0.8, 0.9, 1.0),
+    "env_filter": ("off", "box", "bartlett"),
+    "ao_samples": (0, 4, 8, 16),
+    "multirate": (True, False),
+}
+
+
+def renderable_space() -> ParameterSpace:
+    """Every value a job may search and the renderer, the engine's manual settings, REST and verify
+    accept: DESIGN.md's table (:data:`DEFAULT_VALUES`) and, for shadow rays and AO samples, the steps
+    between its 1-4-16 and 8-16, where a heavy scene's noise floor at 640x360 lies (bench/RESULTS.md,
+    "Finer shadow and AO steps at the missed 640x360 frames"). Values are ordered cheapest first, so
+    the maximum quality is the last value; parameter names are the RenderSettings field they set
+    (``sampling`` sets ``mode`` and ``block``). The similarity threshold is the normal angle in degrees:
+    loose 45, medium 20, strict 5."""
     params = (
         Parameter("sampling", tuple(n for n, _ in _SAMPLING), len(_SAMPLING) - 1,
                   tuple(f for _, f in _SAMPLING)),
         Parameter("normal_threshold_deg", (45.0, 20.0, 5.0), 2),
         Parameter("max_depth", (0, 1, 2, 3), 3),
-        Parameter("shadow_samples", (0, 1, 4, 16), 3),
+        Parameter("shadow_samples", (0, 1, 2, 4, 8, 16), 5),
         Parameter("resolution_scale", (0.7, 0.8, 0.9, 1.0), 3),
         Parameter("env_filter", ("off", "box", "bartlett"), 2),
-        Parameter("ao_samples", (0, 4, 8, 16), 3),
+        Parameter("ao_samples", (0, 4, 8, 10, 12, 16), 5),
         Parameter("multirate", (True, False), 1),
     )
     return ParameterSpace(params)
+
+
+def default_space() -> ParameterSpace:
+    """The search space of a job that names no values: :func:`renderable_space` cut to DESIGN.md's
+    table (8 parameters, 23,040 settings)."""
+    return search_space()
+
+
+def search_space(values: Mapping[str, Sequence[Any]] | None = None) -> ParameterSpace:
+    """A job's search space: DESIGN.md's values (:data:`DEFAULT_VALUES`), each parameter named in
+    ``values`` given those instead (any of :func:`renderable_space`'s, kept in its order). ValueError
+    names an unknown parameter or value."""
+    return renderable_space().with_values({**DEFAULT_VALUES, **(values or {})})
+
+
+def space_holding(values: Mapping[str, Any] | None) -> ParameterSpace:
+    """:func:`default_space` when it holds every ``{parameter: value}``, else :func:`renderable_space`.
+    Evaluation cache keys name the space (what packed settings mean), so settings of DESIGN.md's table
+    share their evaluations with the jobs that searched it."""
+    space = default_space()
+    try:
+        space.indices_of(values)
+    except ValueError:
+        return renderable_space()
+    return space
+
+
+def stored_space(parameters: Iterable[StoredParameter]) -> ParameterSpace:
+    """The space a store's settings were searched in (its parameters' values, as its job cut them from
+    :func:`renderable_space`), for rendering its picks under the same cache keys."""
+    return renderable_space().with_values({p.name: p.values for p in parameters})
+
+
+def parse_space_argument(text: str) -> tuple[str, tuple[Any, ...]]:
+    """``NAME=V1,V2,...`` (a command line's ``--space``) as a parameter and its values, each matched to
+    one of :func:`renderable_space`'s by its text (``16``, ``0.9``, ``fsaa_2x2``, ``True``). ValueError
+    names an unknown parameter or value."""
+    name, sep, rest = text.partition("=")
+    name = name.strip()
+    space = renderable_space()
+    if not sep or not rest.strip():
+        raise ValueError(f"--space takes NAME=V1,V2,..., got {text!r}")
+    if name not in space.names:
+        raise ValueError(f"unknown parameter {name!r}; known: {list(space.names)}")
+    known = space.parameters[space.names.index(name)].values
+    values = []
+    for item in (t.strip() for t in rest.split(",")):
+        hits = [v for v in known if str(v) == item or (isinstance(v, float) and _float_text(item) == v)]
+        if not hits:
+            raise ValueError(f"{item!r} is not a value of {name!r}; values: {list(known)}")
+        values.append(hits[0])
+    return name, tuple(values)
+
+
+def _float_text(text: str) -> float | None:
+    try:
+        return float(text)
+    except ValueError:
+        return None
+
+
+def add_space_argument(parser: Any) -> None:
+    """``--space NAME=V1,V2,...`` (repeatable) on an argparse parser: values per parameter instead of
+    the default ones (a job's ``space``), collected as ``{name: values}`` in ``args.space``."""
+
+    def parse(text: str) -> tuple[str, tuple[Any, ...]]:
+        try:
+            return parse_space_argument(text)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+
+    parser.add_argument("--space", type=parse, action="append", default=None, metavar="NAME=V1,V2,...",
+                        help="search these values of a parameter instead of the default ones, e.g. "
+                             "shadow_samples=0,1,2,4,16 (repeat per parameter; values: "
+                             + "; ".join(f"{p.name} {','.join(map(str, p.values))}"
+                                         for p in renderable_space().parameters) + ")")
+
+
+def space_from_arguments(pairs: Sequence[tuple[str, tuple[Any, ...]]] | None) -> dict[str, tuple[Any, ...]]:
+    """``args.space`` of :func:`add_space_argument` as ``{name: values}`` (a name given twice: the last)."""
+    return dict(pairs or ())
+

@@ -21,7 +21,7 @@ import numpy as np
 from service.camera_path import CameraPath
 from service.evaluation import CameraSpec, evaluate
 from service.options import check_query
-from service.params import default_space
+from service.params import stored_space
 from service.store import ParetoStore
 
 #: A prediction holds when the measured power is within this share of it (the issue's 10 % target).
@@ -167,9 +167,9 @@ def verify_store(scene: Any, store: ParetoStore, path: CameraPath, *, error_budg
         if rw < 8 or rh < 8:
             raise ValueError(f"resolution must be at least 8x8, got {resolution!r}")
     metric = str(store.meta.get("metric", "ssim"))
-    space = default_space()
+    space = stored_space(store.parameters)  # its job's, so its cache keys are the job's
     # the store's own maximum quality is the reference its errors were measured against (parameters
-    # it does not carry at the default space's best, as in its lookups' settings)
+    # it does not carry at the renderable space's best, as in its lookups' settings)
     best = space.indices_of(store.settings_of([p.max_quality for p in store.parameters]))
     numbers = sample_frames(len(path), frames)
     checks: list[FrameCheck] = []

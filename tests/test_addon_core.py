@@ -170,6 +170,9 @@ def test_job_request_validates_and_sends_only_overrides() -> None:
             JobRequest(options=bad)
     with pytest.raises(ValueError):
         JobRequest(parameters=())
+    assert JobRequest(space={"ao_samples": [0, 10]}).payload("a" * 64, {})["space"] == {"ao_samples": [0, 10]}
+    with pytest.raises(ValueError, match="not a value"):
+        JobRequest(space={"ao_samples": [3]})
 
 
 def test_describe_job_progress() -> None:

@@ -270,6 +270,7 @@ def test_job_request_errors_name_the_problem(client: httpx.Client, scene: dict[s
     spec = tiny_job(scene["id"])
     for patch, needle in (({"profile": "nonexistent"}, "profile"),
                           ({"space": {"sampling": ["ultra"]}}, "ultra"),
+                          ({"space": {"shadow_samples": [3]}}, "3"),
                           ({"parameters": ["warp_drive"]}, "warp_drive")):
         r = client.post("/jobs", json={**spec, **patch})
         assert r.status_code == 422, r.text
@@ -498,6 +499,40 @@ def test_verify_a_store_over_rest(client: httpx.Client, finished: dict[str, Any]
     assert both.status_code == 422
     missing = client.post("/stores/nope/verify", json={"camera_path": path, "error_budget": 0.05})
     assert missing.status_code == 404
+
+
+def test_a_job_searches_values_between_the_default_steps(client: httpx.Client,
+                                                          scene: dict[str, Any]) -> None:
+    """A job's ``space`` may name renderable values the default search space lacks (2 shadow rays, AO 10):
+    its store names them, POST /evaluate renders them, and verify prices its picks like /evaluate."""
+    spec = tiny_job(scene["id"])
+    spec["space"] = {**spec["space"], "shadow_samples": [1, 2], "ao_samples": [0, 10]}
+    spec["parameters"] = ["shadow_samples", "ao_samples"]
+    r = client.post("/jobs", json=spec)
+    assert r.status_code == 201, r.text
+    events = sse_events(client, f"/jobs/{r.json()['id']}/events")
+    assert events[-1][0] == "done", events[-1]
+    job = client.get(f"/jobs/{r.json()['id']}").json()
+    store = ParetoStore.from_json(client.get(f"/stores/{job['store_id']}").text)
+    values = {p.name: list(p.values) for p in store.parameters}
+    assert values["shadow_samples"] == [1, 2] and values["ao_samples"] == [0, 10]
+    path = camera_path(3)
+    doc = client.post(f"/stores/{job['store_id']}/verify",
+                      json={"camera_path": path, "error_budget": 0.05, "frames": 3}).json()
+    for f in doc["frames"]:
+        frame = path["frames"][f["frame"]]
+        cam = {"matrix_world": frame["matrix_world"], "vfov": frame["vfov"], "width": 64, "height": 48}
+        ev = client.post("/evaluate", json={"scene_id": scene["id"], "camera": cam,
+                                            "settings": f["settings"]})
+        assert ev.status_code == 200, ev.text
+        assert f["measured_power_w"] == pytest.approx(ev.json()["power_w"], rel=1e-9)
+    between = {"shadow_samples": 2, "ao_samples": 10}
+    ev = client.post("/evaluate", json={"scene_id": scene["id"], "camera": camera(), "settings": between})
+    top = client.post("/evaluate", json={"scene_id": scene["id"], "camera": camera(),
+                                         "settings": {"shadow_samples": 16, "ao_samples": 16}})
+    assert ev.status_code == 200 and top.status_code == 200
+    assert 0 < ev.json()["error"] and top.json()["error"] == 0.0
+    assert ev.json()["power_w"] < top.json()["power_w"]
 
 
 def test_query_and_verify_take_the_lookup_priority(client: httpx.Client, finished: dict[str, Any]) -> None:

@@ -87,6 +87,7 @@ def test_query_errors_exit_nonzero(argv, capsys) -> None:
     ["query", "s.json", "--position", "nan", "0", "0", "--direction", "1", "0", "0", "--power-budget", "1"],
     ["optimize", "scene.glb", "--out", "x.json"],
     ["optimize", "scene.glb", "--path", "p.json", "--out", "x.json", "--threshold-power", "-1"],
+    ["optimize", "scene.glb", "--path", "p.json", "--out", "x.json", "--space", "shadow_samples=3"],
 ])
 def test_bad_arguments(argv) -> None:
     with pytest.raises(SystemExit) as e:

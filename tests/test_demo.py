@@ -49,6 +49,13 @@ def test_demo_searches_and_measures_on_the_profile_it_is_given() -> None:
 
     assert demo.job_request(demo.parser().parse_args([])).profile == "mobile"
     assert demo.job_request(demo.parser().parse_args(["--profile", "desktop"])).profile == "desktop"
+    finer = demo.job_request(demo.parser().parse_args(
+        ["--space", "shadow_samples=0,1,2,4,16", "--space", "ao_samples=0,4,8,10,16"]))
+    body = finer.payload("a" * 64, {"version": 1, "fps": 30.0, "frames": []})
+    assert body["space"] == {"shadow_samples": [0, 1, 2, 4, 16], "ao_samples": [0, 4, 8, 10, 16]}
+    assert "space" not in demo.job_request(demo.parser().parse_args([])).payload("a" * 64, {})
+    with pytest.raises(SystemExit):
+        demo.parser().parse_args(["--space", "shadow_samples=3"])
     with pytest.raises(SystemExit):
         demo.parser().parse_args(["--profile", "../etc/passwd"])
 

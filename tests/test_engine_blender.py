@@ -105,13 +105,13 @@ def registered_engine():
 
 
 def test_the_engine_registers_with_its_properties_and_borrowed_panels(ext) -> None:
-    from service.params import default_space
+    from service.params import renderable_space
 
     assert registered_engine().bl_label == "Render Budget GPU"
     assert ENGINE in bpy.types.RENDER_PT_color_management.COMPAT_ENGINES
     assert ENGINE in bpy.types.EEVEE_MATERIAL_PT_surface.COMPAT_ENGINES
     rna = bpy.types.Scene.bl_rna.properties["render_budget_engine"].fixed_type.bl_rna.properties
-    for p in default_space().parameters:  # one property per searched parameter, its values as items
+    for p in renderable_space().parameters:  # one property per parameter, every value a store may name
         items = [i.identifier for i in rna[p.name].enum_items]
         assert items == [str(v) for v in p.values] and rna[p.name].default == str(p.values[p.max_quality])
     disable_dev()
@@ -265,7 +265,7 @@ def test_an_animation_follows_the_store_under_the_budget(scene, tmp_path) -> Non
     from PIL import Image
 
     from addon.core.playback_logic import PlaybackDriver
-    from service.params import default_space
+    from service.params import renderable_space
 
     sc = scene
     orbit_camera(sc, frames=8)
@@ -286,7 +286,7 @@ def test_an_animation_follows_the_store_under_the_budget(scene, tmp_path) -> Non
     # the same frames through the playback logic (fresh filter, scene time, the camera the handler reads)
     # on the store as the scene holds it (its figures rounded by the store format: the filter paces in
     # predicted error, so the unrounded synthetic store can break a tie another way)
-    space = default_space()
+    space = renderable_space()
     drv = PlaybackDriver(ParetoStore.from_json((tmp_path / "store.json").read_text()), 0.1)
     camera_vfov = ext_module("camera_path").camera_vfov
     for f, row in zip(range(1, 9), rows, strict=True):

@@ -20,7 +20,7 @@ from addon.core import engine_frame, engine_scene, engine_settings, progressive,
 from addon.core.engine_frame import CameraView, RenderCancelled, render_frame
 from addon.core.engine_settings import Budget, FrameSettings, SettingsChooser
 from addon.core.playback_logic import FRAME_FLAGS, PlaybackDriver, frame_flags, missed_rate_text
-from service.params import default_space
+from service.params import default_space, renderable_space
 from service.store import camera as camera_maths
 from tests.addon_support import synthetic_store
 
@@ -65,8 +65,12 @@ VIEW = CameraView(look((1.0, -4.0, 2.0)), 0.7, 96, 64)
 
 
 # -- quality settings -------------------------------------------------------------------------------
-def test_quality_properties_are_the_optimisers_space() -> None:
-    space = default_space()
+def test_quality_properties_are_every_value_a_store_may_name() -> None:
+    """The manual settings offer every value a job may search (the default search space's among them),
+    so the engine renders whatever a store picks."""
+    space = renderable_space()
+    assert all(set(p.values) <= set(q.values)
+               for p, q in zip(default_space().parameters, space.parameters, strict=True))
     props = engine_settings.quality_properties()
     assert [p.name for p in props] == list(space.names)
     for p, prm in zip(props, space.parameters, strict=True):
@@ -98,7 +102,7 @@ def test_store_chooser_steps_like_playback_and_manual_without_a_store() -> None:
         got = chooser.choose(m, 0.69, 16 / 9, t)
         want = reference.step(m, 0.69, 16 / 9, t, "POWER", 3.3)
         assert got.source == "store"
-        assert got.indices == default_space().indices_of(want.active_settings)
+        assert got.indices == engine_settings.space().indices_of(want.active_settings)
         assert got.predicted_power_w == want.predicted_power_w and got.predicted_error == want.predicted_error
         assert got.in_transition == want.in_transition
         seen.add(got.indices)
@@ -234,11 +238,11 @@ def test_measured_error_is_the_optimisers(scene: sim_core.Scene) -> None:
     cam = VIEW.camera()
     spec = CameraSpec(tuple(cam.position), tuple(cam.forward), tuple(cam.up), VIEW.vfov, VIEW.width,
                       VIEW.height)
-    want = evaluate(scene, spec, idx, default_space(), profile="mobile", fps=30.0, metric="ssim")
+    want = evaluate(scene, spec, idx, engine_settings.space(), profile="mobile", fps=30.0, metric="ssim")
     assert 0 < out.measured_error == pytest.approx(want.error, abs=1e-12)
     assert out.metadata()["render_budget.measured_error"] == f"{out.measured_error:.6g}"
     assert bands == sorted(bands) and bands[-1] == 1.0 and any(0.45 < b <= 0.5 for b in bands)
-    top = render_frame(scene, VIEW, FrameSettings("manual", default_space().max_quality_indices()),
+    top = render_frame(scene, VIEW, FrameSettings("manual", engine_settings.space().max_quality_indices()),
                        profile="mobile", fps=30.0, measure_error="ssim")
     assert top.measured_error == 0.0
     plain = render_frame(scene, VIEW, FrameSettings("manual", idx), profile="mobile", fps=30.0)
@@ -343,7 +347,7 @@ def test_store_chooser_looks_up_under_the_query_options() -> None:
     for k, m in enumerate(orbit(6)):
         got = chooser.choose(m, 0.69, 16 / 9, k / 24)
         want = reference.step(m, 0.69, 16 / 9, k / 24, "POWER", 3.3, **query)
-        assert got.indices == default_space().indices_of(want.active_settings)
+        assert got.indices == engine_settings.space().indices_of(want.active_settings)
         assert (got.priority, got.fps_target, got.meets_fps) == ("budget", 12.0, want.meets_fps)
     slow = SettingsChooser(CHEAP, store, Budget("POWER", 3.3), query={"priority": "budget"})
     frame = slow.choose(orbit(1)[0], 0.69, 16 / 9, 0.0)
@@ -609,7 +613,7 @@ def test_viewport_playback_follows_the_store() -> None:
         shown = []
         for k, m in enumerate(orbit(12)):
             frame = playback.step(m, 0.69, 16 / 9, k / 24.0, "POWER", 3.3)
-            fs = FrameSettings("store", default_space().indices_of(frame.active_settings),
+            fs = FrameSettings("store", engine_settings.space().indices_of(frame.active_settings),
                                frame.predicted_power_w, frame.predicted_error)
             vp.show(m, region_projection(32, 18, 0.69), 32, 18, fs, profile="mobile", fps=24)
             assert vp.driver.wait_idle(60)  # as if playback waited for each frame

@@ -190,6 +190,13 @@ def test_cli_optimize_then_query(tmp_path, capsys) -> None:
                    "--max-depth", "0", "--parameters", "sampling,resolution_scale", "--eval-height", "12",
                    "--cache", str(tmp_path / "c.sqlite"), "--no-progress"])
     assert rc == 0 and ", 0 renders," in capsys.readouterr().out
+    # --space: values between the default steps (2 shadow rays) are searched and named by the store
+    rc = cli.main(["optimize", str(MODELS / "teapot.obj"), "--path", str(path_file), "--out", str(out),
+                   "--max-depth", "0", "--parameters", "sampling,shadow_samples", "--eval-height", "12",
+                   "--space", "shadow_samples=2,16", "--cache", str(tmp_path / "c.sqlite"), "--no-progress"])
+    assert rc == 0
+    finer = ParetoStore.from_json(out.read_text())
+    assert {p.name: p.values for p in finer.parameters}["shadow_samples"] == (2, 16)
 
 
 def test_options_validation() -> None:

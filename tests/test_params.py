@@ -6,7 +6,17 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from service.params import Parameter, ParameterSpace, default_space
+from service.params import (
+    DEFAULT_VALUES,
+    Parameter,
+    ParameterSpace,
+    default_space,
+    parse_space_argument,
+    renderable_space,
+    search_space,
+    space_holding,
+    stored_space,
+)
 from service.store import pack_indices
 
 
@@ -83,3 +93,54 @@ def test_max_quality_maps_to_render_settings_max_quality() -> None:
             assert getattr(got, name) == getattr(want, name), name
     cheap = s.to_settings(tuple(0 for _ in s.parameters))
     assert (cheap.mode, cheap.block, cheap.max_depth, cheap.resolution_scale) == ("undersample", 4, 0, 0.7)
+
+
+def test_the_default_space_is_design_tables_cut_from_the_renderable_one() -> None:
+    """Cache keys and recorded stores name the default space: cut from the renderable space, it must stay
+    the explicit DESIGN.md table it was (values, best value, RenderSettings fields)."""
+    s = default_space()
+    assert {p.name: p.values for p in s.parameters} == DEFAULT_VALUES
+    assert [p.max_quality for p in s.parameters] == [4, 2, 3, 3, 3, 2, 3, 1]
+    assert s.parameters[3].fields == tuple({"shadow_samples": v} for v in (0, 1, 4, 16))
+    r = renderable_space()
+    assert r.fields_of(r.max_quality_indices()) == s.fields_of(s.max_quality_indices())  # same reference
+    assert search_space() == s
+    assert search_space({"ao_samples": [0, 10, 16]}).parameters[6].values == (0, 10, 16)
+
+
+@given(st.data())
+def test_values_cut_from_a_space_keep_its_order_and_its_best_value(data) -> None:
+    r = renderable_space()
+    wanted = {}
+    for p in data.draw(st.lists(st.sampled_from(r.parameters), unique_by=lambda p: p.name, max_size=4)):
+        wanted[p.name] = data.draw(st.lists(st.sampled_from(p.values), min_size=1, unique_by=repr))
+    s = r.with_values(wanted)
+    for p, q in zip(s.parameters, r.parameters, strict=True):
+        if p.name not in wanted:
+            assert p == q
+            continue
+        order = [q.values.index(v) for v in p.values]
+        assert order == sorted(order) and set(map(repr, p.values)) == set(map(repr, wanted[p.name]))
+        best = q.values.index(p.values[p.max_quality])
+        assert all(abs(best - q.max_quality) <= abs(i - q.max_quality) for i in order)
+        assert p.fields == tuple(q.fields[i] for i in order)  # each value keeps its RenderSettings fields
+
+
+def test_space_values_from_the_command_line_and_from_a_store() -> None:
+    assert parse_space_argument("shadow_samples=0,1,2,4,16") == ("shadow_samples", (0, 1, 2, 4, 16))
+    assert parse_space_argument("resolution_scale=0.9, 1") == ("resolution_scale", (0.9, 1.0))
+    assert parse_space_argument("multirate=True") == ("multirate", (True,))
+    for bad, needle in (("shadow_samples=3", "'3' is not a value"), ("warp=1", "unknown parameter"),
+                        ("ao_samples", "NAME=V1"), ("multirate=1", "not a value")):
+        with pytest.raises(ValueError, match=needle):
+            parse_space_argument(bad)
+    with pytest.raises(ValueError, match="unknown parameters"):
+        search_space({"warp": [1]})
+    assert space_holding({"shadow_samples": 4}) == default_space()
+    assert space_holding({"shadow_samples": 2}) == renderable_space()
+    assert space_holding(None) == default_space()
+    with pytest.raises(ValueError, match="not a value"):
+        space_holding({"shadow_samples": 3}).indices_of({"shadow_samples": 3})
+    finer = search_space({"ao_samples": [0, 4, 8, 10, 16]})
+    assert stored_space(finer.to_stored()) == finer
+    assert stored_space(default_space().to_stored()) == default_space()

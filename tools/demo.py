@@ -40,6 +40,7 @@ from addon.core.local_service import LocalService, free_port
 from service import options as option_schema
 from service.camera_path import CameraPath
 from service.options import JOB_STALL_TIMEOUT_S, positive_number
+from service.params import add_space_argument, space_from_arguments
 from service.verify import markdown
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
@@ -103,6 +104,7 @@ def parser() -> argparse.ArgumentParser:
         f"bridge points {DEMO_BRIDGE_POINTS} and slow points 1, or {DEMO_DISPLAY_POINTS} under --priority "
         "budget)")
     option_schema.add_arguments(optimiser, with_defaults=False, left_out="the demo's own")
+    add_space_argument(optimiser)
     return ap
 
 
@@ -149,7 +151,7 @@ def job_request(args: argparse.Namespace) -> JobRequest:
     given.setdefault("slow_points", demo_slow_points(args.priority))
     if args.resolution is not None:
         given["eval_width"], given["eval_height"] = args.resolution
-    return JobRequest(profile=args.profile, options=given)
+    return JobRequest(profile=args.profile, options=given, space=space_from_arguments(args.space) or None)
 
 
 def process_cpu_s(pid: int) -> float | None:

@@ -1,9 +1,9 @@
 """Which settings the render engine uses for a frame: the store's choice under the scene's budget, or the
 artist's manual quality settings, and the manual settings' Blender properties.
 
-The manual settings are the optimiser's own search space (``service.params.default_space()``): one
-property per parameter whose items are that parameter's values, so the engine can never offer a value
-the optimiser does not search or miss one it does. Pure (no bpy); ``addon/engine`` turns
+The manual settings are every value a job may search (``service.params.renderable_space()``): one
+property per parameter whose items are that parameter's values, so the engine can render every setting
+a store names and never offers one the renderer does not know. Pure (no bpy); ``addon/engine`` turns
 :func:`quality_properties` into Blender properties and calls :class:`SettingsChooser` per frame.
 """
 
@@ -16,7 +16,7 @@ from typing import Any
 
 from service import store as pareto_store
 from service.options import check_query
-from service.params import Indices, ParameterSpace, default_space
+from service.params import Indices, ParameterSpace, renderable_space
 
 from .playback_logic import PlaybackDriver, frame_flags, validate_budget
 
@@ -40,8 +40,8 @@ _ACRONYMS = {"fsaa": "FSAA", "1spp": "1 spp", "ao": "AO"}
 
 
 def space() -> ParameterSpace:
-    """The optimiser's search space: what the engine's manual settings offer."""
-    return default_space()
+    """Every value a store may name: what the engine's manual settings offer."""
+    return renderable_space()
 
 
 def value_identifier(value: Any) -> str:

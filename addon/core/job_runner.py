@@ -35,11 +35,17 @@ class JobRequest:
     profile: str = "mobile"
     parameters: tuple[str, ...] | None = None  # None: all, minus inert (service default)
     options: Mapping[str, Any] = field(default_factory=dict)
+    space: Mapping[str, tuple[Any, ...]] | None = None  # values per parameter instead of the default ones
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "options", option_schema.check(self.options, public_only=True))
         if self.parameters is not None and not self.parameters:
             raise ValueError("select at least one parameter to search")
+        if self.space:
+            from service.params import renderable_space  # lazy: loads the native core
+
+            renderable_space().with_values(self.space)  # ValueError naming the parameter or value
+            object.__setattr__(self, "space", {str(k): tuple(v) for k, v in self.space.items()})
 
     def option(self, name: str) -> Any:
         """The value the job will run with (the override, else the default)."""
@@ -50,6 +56,8 @@ class JobRequest:
                                 "options": option_schema.only_overrides(self.options)}
         if self.parameters is not None:
             body["parameters"] = list(self.parameters)
+        if self.space:
+            body["space"] = {k: list(v) for k, v in self.space.items()}
         return body
 
 

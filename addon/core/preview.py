@@ -84,11 +84,11 @@ def check_size(width: int, height: int, available: int | None = None) -> None:
 
 
 def settings_indices(values: Mapping[str, Any] | None) -> tuple[Any, tuple[int, ...]]:
-    """The default parameter space and the indices of `{parameter: value}` (what a store lookup returns);
-    parameters left out stay at maximum quality."""
-    from service.params import default_space  # lazy: loads the native core (above)
+    """The space holding `{parameter: value}` (what a store lookup returns; the default one when it can,
+    as the service's render route) and its indices; parameters left out stay at maximum quality."""
+    from service.params import space_holding  # lazy: loads the native core (above)
 
-    space = default_space()
+    space = space_holding(values)
     return space, space.indices_of(values)
 
 

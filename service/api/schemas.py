@@ -25,7 +25,7 @@ from pydantic import (
 import sim_core
 from service import options
 from service.camera_path import FPS_MAX, FPS_MIN
-from service.params import default_space
+from service.params import renderable_space
 from service.store.camera import (
     MAX_ASPECT,
     MAX_COORDINATE,
@@ -60,7 +60,7 @@ Fps = Annotated[float, Field(strict=True, ge=FPS_MIN, le=FPS_MAX)]
 PROFILES = tuple(sorted(str(p) for p in sim_core.list_profiles()))
 Profile = Annotated[str, Field(json_schema_extra={"enum": list(PROFILES)},
                                description="hardware profile (GET /health lists them)")]
-_SPACE = {p.name: list(p.values) for p in default_space().parameters}
+_SPACE = {p.name: list(p.values) for p in renderable_space().parameters}
 
 
 def _known_profile(name: str) -> str:
@@ -78,11 +78,11 @@ def _known_parameter(name: str) -> str:
 ProfileName = Annotated[Profile, AfterValidator(_known_profile)]
 ParameterName = Annotated[Name, AfterValidator(_known_parameter),
                           Field(json_schema_extra={"enum": list(_SPACE)})]
-#: ``{parameter: value}`` of the default space (values as a store query returns them). Keys and values
+#: ``{parameter: value}`` of the renderable space (values as a store query returns them). Keys and values
 #: are checked against the space where it is built (422 naming the parameter); the schema lists them.
 SETTINGS_SCHEMA = {"type": "object", "additionalProperties": False,
                    "properties": {n: {"enum": v} for n, v in _SPACE.items()}}
-#: ``{parameter: [values]}``: candidate values per parameter.
+#: ``{parameter: [values]}``: candidate values per parameter (any of the renderable space's).
 SPACE_SCHEMA = {"type": "object", "additionalProperties": False,
                 "properties": {n: {"type": "array", "items": {"enum": v}, "minItems": 1, "maxItems": 16}
                                for n, v in _SPACE.items()}}
@@ -232,8 +232,9 @@ class JobCreate(StrictModel):
     )
     space: Annotated[dict[str, Annotated[list[Scalar], Field(min_length=1, max_length=16)]],
                      Field(max_length=8, json_schema_extra=SPACE_SCHEMA)] | None = Field(
-        default=None, description="explicit candidate values per parameter (at most 8 parameters: settings "
-                                  "pack into 32 bits), maximum quality first"
+        default=None, description="candidate values per parameter instead of the default ones (at most 8 "
+                                  "parameters: settings pack into 32 bits; any value the schema lists, e.g. "
+                                  "shadow_samples 2 or ao_samples 10 between the default steps)"
     )
     options: JobOptionsIn = Field(default_factory=JobOptionsIn)  # type: ignore[valid-type]
     profile: ProfileName = "mobile"

@@ -14,7 +14,7 @@ from sim_core.image import encode_exr, encode_png
 
 import sim_core
 from service.evaluation import CameraSpec, Evaluator
-from service.params import ParameterSpace, default_space
+from service.params import ParameterSpace, space_holding
 from service.store import frame_rate_reached, meets_frame_rate
 from service.store.camera import normalised_camera_matrix
 
@@ -39,9 +39,10 @@ def camera_matrix(cam: CameraIn, max_pixels: int) -> np.ndarray:
 
 
 def settings_indices(values: dict[str, Any] | None) -> tuple[ParameterSpace, tuple[int, ...]]:
-    """The default parameter space and the index vector of ``{parameter: value}`` (the names and values a
-    store query returns); parameters left out stay at maximum quality."""
-    space = default_space()
+    """The space holding ``{parameter: value}`` (the names and values a store query returns; the default
+    one when it can, see ``space_holding``) and its index vector; parameters left out stay at maximum
+    quality."""
+    space = space_holding(values)
     try:
         return space, space.indices_of(values)
     except ValueError as exc:
@@ -98,7 +99,7 @@ def render_preview(body: RenderRequest, storage: StorageDep, scenes: ScenesDep,
 def evaluate_settings(body: EvaluateRequest, storage: StorageDep, scenes: ScenesDep, jobs: JobsDep,
                       settings: SettingsDep) -> EvaluateResponse:
     """Error (1 - SSIM against the maximum-quality render of the same camera), power (at the frame rate
-    reached) and frame time of settings (``{parameter: value}`` of the default space, as a store query
+    reached) and frame time of settings (``{parameter: value}`` of the renderable space, as a store query
     returns them). Answered from the service's evaluation cache when the same camera, settings, size,
     profile, frame rate and power resolution were evaluated before (by a job or a request); requests
     run concurrently, and the camera's reference is rendered once for all of them."""
