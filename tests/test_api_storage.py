@@ -151,9 +151,21 @@ def test_progress_after_every_view_does_not_promise_no_time_left() -> None:
     assert progress_dict({"views_done": 4, "views_planned": 4}, elapsed_s=1.0)["estimate_s"] == 0.0
 
 
+def _run_with(storage: Storage, monkeypatch, job_id: str, attempt) -> None:
+    """The job manager runs ``job_id`` with ``attempt`` in place of the optimiser (no scene, no workers)."""
+    import service.jobs as jobs_module
+
+    monkeypatch.setattr(jobs_module, "run_optimisation", attempt)
+    monkeypatch.setattr(jobs_module, "SceneHandle", lambda *_a, **_kw: None)
+    manager = JobManager(storage, SceneCache(storage), workers=0)
+    monkeypatch.setattr(manager.scenes, "get", lambda _id: None)
+    monkeypatch.setattr(manager, "executor", lambda: None)
+    monkeypatch.setattr(manager, "eval_cache", lambda: None)
+    manager._run(job_id)
+
+
 def test_a_resumed_job_keeps_the_fraction_an_earlier_attempt_reached(storage: Storage, monkeypatch) -> None:
     """The job manager passes the stored progress's fraction on to the next attempt's reports."""
-    import service.jobs as jobs_module
     from service.optimize import Cancelled, Progress
 
     job = storage.create_job(scene_id=SCENE, spec={})
@@ -164,13 +176,7 @@ def test_a_resumed_job_keeps_the_fraction_an_earlier_attempt_reached(storage: St
             progress(Progress(fraction=f))
         raise Cancelled("stopped")
 
-    monkeypatch.setattr(jobs_module, "run_optimisation", attempt)
-    monkeypatch.setattr(jobs_module, "SceneHandle", lambda *_a, **_kw: None)
-    manager = JobManager(storage, SceneCache(storage), workers=0)
-    monkeypatch.setattr(manager.scenes, "get", lambda _id: None)
-    monkeypatch.setattr(manager, "executor", lambda: None)
-    monkeypatch.setattr(manager, "eval_cache", lambda: None)
-    manager._run(job.id)
+    _run_with(storage, monkeypatch, job.id, attempt)
     reported = [e.data["fraction"] for e in storage.events_after(job_id=job.id) if e.kind == "progress"]
     assert reported == [0.5, 0.625]
     assert storage.get_job(job_id=job.id).progress["fraction"] == 0.625
@@ -259,20 +265,14 @@ def test_active_scene_hashes_name_what_eviction_must_keep(storage: Storage) -> N
 def test_a_job_keeps_its_camera_references_in_the_data_directory(storage: Storage, monkeypatch) -> None:
     """The optimiser gets the data directory's tmp/ (on the data disk, emptied at start after a crash)
     for the references its pricing rounds share, not the system's temporary directory."""
-    import service.jobs as jobs_module
+    from service.optimize import Cancelled
 
     job = storage.create_job(scene_id=SCENE, spec={})
     seen: dict[str, object] = {}
 
     def attempt(spec, *, scratch_dir, **_kw):
         seen["scratch_dir"] = scratch_dir
-        raise jobs_module.Cancelled("stopped")
+        raise Cancelled("stopped")
 
-    monkeypatch.setattr(jobs_module, "run_optimisation", attempt)
-    monkeypatch.setattr(jobs_module, "SceneHandle", lambda *_a, **_kw: None)
-    manager = JobManager(storage, SceneCache(storage), workers=0)
-    monkeypatch.setattr(manager.scenes, "get", lambda _id: None)
-    monkeypatch.setattr(manager, "executor", lambda: None)
-    monkeypatch.setattr(manager, "eval_cache", lambda: None)
-    manager._run(job.id)
+    _run_with(storage, monkeypatch, job.id, attempt)
     assert seen["scratch_dir"] == storage.tmp_dir and storage.tmp_dir.is_dir()
