@@ -148,6 +148,7 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, config: O
         display=None if config.display_estimator == "preview" else display,
         display_points=config.display_points, slow_points=config.slow_points,
         bridge_points=config.bridge_points,
+        descent_steps=config.descent_steps,
     )
     pricing = pricer = references = None
     if config.display_estimator != "preview":
@@ -209,5 +210,8 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, config: O
         "scene": handle.content_hash,
         "executor": getattr(executor, "name", type(executor).__name__),
     }
+    if config.descent_steps:  # (stores searched without a descent keep the document they had)
+        meta["descent_steps"] = config.descent_steps
+        meta["descent_evaluations"] = builder.search.descent_evaluated
     return builder.to_store(profile=config.profile, fps=config.fps, aspect=aspect, meta=meta)
 

@@ -139,6 +139,12 @@ OPTIONS: tuple[Option, ...] = (
            minimum=4, maximum=512, metavar="N"),
     Option("generations", int, 25, "Generations", "NSGA-II generations of each full search",
            minimum=1, maximum=500, metavar="N"),
+    Option("descent_steps", int, 0, "Descent steps",
+           "after each camera's search, where max quality misses the frame rate, step down from it one "
+           "parameter one value at a time, each step the one that saves the most frame time for the error "
+           "it adds, at most this many steps or until it keeps up (0: none; a few dozen small renders a "
+           "camera; the real-time end is priced where the real-time points priced stay over error 0.02)",
+           minimum=0, maximum=32, metavar="N"),
     Option("seed", int, 0, "Seed", "random seed (the same seed gives the same store)",
            minimum=0, maximum=2**31 - 1, metavar="N"),
     Option("exhaustive_limit", int, 512, "Exhaustive up to",

@@ -176,3 +176,78 @@ def test_probes_that_keep_up_are_returned_beside_the_frontier_for_the_display_pr
     assert [pt[0] for pt in extra] == [step]  # priced besides the spread, which never holds it
     spread = [pt[0] for pt in spread_points(found.points, 4, FPS, 1)]
     assert step not in spread and top in spread
+
+
+# -- the descent from max quality -------------------------------------------------------------------------
+LAB_SPACE = default_space().subset(["sampling", "shadow_samples", "resolution_scale", "ao_samples"])
+
+
+class LabModel:
+    """The lab's heavy cameras at the search's small images: the sampler and the resolution set the
+    error, shadow rays and AO samples set most of the frame time and add little error. Max takes three
+    frame deadlines; FSAA at full resolution keeps up only with few shadow rays and little AO."""
+
+    def __init__(self) -> None:
+        self.fps = FPS
+        self.evaluations = 0
+        self.cache_hits = 0
+        self.asked: list[tuple[int, ...]] = []
+
+    def evaluate(self, requests):
+        out = []
+        for _, x in requests:
+            s, h, r, a = (int(x[i]) for i in LAB_SPACE.free_positions)
+            self.evaluations += 1
+            self.asked.append(tuple(x))
+            error = 0.04 * (4 - s) + 0.03 * (3 - r) + 0.002 * (3 - h) + 0.001 * (3 - a)
+            deadlines = (0.3 + 0.25 * s / 4 + 0.2 * r / 3) * (1 + 2.0 * h / 3 + 1.0 * a / 3)
+            out.append(SimpleNamespace(error=error, power_w=1.0 + deadlines, frame_time_s=deadlines / FPS))
+        return out
+
+
+def _lab_search(model: LabModel, descent_steps: int) -> Search:
+    return Search(model, LAB_SPACE, NSGAConfig(population=4, generations=2, seed=3),  # type: ignore[arg-type]
+                  exhaustive_limit=0, descent_steps=descent_steps)
+
+
+def test_the_descent_from_max_reaches_the_accurate_real_time_setting_the_search_missed() -> None:
+    """Stepping down from a slow Max, each step the one that saves the most frame time for the error it
+    adds, keeps the sampler and the resolution and gives up shadow rays and AO until it keeps up: a
+    real-time setting far more accurate than any the short NSGA-II search met. Without the option no
+    descent runs and the search is what it was."""
+    plain_model = LabModel()
+    plain = _lab_search(plain_model, 0)
+    found0 = plain.run([CAM], [[]], "search")[0]
+    assert plain.descent_evaluated == 0
+    real_time0 = [pt for pt in [*found0.points, *found0.kept_up] if meets_frame_rate(pt[3], FPS)]
+    assert min(pt[1] for pt in real_time0) > 0.02
+
+    model = LabModel()
+    search = _lab_search(model, 8)
+    found = search.run([CAM], [[]], "search")[0]
+    assert model.asked[:len(plain_model.asked)] == plain_model.asked  # the search itself unchanged
+    assert 0 < search.descent_evaluated <= 8 * len(LAB_SPACE.free_positions)
+    assert search.steps_done == search.steps_planned
+    top = LAB_SPACE.max_quality_indices()
+    sampler, _, resolution, _ = LAB_SPACE.free_positions
+    best = min(found.kept_up, key=lambda pt: pt[1])
+    assert best[1] <= 0.01 and meets_frame_rate(best[3], FPS)
+    assert best[0][sampler] == top[sampler] and best[0][resolution] == top[resolution]
+    # the slow settings it passed join the slow tier, between Max and the real-time points
+    slow = [pt for pt in found.points if not meets_frame_rate(pt[3], FPS)]
+    assert any(pt[0][sampler] == top[sampler] and pt[0][resolution] == top[resolution] and pt[0] != top
+               for pt in slow)
+    # each step evaluated the settings one parameter one value below where it stood
+    descent = model.asked[len(plain_model.asked):]
+
+    def apart(x, y):
+        return sum(abs(int(u) - int(v)) for u, v in zip(x, y, strict=True))
+    assert descent and all(any(apart(x, y) == 1 for y in [top, *descent]) for x in descent)
+
+
+def test_a_descent_step_takes_the_most_frame_time_for_the_error_it_adds() -> None:
+    at = (0.010, 3.0)
+    # 0.5 / 0.002 beats 2.0 / 0.041 and 0.1 / 0.001
+    assert Search.best_step(at, [(0.011, 2.5), (0.050, 1.0), (0.010, 2.9)]) == 0
+    assert Search.best_step(at, [(0.0, 3.0), (0.02, 3.5)]) is None  # nothing saves time
+    assert Search.best_step(at, [(0.005, 2.0), (0.012, 1.0)]) == 0  # less error counts as none added

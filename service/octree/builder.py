@@ -59,6 +59,8 @@ class OctreeConfig:
     # at most this many more settings of each frontier priced there where the priced meeting tier's
     # errors jump (:mod:`.bridge`; 0: none)
     bridge_points: int = 0
+    # steps of the search's descent from max quality toward the frame rate (:meth:`.search.Search.descend`)
+    descent_steps: int = 0
 
     def __post_init__(self) -> None:
         options.check({name: getattr(self, name) for name in (
@@ -242,7 +244,8 @@ class OctreeBuilder:
         root_min, root_size = root_cube(path.positions, config.pad_fraction, config.min_size,
                                         rest_on_path=config.view_sampling != "axis")
         self.lattice = Lattice(root_min, root_size, config.max_depth)
-        self.search = Search(evaluator, space, config.nsga, config.exhaustive_limit, progress, should_cancel)
+        self.search = Search(evaluator, space, config.nsga, config.exhaustive_limit, progress, should_cancel,
+                             descent_steps=config.descent_steps)
         strategy = STRATEGIES[config.view_sampling]
         self.sampling: CameraSampling = strategy(self.lattice, self.search, config, path)
         if (config.display is None) != (pricer is None):

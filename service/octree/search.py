@@ -53,6 +53,10 @@ FRACTION_BEFORE_DONE = 0.99
 #: Where the probes' chain from Max towards the most accurate real-time setting stops (fractions of the
 #: way, per parameter index).
 PROBE_CHAIN = (0.25, 0.5, 0.75)
+#: Added to the error a descent step adds before dividing the frame time it saves by it: steps whose
+#: error change is below it (a few thousandths of 1 - SSIM at the search's small images) rank by the time
+#: they save.
+DESCENT_ERROR_FLOOR = 0.001
 
 
 @dataclass(frozen=True)
@@ -93,8 +97,10 @@ class Search:
 
     def __init__(self, evaluator: Evaluator, space: ParameterSpace, nsga: NSGAConfig, exhaustive_limit: int,
                  progress: Callable[[Progress], None] | None = None,
-                 should_cancel: Callable[[], bool] | None = None) -> None:
+                 should_cancel: Callable[[], bool] | None = None, *, descent_steps: int = 0) -> None:
         self.ev = evaluator
+        self.descent_steps = int(descent_steps)
+        self.descent_evaluated = 0  # settings a descent evaluated (cache hits included), all searches
         self.space = space
         self.nsga = nsga
         self.exhaustive_limit = exhaustive_limit
@@ -168,7 +174,7 @@ class Search:
         if self.exhaustive:
             n = math.prod(self.space.free_n_values)
             return n_jobs * -(-n // max(1, 256 // max(1, n_jobs)))
-        return n_jobs * ((generations or self.nsga.generations) + 1)
+        return n_jobs * ((generations or self.nsga.generations) + 1 + self.descent_steps)
 
     # -- the searches -------------------------------------------------------------------------------
 
@@ -191,6 +197,8 @@ class Search:
         else:
             archives = self._nsga(cameras, warm, phase, generations, times)
             kept_up = self._probe(cameras, archives, times, phase)
+            if self.descent_steps:
+                self._descend(cameras, archives, times, phase, kept_up)
         found = [Found(self.frontier(arch, t), k)
                  for arch, t, k in zip(archives, times, kept_up, strict=True)]
         self.state.views_done += len(cameras)
@@ -272,6 +280,81 @@ class Search:
         self.steps_done += len(jobs)
         self.report(phase)
         return kept_up
+
+    def descent_start(self, archive: Archive) -> Indices | None:
+        """Where a camera's descent starts (free indices): max quality, when the archive holds settings
+        that keep up and settings that miss the rate and none that keeps up is as accurate as Max (the
+        probes' condition); else None."""
+        xs, objectives = archive.arrays()
+        if not xs:
+            return None
+        meets = archive.feasible_mask(xs)
+        if meets.all() or not meets.any() or objectives[meets, 0].min() <= 0.0:
+            return None
+        return self.space.restrict(self.space.max_quality_indices())
+
+    def steps_down(self, x: Indices) -> list[Indices]:
+        """``x`` with one free parameter one value nearer its cheap end, each parameter in turn."""
+        low = self.space.restrict(self.space.min_quality_indices())
+        return [(*x[:i], v + (1 if lo > v else -1), *x[i + 1:])
+                for i, (v, lo) in enumerate(zip(x, low, strict=True)) if v != lo]
+
+    @staticmethod
+    def best_step(at: tuple[float, float], steps: Sequence[tuple[float, float]]) -> int | None:
+        """Which of ``steps`` ((error, frame time) each) a descent at ``at`` takes: the most frame time
+        saved for the error added (plus :data:`DESCENT_ERROR_FLOOR`); None when none saves time."""
+        e0, t0 = at
+        best, best_gain = None, 0.0
+        for k, (e, t) in enumerate(steps):
+            if t < t0:
+                gain = (t0 - t) / (max(0.0, e - e0) + DESCENT_ERROR_FLOOR)
+                if gain > best_gain:
+                    best, best_gain = k, gain
+        return best
+
+    def _descend(self, cameras: Sequence[CameraSpec], archives: list[Archive],
+                 times: list[dict[Indices, float]], phase: str, kept_up: list[Points]) -> None:
+        """Every camera's descent from max quality toward the frame rate, in lock-step: at each step the
+        settings one parameter one value cheaper than where it stands are evaluated and it moves to the
+        one that saves the most frame time for the error it adds (:meth:`best_step`), at most
+        ``descent_steps`` steps or until it keeps up. Steps that miss the rate join the archive (the slow
+        tier's candidates); those that keep up join ``kept_up``, as the probes' do.
+
+        The search's small images hide what the lab's heavy cameras at 640x360 needed: their NSGA-II
+        frontiers went from error 0.09 straight to a slow Max, while FSAA with 2 shadow rays and no AO,
+        two parameters below Max, keeps up at error 0.003 there and was never evaluated
+        (bench/RESULTS.md, "The lab at 640x360 searched with the finer steps")."""
+        at: dict[int, tuple[Indices, float, float]] = {}
+        for j, a in enumerate(archives):
+            x = self.descent_start(a)
+            if x is not None and x in a and x in times[j]:
+                at[j] = (x, a.points[x][0], times[j][x])
+        for _ in range(self.descent_steps):
+            jobs = [(j, self.steps_down(x)) for j, (x, _, _) in at.items()]
+            jobs = [(j, xs) for j, xs in jobs if xs]
+            if not jobs:
+                break
+            self.check_cancel()
+            res = iter(self.evaluate([(cameras[j], self.space.expand(x)) for j, xs in jobs for x in xs]))
+            for j, xs in jobs:
+                evs = [next(res) for _ in xs]
+                self.descent_evaluated += len(xs)
+                known = {pt[0] for pt in kept_up[j]}
+                for x, ev in zip(xs, evs, strict=True):
+                    if not self.keeps_up(ev):
+                        if x not in archives[j]:
+                            archives[j].add(x, (ev.error, ev.power_w), False)
+                            times[j][x] = ev.frame_time_s
+                    elif self.space.expand(x) not in known:
+                        kept_up[j].append((self.space.expand(x), float(ev.error), float(ev.power_w),
+                                           float(ev.frame_time_s)))
+                k = self.best_step(at[j][1:], [(float(ev.error), float(ev.frame_time_s)) for ev in evs])
+                if k is None or self.keeps_up(evs[k]):
+                    del at[j]  # nothing saves time, or real time reached
+                else:
+                    at[j] = (xs[k], float(evs[k].error), float(evs[k].frame_time_s))
+            self.steps_done += len(jobs)
+            self.report(phase)
 
     def _enumerate(self, cameras: Sequence[CameraSpec], phase: str, times: list[dict[Indices, float]]
                    ) -> list[Archive]:
