@@ -323,7 +323,7 @@ class Search:
         The search's small images hide what the lab's heavy cameras at 640x360 needed: their NSGA-II
         frontiers went from error 0.09 straight to a slow Max, while FSAA with 2 shadow rays and no AO,
         two parameters below Max, keeps up at error 0.003 there and was never evaluated
-        (bench/RESULTS.md, "The lab at 640x360 searched with the finer steps")."""
+        (bench/RESULTS.md, "The lab at 640x360 with the search's descent from Max")."""
         at: dict[int, tuple[Indices, float, float]] = {}
         for j, a in enumerate(archives):
             x = self.descent_start(a)
