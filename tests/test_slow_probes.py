@@ -182,16 +182,10 @@ def test_probes_that_keep_up_are_returned_beside_the_frontier_for_the_display_pr
 LAB_SPACE = default_space().subset(["sampling", "shadow_samples", "resolution_scale", "ao_samples"])
 
 
-class LabModel:
+class LabModel(Model):
     """The lab's heavy cameras at the search's small images: the sampler and the resolution set the
     error, shadow rays and AO samples set most of the frame time and add little error. Max takes three
     frame deadlines; FSAA at full resolution keeps up only with few shadow rays and little AO."""
-
-    def __init__(self) -> None:
-        self.fps = FPS
-        self.evaluations = 0
-        self.cache_hits = 0
-        self.asked: list[tuple[int, ...]] = []
 
     def evaluate(self, requests):
         out = []
