@@ -234,23 +234,14 @@ class Search:
         settings that miss the rate (no frame-rate target missed: no slow tier to fill), or when one
         that keeps up is as accurate as Max. At most the
         number of free parameters plus ``len(PROBE_CHAIN)`` (11 on the default space)."""
-        xs, objectives = archive.arrays()
-        if not xs:
+        tiers = self._both_tiers(archive)
+        if tiers is None:
             return []
-        meets = archive.feasible_mask(xs)
-        if meets.all() or not meets.any():
-            return []
+        xs, objectives, meets = tiers
         ok = np.flatnonzero(meets)
-        i_best = int(ok[np.lexsort((objectives[ok, 1], objectives[ok, 0]))[0]])  # least error, then power
-        if objectives[i_best, 0] <= 0.0:
-            return []  # a setting as accurate as Max keeps up: nothing can be more accurate
-        best = xs[i_best]
+        best = xs[int(ok[np.lexsort((objectives[ok, 1], objectives[ok, 0]))[0]])]  # least error, then power
         top = self.space.restrict(self.space.max_quality_indices())
-        low = self.space.restrict(self.space.min_quality_indices())
-        out: list[Indices] = []
-        for i, (t, lo) in enumerate(zip(top, low, strict=True)):
-            if t != lo:
-                out.append((*top[:i], t + (1 if lo > t else -1), *top[i + 1:]))
+        out = self.steps_down(top)
         for f in PROBE_CHAIN:
             out.append(tuple(t + round(f * (b - t)) for t, b in zip(top, best, strict=True)))
         return [x for x in dict.fromkeys(out) if x not in archive]
@@ -281,15 +272,23 @@ class Search:
         self.report(phase)
         return kept_up
 
-    def descent_start(self, archive: Archive) -> Indices | None:
-        """Where a camera's descent starts (free indices): max quality, when the archive holds settings
-        that keep up and settings that miss the rate and none that keeps up is as accurate as Max (the
-        probes' condition); else None."""
+    @staticmethod
+    def _both_tiers(archive: Archive) -> tuple[list[Indices], np.ndarray, np.ndarray] | None:
+        """The archive's settings, objectives and which keep up, when it holds settings on both sides of
+        the frame rate and none that keeps up is as accurate as Max (nothing could be more accurate);
+        else None: no slow region to probe or descend."""
         xs, objectives = archive.arrays()
         if not xs:
             return None
         meets = archive.feasible_mask(xs)
         if meets.all() or not meets.any() or objectives[meets, 0].min() <= 0.0:
+            return None
+        return xs, objectives, meets
+
+    def descent_start(self, archive: Archive) -> Indices | None:
+        """Where a camera's descent starts (free indices): max quality, under the probes' condition
+        (:meth:`_both_tiers`); else None."""
+        if self._both_tiers(archive) is None:
             return None
         return self.space.restrict(self.space.max_quality_indices())
 
