@@ -139,7 +139,7 @@ OPTIONS: tuple[Option, ...] = (
            minimum=4, maximum=512, metavar="N"),
     Option("generations", int, 25, "Generations", "NSGA-II generations of each full search",
            minimum=1, maximum=500, metavar="N"),
-    Option("descent_steps", int, 0, "Descent steps",
+    Option("descent_steps", int, 8, "Descent steps",
            "after each camera's search, where max quality misses the frame rate, step down from it one "
            "parameter one value at a time, each step the one that saves the most frame time for the error "
            "it adds, at most this many steps or until it keeps up (0: none; a few dozen small renders a "
