@@ -180,6 +180,10 @@ def parser() -> argparse.ArgumentParser:
     _option_schema().add_arguments(opt, with_defaults=False, left_out=_KEPT)
     opt.add_argument("--resolution", help="evaluation resolution WxH, e.g. 64x36 (sets --eval-width, "
                      "--eval-height)")
+    opt.add_argument("--space", action="append", metavar="NAME=V1,V2,...",
+                     help="search these values of a parameter instead of the listed ones, e.g. "
+                          "shadow_samples=0,1,2,4,16 (repeat per parameter; kept in the .blend's parameter "
+                          "list)")
     opt.add_argument("--frame-step", type=int)
     opt.add_argument("--record", action="store_true", help="re-record the path from the camera animation")
     opt.add_argument("--save-as", help="save the .blend here (default: overwrite the opened file)")
@@ -248,6 +252,8 @@ def cmd_optimize(bpy: ModuleType, ext: str, args: argparse.Namespace) -> int:
         if scene.camera is None:
             raise ValueError("the scene has no active camera")
         cp.store_path(scene, cp.sample_animation(scene, scene.camera, scene.render_budget.frame_step))
+    if args.space:
+        ops.set_parameter_values(scene, args.space)
     client = sp.client_for(bpy.context)
     bar = ProgressBar("optimize")
     t0 = time.monotonic()

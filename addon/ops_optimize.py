@@ -48,14 +48,21 @@ def check_scene(scene: bpy.types.Scene) -> None:
 
 
 def job_request(scene: bpy.types.Scene) -> JobRequest:
+    """The job the panel describes; the parameter list's values, where edited away from the default
+    ones, become the job's ``space`` (ValueError names a value the renderer does not take)."""
+    # lazy: loads the native core, which registering the add-on does not
+    from service.params import space_from_texts
+
     props = scene.render_budget
     searchable = [p for p in props.parameters if not p.inert]
     enabled = tuple(p.name for p in searchable if p.enabled)
+    space = space_from_texts({p.name: p.values for p in searchable if p.enabled})
     return JobRequest(
         profile=props.profile or _default_profile(),
         # None lets the service search its whole default space (minus what is inert for this scene)
         parameters=enabled if searchable else None,
         options=option_values(props),
+        space=space or None,
     )
 
 
@@ -159,21 +166,52 @@ def apply_outcome(scene: bpy.types.Scene, outcome: JobOutcome, path: path_format
 
 def fill_parameters(scene: bpy.types.Scene, inert: dict[str, str],
                     store: pareto_store.ParetoStore | None = None) -> None:
-    """Show the parameter space: the store's parameters with values, then inert ones with their reason."""
+    """Show the parameter space: the store's parameters with the values it was searched with (without a
+    store: the values typed so far, else the default ones), then inert ones with their reason."""
+    # lazy: loads the native core, which registering the add-on does not
+    from service.params import DEFAULT_VALUES, values_text
+
     props = scene.render_budget
     previous = {p.name: p.enabled for p in props.parameters}
+    typed = {p.name: p.values for p in props.parameters if not p.inert and p.values.strip()}
+    if store is not None:
+        listed = {p.name: values_text(p.values) for p in store.parameters}
+    else:
+        listed = {name: typed.get(name, values_text(values)) for name, values in DEFAULT_VALUES.items()}
     props.parameters.clear()
-    for p in (store.parameters if store is not None else ()):
+    for name, text in listed.items():
+        if store is None and name in inert:
+            continue  # listed below, with the reason
         item = props.parameters.add()
-        item.name = p.name
-        item.values = ", ".join(str(v) for v in p.values)
-        item.value_count = len(p.values)
-        item.enabled = previous.get(p.name, True)
+        item.name = name
+        item.values = text
+        item.value_count = len([v for v in text.split(",") if v.strip()])
+        item.enabled = previous.get(name, True)
     for name, reason in sorted(inert.items()):
         if name in props.parameters:
             continue
         item = props.parameters.add()
         item.name, item.inert, item.reason, item.enabled = name, True, reason, False
+
+
+def set_parameter_values(scene: bpy.types.Scene, texts: list[str]) -> None:
+    """``NAME=V1,V2,...`` texts (batch ``optimize --space``) into the parameter list, which the default
+    values fill first when it lists none: the next job searches them and the .blend keeps them.
+    ValueError names an unknown parameter or value, or a parameter inert for this scene."""
+    # lazy: loads the native core, which registering the add-on does not
+    from service.params import parse_space_argument, values_text
+
+    parsed = [parse_space_argument(text) for text in texts]  # all checked before anything changes
+    props = scene.render_budget
+    inert = {p.name: p.reason for p in props.parameters if p.inert}
+    for name, _ in parsed:
+        if name in inert:
+            raise ValueError(f"parameter {name!r} cannot change this scene ({inert[name]})")
+    if not any(not p.inert for p in props.parameters):
+        fill_parameters(scene, inert)
+    for name, values in parsed:
+        item = props.parameters.get(name) or props.parameters.add()
+        item.name, item.values, item.value_count, item.enabled = name, values_text(values), len(values), True
 
 
 def run_sync(scene: bpy.types.Scene, client: ServiceClient | LocalClient,

@@ -22,7 +22,7 @@ class RENDER_BUDGET_UL_parameters(bpy.types.UIList):
         else:
             row.prop(item, "enabled", text="")
             row.label(text=item.name)
-            row.label(text=item.values)
+            row.prop(item, "values", text="")  # editable: the next job searches what it says
 
 
 class VIEW3D_PT_render_budget(bpy.types.Panel):

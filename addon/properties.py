@@ -31,7 +31,9 @@ class RENDER_BUDGET_PG_parameter(bpy.types.PropertyGroup):
     """One parameter of the search space as the service reported it for this scene."""
 
     # `name` (built in) is the parameter's RenderSettings field name.
-    values: StringProperty(name="Values", description="Candidate values, comma separated")  # type: ignore
+    values: StringProperty(  # type: ignore
+        name="Values", description="Values the next job searches, comma separated (shadow "
+        "rays and AO samples also take 2, 8 and 10, 12 between the default steps)")
     value_count: IntProperty(name="Count", min=0)  # type: ignore
     enabled: BoolProperty(name="Search", description="Include this parameter in the search", default=True)  # type: ignore
     inert: BoolProperty(name="Inert", description="Cannot change this scene's image or power")  # type: ignore

@@ -381,6 +381,26 @@ def parse_space_argument(text: str) -> tuple[str, tuple[Any, ...]]:
     return name, tuple(values)
 
 
+def space_from_texts(texts: Mapping[str, str]) -> dict[str, tuple[Any, ...]]:
+    """Values typed per parameter (``{"shadow_samples": "0, 1, 2, 4, 16"}``, as the add-on's parameter
+    list shows them) as a job's ``space``: only the parameters whose values differ from
+    :data:`DEFAULT_VALUES`, so a job whose list was left alone searches the default space under its
+    cache keys (a blank text: the default values). ValueError names the parameter and the value."""
+    space: dict[str, tuple[Any, ...]] = {}
+    for name, text in texts.items():
+        if not text.strip():
+            continue
+        _, values = parse_space_argument(f"{name}={text}")
+        if set(values) != set(DEFAULT_VALUES.get(name, ())):
+            space[name] = values
+    return space
+
+
+def values_text(values: Iterable[Any]) -> str:
+    """Values as the add-on's parameter list shows them and :func:`space_from_texts` reads them."""
+    return ", ".join(str(v) for v in values)
+
+
 def _float_text(text: str) -> float | None:
     try:
         return float(text)

@@ -680,7 +680,9 @@ def test_panel_and_preferences_refer_to_existing_properties(ext) -> None:
     """Drawing needs a window; check statically that every property the UI draws exists."""
     import ast
 
-    scene_props = set(bpy.types.Scene.bl_rna.properties["render_budget"].fixed_type.properties.keys())
+    scene_group = bpy.types.Scene.bl_rna.properties["render_budget"].fixed_type
+    scene_props = set(scene_group.properties.keys())
+    item_props = set(scene_group.properties["parameters"].fixed_type.properties.keys())  # the list's rows
     wm_rna = bpy.types.WindowManager.bl_rna
     runtime = set(wm_rna.properties["render_budget_runtime"].fixed_type.properties.keys())
     from service.options import PUBLIC
@@ -694,7 +696,7 @@ def test_panel_and_preferences_refer_to_existing_properties(ext) -> None:
             choices = [name.body, name.orelse] if isinstance(name, ast.IfExp) else [name]
             names = [c.value for c in choices if isinstance(c, ast.Constant)]  # options: drawn by name
             for n in names:
-                assert n in (scene_props if owner == "props" else runtime | scene_props | {"enabled"}), n
+                assert n in (scene_props if owner == "props" else runtime | scene_props | item_props), n
         if isinstance(node, ast.Call) and getattr(node.func, "attr", "") == "operator":
             idname = node.args[0].value
             getattr(getattr(bpy.ops, idname.split(".")[0]), idname.split(".")[1]).get_rna_type()

@@ -171,3 +171,28 @@ def test_analyse_scene_runs_here(ext) -> None:
     inert = {p.name for p in sc.render_budget.parameters if p.inert}
     assert "multirate" in inert or "normal_threshold_deg" in inert  # the simulator said why
 
+
+def test_the_parameter_list_lists_the_default_values_and_a_job_searches_what_it_is_edited_to(ext) -> None:
+    """Before any store the list shows the default values of the parameters that can change the scene;
+    editing one makes the next job search those values (its ``space``), and a value the renderer does
+    not take stops the job before anything is sent, naming it."""
+    from service.params import DEFAULT_VALUES, values_text
+
+    ops = m("ops_optimize")
+    sc = orbit_scene.build(bpy, 8, (96, 54))  # no parameters listed yet
+    assert bpy.ops.render_budget.analyze_scene() == {"FINISHED"}
+    props = sc.render_budget
+    listed = {p.name: p.values for p in props.parameters if not p.inert}
+    inert = {p.name for p in props.parameters if p.inert}
+    assert listed and set(listed) | inert == set(DEFAULT_VALUES) and not set(listed) & inert
+    assert all(text == values_text(DEFAULT_VALUES[name]) for name, text in listed.items())
+    assert ops.job_request(sc).space is None  # untouched: the default space
+    props.parameters["shadow_samples"].values = "0, 1, 2, 4, 16"
+    assert ops.job_request(sc).space == {"shadow_samples": (0, 1, 2, 4, 16)}
+    assert bpy.ops.render_budget.analyze_scene() == {"FINISHED"}  # analysing again keeps the edit
+    assert props.parameters["shadow_samples"].values == "0, 1, 2, 4, 16"
+    props.parameters["shadow_samples"].values = "0, 3"
+    with pytest.raises(RuntimeError, match="'3' is not a value of 'shadow_samples'"):
+        bpy.ops.render_budget.optimize()
+    assert props.store_text is None
+

@@ -259,3 +259,23 @@ def test_batch_fails_loudly(optimized, tmp_path) -> None:
     assert proc.returncode == 1 and "no render-budget service" in proc.stderr
     proc = _batch(["--blend", str(tmp_path / "missing.blend"), "playback"], tmp_path)
     assert proc.returncode == 1 and "failed" in proc.stderr
+
+
+def test_batch_optimize_searches_the_values_given_and_keeps_them_in_the_blend(optimized, service,
+                                                                               tmp_path) -> None:
+    """``optimize --space NAME=V1,...`` puts the values into the .blend's parameter list, the job
+    searches them (the store says so) and the saved file lists them; a bad value changes nothing."""
+    saved, store_out = tmp_path / "finer.blend", tmp_path / "store.json"
+    proc = _batch(["--blend", str(optimized), "--url", service.url, "optimize", "--space",
+                   "shadow_samples=0,1,2,4,16", "--save-as", str(saved), "--store-out", str(store_out)],
+                  tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    store = ParetoStore.from_json(store_out.read_text())
+    assert {p.name: p.values for p in store.parameters}["shadow_samples"] == (0, 1, 2, 4, 16)
+    bpy.ops.wm.open_mainfile(filepath=str(saved))
+    assert bpy.context.scene.render_budget.parameters["shadow_samples"].values == "0, 1, 2, 4, 16"
+    before = optimized.read_bytes()
+    proc = _batch(["--blend", str(optimized), "--url", service.url, "optimize", "--space",
+                   "shadow_samples=0,3"], tmp_path)
+    assert proc.returncode == 1 and "'3' is not a value of 'shadow_samples'" in proc.stderr
+    assert optimized.read_bytes() == before

@@ -14,8 +14,10 @@ from service.params import (
     parse_space_argument,
     renderable_space,
     search_space,
+    space_from_texts,
     space_holding,
     stored_space,
+    values_text,
 )
 from service.store import pack_indices
 
@@ -144,3 +146,32 @@ def test_space_values_from_the_command_line_and_from_a_store() -> None:
     finer = search_space({"ao_samples": [0, 4, 8, 10, 16]})
     assert stored_space(finer.to_stored()) == finer
     assert stored_space(default_space().to_stored()) == default_space()
+
+
+@given(st.data())
+def test_values_typed_in_the_parameter_list_become_a_space_only_where_they_differ(data) -> None:
+    """The add-on's list shows each parameter's values as text; a job names only what was edited away
+    from the default values (in any order), so an untouched list searches the default space."""
+    r = renderable_space()
+    texts, wanted = {}, {}
+    for p in data.draw(st.lists(st.sampled_from(r.parameters), unique_by=lambda p: p.name, max_size=4)):
+        values = data.draw(st.lists(st.sampled_from(p.values), min_size=1, unique_by=repr))
+        texts[p.name] = values_text(values)
+        if {repr(v) for v in values} != {repr(v) for v in DEFAULT_VALUES[p.name]}:
+            wanted[p.name] = tuple(values)
+    space = space_from_texts(texts)
+    assert space == wanted
+    assert search_space(space) == r.with_values({**DEFAULT_VALUES, **wanted})
+
+
+def test_the_default_values_as_text_ask_for_no_space_and_a_bad_value_is_named() -> None:
+    texts = {name: values_text(values) for name, values in DEFAULT_VALUES.items()}
+    assert space_from_texts(texts) == {}
+    assert space_from_texts({"shadow_samples": "16, 4, 1, 0"}) == {}  # the order does not matter
+    assert space_from_texts({"shadow_samples": "  "}) == {}  # blank: the default values
+    assert space_from_texts({"ao_samples": "0, 10, 16"}) == {"ao_samples": (0, 10, 16)}
+    with pytest.raises(ValueError, match="'3' is not a value of 'shadow_samples'"):
+        space_from_texts({"shadow_samples": "0, 3"})
+    with pytest.raises(ValueError, match="'' is not a value"):
+        space_from_texts({"ao_samples": "0, , 4"})
+
