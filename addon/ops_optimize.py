@@ -180,8 +180,8 @@ def fill_parameters(scene: bpy.types.Scene, inert: dict[str, str],
         listed = {name: typed.get(name, values_text(values)) for name, values in DEFAULT_VALUES.items()}
     props.parameters.clear()
     for name, text in listed.items():
-        if store is None and name in inert:
-            continue  # listed below, with the reason
+        if name in inert:
+            continue  # listed below, greyed out with the reason (a store keeps it, fixed)
         item = props.parameters.add()
         item.name = name
         item.values = text
