@@ -182,11 +182,7 @@ def fill_parameters(scene: bpy.types.Scene, inert: dict[str, str],
     for name, text in listed.items():
         if name in inert:
             continue  # listed below, greyed out with the reason (a store keeps it, fixed)
-        item = props.parameters.add()
-        item.name = name
-        item.values = text
-        item.value_count = len([v for v in text.split(",") if v.strip()])
-        item.enabled = previous.get(name, True)
+        _list_values(props.parameters.add(), name, text, previous.get(name, True))
     for name, reason in sorted(inert.items()):
         if name in props.parameters:
             continue
@@ -210,8 +206,13 @@ def set_parameter_values(scene: bpy.types.Scene, texts: list[str]) -> None:
     if not any(not p.inert for p in props.parameters):
         fill_parameters(scene, inert)
     for name, values in parsed:
-        item = props.parameters.get(name) or props.parameters.add()
-        item.name, item.values, item.value_count, item.enabled = name, values_text(values), len(values), True
+        _list_values(props.parameters.get(name) or props.parameters.add(), name, values_text(values), True)
+
+
+def _list_values(item: bpy.types.PropertyGroup, name: str, text: str, enabled: bool) -> None:
+    """One searchable row of the parameter list: its name, its values as text and their count."""
+    item.name, item.values, item.enabled = name, text, enabled
+    item.value_count = len([v for v in text.split(",") if v.strip()])
 
 
 def run_sync(scene: bpy.types.Scene, client: ServiceClient | LocalClient,
