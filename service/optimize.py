@@ -57,6 +57,15 @@ OptimizeConfig = make_dataclass(
 OptimizeConfig.__module__ = __name__  # (make_dataclass takes module= only from Python 3.12)
 
 
+def store_pricing(config: OptimizeConfig, display: tuple[int, int]) -> DisplayPricing:
+    """How a job (``OptimizeConfig``) prices its store at ``display``: whole frames below
+    ``display_tiles_min_pixels``, where the tile estimator would cost about as much and only adds its
+    sampling error to the figures the budgets are checked against, else as the job says."""
+    small = display[0] * display[1] < config.display_tiles_min_pixels
+    estimator = "full" if small else config.display_estimator
+    return DisplayPricing(estimator, config.display_fraction, seed=config.seed)
+
+
 def resolve_space(scene: Any, space: ParameterSpace, path: CameraPath, threads: int | None = None
                   ) -> ParameterSpace:
     """Fix the parameters the simulator reports inert for this scene (verified by rendering there).
@@ -152,9 +161,7 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, config: O
     )
     pricing = pricer = references = None
     if config.display_estimator != "preview":
-        small = display[0] * display[1] < config.display_tiles_min_pixels
-        estimator = "full" if small else config.display_estimator
-        pricing = DisplayPricing(estimator, config.display_fraction, seed=config.seed)
+        pricing = store_pricing(config, display)
         # each pricing camera's reference, rendered in its first round, read by the later ones
         references = tempfile.TemporaryDirectory(prefix="render-budget-references-", dir=scratch_dir)
         pricer = DisplayPricer(evaluator, pricing, references.name)

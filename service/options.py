@@ -160,7 +160,8 @@ OPTIONS: tuple[Option, ...] = (
            minimum=8, maximum=1024, metavar="PX", group="Evaluation"),
     Option("display_estimator", str, "tiles", "Store figures",
            "how every point the store records is priced at the path's own resolution: a tile estimator "
-           "(a sample of the frame traced at that resolution), whole frames (exact, slow), or preview "
+           "(a sample of the frame traced at that resolution; displays smaller than 1280x720 are priced "
+           "as whole frames all the same), whole frames (exact, slow), or preview "
            "(the search's small images, power scaled by the pixel ratio: a rough preview only)",
            choices=DISPLAY_ESTIMATORS,
            choice_labels=("Tile estimator", "Whole frames", "Preview resolution only"),
@@ -201,11 +202,12 @@ OPTIONS: tuple[Option, ...] = (
            public=False),
     Option("skip_inert", bool, True, "Skip inert", "leave out the parameters the simulator reports "
            "cannot change this scene", public=False),
-    Option("display_tiles_min_pixels", int, 640 * 360, "Tile estimator from",
+    Option("display_tiles_min_pixels", int, 1280 * 720, "Tile estimator from",
            "the tile estimator prices display sizes of at least this many pixels; smaller ones are priced "
-           "as whole frames (below 640x360 the blocks' SSIM margins and whole adaptive tiles make a "
-           "quarter of the blocks cost about as much as the frame: bench/RESULTS.md)", minimum=0,
-           public=False),
+           "as whole frames (up to 640x360 the blocks' SSIM margins and whole adaptive tiles make a "
+           "quarter of the blocks cost about as much as the frame, and the estimate's error, 0.0017 low "
+           "at the setting the error budget picked, broke the valley's budget at 640x360: "
+           "bench/RESULTS.md)", minimum=0, public=False),
     Option("power_at_path_resolution", bool, True, "Search power at path resolution",
            "the search compares the evaluation images' power scaled to the path's pixel count (static "
            "power would hide every difference at a few hundred pixels); a search figure, never a "

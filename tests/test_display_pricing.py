@@ -35,7 +35,7 @@ from service.eval_cache import EvalCache
 from service.evaluation import CameraSpec
 from service.executors import InProcessExecutor
 from service.metrics import ssim, ssim_map
-from service.optimize import OptimizeConfig, display_resolution, optimize_path
+from service.optimize import OptimizeConfig, display_resolution, optimize_path, store_pricing
 from service.params import default_space
 from service.store import ParetoStore, unpack_indices, view_up
 from service.store.codec import QMAX
@@ -598,6 +598,19 @@ def test_store_figures_are_whole_frames_at_the_paths_resolution(scene) -> None:
         differs += len(pfr.error) != len(fr.error) or not (np.allclose(pfr.error, fr.error, atol=1e-3)
                                                           and np.allclose(pfr.power_w, fr.power_w, rtol=0.01))
     assert differs > 0
+
+
+def test_displays_below_1280x720_are_priced_as_whole_frames_by_default() -> None:
+    # at 640x360 a quarter of the blocks cost about a whole frame, and the estimate's error near a budget
+    # broke it on the valley and the village; the tiles pay off from the path's own 1280x720
+    default = OptimizeConfig()
+    assert default.display_estimator == "tiles"
+    assert store_pricing(default, (640, 360)).estimator == "full"
+    assert store_pricing(default, (960, 540)).estimator == "full"
+    assert store_pricing(default, (1280, 720)).estimator == "tiles"
+    assert store_pricing(default, (1920, 1080)) == DisplayPricing("tiles", default.display_fraction, seed=0)
+    assert store_pricing(OptimizeConfig(display_estimator="full"), (1920, 1080)).estimator == "full"
+    assert store_pricing(OptimizeConfig(display_tiles_min_pixels=0), (64, 36)).estimator == "tiles"
 
 
 @pytest.mark.slow

@@ -5,7 +5,8 @@ path is shown at (DESIGN.md, fidelity rule). ``"full"`` renders every setting an
 reference as whole frames: exact, and as slow as the frames. ``"tiles"`` (the default) traces a sample
 of the frame's blocks at display resolution and estimates the frame's error and activity counters
 from it; power and frame time then come from the estimated counters through the energy model, as for
-a rendered frame (never from a smaller render scaled by its pixel count).
+a rendered frame (never from a smaller render scaled by its pixel count). A job uses it for displays
+of 1280x720 and more; smaller ones are priced as whole frames (``service.optimize.store_pricing``).
 
 The tile estimator, for one camera and the settings priced there:
 
