@@ -46,7 +46,8 @@ def main() -> None:
     scene, path = built_scene(args.scene)
     store = ParetoStore.from_json(args.store.read_text())
     space = stored_space(store.parameters)
-    best = space.indices_of(store.settings_of([p.max_quality for p in store.parameters]))
+    max_settings = store.settings_of([p.max_quality for p in store.parameters])
+    best = space.indices_of(max_settings)
     w, h = args.size
     pricing = store.meta.get("display_pricing", "?")
     print(f"{args.scene}, store {args.store.name} ({pricing}), whole frames at {w}x{h}, "
@@ -66,8 +67,7 @@ def main() -> None:
         e_sample, e_frame = (evaluate(scene, cam, idx, space, profile=store.profile, fps=store.fps,
                                       threads=args.threads, reference_indices=best).error
                              for cam in (at_sample, at_frame))
-        pick = ", ".join(f"{k}={v}" for k, v in hit.settings.items() if v != store.settings_of(
-            [p.max_quality for p in store.parameters])[k])
+        pick = ", ".join(f"{k}={v}" for k, v in hit.settings.items() if v != max_settings[k])
         rows.append((e_sample - hit.expected_error, e_frame - e_sample))
         print(f"| {number} | {pick or 'Max'} | {hit.expected_error:.4f} | {e_sample:.4f} | {e_frame:.4f} | "
               f"{e_sample - hit.expected_error:+.4f} | {e_frame - e_sample:+.4f} |", flush=True)
