@@ -13,6 +13,9 @@ table sets the store's prediction against both:
 
     .venv/bin/python bench/bench_pick_sources.py valley out/valley360both/store.json --size 640x360 \\
         --frames 552,690
+
+``--try`` also prices given settings whole at each frame's sample camera: whether the space holds what the
+store lacks there.
 """
 
 from __future__ import annotations
@@ -29,7 +32,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from addon.core.campaign import parse_size
 from bench.bench_space_steps import built_scene
 from service.evaluation import CameraSpec, evaluate
-from service.params import stored_space
+from service.params import ParameterSpace, stored_space
 from service.store import ParetoStore
 
 
@@ -40,6 +43,9 @@ def main() -> None:
     ap.add_argument("--size", type=parse_size, default=(640, 360))
     ap.add_argument("--frames", type=lambda v: [int(x) for x in v.split(",")], required=True)
     ap.add_argument("--budget", type=float, default=0.02)
+    ap.add_argument("--try", dest="tries", nargs="*", default=[], metavar="NAME:VALUE,...",
+                    help="settings (changes from Max) also priced whole at each frame's sample camera, "
+                         "e.g. sampling:fsaa_2x2,shadow_samples:1,ao_samples:4")
     ap.add_argument("--threads", type=int, default=None)
     args = ap.parse_args()
     t0 = time.time()
@@ -56,6 +62,7 @@ def main() -> None:
           "| at sample - stored | frame - at sample |")
     print("|---|---|---|---|---|---|---|")
     rows = []
+    tried_at = []
     for number in args.frames:
         f = path.frames[number]
         m = np.asarray(f.matrix_world, dtype=np.float64)
@@ -64,6 +71,7 @@ def main() -> None:
         eye, fwd, up = store.sample_camera(hit.corner, hit.view)
         at_sample = CameraSpec(tuple(eye), tuple(fwd), tuple(up), store.vfov, w, h)
         at_frame = CameraSpec.from_matrix(m, f.vfov, w, h)
+        tried_at.append((number, at_sample))
         e_sample, e_frame = (evaluate(scene, cam, idx, space, profile=store.profile, fps=store.fps,
                                       threads=args.threads, reference_indices=best).error
                              for cam in (at_sample, at_frame))
@@ -71,10 +79,34 @@ def main() -> None:
         rows.append((e_sample - hit.expected_error, e_frame - e_sample))
         print(f"| {number} | {pick or 'Max'} | {hit.expected_error:.4f} | {e_sample:.4f} | {e_frame:.4f} | "
               f"{e_sample - hit.expected_error:+.4f} | {e_frame - e_sample:+.4f} |", flush=True)
+    if args.tries:
+        print("\n| frame | setting tried at the sample camera | error | power W | fps |")
+        print("|---|---|---|---|---|")
+    for number, cam in tried_at:
+        for text in args.tries:
+            ev = evaluate(scene, cam, space.indices_of(_over(max_settings, text, space)), space,
+                          profile=store.profile, fps=store.fps, threads=args.threads, reference_indices=best)
+            print(f"| {number} | {text} | {ev.error:.4f} | {ev.power_w:.2f} | {1.0 / ev.frame_time_s:.1f} |",
+                  flush=True)
     d = np.asarray(rows)
     print(f"\nmean |at sample - stored| {np.mean(np.abs(d[:, 0])):.4f} (mean {np.mean(d[:, 0]):+.4f}); "
           f"mean |frame - at sample| {np.mean(np.abs(d[:, 1])):.4f} (mean {np.mean(d[:, 1]):+.4f}); "
           f"{time.time() - t0:.0f} s")
+
+
+def _over(base: dict, text: str, space: ParameterSpace) -> dict:
+    """``base`` with the ``name:value`` changes of ``text``, each value one of the parameter's own."""
+    out = dict(base)
+    for item in text.split(","):
+        name, _, value = item.partition(":")
+        param = next((p for p in space.parameters if p.name == name), None)
+        if param is None:
+            raise SystemExit(f"no parameter {name!r} in the store's space")
+        match = [v for v in param.values if str(v) == value]
+        if not match:
+            raise SystemExit(f"{value!r} is not a value of {name!r} ({', '.join(map(str, param.values))})")
+        out[name] = match[0]
+    return out
 
 
 if __name__ == "__main__":
