@@ -46,8 +46,12 @@ def main() -> None:
     ap.add_argument("--try", dest="tries", nargs="*", default=[], metavar="NAME:VALUE,...",
                     help="settings (changes from Max) also priced whole at each frame's sample camera, "
                          "e.g. sampling:fsaa_2x2,shadow_samples:1,ao_samples:4")
+    ap.add_argument("--scaled-to", type=parse_size, default=None, metavar="WxH",
+                    help="price power and frame time for this many pixels (what the search does with its "
+                         "small images: --size 64x36 --scaled-to 640x360)")
     ap.add_argument("--threads", type=int, default=None)
     args = ap.parse_args()
+    target = None if args.scaled_to is None else args.scaled_to[0] * args.scaled_to[1]
     t0 = time.time()
     scene, path = built_scene(args.scene)
     store = ParetoStore.from_json(args.store.read_text())
@@ -73,8 +77,8 @@ def main() -> None:
         at_frame = CameraSpec.from_matrix(m, f.vfov, w, h)
         tried_at.append((number, at_sample))
         e_sample, e_frame = (evaluate(scene, cam, idx, space, profile=store.profile, fps=store.fps,
-                                      threads=args.threads, reference_indices=best).error
-                             for cam in (at_sample, at_frame))
+                                      threads=args.threads, reference_indices=best,
+                                      target_pixels=target).error for cam in (at_sample, at_frame))
         pick = ", ".join(f"{k}={v}" for k, v in hit.settings.items() if v != max_settings[k])
         rows.append((e_sample - hit.expected_error, e_frame - e_sample))
         print(f"| {number} | {pick or 'Max'} | {hit.expected_error:.4f} | {e_sample:.4f} | {e_frame:.4f} | "
@@ -85,7 +89,8 @@ def main() -> None:
     for number, cam in tried_at:
         for text in args.tries:
             ev = evaluate(scene, cam, space.indices_of(_over(max_settings, text, space)), space,
-                          profile=store.profile, fps=store.fps, threads=args.threads, reference_indices=best)
+                          profile=store.profile, fps=store.fps, threads=args.threads, reference_indices=best,
+                          target_pixels=target)
             print(f"| {number} | {text} | {ev.error:.4f} | {ev.power_w:.2f} | {1.0 / ev.frame_time_s:.1f} |",
                   flush=True)
     d = np.asarray(rows)
