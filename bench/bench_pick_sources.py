@@ -32,7 +32,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from addon.core.campaign import parse_size
 from bench.bench_space_steps import built_scene
 from service.evaluation import CameraSpec, evaluate
-from service.params import ParameterSpace, stored_space
+from service.params import parse_space_argument, stored_space
 from service.store import ParetoStore
 
 
@@ -88,7 +88,7 @@ def main() -> None:
         print("|---|---|---|---|---|")
     for number, cam in tried_at:
         for text in args.tries:
-            ev = evaluate(scene, cam, space.indices_of(_over(max_settings, text, space)), space,
+            ev = evaluate(scene, cam, space.indices_of(_over(max_settings, text)), space,
                           profile=store.profile, fps=store.fps, threads=args.threads, reference_indices=best,
                           target_pixels=target)
             print(f"| {number} | {text} | {ev.error:.4f} | {ev.power_w:.2f} | {1.0 / ev.frame_time_s:.1f} |",
@@ -99,18 +99,15 @@ def main() -> None:
           f"{time.time() - t0:.0f} s")
 
 
-def _over(base: dict, text: str, space: ParameterSpace) -> dict:
-    """``base`` with the ``name:value`` changes of ``text``, each value one of the parameter's own."""
+def _over(base: dict, text: str) -> dict:
+    """``base`` with the ``name:value`` changes of ``text``, each value read as ``--space`` reads it."""
     out = dict(base)
     for item in text.split(","):
         name, _, value = item.partition(":")
-        param = next((p for p in space.parameters if p.name == name), None)
-        if param is None:
-            raise SystemExit(f"no parameter {name!r} in the store's space")
-        match = [v for v in param.values if str(v) == value]
-        if not match:
-            raise SystemExit(f"{value!r} is not a value of {name!r} ({', '.join(map(str, param.values))})")
-        out[name] = match[0]
+        try:
+            _, (out[name],) = parse_space_argument(f"{name}={value}")
+        except ValueError as exc:
+            raise SystemExit(str(exc)) from None
     return out
 
 

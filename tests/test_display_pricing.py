@@ -601,8 +601,8 @@ def test_store_figures_are_whole_frames_at_the_paths_resolution(scene) -> None:
 
 
 def test_displays_below_1280x720_are_priced_as_whole_frames_by_default() -> None:
-    # at 640x360 a quarter of the blocks cost about a whole frame, and the estimate's error near a budget
-    # broke it on the valley and the village; the tiles pay off from the path's own 1280x720
+    # at 640x360 a quarter of the blocks cost about a whole frame, and the estimate's error near the budget
+    # broke it on the valley; the tiles pay off from the path's own 1280x720
     default = OptimizeConfig()
     assert default.display_estimator == "tiles"
     assert store_pricing(default, (640, 360)).estimator == "full"
