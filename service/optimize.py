@@ -198,6 +198,7 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, config: O
         "bridged_points": builder.bridged_points,
         # and how many of the search's probes that kept up were priced (far from max quality only)
         "probed_points": builder.probed_points,
+        "near_points": builder.near_points,
         "metric": config.metric,
         # the power figures include it: a lookup at another frame rate reprices power from it
         "static_power_w": sim_core.load_profile(config.profile).static_power_w,

@@ -203,6 +203,46 @@ def kept_up_to_price(points: list[tuple[Any, ...]], kept_up: Sequence[tuple[Any,
     return [pts[i] for i in fast if i >= len(meeting) and float(pts[i][1]) < best]
 
 
+#: At most this many of a frontier's slow settings near the deadline are priced (:func:`near_to_price`).
+NEAR_POINTS = 4
+#: A slow setting near the deadline is priced when its search frame time times the frontier's measured
+#: display/search ratio is at most this multiple of the deadline: the ratio is a median over the
+#: settings priced, and settings differ around it.
+NEAR_SLACK = 1.1
+
+
+def near_to_price(search_points: Sequence[tuple[Any, ...]], priced: Sequence[tuple[Any, ...]],
+                  near: Sequence[tuple[Any, ...]], fps: float | None, k: int = NEAR_POINTS) -> list[Any]:
+    """The search's slow settings near the deadline (``near``, :meth:`.search.Search.near_deadline`)
+    that a frontier's display pricing prices after its first round: where the most accurate point
+    ``priced`` meets the rate at display resolution with an error over :data:`PROBE_ERROR` (or none
+    does), those not priced yet that are more accurate, at the search, than every point priced that
+    meets the rate there, and whose frame time scaled by the frontier's display/search ratio (the
+    median over the settings priced, ``search_points`` holding the search's figures of each) is within
+    :data:`NEAR_SLACK` of the deadline; at most ``k``, spread along their error (:func:`_spread`).
+
+    The search prices frame time from its small images scaled by the pixel ratio, which the display
+    resolution can beat by a quarter: at the valley's frame 552 at 640x360 the one setting within the
+    error budget that keeps up there was judged slow, and the frame missed its budget."""
+    if fps is None or not near or k <= 0:
+        return []
+    at_search = {pt[0]: pt for pt in search_points}
+    ratios = [float(pt[3]) / float(at_search[pt[0]][3]) for pt in priced
+              if pt[0] in at_search and float(at_search[pt[0]][3]) > 0.0]
+    if not ratios:
+        return []
+    ratio = float(np.median(ratios))
+    meeting, _ = split_by_rate(priced, fps)
+    real_time = meeting if meeting and meets_frame_rate(float(meeting[0][3]), fps) else []
+    if real_time and min(float(pt[1]) for pt in real_time) <= PROBE_ERROR:
+        return []
+    best = min((float(at_search[pt[0]][1]) for pt in real_time if pt[0] in at_search), default=np.inf)
+    done = {pt[0] for pt in priced}
+    cands = [pt for pt in near if pt[0] not in done and float(pt[1]) < best
+             and meets_frame_rate(ratio * float(pt[3]) / NEAR_SLACK, fps)]
+    return [pt[0] for pt in _spread(cands, k)]
+
+
 def time_left(spent_s: float, done: int, total: int) -> float | None:
     """Seconds left for ``total`` equal jobs when ``done`` of them took ``spent_s`` (None before the
     first is done)."""
@@ -255,6 +295,7 @@ class OctreeBuilder:
         self.display_points = 0  # frontier points priced there
         self.bridged_points = 0  # of them, priced between the first ones' error jumps (:mod:`.bridge`)
         self.probed_points = 0  # of them, the search's probes that kept up (:meth:`_probes_to_price`)
+        self.near_points = 0  # of them, the search's slow settings near the deadline (:func:`near_to_price`)
         self._bridge_reserve = 0.0  # search steps planned for bridging not priced yet
         # per lattice frontier id priced at several cameras: (cameras, settings, error, power and frame
         # time (K, n) of each setting at each camera), what the store keeps as its per-camera figures
@@ -370,13 +411,22 @@ class OctreeBuilder:
         rec = self.lattice.frontiers[fid]
         return [pt[0] for pt in kept_up_to_price(rec.points, rec.kept_up, fps)]
 
+    def _near_to_price(self, fid: int, priced: list[tuple[Any, ...]], probes: list[Indices]) -> list[Indices]:
+        """The search's slow settings near the deadline (:func:`near_to_price`) that frontier ``fid``
+        prices after its first pricing round, besides its ``probes``."""
+        rec = self.lattice.frontiers[fid]
+        xs = near_to_price([*rec.points, *rec.kept_up, *rec.near], priced, rec.near, self.search.ev.fps)
+        return [x for x in xs if x not in probes]
+
     def _price_at_display(self) -> None:
         """Every measured frontier's points priced again at the path's resolution at the frontier's
         cameras (its sample, and for path samples its guards), keeping each point's worst error, power
         and frame time there: the store's figures are the display resolution's, the search's only chose
         the points (:func:`spread_points`: at most ``display_points`` of the meeting tier and
         ``slow_points`` of the slow tier). Then, in a second round, the search's probes that kept up
-        where the priced real-time points are far from max quality (:meth:`_probes_to_price`), and where
+        where the priced real-time points are far from max quality (:meth:`_probes_to_price`), there too
+        the slow settings that the display's frame times put within reach of the deadline
+        (:func:`near_to_price`), and where
         the priced meeting tier's errors jump, up to ``bridge_points`` more settings between them, a few
         rounds (:mod:`.bridge`). The store's tiers are drawn again from the display figures
         (``Frontier.from_points``): a point may meet the rate at one resolution and miss it at the
@@ -402,20 +452,23 @@ class OctreeBuilder:
         search.steps_planned += self._bridge_reserve
         self.bridged_points = 0
         self.probed_points = 0
+        self.near_points = 0
         first_count: dict[int, int] = {}  # per frontier, the points its first round and probes priced
         pace_s: float | None = None  # seconds a pricing render took in the rounds so far
-        probing = any(lat.frontiers[fid].kept_up for fid in jobs)
+        probing = any(lat.frontiers[fid].kept_up or lat.frontiers[fid].near for fid in jobs)
         for round_ in range(1 + (bridge.ROUNDS if self.cfg.bridge_points > 0 else int(probing))):
             if round_:
                 asked = {}
                 for fid, (_, xs, figs) in jobs.items():
                     priced = self._worst(xs, figs)
                     probes = self._probes_to_price(fid, priced) if round_ == 1 else []
+                    near = self._near_to_price(fid, priced, probes) if round_ == 1 else []
                     left = self.cfg.bridge_points - (len(xs) - first_count[fid])
-                    first_count[fid] += len(probes)  # probes do not count against the bridges
-                    more = probes + bridge.bridge_candidates(priced, fps, left, [*xs, *probes])
+                    first_count[fid] += len(probes) + len(near)  # neither counts against the bridges
+                    more = probes + near + bridge.bridge_candidates(priced, fps, left, [*xs, *probes, *near])
                     self.probed_points += len(probes)
-                    self.bridged_points += len(more) - len(probes)
+                    self.near_points += len(near)
+                    self.bridged_points += len(more) - len(probes) - len(near)
                     if more:
                         asked[fid] = more
                 if not asked:
@@ -427,6 +480,7 @@ class OctreeBuilder:
         for fid, (cams, xs, (err, pw, ft)) in jobs.items():
             lat.frontiers[fid].points = self._worst(xs, (err, pw, ft))
             lat.frontiers[fid].kept_up = []  # priced: among the points now where not dominated
+            lat.frontiers[fid].near = []
             if len(cams) > 1:  # and each camera's, to predict a frame between them
                 self.priced[fid] = (cams, xs, err, pw, ft)
             self.display_points += len(xs)

@@ -63,12 +63,14 @@ def densify(points: np.ndarray, step: float) -> np.ndarray:
 class FrontierRecord:
     """A frontier as measured at one camera sample: full index vectors with error, power and frame time;
     ``kept_up``: the search's probes that kept up with the frame rate there, left out of ``points``
-    (:class:`.search.Found`), which only the display pricing reads."""
+    (:class:`.search.Found`), and ``near``: its slow settings near the deadline, which only the display
+    pricing reads."""
 
     corner: int
     view: int
     points: list[tuple[Indices, float, float, float]]
     kept_up: list[tuple[Indices, float, float, float]] = field(default_factory=list)
+    near: list[tuple[Indices, float, float, float]] = field(default_factory=list)
 
     def settings(self) -> list[Indices]:
         return [pt[0] for pt in self.points]
@@ -146,9 +148,11 @@ class Lattice:
         return children
 
     def set_frontier(self, corner: int, view: int, points: list[tuple[Indices, float, float, float]],
-                     kept_up: Sequence[tuple[Indices, float, float, float]] = ()) -> None:
-        """Record a frontier measured for (corner, view), with the search's probes that kept up there."""
-        self.frontiers.append(FrontierRecord(corner, view, points, list(kept_up)))
+                     kept_up: Sequence[tuple[Indices, float, float, float]] = (),
+                     near: Sequence[tuple[Indices, float, float, float]] = ()) -> None:
+        """Record a frontier measured for (corner, view), with the search's probes that kept up there and
+        its slow settings near the deadline."""
+        self.frontiers.append(FrontierRecord(corner, view, points, list(kept_up), list(near)))
         self.corner_views[corner][view] = len(self.frontiers) - 1
 
     def frontier(self, corner: int, view: int) -> FrontierRecord:

@@ -170,7 +170,7 @@ class PathSampling:
         found = self.search.run([self.sample_cams[(c, v)] for c, v, _ in jobs], [w for _, _, w in jobs],
                                 phase, generations, planned)
         for (c, v, _), got in zip(jobs, found, strict=True):
-            self.lattice.set_frontier(c, v, got.points, got.kept_up)
+            self.lattice.set_frontier(c, v, got.points, got.kept_up, got.near)
 
     def _view_distances(self) -> np.ndarray:
         d = np.linalg.norm(self.path.targets - self.path.positions, axis=1)

@@ -33,7 +33,7 @@ import math
 import time
 import zlib
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -57,15 +57,23 @@ PROBE_CHAIN = (0.25, 0.5, 0.75)
 #: error change is below it (a few thousandths of 1 - SSIM at the search's small images) rank by the time
 #: they save.
 DESCENT_ERROR_FLOOR = 0.001
+#: The slow settings a search keeps for the display pricing to try (:meth:`Search.near_deadline`): those
+#: whose frame time is at most this multiple of the deadline. The search's frame time is its small
+#: image's counters scaled by the pixel ratio, and at 640x360 it ran up to a third slow: the valley's
+#: FSAA with 1 shadow ray and AO 4 read 24.1 fps there and ran at 32.6 fps rendered whole
+#: (bench/RESULTS.md, "Slow settings near the deadline priced at display resolution").
+NEAR_DEADLINE = 1.5
 
 
 @dataclass(frozen=True)
 class Found:
-    """One camera's search: its two-tier frontier, and the probes that kept up with the frame rate,
-    which the frontier leaves out (not dominated-checked against it)."""
+    """One camera's search: its two-tier frontier, the probes that kept up with the frame rate,
+    which the frontier leaves out (not dominated-checked against it), and the slow settings near the
+    deadline (:meth:`Search.near_deadline`)."""
 
     points: Points
     kept_up: Points
+    near: Points = field(default_factory=list)
 
 
 class Cancelled(Exception):
@@ -199,7 +207,7 @@ class Search:
             kept_up = self._probe(cameras, archives, times, phase)
             if self.descent_steps:
                 self._descend(cameras, archives, times, phase, kept_up)
-        found = [Found(self.frontier(arch, t), k)
+        found = [Found(self.frontier(arch, t), k, self.near_deadline(arch, t))
                  for arch, t, k in zip(archives, times, kept_up, strict=True)]
         self.state.views_done += len(cameras)
         self.steps_done = max(self.steps_done, steps_before + stage_steps)  # searches that ended early
@@ -215,6 +223,36 @@ class Search:
         fast, slow = frontier_tiers(objectives[:, 0], objectives[:, 1], archive.feasible_mask(xs))
         return [(self.space.expand(xs[i]), float(objectives[i, 0]), float(objectives[i, 1]), times[xs[i]])
                 for i in fast + slow]
+
+    def near_deadline(self, archive: Archive, times: dict[Indices, float]) -> Points:
+        """The slow settings of ``archive`` that the display resolution may find real-time, for the
+        display pricing to try (:func:`.builder.near_to_price`): those that miss the frame rate with a
+        frame time at most :data:`NEAR_DEADLINE` times the deadline and are more accurate than every
+        setting that keeps up, on their front of error against frame time (no other one both more
+        accurate and faster), error ascending. None without a frame-rate target, or when a setting that
+        keeps up is as accurate as Max. The frontier's slow tier ranks by power, and near the deadline
+        the slow settings all draw about the full-speed power, so the tier keeps the most accurate and
+        drops these."""
+        fps = self.ev.fps
+        xs, objectives = archive.arrays()
+        if fps is None or not xs:
+            return []
+        meets = archive.feasible_mask(xs)
+        best = float(objectives[meets, 0].min()) if meets.any() else math.inf
+        if best <= 0.0:
+            return []
+        limit = NEAR_DEADLINE / float(fps)
+        near = [i for i in np.flatnonzero(~meets)
+                if objectives[i, 0] < best and times.get(xs[i], math.inf) <= limit]
+        near.sort(key=lambda i: (objectives[i, 0], times[xs[i]]))
+        out: Points = []
+        fastest = math.inf
+        for i in near:  # error ascending: on the front when faster than every more accurate one
+            if times[xs[i]] < fastest:
+                fastest = times[xs[i]]
+                out.append((self.space.expand(xs[i]), float(objectives[i, 0]), float(objectives[i, 1]),
+                            float(times[xs[i]])))
+        return out
 
     def meeting_tier(self, points: Points) -> Points:
         """The points of a frontier that keep up with the run's frame rate (all of them when none

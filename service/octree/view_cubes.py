@@ -142,7 +142,7 @@ class ViewCubeSampling:
     def _optimise(self, jobs: Sequence[tuple[int, int, list[Indices]]], phase: str) -> None:
         found = self.search.run([self.camera(c, v) for c, v, _ in jobs], [w for _, _, w in jobs], phase)
         for (c, v, _), got in zip(jobs, found, strict=True):
-            self.lattice.set_frontier(c, v, got.points, got.kept_up)
+            self.lattice.set_frontier(c, v, got.points, got.kept_up, got.near)
 
     def _on_path(self, node: int) -> bool:
         lo, hi = self.lattice.node_box(node)
