@@ -128,9 +128,9 @@ def _one_frontier_store(points: list[tuple]) -> ParetoStore:
 
 
 def _run_one_frontier_builder(points: list[tuple], pricer, progress=None, should_cancel=None, kept_up=(),
-                              **options):
+                              near=(), **options):
     """An octree builder whose one measured frontier holds ``points`` (and the search's probes that kept
-    up, ``kept_up``) and that every view reads, run with
+    up, ``kept_up``, and its slow settings near the deadline, ``near``) and that every view reads, run with
     a stand-in ``pricer`` (its display pricing alone does work), ``progress`` and ``should_cancel``
     callbacks: the builder, after its run."""
     from service.octree.builder import OctreeBuilder, OctreeConfig, PathFrames
@@ -145,7 +145,7 @@ def _run_one_frontier_builder(points: list[tuple], pricer, progress=None, should
 
     def build() -> None:  # one measured frontier, every view of the root's corners reads it
         b.lattice.add_root()
-        b.lattice.set_frontier(0, 0, points, kept_up)
+        b.lattice.set_frontier(0, 0, points, kept_up, near)
         for views in b.lattice.corner_views:
             views[:] = [0] * len(views)
 
