@@ -21,7 +21,7 @@ from service.octree.builder import NEAR_SLACK, PROBE_ERROR, _spread, near_to_pri
 from service.octree.search import NEAR_DEADLINE, Search
 from service.params import default_space
 from service.store import meets_frame_rate, split_by_rate
-from tests.test_spread_points import _run_one_frontier_builder
+from tests.test_spread_points import _run_one_frontier_builder, table_pricer
 
 FPS = 30.0
 SPACE = default_space().subset(["sampling", "max_depth", "resolution_scale"])
@@ -123,17 +123,8 @@ def test_the_builder_prices_a_slow_setting_the_display_resolution_keeps_in_real_
         display = {pt[0]: (pt[1], pt[2], ratio * pt[3]) for pt in (*meeting, slow_max)}
         display[near[0]] = (0.0177, 35.7, 1 / 32.6 if ratio < 1 else 1 / 24.1)
         asked: list[list[tuple[int, ...]]] = []
-
-        class Pricer:
-            ev = SimpleNamespace(executor=None)
-
-            def price(self, requests, on_progress=None):
-                asked.extend(list(xs) for _, xs in requests)
-                return [[SimpleNamespace(error=display[x][0], power_w=display[x][1],
-                                         frame_time_s=display[x][2]) for x in xs] for _, xs in requests]
-
-        b = _run_one_frontier_builder([*meeting, slow_max], Pricer(), near=near_list, display_points=4,
-                                      slow_points=1)
+        b = _run_one_frontier_builder([*meeting, slow_max], table_pricer(display, asked), near=near_list,
+                                      display_points=4, slow_points=1)
         store = b.to_store(profile="mobile", fps=FPS, aspect=16 / 9, meta={"static_power_w": 0.1})
         hit = store.lookup((0.5, 0.0, 0.0), direction=(1.0, 0.0, 0.0), error_budget=0.02)
         return asked, hit, b, [pt[0] for pt in spread_points([*meeting, slow_max], 4, FPS, 1)]

@@ -154,6 +154,17 @@ def _run_one_frontier_builder(points: list[tuple], pricer, progress=None, should
     return b
 
 
+def table_pricer(figures: dict, asked: list) -> SimpleNamespace:
+    """A stand-in display pricer answering each setting with its ``figures`` ((error, power, frame
+    time)), recording the settings of each request it is asked for in ``asked``."""
+    def price(requests, on_progress=None):
+        asked.extend(list(xs) for _, xs in requests)
+        return [[SimpleNamespace(error=figures[x][0], power_w=figures[x][1], frame_time_s=figures[x][2])
+                 for x in xs] for _, xs in requests]
+
+    return SimpleNamespace(ev=SimpleNamespace(executor=None), price=price)
+
+
 def test_budget_first_finds_an_intermediate_slow_point_near_the_budget() -> None:
     """Real-time settings reach error 0.05 at best; nine slower ones reach 0.04 down to 0. With the
     spread points priced, an error budget of 0.02 picks the slow setting at 0.015 (0.09 s a frame), not
@@ -372,17 +383,8 @@ def test_the_builder_prices_a_probe_that_kept_up_where_the_real_time_points_are_
                    for j, (e, p) in enumerate(((0.3, 0.2), (0.1, 0.4), (best, 0.6)))]
         figures = {pt[0]: pt[1:] for pt in (*meeting, slow_max, probe)}
         asked: list[list[tuple[int, ...]]] = []
-
-        class Pricer:
-            ev = SimpleNamespace(executor=None)
-
-            def price(self, requests, on_progress=None):
-                asked.extend(list(xs) for _, xs in requests)
-                return [[SimpleNamespace(error=figures[x][0], power_w=figures[x][1],
-                                         frame_time_s=figures[x][2]) for x in xs] for _, xs in requests]
-
-        b = _run_one_frontier_builder([*meeting, slow_max], Pricer(), kept_up=kept_up, display_points=4,
-                                      slow_points=1)
+        b = _run_one_frontier_builder([*meeting, slow_max], table_pricer(figures, asked), kept_up=kept_up,
+                                      display_points=4, slow_points=1)
         store = b.to_store(profile="mobile", fps=FPS, aspect=16 / 9, meta={"static_power_w": 0.1})
         hit = store.lookup((0.5, 0.0, 0.0), direction=(1.0, 0.0, 0.0), error_budget=0.02)
         return asked, hit, b, [pt[0] for pt in spread_points([*meeting, slow_max], 4, FPS, 1)]
