@@ -379,7 +379,7 @@ def _digest(store: ParetoStore, version: int | None = None) -> str:
 # f0 from the IOR, Principled layering, SH ambient, Cycles' light falloffs), the octree code unchanged.
 DISPLAY_META = ("figures_resolution", "display_resolution", "display_pricing", "display_pricing_label",
                 "display_cameras", "display_points", "slow_points", "bridge_points", "bridged_points",
-                "probed_points")
+                "probed_points", "near_points")  # (near_points: counted since 5af6632, the stores unchanged)
 # Re-recorded when power became the power at the frame rate reached and the searches put settings that
 # miss 30 fps behind those that keep up (store format 4 with frame times; at this path's 320x240 the
 # costliest settings take up to ~70 ms on mobile). With the old power (P_static + E * fps), every setting
