@@ -232,8 +232,7 @@ def near_to_price(search_points: Sequence[tuple[Any, ...]], priced: Sequence[tup
     if not ratios:
         return []
     ratio = float(np.median(ratios))
-    meeting, _ = split_by_rate(priced, fps)
-    real_time = meeting if meeting and meets_frame_rate(float(meeting[0][3]), fps) else []
+    real_time = [pt for pt in priced if meets_frame_rate(float(pt[3]), fps)]
     if real_time and min(float(pt[1]) for pt in real_time) <= PROBE_ERROR:
         return []
     best = min((float(at_search[pt[0]][1]) for pt in real_time if pt[0] in at_search), default=np.inf)
