@@ -26,7 +26,7 @@ COUNTERS = {
 
 def test_shipped_profiles_load_and_are_listed() -> None:
     names = list_profiles()
-    assert {"mobile", "desktop"} <= set(names)
+    assert {"mobile", "desktop", "desktop_gtx980"} <= set(names)
     for name in names:
         p = load_profile(name)
         assert p.name == name and p.static_power_w > 0
@@ -62,7 +62,7 @@ def test_load_profile_by_path_and_errors(tmp_path: Path) -> None:
         load_profile(odd)
 
 
-@pytest.mark.parametrize("profile", ["mobile", "desktop"])
+@pytest.mark.parametrize("profile", ["mobile", "desktop", "desktop_gtx980"])
 @pytest.mark.parametrize("fps", [24.0, 60.0])
 def test_total_is_sum_of_blocks_and_power_is_static_plus_e_fps(profile: str, fps: float) -> None:
     small = {k: v // 100 for k, v in COUNTERS.items()}  # a frame well inside its deadline
@@ -102,7 +102,7 @@ def test_each_counter_moves_only_its_block() -> None:
         assert changed == {block}, (counter, changed)
 
 
-@pytest.mark.parametrize("profile", ["mobile", "desktop"])
+@pytest.mark.parametrize("profile", ["mobile", "desktop", "desktop_gtx980"])
 def test_a_node_visit_is_one_wide_node_step(profile: str) -> None:
     """bvh_node_visits counts 4-wide node steps: priced per step, timed as four box tests each."""
     from sim_core import _core
@@ -113,6 +113,24 @@ def test_a_node_visit_is_one_wide_node_step(profile: str) -> None:
     assert r.energy_j["traversal"] == pytest.approx(1000 * p.energy_pj["traversal_step"] * 1e-12, rel=1e-12)
     steps_per_cycle = p.throughput["ti_box_tests_per_cycle"] / 4
     assert r.cycles["traversal"] == pytest.approx(1000 / steps_per_cycle, rel=1e-12)
+
+
+def test_the_gtx980_profile_is_the_desktop_part_wider() -> None:
+    """Same architecture and process as ``desktop``: every event costs the same energy, only the units,
+    clock, bandwidth and static power differ, so a frame's dynamic energy is equal and it runs 3.2 x
+    1.126 times faster where a core-bound unit is the bottleneck (DRAM is 2.8x wider)."""
+    desktop, wide = load_profile("desktop"), load_profile("desktop_gtx980")
+    assert wide.energy_pj == desktop.energy_pj and wide.ops == desktop.ops
+    assert wide.cache_size_bytes == desktop.cache_size_bytes
+    assert wide.comparator_style == desktop.comparator_style
+    for key, value in desktop.throughput.items():
+        ratio = wide.throughput[key] / value
+        assert ratio == pytest.approx(224 / 80 if key == "dram_bytes_per_s" else 3.2), key
+    rd, rw = price(COUNTERS, desktop, 30.0), price(COUNTERS, wide, 30.0)
+    assert rw.dynamic_energy_j == pytest.approx(rd.dynamic_energy_j, rel=1e-12)
+    speedup = rd.frame_time_s / rw.frame_time_s
+    assert 2.8 * 1.126 * (1 - 1e-9) <= speedup <= 3.2 * 1.126 * (1 + 1e-9)
+    assert wide.static_power_w / 165 == pytest.approx(desktop.static_power_w / 68, rel=0.02)
 
 
 def test_dynamic_energy_is_linear_in_activity() -> None:
@@ -156,7 +174,7 @@ def test_bad_input_is_rejected() -> None:
 _counts = st.integers(min_value=0, max_value=10**10)
 
 
-@pytest.mark.parametrize("profile", ["mobile", "desktop"])
+@pytest.mark.parametrize("profile", ["mobile", "desktop", "desktop_gtx980"])
 @settings(max_examples=80, deadline=None)
 @given(counters=st.dictionaries(st.sampled_from(energy.COUNTERS[:-1]), _counts, max_size=12),
        fps=st.floats(min_value=0.5, max_value=480.0))
