@@ -24,6 +24,10 @@ COUNTERS = {
 }
 
 
+#: Every shipped profile: the per-profile tests below run over each one added.
+SHIPPED = list_profiles()
+
+
 def test_shipped_profiles_load_and_are_listed() -> None:
     names = list_profiles()
     assert {"mobile", "desktop", "desktop_gtx980"} <= set(names)
@@ -62,7 +66,7 @@ def test_load_profile_by_path_and_errors(tmp_path: Path) -> None:
         load_profile(odd)
 
 
-@pytest.mark.parametrize("profile", ["mobile", "desktop", "desktop_gtx980"])
+@pytest.mark.parametrize("profile", SHIPPED)
 @pytest.mark.parametrize("fps", [24.0, 60.0])
 def test_total_is_sum_of_blocks_and_power_is_static_plus_e_fps(profile: str, fps: float) -> None:
     small = {k: v // 100 for k, v in COUNTERS.items()}  # a frame well inside its deadline
@@ -102,7 +106,7 @@ def test_each_counter_moves_only_its_block() -> None:
         assert changed == {block}, (counter, changed)
 
 
-@pytest.mark.parametrize("profile", ["mobile", "desktop", "desktop_gtx980"])
+@pytest.mark.parametrize("profile", SHIPPED)
 def test_a_node_visit_is_one_wide_node_step(profile: str) -> None:
     """bvh_node_visits counts 4-wide node steps: priced per step, timed as four box tests each."""
     from sim_core import _core
@@ -174,7 +178,7 @@ def test_bad_input_is_rejected() -> None:
 _counts = st.integers(min_value=0, max_value=10**10)
 
 
-@pytest.mark.parametrize("profile", ["mobile", "desktop", "desktop_gtx980"])
+@pytest.mark.parametrize("profile", SHIPPED)
 @settings(max_examples=80, deadline=None)
 @given(counters=st.dictionaries(st.sampled_from(energy.COUNTERS[:-1]), _counts, max_size=12),
        fps=st.floats(min_value=0.5, max_value=480.0))
