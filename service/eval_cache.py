@@ -1,7 +1,8 @@
 """Persistent evaluation cache (SQLite): a repeated or resumed run never renders the same thing twice.
 
 Key: scene content hash, camera key, packed settings, metric (with the evaluation-pipeline version),
-hardware profile, fps and resolution. Values: error, power, frame time and the energy breakdown.
+hardware profile (its name and a digest of its figures, so an edited profile is priced afresh), fps and
+resolution. Values: error, power, frame time and the energy breakdown.
 The file uses WAL mode so a reader (the REST service) and a writer (a job) can share it, and every
 batch is one transaction, so a killed process loses at most the batch in flight.
 

@@ -390,6 +390,8 @@ class Evaluator:
         self.ctx = EvalContext(self.scene, space, profile, float(fps), metric, threads, target_pixels)
         px = "own" if target_pixels is None else str(int(target_pixels))
         self.metric_key = f"{metric}:{PIPELINE_VERSION}:{space_fingerprint(space)}:px={px}"
+        # the profile's figures, not just its name: an edited or upgraded profile is priced afresh
+        self.profile_key = f"{profile}@{_profile(profile).fingerprint}"
         self.evaluations = 0  # renders actually done
         self.cache_hits = 0
         self.render_time_s = 0.0
@@ -400,7 +402,7 @@ class Evaluator:
         return self.ctx.fps
 
     def _key(self, camera: CameraSpec) -> CacheKey:
-        return CacheKey(self.scene.content_hash, camera.key(), self.metric_key, self.ctx.profile,
+        return CacheKey(self.scene.content_hash, camera.key(), self.metric_key, self.profile_key,
                         camera.width, camera.height, self.ctx.fps)
 
     def evaluate(self, requests: Sequence[tuple[CameraSpec, Sequence[int]]]) -> list[Evaluation]:

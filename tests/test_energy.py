@@ -298,3 +298,46 @@ def test_price_tiles_rejects_bad_input() -> None:
                            "mobile")
     with pytest.raises(ValueError, match="at least one"):
         energy.price_tiles({}, None, "mobile")
+
+
+def test_a_profile_takes_what_it_does_not_set_from_its_base(tmp_path: Path) -> None:
+    desktop = load_profile("desktop")
+    child = tmp_path / "child.toml"
+    child.write_text('base = "desktop"\nname = "child"\n[static]\npower_w = 20.0  # test\n'
+                     '[throughput]\nsrp_ops_per_cycle = 1280  # test\n')
+    p = load_profile(child)
+    assert p.name == "child" and p.static_power_w == 20.0 and p.throughput["srp_ops_per_cycle"] == 1280
+    # the rest of an overridden section, and whole sections it does not name, come from the base
+    assert p.throughput["dram_bytes_per_s"] == desktop.throughput["dram_bytes_per_s"]
+    assert p.energy_pj == desktop.energy_pj and p.ops == desktop.ops and p.cache_ways == desktop.cache_ways
+    grandchild = tmp_path / "grandchild.toml"  # a base by path, relative to the file naming it
+    grandchild.write_text('base = "child.toml"\nname = "grandchild"\n[clock]\nsrp_hz = 2e9  # test\n')
+    g = load_profile(grandchild)
+    assert g.static_power_w == 20.0 and g.clock["srp_hz"] == 2e9
+    assert g.clock["ti_hz"] == desktop.clock["ti_hz"]
+    loop = tmp_path / "loop.toml"
+    loop.write_text('base = "loop.toml"\nname = "loop"\n')
+    with pytest.raises(ValueError, match="cycle"):
+        load_profile(loop)
+    nameless = tmp_path / "nameless.toml"
+    nameless.write_text('base = "desktop"\n')
+    with pytest.raises(ValueError, match="own 'name'"):
+        load_profile(nameless)
+    orphan = tmp_path / "orphan.toml"
+    orphan.write_text('base = "no-such-profile"\nname = "orphan"\n')
+    with pytest.raises(FileNotFoundError, match="no-such-profile"):
+        load_profile(orphan)
+    child.write_text('base = "desktop"\nname = "child"\n[static]\npower_w = -1.0  # test\n')
+    with pytest.raises(ValueError, match="power_w"):  # the merged profile is validated as a whole
+        load_profile(child)
+
+
+def test_the_fingerprint_follows_the_figures_not_the_name_or_file(tmp_path: Path) -> None:
+    src = Path(energy.__file__).with_name("profiles") / "mobile.toml"
+    copy = tmp_path / "copy.toml"
+    copy.write_text(src.read_text().replace('name = "mobile"', 'name = "other"')
+                    .replace('description = "', 'description = "Copied: '))
+    assert load_profile(copy).fingerprint == load_profile("mobile").fingerprint
+    copy.write_text(src.read_text().replace("traversal_step = 100.0", "traversal_step = 100.5"))
+    assert load_profile(copy).fingerprint != load_profile("mobile").fingerprint
+    assert len({load_profile(name).fingerprint for name in SHIPPED}) == len(SHIPPED)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import threading
 from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -151,6 +152,31 @@ def test_cache_answers_repeats_and_persists(scene, tmp_path) -> None:
         ev3 = Evaluator(scene, sp, cache=cache, fps=60.0)
         ev3.evaluate(reqs[:2])
         assert ev3.evaluations == 2
+
+
+def test_an_edited_profile_is_priced_afresh_not_served_from_the_cache(scene, tmp_path, monkeypatch) -> None:
+    """The cache keys a profile by its figures too: a profile file edited (or a product upgrade that
+    changes a shipped one) under the same name must not get the old figures back from a kept cache."""
+    prof = tmp_path / "mine.toml"
+    mobile = (Path(sim_core.energy.__file__).with_name("profiles") / "mobile.toml").read_text()
+    prof.write_text(mobile.replace('name = "mobile"', 'name = "mine"'))
+    sp = default_space().subset(SMALL)
+    reqs = [(_cam(), sp.expand(x)) for x in nsga.enumerate_space(sp.free_n_values)[:3]]
+    with EvalCache(tmp_path / "c.sqlite") as cache:
+        before = Evaluator(scene, sp, cache=cache, profile=str(prof)).evaluate(reqs)
+        static = sim_core.load_profile(prof).static_power_w
+        prof.write_text(prof.read_text().replace(f"power_w = {static}", f"power_w = {static + 1.0}"))
+        monkeypatch.setattr(evaluation, "_PROFILES", {})  # a new process: the profile is read again
+        ev = Evaluator(scene, sp, cache=cache, profile=str(prof))
+        after = ev.evaluate(reqs)
+        assert ev.evaluations == 3 and ev.cache_hits == 0
+        for b, a in zip(before, after, strict=True):
+            assert a.error == b.error and a.power_w == pytest.approx(b.power_w + 1.0, rel=1e-9)
+        # the description is not a figure: still the same key
+        prof.write_text(prof.read_text().replace('description = "', 'description = "Edited: '))
+        monkeypatch.setattr(evaluation, "_PROFILES", {})
+        again = Evaluator(scene, sp, cache=cache, profile=str(prof))
+        assert again.evaluate(reqs) == after and again.evaluations == 0
 
 
 def test_executors_give_identical_results(scene) -> None:

@@ -58,7 +58,7 @@ class DisplayPricer:
         self.cameras = 0  # camera tasks run
 
     def _key(self, camera: CameraSpec) -> CacheKey:
-        return CacheKey(self.ev.scene.content_hash, camera.key(), self.metric_key, self.ctx.profile,
+        return CacheKey(self.ev.scene.content_hash, camera.key(), self.metric_key, self.ev.profile_key,
                         camera.width, camera.height, self.ctx.fps)
 
     def price(self, requests: Sequence[tuple[CameraSpec, Sequence[Indices]]],

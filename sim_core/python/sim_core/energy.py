@@ -14,6 +14,9 @@ carries its source or stated assumption.
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
+import json
 import math
 import tomllib
 from collections.abc import Callable, Mapping
@@ -116,6 +119,14 @@ class Profile:
             self.texture_cache_size_bytes, self.texture_cache_line_bytes, self.texture_cache_ways
         )
 
+    @property
+    def fingerprint(self) -> str:
+        """A digest of every figure the model prices with (not the name, description or file): a cache
+        keyed by it never serves figures of an edited or upgraded profile under the same name."""
+        figures = {k: v for k, v in dataclasses.asdict(self).items()
+                   if k not in ("name", "description", "source")}
+        return hashlib.sha256(json.dumps(figures, sort_keys=True).encode()).hexdigest()[:16]
+
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], source: str = "") -> Profile:
         """Validate a parsed profile: every section and key present, numbers finite and in range."""
@@ -173,11 +184,11 @@ def list_profiles() -> list[str]:
     return sorted(p.stem for p in _PROFILE_DIR.glob("*.toml"))
 
 
-def load_profile(name_or_path: str | Path) -> Profile:
-    """Load a shipped profile by name (``"mobile"``, ``"desktop"``) or any profile TOML file by path."""
-    if isinstance(name_or_path, Profile):
-        return name_or_path
+def _profile_path(name_or_path: str | Path, relative_to: Path | None = None) -> Path:
+    """A shipped profile's file by name, or a TOML file by path (relative to ``relative_to`` if given)."""
     p = Path(name_or_path)
+    if relative_to is not None and not p.is_absolute() and p.suffix == ".toml":
+        p = relative_to / p
     if p.suffix != ".toml" and not p.exists():
         p = _PROFILE_DIR / f"{name_or_path}.toml"
         if not p.exists():
@@ -186,12 +197,46 @@ def load_profile(name_or_path: str | Path) -> Profile:
             )
     if not p.is_file():
         raise FileNotFoundError(f"hardware profile file not found: {p}")
+    return p
+
+
+def _read_profile(p: Path, seen: tuple[Path, ...] = ()) -> dict[str, Any]:
+    """A profile file's data with its ``base`` profile's values under its own, section by section: a
+    profile that differs from another in a few figures states only those (one source for the rest)."""
     with p.open("rb") as f:
         try:
             data = tomllib.load(f)
         except tomllib.TOMLDecodeError as e:
             raise ValueError(f"{p}: not valid TOML: {e}") from e
-    return Profile.from_dict(data, source=str(p))
+    base = data.pop("base", None)
+    if base is None:
+        return data
+    if not isinstance(base, str) or not base:
+        raise ValueError(f"{p}: 'base' must name a shipped profile or a profile file, got {base!r}")
+    if "name" not in data:
+        raise ValueError(f"{p}: a profile with a 'base' must have its own 'name'")
+    base_path = _profile_path(base, relative_to=p.parent)
+    chain = (*seen, p.resolve())
+    if base_path.resolve() in chain:
+        raise ValueError(f"{p}: its base profiles form a cycle ({' -> '.join(str(c) for c in chain)} -> "
+                         f"{base_path})")
+    merged = _read_profile(base_path, chain)
+    for key, value in data.items():
+        if isinstance(value, dict) and isinstance(merged.get(key), dict):
+            merged[key] = {**merged[key], **value}
+        else:
+            merged[key] = value
+    return merged
+
+
+def load_profile(name_or_path: str | Path) -> Profile:
+    """Load a shipped profile by name (``"mobile"``, ``"desktop"``) or any profile TOML file by path. A
+    profile file may name a ``base`` profile (shipped name, or a path relative to the file) whose values
+    it keeps where it does not set its own."""
+    if isinstance(name_or_path, Profile):
+        return name_or_path
+    p = _profile_path(name_or_path)
+    return Profile.from_dict(_read_profile(p), source=str(p))
 
 
 def sustained_power(static_power_w: float, dynamic_energy_j: float, frame_time_s: float, fps: float
