@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from types import SimpleNamespace
 
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -251,6 +252,21 @@ def test_a_bridging_rounds_time_left_goes_by_the_pricing_before_it(monkeypatch) 
     assert first.estimate_s is not None and took / 2 <= first.estimate_s <= 2 * took
 
 
+def test_the_first_pricing_rounds_time_left_includes_the_bridging_after_it(monkeypatch) -> None:
+    """The first pricing round is not the job's last phase when bridging follows it: its time left at its
+    last batch is the bridging still to come (the most it may price, at the round's own pace), not 0 s
+    (the hall's first round at 640x360 read ~5 min left with an hour of bridging after it); only the
+    last round's last batch reads 0 s. The bound holds: what the bridging took is within it."""
+    _, reports, priced_at = _clocked_bridging(monkeypatch, search_evaluations=1, first_round_cached=False)
+    first = [r for r in reports if r.phase == "price at display resolution"]
+    bridging = [r for r in reports if r.phase == "price between the priced points"]
+    took = priced_at["price between the priced points"]
+    assert took > 0 and first and bridging
+    assert first[-1].estimate_s is not None and first[-1].estimate_s >= took
+    assert first[-1].estimate_s == pytest.approx(4 * 1.0)  # 4 bridge points at the round's 1 s a setting
+    assert bridging[-1].estimate_s == 0.0
+
+
 def test_a_bridging_round_after_a_cached_round_does_not_promise_no_time_left(monkeypatch) -> None:
     """A rerun from a copied data folder answers the first pricing round from the evaluation cache in no
     time; the bridging round after it renders. Its first time left is not that cached round's pace (which
@@ -323,11 +339,17 @@ def test_a_cancel_stops_a_pricing_batch_between_its_cameras(monkeypatch) -> None
 
 def test_a_pricing_round_answered_from_the_cache_ends_with_nothing_left(monkeypatch) -> None:
     """A rerun from a copied data folder: the first pricing round is answered from the evaluation cache,
-    nothing rendered, so it has no pace. Once its last camera is done its time left is 0, not unknown or
-    the round's first guess."""
+    nothing rendered, so it has no pace. Once its last camera is done its time left is the bridging's
+    after it alone (by the search's guess: 4 bridge points at each of the 20 cameras), not unknown or
+    the round's first guess, which counted the round itself; the last round ends with nothing left."""
     import service.octree.builder as builder_module
 
-    monkeypatch.setattr(builder_module.OctreeBuilder, "pricing_time", lambda self, *args: 50.0)  # the guess
+    def guess(self, state, cameras, points):  # the search's guess: 1 s a reference or setting
+        return float(cameras + points)
+
+    monkeypatch.setattr(builder_module.OctreeBuilder, "pricing_time", guess)
     _, reports, _ = _clocked_bridging(monkeypatch, search_evaluations=1, first_round_cached=True, cameras=20)
     pricing = [r for r in reports if r.phase == "price at display resolution"]
-    assert len(pricing) >= 3 and pricing[-1].estimate_s == 0.0
+    assert len(pricing) >= 3 and pricing[-1].estimate_s == pytest.approx(20 * 4)
+    assert pricing[0].estimate_s > pricing[-1].estimate_s
+    assert [r for r in reports if r.phase == "price between the priced points"][-1].estimate_s == 0.0

@@ -455,7 +455,8 @@ class OctreeBuilder:
         first_count: dict[int, int] = {}  # per frontier, the points its first round and probes priced
         pace_s: float | None = None  # seconds a pricing render took in the rounds so far
         probing = any(lat.frontiers[fid].kept_up or lat.frontiers[fid].near for fid in jobs)
-        for round_ in range(1 + (bridge.ROUNDS if self.cfg.bridge_points > 0 else int(probing))):
+        rounds = 1 + (bridge.ROUNDS if self.cfg.bridge_points > 0 else int(probing))
+        for round_ in range(rounds):
             if round_:
                 asked = {}
                 for fid, (_, xs, figs) in jobs.items():
@@ -472,7 +473,8 @@ class OctreeBuilder:
                         asked[fid] = more
                 if not asked:
                     break
-            pace_s = self._price_round(jobs, asked, bridging=round_ > 0, pace_s=pace_s)
+            pace_s = self._price_round(jobs, asked, bridging=round_ > 0, pace_s=pace_s,
+                                       last=round_ == rounds - 1)
             if not round_:
                 first_count = {fid: len(xs) for fid, (_, xs, _) in jobs.items()}
         self.priced = {}
@@ -494,11 +496,13 @@ class OctreeBuilder:
                 for x, e, p, t in zip(xs, err.max(axis=0), pw.max(axis=0), ft.max(axis=0), strict=True)]
 
     def _price_round(self, jobs: dict[int, tuple[list[CameraSpec], list[Indices], list[np.ndarray]]],
-                     asked: dict[int, list[Indices]], bridging: bool, pace_s: float | None) -> float | None:
+                     asked: dict[int, list[Indices]], bridging: bool, pace_s: float | None,
+                     last: bool = False) -> float | None:
         """Price ``asked`` (settings per frontier) at their frontiers' cameras and append them and their
         figures to ``jobs``, reporting progress per batch. ``pace_s``: seconds a pricing render (in
         :meth:`_pricing_renders`' units) took in the rounds before, the time left's first guess for a
-        bridging round; returns this round's."""
+        bridging round; returns this round's. The time left includes the bridging rounds after this one
+        (the most they may price) unless it is the ``last``."""
         search = self.search
         requests = [(cam, xs) for fid, xs in asked.items() for cam in jobs[fid][0]]
         # what each camera priced at display resolution costs in search steps (the fraction done, and the
@@ -518,7 +522,12 @@ class OctreeBuilder:
         # a bridging round goes by the rounds before it: the search's pace, taken over its renders,
         # counts the display pricing's time too, and over a search answered from the cache gave hours
         renders = self._pricing_renders(refs * len(requests), points)
-        guess_s = (pace_s * renders if bridging and pace_s is not None
+        # the bridging rounds still to come after this one (the most they may price, as in the fraction
+        # done): the last batch of a round is not the job's end (the hall's first round at 640x360 showed
+        # ~5 min left for an hour of bridging after it)
+        # (settings: a whole number, held as search steps)
+        after = 0.0 if last else float(round(self._bridge_reserve / self.pricing_steps(0, 1.0)))
+        guess_s = (pace_s * self._pricing_renders(0, points + after) if bridging and pace_s is not None
                    else self.pricing_time(search.state, len(requests), points + most))
         search.report(phase, remaining_s=guess_s)
         # cameras per batch: several per worker, so that a batch's last camera (whose cost varies with
@@ -541,7 +550,12 @@ class OctreeBuilder:
             # resolution, which pricing_time guesses from the search's pace and pixel counts only: from the
             # first render on, the time left is this round's own pace
             left_s = self._round_time_left(time.perf_counter() - started, requests, end, rendered_before,
-                                           rendered, to_render)
+                                           rendered, to_render, after=after)
+            if left_s is None and rendered is None and end >= len(requests):
+                # the round is done with no pace of its own (the evaluation cache answered it): the rounds
+                # after it, by the pace before it or the search's guess
+                left_s = (pace_s * self._pricing_renders(0, after) if pace_s is not None
+                          else self.pricing_time(search.state, 0, after))
             search.report(phase, remaining_s=guess_s if left_s is None else left_s)
 
         for start in range(0, len(requests), chunk):
@@ -567,17 +581,23 @@ class OctreeBuilder:
 
     def _round_time_left(self, spent_s: float, requests: list[tuple[CameraSpec, list[Indices]]], end: int,
                          rendered_before: int | None, rendered: int | None = None,
-                         to_render: int = 0) -> float | None:
+                         to_render: int = 0, after: float = 0.0) -> float | None:
         """Seconds left for a pricing round's ``requests`` after ``spent_s``, in the batch that ends at
         ``requests[end]``: ``rendered`` of its ``to_render`` uncached settings so far, or all of it done
-        (None); None while nothing was rendered. Settings the evaluation cache answered take no time: the
-        pace is per setting rendered, and the requests after the batch are expected to need rendering in
-        the share the round's requests up to ``end`` did (a rerun from a copied data folder whose first
+        (None), and for ``after`` settings the rounds after it may price; None while nothing was
+        rendered. Settings the evaluation cache answered take no time: the pace is per setting rendered,
+        and the requests after the batch, and those ``after`` it, are expected to need rendering in the
+        share the round's requests up to ``end`` did (a rerun from a copied data folder whose first
         bridging batch was cached reported ~0 s left for an hour of renders)."""
-        if rendered is None and end >= len(requests):  # the round is done, cached or not
+        if rendered is None and end >= len(requests) and after <= 0:  # the last round is done
             return 0.0
         if rendered_before is None:  # (a pricer that does not count its renders)
-            return time_left(spent_s, end, len(requests)) if rendered is None else None
+            if rendered is not None:
+                return None
+            if after <= 0:
+                return time_left(spent_s, end, len(requests))
+            done = sum(len(xs) for _, xs in requests[:end])
+            return spent_s / done * (sum(len(xs) for _, xs in requests[end:]) + after) if done > 0 else None
         if rendered is None:  # the batch is done, and the pricer has counted its renders
             rendered = to_render = 0
         counted = self.pricer.evaluations - rendered_before  # type: ignore[union-attr]  # (batches done)
@@ -585,7 +605,7 @@ class OctreeBuilder:
         if counted + rendered <= 0 or asked <= 0:
             return None
         share = min(1.0, (counted + to_render) / asked)
-        later = sum(len(xs) for _, xs in requests[end:])
+        later = sum(len(xs) for _, xs in requests[end:]) + after
         return spent_s / (counted + rendered) * (to_render - rendered + share * later)
 
     def _priced_figures(self, fid: int, frontier: Frontier) -> PricedFigures | None:
