@@ -255,7 +255,7 @@ def test_a_bridging_rounds_time_left_goes_by_the_pricing_before_it(monkeypatch) 
 def test_the_first_pricing_rounds_time_left_includes_the_bridging_after_it(monkeypatch) -> None:
     """The first pricing round is not the job's last phase when bridging follows it: its time left at its
     last batch is the bridging still to come (the most it may price, at the round's own pace), not 0 s
-    (the hall's first round at 640x360 read ~5 min left with an hour of bridging after it); only the
+    (the hall's first round at 640x360 read 87 s left with an hour of bridging after it); only the
     last round's last batch reads 0 s. The bound holds: what the bridging took is within it."""
     _, reports, priced_at = _clocked_bridging(monkeypatch, search_evaluations=1, first_round_cached=False)
     first = [r for r in reports if r.phase == "price at display resolution"]

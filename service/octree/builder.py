@@ -295,7 +295,7 @@ class OctreeBuilder:
         self.bridged_points = 0  # of them, priced between the first ones' error jumps (:mod:`.bridge`)
         self.probed_points = 0  # of them, the search's probes that kept up (:meth:`_probes_to_price`)
         self.near_points = 0  # of them, the search's slow settings near the deadline (:func:`near_to_price`)
-        self._bridge_reserve = 0.0  # search steps planned for bridging not priced yet
+        self._bridge_reserve = 0  # settings the bridging may still price (in the steps planned, not priced)
         # per lattice frontier id priced at several cameras: (cameras, settings, error, power and frame
         # time (K, n) of each setting at each camera), what the store keeps as its per-camera figures
         self.priced: dict[int, PerCamera] = {}
@@ -446,9 +446,8 @@ class OctreeBuilder:
         # the points to price are known: the estimate is this phase's own from here, and its steps planned,
         # with the most the bridging may price held in reserve (the rounds draw their steps from it)
         search.renders_after = None
-        self._bridge_reserve = sum(self.pricing_steps(0, len(cams) * self.cfg.bridge_points)
-                                   for cams, _, _ in jobs.values())
-        search.steps_planned += self._bridge_reserve
+        self._bridge_reserve = sum(len(cams) * self.cfg.bridge_points for cams, _, _ in jobs.values())
+        search.steps_planned += self.pricing_steps(0, self._bridge_reserve)
         self.bridged_points = 0
         self.probed_points = 0
         self.near_points = 0
@@ -511,24 +510,21 @@ class OctreeBuilder:
         phase = "price between the priced points" if bridging else "price at display resolution"
         refs = 0 if bridging else 1
         steps = [self.pricing_steps(refs, len(xs)) for _, xs in requests]
-        reserved = min(self._bridge_reserve, sum(steps)) if refs == 0 else 0.0
+        points = sum(len(xs) for _, xs in requests)
+        reserved = min(self._bridge_reserve, points) if refs == 0 else 0
         self._bridge_reserve -= reserved
-        search.steps_planned += sum(steps) - reserved
+        search.steps_planned += sum(steps) - self.pricing_steps(0, reserved)
         done = search.steps_done
         search.check_cancel()
-        # (the first round's estimate includes the most the bridging may price, as the search's did)
-        most = sum(len(jobs[fid][0]) for fid in asked) * self.cfg.bridge_points if refs else 0
-        points = sum(len(xs) for _, xs in requests)
         # a bridging round goes by the rounds before it: the search's pace, taken over its renders,
         # counts the display pricing's time too, and over a search answered from the cache gave hours
         renders = self._pricing_renders(refs * len(requests), points)
         # the bridging rounds still to come after this one (the most they may price, as in the fraction
-        # done): the last batch of a round is not the job's end (the hall's first round at 640x360 showed
-        # ~5 min left for an hour of bridging after it)
-        # (settings: a whole number, held as search steps)
-        after = 0.0 if last else float(round(self._bridge_reserve / self.pricing_steps(0, 1.0)))
+        # done): the last batch of a round is not the job's end (the hall's first round at 640x360 read
+        # 87 s left for an hour of bridging after it)
+        after = 0 if last else self._bridge_reserve
         guess_s = (pace_s * self._pricing_renders(0, points + after) if bridging and pace_s is not None
-                   else self.pricing_time(search.state, len(requests), points + most))
+                   else self.pricing_time(search.state, len(requests), points + after))
         search.report(phase, remaining_s=guess_s)
         # cameras per batch: several per worker, so that a batch's last camera (whose cost varies with
         # its points) leaves the other workers idle for a small share of the batch only
@@ -581,7 +577,7 @@ class OctreeBuilder:
 
     def _round_time_left(self, spent_s: float, requests: list[tuple[CameraSpec, list[Indices]]], end: int,
                          rendered_before: int | None, rendered: int | None = None,
-                         to_render: int = 0, after: float = 0.0) -> float | None:
+                         to_render: int = 0, after: int = 0) -> float | None:
         """Seconds left for a pricing round's ``requests`` after ``spent_s``, in the batch that ends at
         ``requests[end]``: ``rendered`` of its ``to_render`` uncached settings so far, or all of it done
         (None), and for ``after`` settings the rounds after it may price; None while nothing was
