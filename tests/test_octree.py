@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from service import cli
 from service.camera_path import CameraPath
@@ -488,3 +490,97 @@ def test_the_default_descent_gives_the_recorded_store(scene, name) -> None:
         assert _digest(store) in RECORDED_DESCENT[name]
     again = optimize_path(scene, path, SPACE, opts, cache=EvalCache(), executor=InProcessExecutor())
     assert _digest(again) == _digest(store)
+
+
+def _passes_sampler(positions: np.ndarray, forwards: np.ndarray, guard_frames: int):
+    """A path sampler over these frames (only what choosing a group's cameras reads)."""
+    from types import SimpleNamespace
+
+    from service.octree import PathFrames, PathSampling
+
+    n = len(positions)
+    frames = PathFrames(positions, forwards, positions + forwards * 6.0, np.tile(np.eye(4), (n, 1, 1)),
+                        np.full(n, 0.7), np.full(n, 1.5))
+    lattice = SimpleNamespace(root_min=np.full(3, -10.0), root_size=20.0)
+    cfg = SimpleNamespace(guard_frames=guard_frames, vfov=0.7, width=32, height=18)
+    return PathSampling(lattice, None, cfg, frames)
+
+
+def test_every_pass_through_a_group_gets_a_pricing_camera() -> None:
+    """A group read on two passes of the path: the first a long walk, the second short and 0.6 m to
+    its side. The medoid and the frame farthest from it both fall on the walk, so without a camera per
+    pass the second pass's frames read figures priced only on the first; with guard frames its medoid
+    is a pricing camera too, and without them the sample stays alone."""
+    walk = np.stack([np.linspace(-1.0, 1.0, 21), np.zeros(21), np.zeros(21)], axis=1)
+    back = np.stack([np.linspace(-0.1, 0.1, 5), np.full(5, 0.6), np.zeros(5)], axis=1)
+    between = np.stack([np.zeros(10), np.full(10, 5.0), np.zeros(10)], axis=1)  # another group's frames
+    positions = np.concatenate([walk, between, back])
+    forwards = np.tile([0.0, 1.0, 0.0], (len(positions), 1))
+    group = [*range(21), *range(31, 36)]
+    dist = np.full(len(positions), 6.0)
+    for guards, want in ((0, 1), (1, 3), (2, 4)):
+        cams = _passes_sampler(positions, forwards, guards)._sample_cameras(group, dist)
+        eyes = np.asarray([c.eye for c in cams])
+        assert len(cams) == want
+        assert np.allclose(eyes[0], walk[10], atol=1e-3)  # the group's medoid, on the walk
+        if guards:
+            assert np.allclose(eyes[1], back[2], atol=1e-3)  # the second pass's medoid
+            assert np.allclose(eyes[2], walk[0], atol=1e-3) or np.allclose(eyes[2], walk[-1], atol=1e-3)
+
+
+@settings(max_examples=60, deadline=None)
+@given(runs=st.lists(st.tuples(st.integers(1, 6), st.integers(2, 5)), min_size=1, max_size=5),
+       guards=st.integers(0, 3), seed=st.integers(0, 2**16))
+def test_pricing_cameras_cover_every_pass(runs, guards, seed) -> None:
+    """Invariants of a group's cameras over random passes: the sample first, one camera per pass with
+    guard frames (a pass coinciding with an earlier camera adds none), at most ``guard_frames`` more,
+    no two the same; without guard frames the sample alone."""
+    rng = np.random.default_rng(seed)
+    group, start = [], 0
+    for length, gap in runs:
+        group += list(range(start, start + length))
+        start += length + gap
+    positions = rng.uniform(-3.0, 3.0, (start, 3)).round(1)
+    forwards = np.tile([0.0, 1.0, 0.0], (start, 1))
+    cams = _passes_sampler(positions, forwards, guards)._sample_cameras(group, np.full(start, 6.0))
+    eyes = np.asarray([c.eye for c in cams])
+    if guards == 0:
+        assert len(cams) == 1
+        return
+    distinct = {tuple(e) for e in eyes.round(3)}
+    assert len(distinct) == len(cams)
+    start = 0
+    for length, gap in runs:
+        run = positions[start:start + length]
+        assert np.min(np.linalg.norm(run[:, None, :] - eyes[None, :, :], axis=2)) < 1e-3
+        start += length + gap
+    assert len(cams) <= 1 + len(runs) + guards
+
+
+@pytest.mark.slow
+def test_a_path_coming_back_prices_its_frontiers_on_both_passes(scene) -> None:
+    """A path along an orbit, away, and back for a few frames 0.3 m above its middle: wherever both
+    passes read one frontier, the store's pricing cameras for it include a frame of each (built through
+    the whole optimiser). With one guard frame the frame farthest from the sample is an end of the long
+    pass, so without a camera per pass the short one is priced nowhere."""
+    orbit = [(6.0 * np.sin(a), -6.0 * np.cos(a), 2.5) for a in np.linspace(-0.6, 0.9, 16)]
+    away = [(9.0 * np.sin(a), -9.0 * np.cos(a), 2.5) for a in np.linspace(0.9, 0.0, 4)]
+    back = [(6.0 * np.sin(a), -6.0 * np.cos(a), 2.8) for a in np.linspace(0.1, 0.2, 4)]
+    pos = orbit + away + back
+    passes = [range(0, 16), range(20, 24)]
+    path = CameraPath.from_positions(pos, [(-x, -y, 0.6 - z) for x, y, z in pos], vfov=0.7,
+                                     resolution=(320, 240))
+    opts = _options(view_sampling="path", max_depth=3, path_resolution=0.5, guard_frames=1)
+    store = optimize_path(scene, path, SPACE, opts, cache=EvalCache(), executor=InProcessExecutor())
+    readers: dict[int, set[int]] = {}
+    for i, f in enumerate(path.frames):
+        c, v = store.locate(f.position, matrix=np.asarray(f.matrix_world), fov=f.vfov, aspect=f.aspect)
+        readers.setdefault(int(store.corner_views[c, v]), set()).update(
+            k for k, run in enumerate(passes) if i in run)
+    both = [fid for fid, read in readers.items() if len(read) == 2]
+    assert both, "the test path should read some frontier on both passes"
+    positions = path.positions()
+    for fid in both:
+        eyes = store.priced[fid].eyes
+        near = np.linalg.norm(positions[:, None, :] - eyes[None, :, :], axis=2).min(axis=1) < 1e-3
+        assert all(near[list(run)].any() for run in passes), (fid, readers)

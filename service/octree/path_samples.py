@@ -10,9 +10,11 @@ by eye distance over viewing distance plus direction difference); a full search 
 ``path_stride``-th sample along the path and short warm-started ones in between (warm-started from
 the neighbours' meeting tiers); then every frontier
 setting is also priced at ``guard_frames`` more of those frames (the ones least like the chosen ones)
-and the frontier keeps each setting's worst error, power and frame time, so it bounds the frames it
-serves (and each camera's own, :class:`service.store.priced.PricedFigures`: the lookup interpolates
-them at a frame, and draws the frame's tiers from the interpolated frame times). Faces
+and, when there are guard frames, at the medoid of every other pass of the path through the sample's
+group (a loop's closing frames, a second walk through a room: the frames least like the chosen ones
+need not fall on it), and the frontier keeps each setting's worst error, power and frame time, so it
+bounds the frames it serves (and each camera's own, :class:`service.store.priced.PricedFigures`: the
+lookup interpolates them at a frame, and draws the frame's tiers from the interpolated frame times). Faces
 no path frame reads inherit the frontier of the nearest sample. No frontier-difference comparisons
 are made in this mode.
 """
@@ -189,13 +191,16 @@ class PathSampling:
 
     def _sample_cameras(self, frames: Sequence[int], dist: np.ndarray) -> list[CameraSpec]:
         """The group's medoid frame (eye and view direction, distances in units of the viewing
-        distance), then up to ``guard_frames`` frames farthest from the chosen ones."""
+        distance); with guard frames, the medoid of every other pass of the path through the group
+        (:func:`_pass_medoids`), then up to ``guard_frames`` frames farthest from the chosen ones."""
         idx = np.asarray(frames, dtype=np.int64)
         p = self.path.positions[idx]
         f = self.path.forwards[idx] / np.linalg.norm(self.path.forwards[idx], axis=1, keepdims=True)
         scale = float(np.median(dist[idx]))
         cost = camera_dissimilarity(p[:, None, :], f[:, None, :], p[None, :, :], f[None, :, :], scale)
         chosen = [int(np.argmin(cost.sum(axis=1)))]
+        if self.cfg.guard_frames > 0:
+            chosen += _pass_medoids(idx, cost, chosen[0])
         for _ in range(self.cfg.guard_frames):
             far = cost[chosen].min(axis=0)
             k = int(np.argmax(far))
@@ -254,3 +259,23 @@ class PathSampling:
                 sc, sv = keys[k]
                 views[v] = self.lattice.corner_views[sc][sv]
 
+
+
+def _pass_medoids(frames: np.ndarray, cost: np.ndarray, sample: int) -> list[int]:
+    """The medoid of each pass of the path through a group (a run of consecutive path frames) but the
+    sample's own, as positions in ``frames``.
+
+    A path that comes back to a lookup cell later (a loop's closing frames, a second walk through a
+    room) reads the same frontier from another place or pitch, and the dissimilarity's farthest frames
+    need not fall on that pass: on the hall a frame 0.65 m to the side and 0.048 from the sample by that
+    measure read a frontier priced only on the other pass and measured twice its worst camera's error
+    (bench/RESULTS.md). Coinciding with a camera already chosen, a pass adds none."""
+    runs = np.split(np.arange(frames.size), np.flatnonzero(np.diff(frames) > 1) + 1)
+    chosen = [sample]
+    for run in runs:
+        if sample in run:
+            continue
+        m = int(run[np.argmin(cost[np.ix_(run, run)].sum(axis=1))])
+        if cost[chosen, m].min() > 1e-12:
+            chosen.append(m)
+    return chosen[1:]
