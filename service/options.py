@@ -126,8 +126,8 @@ OPTIONS: tuple[Option, ...] = (
            "path cameras: octree leaves at most this times the viewing distance wide",
            minimum=0.01, maximum=10.0, metavar="R", group=_SAMPLES, modes=("path",), precision=3),
     Option("guard_frames", int, 2, "Guard frames",
-           "path cameras: also price each frontier at this many more path cameras (and, when above 0, "
-           "one of every other pass of the path through it), keeping the worst error and power",
+           "path cameras: also price each frontier at this many more path cameras (and at one camera of "
+           "as many other passes of the path through it), keeping the worst error and power",
            minimum=0, maximum=8, metavar="N", group=_SAMPLES, modes=("path",)),
     Option("threshold_power_w", float, 0.05, "Power threshold (W)",
            "view cubes: subdivide where neighbouring frontiers differ by more than this many watts",

@@ -531,10 +531,10 @@ def test_every_pass_through_a_group_gets_a_pricing_camera() -> None:
 @settings(max_examples=60, deadline=None)
 @given(runs=st.lists(st.tuples(st.integers(1, 6), st.integers(2, 5)), min_size=1, max_size=5),
        guards=st.integers(0, 3), seed=st.integers(0, 2**16))
-def test_pricing_cameras_cover_every_pass(runs, guards, seed) -> None:
-    """Invariants of a group's cameras over random passes: the sample first, one camera per pass with
-    guard frames (a pass coinciding with an earlier camera adds none), at most ``guard_frames`` more,
-    no two the same; without guard frames the sample alone."""
+def test_pricing_cameras_cover_the_passes(runs, guards, seed) -> None:
+    """Invariants of a group's cameras over random passes: the sample first, with guard frames a camera
+    on as many other passes (every pass when there are no more of them), at most ``guard_frames``
+    farthest frames more, no two the same; without guard frames the sample alone."""
     rng = np.random.default_rng(seed)
     group, start = [], 0
     for length, gap in runs:
@@ -547,14 +547,30 @@ def test_pricing_cameras_cover_every_pass(runs, guards, seed) -> None:
     if guards == 0:
         assert len(cams) == 1
         return
-    distinct = {tuple(e) for e in eyes.round(3)}
-    assert len(distinct) == len(cams)
-    start = 0
+    assert len({tuple(e) for e in eyes.round(3)}) == len(cams)
+    covered, start = 0, 0
     for length, gap in runs:
         run = positions[start:start + length]
-        assert np.min(np.linalg.norm(run[:, None, :] - eyes[None, :, :], axis=2)) < 1e-3
+        covered += np.min(np.linalg.norm(run[:, None, :] - eyes[None, :, :], axis=2)) < 1e-3
         start += length + gap
-    assert len(cams) <= 1 + len(runs) + guards
+    assert covered >= 1 + min(guards, len(runs) - 1)
+    assert len(cams) <= 1 + 2 * guards
+
+
+def test_a_camera_wavering_across_a_border_adds_at_most_guard_frames_pass_cameras() -> None:
+    """A camera that crosses a group's border back and forth makes a pass of every crossing: the
+    passes priced are the longest ones, at most ``guard_frames`` of them, so the cost stays bounded."""
+    n = 60
+    positions = np.stack([np.linspace(0.0, 3.0, n), np.zeros(n), np.zeros(n)], axis=1)
+    forwards = np.tile([0.0, 1.0, 0.0], (n, 1))
+    long_pass = list(range(10))
+    group = [*long_pass, *range(12, 60, 2)]  # a pass of ten frames, then 24 single-frame passes
+    for guards in (1, 2):
+        cams = _passes_sampler(positions, forwards, guards)._sample_cameras(group, np.full(n, 6.0))
+        assert len(cams) <= 1 + 2 * guards
+        eyes = np.asarray([c.eye for c in cams])
+        assert np.linalg.norm(positions[long_pass] - eyes[0], axis=1).min() > 0.1  # the sample elsewhere
+        assert np.linalg.norm(positions[long_pass] - eyes[1], axis=1).min() < 1e-3  # the longest pass next
 
 
 @pytest.mark.slow

@@ -351,8 +351,8 @@ class OctreeBuilder:
 
         Where the sampling strategy knows the frontiers it will price and their cameras before the search
         ends (:meth:`CameraSampling.pricing_plan`: path samples, once placed, each at its sample camera
-        and its own guards and pass cameras, which are fewer than ``guard_frames`` where a group's frames
-        coincide and more where the path passes through it more than once), exactly
+        and its own guards and pass cameras, at most ``guard_frames`` of each, fewer where a group's
+        frames coincide or the path passes through it once), exactly
         those cameras, each with the points its frontier keeps to be priced (:func:`spread_points`) or,
         for a frontier not found yet, as many as the frontiers found so far keep on average. Otherwise
         (view cubes, or path samples not placed yet) every view planned so far, at its sample camera and

@@ -10,11 +10,12 @@ by eye distance over viewing distance plus direction difference); a full search 
 ``path_stride``-th sample along the path and short warm-started ones in between (warm-started from
 the neighbours' meeting tiers); then every frontier
 setting is also priced at ``guard_frames`` more of those frames (the ones least like the chosen ones)
-and, when there are guard frames, at the medoid of every other pass of the path through the sample's
-group (a loop's closing frames, a second walk through a room: the frames least like the chosen ones
-need not fall on it), and the frontier keeps each setting's worst error, power and frame time, so it
-bounds the frames it serves (and each camera's own, :class:`service.store.priced.PricedFigures`: the
-lookup interpolates them at a frame, and draws the frame's tiers from the interpolated frame times). Faces
+and, when there are guard frames, at the medoids of as many other passes of the path through the
+sample's group (a loop's closing frames, a second walk through a room: the frames least like the chosen
+ones need not fall on them; the longest passes first), and the frontier keeps each setting's worst
+error, power and frame time, so it bounds the frames it serves (and each camera's own,
+:class:`service.store.priced.PricedFigures`: the lookup interpolates them at a frame, and draws the
+frame's tiers from the interpolated frame times). Faces
 no path frame reads inherit the frontier of the nearest sample. No frontier-difference comparisons
 are made in this mode.
 """
@@ -191,8 +192,9 @@ class PathSampling:
 
     def _sample_cameras(self, frames: Sequence[int], dist: np.ndarray) -> list[CameraSpec]:
         """The group's medoid frame (eye and view direction, distances in units of the viewing
-        distance); with guard frames, the medoid of every other pass of the path through the group
-        (:func:`_pass_medoids`), then up to ``guard_frames`` frames farthest from the chosen ones."""
+        distance); with guard frames, the medoids of up to ``guard_frames`` other passes of the path
+        through the group (:func:`_pass_medoids`), then up to ``guard_frames`` frames farthest from the
+        chosen ones."""
         idx = np.asarray(frames, dtype=np.int64)
         p = self.path.positions[idx]
         f = self.path.forwards[idx] / np.linalg.norm(self.path.forwards[idx], axis=1, keepdims=True)
@@ -200,7 +202,7 @@ class PathSampling:
         cost = camera_dissimilarity(p[:, None, :], f[:, None, :], p[None, :, :], f[None, :, :], scale)
         chosen = [int(np.argmin(cost.sum(axis=1)))]
         if self.cfg.guard_frames > 0:
-            chosen += _pass_medoids(idx, cost, chosen[0])
+            chosen += _pass_medoids(idx, cost, chosen[0], self.cfg.guard_frames)
         for _ in range(self.cfg.guard_frames):
             far = cost[chosen].min(axis=0)
             k = int(np.argmax(far))
@@ -260,21 +262,22 @@ class PathSampling:
                 views[v] = self.lattice.corner_views[sc][sv]
 
 
-
-def _pass_medoids(frames: np.ndarray, cost: np.ndarray, sample: int) -> list[int]:
-    """The medoid of each pass of the path through a group (a run of consecutive path frames) but the
-    sample's own, as positions in ``frames``.
+def _pass_medoids(frames: np.ndarray, cost: np.ndarray, sample: int, most: int) -> list[int]:
+    """The medoids of up to ``most`` passes of the path through a group (runs of consecutive path frames)
+    other than the sample's own, the longest passes first, as positions in ``frames``.
 
     A path that comes back to a lookup cell later (a loop's closing frames, a second walk through a
     room) reads the same frontier from another place or pitch, and the dissimilarity's farthest frames
     need not fall on that pass: on the hall a frame 0.65 m to the side and 0.048 from the sample by that
     measure read a frontier priced only on the other pass and measured twice its worst camera's error
-    (bench/RESULTS.md). Coinciding with a camera already chosen, a pass adds none."""
+    (bench/RESULTS.md). A pass coinciding with a camera already chosen adds none; ``most`` bounds the
+    cost where a camera wavers across a cell's border (each crossing a pass)."""
     runs = np.split(np.arange(frames.size), np.flatnonzero(np.diff(frames) > 1) + 1)
+    others = sorted((run for run in runs if sample not in run), key=len, reverse=True)  # stable: path order
     chosen = [sample]
-    for run in runs:
-        if sample in run:
-            continue
+    for run in others:
+        if len(chosen) > most:
+            break
         m = int(run[np.argmin(cost[np.ix_(run, run)].sum(axis=1))])
         if cost[chosen, m].min() > 1e-12:
             chosen.append(m)
