@@ -31,7 +31,7 @@ import numpy as np
 from service.evaluation import CameraSpec
 from service.params import Indices
 from service.store import VIEW_FORWARD, quantise_directions, quantise_eyes, view_up
-from service.store.priced import camera_dissimilarity
+from service.store.priced import SAME_CAMERA, camera_dissimilarity
 
 from .lattice import N_VIEWS, Lattice
 from .search import Search
@@ -200,13 +200,13 @@ class PathSampling:
         f = self.path.forwards[idx] / np.linalg.norm(self.path.forwards[idx], axis=1, keepdims=True)
         scale = float(np.median(dist[idx]))
         cost = camera_dissimilarity(p[:, None, :], f[:, None, :], p[None, :, :], f[None, :, :], scale)
-        chosen = [int(np.argmin(cost.sum(axis=1)))]
+        chosen = [_medoid(cost, np.arange(idx.size))]
         if self.cfg.guard_frames > 0:
             chosen += _pass_medoids(idx, cost, chosen[0], self.cfg.guard_frames)
         for _ in range(self.cfg.guard_frames):
             far = cost[chosen].min(axis=0)
             k = int(np.argmax(far))
-            if far[k] <= 1e-12:
+            if far[k] <= SAME_CAMERA:
                 break
             chosen.append(k)
         eyes = quantise_eyes(p[chosen], self.lattice.root_min, self.lattice.root_size)
@@ -278,7 +278,12 @@ def _pass_medoids(frames: np.ndarray, cost: np.ndarray, sample: int, most: int) 
     for run in others:
         if len(chosen) > most:
             break
-        m = int(run[np.argmin(cost[np.ix_(run, run)].sum(axis=1))])
-        if cost[chosen, m].min() > 1e-12:
+        m = _medoid(cost, run)
+        if cost[chosen, m].min() > SAME_CAMERA:
             chosen.append(m)
     return chosen[1:]
+
+
+def _medoid(cost: np.ndarray, members: np.ndarray) -> int:
+    """The member least unlike the others (least summed ``cost``), as a position in ``cost``."""
+    return int(members[np.argmin(cost[np.ix_(members, members)].sum(axis=1))])

@@ -2,13 +2,12 @@
 a frame between those cameras measures.
 
 A path-sampled frontier is priced at its sample camera and at up to ``guard_frames`` more cameras of the
-path frames it serves (and at one of as many other passes of the path through it), and it
-keeps each point's *worst* error, power and frame time over them (:mod:`service.octree.path_samples`):
-a bound over those cameras, which the budget searches use, so a
-point is chosen only when its worst figures keep the budget. As a prediction of one frame's figures the
-worst one is biased: a frame next to the sample camera gets the figure of a guard camera far from it
-(on the hall, ``desktop``, 320x180, it was most of the power-budget mode's 0.0049 mean |predicted -
-measured| error: bench/RESULTS.md).
+path frames it serves (and at one of as many other passes of the path through it), and it keeps each
+point's *worst* error, power and frame time over them (:mod:`service.octree.path_samples`): a bound over
+those cameras, which the budget searches use, so a point is chosen only when its worst figures keep the
+budget. As a prediction of one frame's figures the worst one is biased: a frame next to the sample
+camera gets the figure of a guard camera far from it (on the hall, ``desktop``, 320x180, it was most of
+the power-budget mode's 0.0049 mean |predicted - measured| error: bench/RESULTS.md).
 
 So a store may also keep every point's figures at each pricing camera (:class:`PricedFigures`), and
 the lookup predicts a frame's error and power as their Shepard interpolation at the frame's camera
