@@ -368,7 +368,8 @@ def _digest(store: ParetoStore, version: int | None = None) -> str:
     # (meta keys added after the recording, saying where the figures were measured, left out)
     d["meta"] = {k: v for k, v in d["meta"].items() if k != "elapsed_s" and k not in DISPLAY_META
                  and k != "static_power_w"  # (recorded since queries may ask for another frame rate)
-                 and k != "probe_evaluations"}  # (recorded since the slow region is probed)
+                 and k != "probe_evaluations"  # (recorded since the slow region is probed)
+                 and k != "guard_radius"}  # (recorded since a group's far frames are priced too)
     return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()
 
 
@@ -492,8 +493,10 @@ def test_the_default_descent_gives_the_recorded_store(scene, name) -> None:
     assert _digest(again) == _digest(store)
 
 
-def _passes_sampler(positions: np.ndarray, forwards: np.ndarray, guard_frames: int):
-    """A path sampler over these frames (only what choosing a group's cameras reads)."""
+def _passes_sampler(positions: np.ndarray, forwards: np.ndarray, guard_frames: int,
+                    guard_radius: float = 0.0):
+    """A path sampler over these frames (only what choosing a group's cameras reads; no guard radius
+    unless given)."""
     from types import SimpleNamespace
 
     from service.octree import PathFrames, PathSampling
@@ -502,7 +505,7 @@ def _passes_sampler(positions: np.ndarray, forwards: np.ndarray, guard_frames: i
     frames = PathFrames(positions, forwards, positions + forwards * 6.0, np.tile(np.eye(4), (n, 1, 1)),
                         np.full(n, 0.7), np.full(n, 1.5))
     lattice = SimpleNamespace(root_min=np.full(3, -10.0), root_size=20.0)
-    cfg = SimpleNamespace(guard_frames=guard_frames, vfov=0.7, width=32, height=18)
+    cfg = SimpleNamespace(guard_frames=guard_frames, guard_radius=guard_radius, vfov=0.7, width=32, height=18)
     return PathSampling(lattice, None, cfg, frames)
 
 
@@ -571,6 +574,74 @@ def test_a_camera_wavering_across_a_border_adds_at_most_guard_frames_pass_camera
         eyes = np.asarray([c.eye for c in cams])
         assert np.linalg.norm(positions[long_pass] - eyes[0], axis=1).min() > 0.1  # the sample elsewhere
         assert np.linalg.norm(positions[long_pass] - eyes[1], axis=1).min() < 1e-3  # the longest pass next
+
+
+def _nearest_camera(positions: np.ndarray, forwards: np.ndarray, cams: list, scale: float) -> np.ndarray:
+    """Each frame's camera dissimilarity to the nearest of ``cams`` (as the lookup weighs them)."""
+    from service.store.priced import camera_dissimilarity
+
+    eyes = np.asarray([c.eye for c in cams])
+    fwd = np.asarray([c.forward for c in cams])
+    cost = camera_dissimilarity(positions[:, None], forwards[:, None], eyes[None], fwd[None], scale)
+    return cost.min(axis=1)
+
+
+def _pan(degrees: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Frames standing still while the camera turns through ``degrees`` about the vertical."""
+    a = np.radians(degrees)
+    return np.zeros((a.size, 3)), np.stack([np.sin(a), np.cos(a), np.zeros(a.size)], axis=1)
+
+
+def test_frames_beyond_the_guard_radius_are_priced_too() -> None:
+    """A fast pan read by one frontier (the hall's frames 1404-1407 turn 20 degrees a frame): the
+    medoid and the two farthest frames leave the frames between them 20 degrees (0.06 by the
+    dissimilarity) from every pricing camera, where the lookup's interpolation between cameras misses
+    most. With the guard radius the farthest of those are priced too, until every frame is within it;
+    without guard frames the sample stays alone."""
+    positions, forwards = _pan(np.arange(0.0, 81.0, 10.0))
+    group, dist = list(range(positions.shape[0])), np.full(positions.shape[0], 6.0)
+    plain = _passes_sampler(positions, forwards, 2)._sample_cameras(group, dist)
+    assert len(plain) == 3
+    assert _nearest_camera(positions, forwards, plain, 6.0).max() > 0.05
+    covered = _passes_sampler(positions, forwards, 2, guard_radius=0.05)._sample_cameras(group, dist)
+    assert [c.forward for c in covered[:3]] == [c.forward for c in plain]  # the same cameras first
+    assert len(covered) == 5
+    assert _nearest_camera(positions, forwards, covered, 6.0).max() <= 0.05
+    alone = _passes_sampler(positions, forwards, 0, guard_radius=0.05)._sample_cameras(group, dist)
+    assert len(alone) == 1
+
+
+def test_the_guard_radius_prices_at_most_guard_frames_more() -> None:
+    """A pan through 160 degrees needs more cameras than that to bring every frame within 0.05: the
+    radius adds ``guard_frames`` of them and stops, so a wild group costs a bounded pricing."""
+    positions, forwards = _pan(np.arange(0.0, 161.0, 10.0))
+    group, dist = list(range(positions.shape[0])), np.full(positions.shape[0], 6.0)
+    for guards in (1, 2, 3):
+        plain = _passes_sampler(positions, forwards, guards)._sample_cameras(group, dist)
+        covered = _passes_sampler(positions, forwards, guards, guard_radius=0.05)._sample_cameras(group, dist)
+        assert len(covered) == len(plain) + guards
+        assert _nearest_camera(positions, forwards, covered, 6.0).max() > 0.05
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(1, 12), guards=st.integers(0, 3), radius=st.floats(0.005, 0.5),
+       seed=st.integers(0, 2**16))
+def test_the_guard_radius_covers_the_group_or_adds_guard_frames(n, guards, radius, seed) -> None:
+    """Invariants over random groups of one pass: the cameras without the radius come first and
+    unchanged; the radius adds none without guard frames, at most ``guard_frames`` with them, and
+    when it adds fewer every frame lies within it (up to the cameras' quantisation)."""
+    rng = np.random.default_rng(seed)
+    positions = rng.uniform(-2.0, 2.0, (n, 3))
+    forwards = rng.normal(size=(n, 3)) + np.array([0.0, 3.0, 0.0])
+    forwards /= np.linalg.norm(forwards, axis=1, keepdims=True)
+    group, dist = list(range(n)), np.full(n, 6.0)
+    plain = _passes_sampler(positions, forwards, guards)._sample_cameras(group, dist)
+    covered = _passes_sampler(positions, forwards, guards, guard_radius=radius)._sample_cameras(group, dist)
+    assert covered[:len(plain)] == plain
+    added = len(covered) - len(plain)
+    assert 0 <= added <= guards
+    if added < guards:
+        assert _nearest_camera(positions, forwards, covered, 6.0).max() <= radius + 1e-4
 
 
 @pytest.mark.slow

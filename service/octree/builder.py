@@ -48,6 +48,9 @@ class OctreeConfig:
     view_sampling: str = "aimed"
     path_resolution: float = 0.25  # "path" sampling: leaf side <= this x the path's viewing distance there
     guard_frames: int = 2  # "path" sampling: extra path cameras of each sample its frontier is priced at
+    # "path" sampling with guard frames: then the frames farther than this from every pricing camera too,
+    # at most guard_frames more (0: none)
+    guard_radius: float = 0.05
     path_stride: int = 4  # "path" sampling: a full search at every path_stride-th sample along the path
     warm_generations: int = 5  # "path" sampling: generations of the warm-started searches in between
     # the path's resolution, where every recorded point is priced again (None: the search's figures)
@@ -65,7 +68,7 @@ class OctreeConfig:
     def __post_init__(self) -> None:
         options.check({name: getattr(self, name) for name in (
             "threshold_power_w", "threshold_error", "max_depth", "min_depth", "margin", "view_sampling",
-            "path_resolution", "guard_frames")})
+            "path_resolution", "guard_frames", "guard_radius")})
 
 
 @dataclass
@@ -351,8 +354,9 @@ class OctreeBuilder:
 
         Where the sampling strategy knows the frontiers it will price and their cameras before the search
         ends (:meth:`CameraSampling.pricing_plan`: path samples, once placed, each at its sample camera
-        and its own guards and pass cameras, at most ``guard_frames`` of each, fewer where a group's
-        frames coincide or the path passes through it once), exactly
+        and its own guards, pass cameras and cameras beyond the guard radius, at most ``guard_frames`` of
+        each, fewer where a group's frames coincide, lie within the radius or the path passes through it
+        once), exactly
         those cameras, each with the points its frontier keeps to be priced (:func:`spread_points`) or,
         for a frontier not found yet, as many as the frontiers found so far keep on average. Otherwise
         (view cubes, or path samples not placed yet) every view planned so far, at its sample camera and

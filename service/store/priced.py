@@ -2,7 +2,8 @@
 a frame between those cameras measures.
 
 A path-sampled frontier is priced at its sample camera and at up to ``guard_frames`` more cameras of the
-path frames it serves (and at one of as many other passes of the path through it), and it keeps each
+path frames it serves (and at one of as many other passes of the path through it, and at as many of its
+frames as lie beyond the guard radius from all those), and it keeps each
 point's *worst* error, power and frame time over them (:mod:`service.octree.path_samples`): a bound over
 those cameras, which the budget searches use, so a point is chosen only when its worst figures keep the
 budget. As a prediction of one frame's figures the worst one is biased: a frame next to the sample
