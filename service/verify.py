@@ -132,6 +132,14 @@ def markdown(doc: dict[str, Any]) -> str:
               f"measured / predicted power: median {s['median_power_ratio']:.3f}, "
               f"{100 * s['share_power_within_10pct']:.0f} % of frames within 10 %",
               f"worst frames: {', '.join(str(i) for i in s['worst_frames'])}"]
+    if figures and tuple(figures) != (w, h):
+        # a stated display size checked at another (the path's own, say): the errors check the picks
+        # there, but power and frame time grow with the pixels and are not what the store predicts
+        size = "x".join(str(v) for v in figures)
+        lines.append(f"note: the store's figures are for a {size} display, not {w}x{h}: the errors check its "
+                     f"picks at this size, and its power and frame-rate figures are for {size}, so the "
+                     f"power ratio above says how far this size's power is from them, not how well they "
+                     f"predict")
     return "\n".join(lines)
 
 

@@ -17,7 +17,7 @@ from service.executors import InProcessExecutor
 from service.metrics import ssim
 from service.optimize import OptimizeConfig, optimize_path
 from service.params import default_space
-from service.verify import sample_frames, verify_store
+from service.verify import markdown, sample_frames, verify_store
 from tests.api_support import teapot_scene_file
 
 SPACE = default_space().subset(["sampling", "max_depth", "resolution_scale"])
@@ -64,6 +64,29 @@ def test_sample_frames_spread_over_the_path() -> None:
 
 
 @pytest.mark.slow
+def _report(resolution: list[int], figures: list[int] | None) -> str:
+    frame = {"frame": 7, "time": 0.25, "predicted_error": 0.01, "measured_error": 0.012,
+             "predicted_power_w": 40.0, "measured_power_w": 58.0, "within_budget": True, "infeasible": False}
+    summary = {"within_budget": 1, "frames": 1, "share_within_budget": 1.0,
+               "mean_abs_error_difference": 0.002, "max_abs_error_difference": 0.002,
+               "median_power_ratio": 1.45, "share_power_within_10pct": 0.0, "worst_frames": [7]}
+    return markdown({"resolution": resolution, "store_figures_resolution": figures, "budget_mode": "error",
+                     "budget_value": 0.02, "profile": "desktop_gtx980", "fps": 30.0, "frames": [frame],
+                     "summary": summary})
+
+
+def test_the_report_says_when_a_store_for_another_display_size_is_checked() -> None:
+    """A 640x360 store's picks rendered at the path's 1280x720 (the issue's subset at full size): the
+    power there is not what the store predicts, and the report says so; at the store's own size, or
+    where the store states no size, it does not."""
+    other = _report([1280, 720], [640, 360])
+    assert "verified at 1280x720 (store figures for 640x360)" in other
+    assert "note: the store's figures are for a 640x360 display, not 1280x720" in other
+    assert "not how well they predict" in other
+    assert "note:" not in _report([640, 360], [640, 360])
+    assert "note:" not in _report([640, 360], None)
+
+
 def test_verify_measures_independent_renders_of_the_stores_choices(setup) -> None:
     _, scene, _, store, _, path, _ = setup
     budget = 0.02
@@ -111,6 +134,7 @@ def test_cli_verify_prints_the_table_and_writes_json(setup, capsys) -> None:
     assert code == 0
     text = capsys.readouterr().out
     assert "verified at 64x48 (store figures for 96x72), power budget" in text and "within budget:" in text
+    assert "note: the store's figures are for a 96x72 display, not 64x48" in text
     doc = json.loads(out.read_text())
     assert doc["resolution"] == [64, 48] and len(doc["frames"]) == 3 and doc["budget_mode"] == "power"
     assert doc["summary"]["within_budget"] == sum(f["measured_power_w"] <= budget for f in doc["frames"])
