@@ -199,6 +199,12 @@ def test_describe_follows_the_services_fraction_through_the_display_pricing() ->
         assert u.fraction == pytest.approx(0.2164)
         assert u.text == ("running [price at display resolution]: 22 %, 9/9 views, 180 evaluations "
                           "(4 cached), ~470 s left")
+    # with the time spent (every service since the job's elapsed time was summed over its attempts)
+    timed = {"state": "running", "progress": {**pricing, "fraction": 0.2164, "elapsed_s": 1234.6}}
+    assert describe(timed).text == ("running [price at display resolution]: 22 %, 9/9 views, 180 "
+                                    "evaluations (4 cached), 1235 s in, ~470 s left")
+    for bad in (None, float("nan"), True, "12"):
+        assert " s in" not in describe({"state": "running", "progress": {**pricing, "elapsed_s": bad}}).text
     assert describe({"state": "running", "progress": {**pricing, "fraction": None}}).fraction == 1.0
     done = describe({"state": "done", "progress": {**pricing, "fraction": 1.0, "phase": "done"}})
     assert done.fraction == 1.0 and done.text == "done: 9/9 views, 180 evaluations (4 cached)"

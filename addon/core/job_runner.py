@@ -5,6 +5,7 @@ Used by the operator's worker thread (GUI), by its synchronous execute() (backgr
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -80,6 +81,10 @@ class JobOutcome:
     job: dict[str, Any] = field(default_factory=dict)
 
 
+def _number(v: Any) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+
+
 def describe(job: dict[str, Any], evals_per_view: int | None = None) -> JobUpdate:
     """Fraction done and a one-line status from a GET /jobs/{id} body.
 
@@ -87,7 +92,8 @@ def describe(job: dict[str, Any], evals_per_view: int | None = None) -> JobUpdat
     pricing after it), shown in the text too. A service without it: views done of those planned, which
     reads 100 % while the display pricing runs; the optimiser finishes the views of an octree level
     together, so `views_done` moves in jumps, and with `evals_per_view` (population x generations) the
-    fraction also follows the renders inside a level.
+    fraction also follows the renders inside a level. While it runs, the text also gives the time spent
+    (`progress.elapsed_s`, over every attempt of the job) beside the service's time left.
     """
     p = job.get("progress") or {}
     done, planned = int(p.get("views_done") or 0), int(p.get("views_planned") or 0)
@@ -108,6 +114,9 @@ def describe(job: dict[str, Any], evals_per_view: int | None = None) -> JobUpdat
     text = f"{state}{phase}: {share}{done}/{planned} views, {int(p.get('evaluations') or 0)} evaluations"
     if p.get("cache_hits"):
         text += f" ({int(p['cache_hits'])} cached)"
+    if state == "running" and _number(p.get("elapsed_s")):
+        # beside the time left, so that a log of these lines shows how the estimates ran out
+        text += f", {float(p['elapsed_s']):.0f} s in"
     if p.get("estimate_s") is not None and state == "running":
         text += f", ~{float(p['estimate_s']):.0f} s left"
     if job.get("error"):
