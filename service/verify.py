@@ -108,8 +108,8 @@ def markdown(doc: dict[str, Any]) -> str:
     then the summary: what the CLI prints and the demo and the add-on write to verify.md."""
     w, h = doc["resolution"]
     figures = doc.get("store_figures_resolution")
-    lines = [f"verified at {w}x{h} (store figures for "
-             f"{'x'.join(str(v) for v in figures) if figures else 'an unstated size'}), {doc['budget_mode']} "
+    size = "x".join(str(v) for v in figures) if figures else "an unstated size"
+    lines = [f"verified at {w}x{h} (store figures for {size}), {doc['budget_mode']} "
              f"budget {doc['budget_value']:g}, profile {doc['profile']} at {doc['fps']:g} fps"
              + (", budget first (the frame rate gives way where nothing within the budget keeps up)"
                 if doc.get("priority") == "budget" else ""), "",
@@ -135,7 +135,6 @@ def markdown(doc: dict[str, Any]) -> str:
     if figures and tuple(figures) != (w, h):
         # a stated display size checked at another (the path's own, say): the errors check the picks
         # there, but power and frame time grow with the pixels and are not what the store predicts
-        size = "x".join(str(v) for v in figures)
         lines.append(f"note: the store's figures are for a {size} display, not {w}x{h}: the errors check its "
                      f"picks at this size, and its power and frame-rate figures are for {size}, so the "
                      f"power ratio above says how far this size's power is from them, not how well they "

@@ -211,7 +211,7 @@ class PathSampling:
         if self.cfg.guard_frames > 0:
             chosen += _pass_medoids(idx, cost, chosen[0], self.cfg.guard_frames)
         chosen += _farthest(cost, chosen, self.cfg.guard_frames, SAME_CAMERA)
-        if self.cfg.guard_frames > 0 and self.cfg.guard_radius > 0:
+        if self.cfg.guard_radius > 0:  # (at most guard_frames more: none without guard frames)
             chosen += _farthest(cost, chosen, self.cfg.guard_frames, self.cfg.guard_radius)
         eyes = quantise_eyes(p[chosen], self.lattice.root_min, self.lattice.root_size)
         fwd = quantise_directions(f[chosen], fine=True)
