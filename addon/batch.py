@@ -313,13 +313,14 @@ def cmd_playback(bpy: ModuleType, ext: str, args: argparse.Namespace) -> int:
         bar((i + 1) / len(frames), f"frame {f}")
     bar.done()
     elapsed = time.perf_counter() - t0
+    figures = pb.figures_of(scene)  # the display the predictions hold for
     if args.out:
         with open(args.out, "w", newline="", encoding="utf-8") as fh:
             w = csv.writer(fh)
             w.writerow(("frame", "time_s", "active_indices", "target_indices", "predicted_power_w",
                         "predicted_error", "predicted_fps", "settings", "fps_target", "meets_fps",
-                        "priority"))
-            w.writerows(rows)
+                        "priority", "predicted_for"))
+            w.writerows((*row, figures) for row in rows)
     n = max(1, len(rows))
     rates = [r[6] for r in rows if r[6]]
     rate = f" at {sum(rates) / len(rates):.1f} fps" if rates else ""  # none: a store before frame times
@@ -328,7 +329,7 @@ def cmd_playback(bpy: ModuleType, ext: str, args: argparse.Namespace) -> int:
         rate += (f" ({missed} frames miss {rows[0][8]:g} fps" +
                  (": budget first)" if props.priority == "budget" else ": no setting keeps up)"))
     sys.stdout.write(f"{len(rows)} frames, mean predicted power {sum(r[4] for r in rows) / n:.3f} W{rate}, "
-                     f"mean predicted error {sum(r[5] for r in rows) / n:.4f}, "
+                     f"mean predicted error {sum(r[5] for r in rows) / n:.4f} (for {figures}), "
                      f"{len({r[2] for r in rows})} distinct settings, {1e3 * elapsed / n:.3f} ms/frame "
                      f"(frame_set included)\n")
     return 0

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import bpy
 
-from .playback import flags_of
+from .playback import figures_of, flags_of
 
 _handle = None
 
@@ -34,7 +34,8 @@ def hud_lines(scene: bpy.types.Scene) -> list[tuple[str, tuple[float, float, flo
     # the frame rate the power is drawn at (0: a store before frame times)
     rate = f" at {props.predicted_fps:.1f} fps" if props.predicted_fps > 0 else ""
     lines = [
-        (f"Power {props.predicted_power:.3f} W{rate}   Error {props.predicted_error:.4f}   ({budget})",
+        (f"Power {props.predicted_power:.3f} W{rate}   Error {props.predicted_error:.4f}   ({budget})   "
+         f"[{figures_of(scene)}]",
          bad if over or props.infeasible else ok),
         (f"Settings: {props.active_settings}", ok),
     ]

@@ -7,7 +7,7 @@ import bpy
 from service import options as option_schema
 
 from . import ops_optimize, preferences
-from .playback import flags_of
+from .playback import figures_of, flags_of
 
 
 class RENDER_BUDGET_UL_parameters(bpy.types.UIList):
@@ -42,7 +42,7 @@ class VIEW3D_PT_render_budget(bpy.types.Panel):
         _draw_budget(layout, props)
         _draw_job(layout, props, rt)
         if props.store_text is not None:
-            _draw_results(layout, props)
+            _draw_results(layout, props, figures_of(context.scene))
         _draw_actions(layout, props)
 
 
@@ -111,8 +111,9 @@ def _draw_job(layout: bpy.types.UILayout, props: bpy.types.PropertyGroup, rt: bp
                 box.label(text=chunk)
 
 
-def _draw_results(layout: bpy.types.UILayout, props: bpy.types.PropertyGroup) -> None:
-    """The loaded store's summary, playback switches and what playback applies at this frame."""
+def _draw_results(layout: bpy.types.UILayout, props: bpy.types.PropertyGroup, figures: str) -> None:
+    """The loaded store's summary, playback switches and what playback applies at this frame (``figures``:
+    the display its predictions hold for, :func:`~.playback.figures_of`)."""
     box = layout.box()
     box.label(text="Results", icon="INFO")
     for chunk in _wrap(props.summary, 48):
@@ -125,7 +126,7 @@ def _draw_results(layout: bpy.types.UILayout, props: bpy.types.PropertyGroup) ->
     elif props.active_indices:
         rate = f" at {props.predicted_fps:.1f} fps" if props.predicted_fps > 0 else ""
         box.label(text=f"Power {props.predicted_power:.3f} W{rate}, "
-                       f"error {props.predicted_error:.4f}")
+                       f"error {props.predicted_error:.4f} ({figures})")
         for chunk in _wrap(props.active_settings, 48):
             box.label(text=chunk)
         for flag in flags_of(props, transition=False):  # the HUD's and the render engine's words

@@ -49,6 +49,13 @@ def flags_of(props: bpy.types.PropertyGroup, *, short: bool = False, transition:
                        fps_target=props.target_fps, priority=props.priority, short=short)
 
 
+def figures_of(scene: bpy.types.Scene) -> str:
+    """The display the store's figures hold for, against the scene's render size, in a few characters
+    (``640x360, not 1280x720``; :meth:`service.store.FiguresSize.short`): beside every predicted figure."""
+    store = store_of(scene)
+    return "" if store is None else store.figures.short(render_resolution(scene))
+
+
 def show_error(scene: bpy.types.Scene, message: str) -> None:
     """Playback cannot drive this frame: say why (panel and HUD read `playback_status`) and clear the
     previous frame's settings and predictions, which no longer apply."""

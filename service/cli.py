@@ -219,7 +219,10 @@ def _query(args: argparse.Namespace) -> int:
            "error": r.error, "clamped": r.clamped, "infeasible": r.infeasible, "corner": r.corner,
            "view": r.view, "frame_time_s": r.frame_time_s, "fps": r.fps, "fps_target": target,
            "meets_fps": r.meets_fps, "priority": r.priority, "expected_power_w": r.expected_power_w,
-           "expected_error": r.expected_error}
+           "expected_error": r.expected_error,
+           # which display the figures hold for (as the REST answer says it)
+           "figures_resolution": list(store.figures.resolution) if store.figures.resolution else None,
+           "figures_kind": store.figures.kind}
     if args.json:
         print(json.dumps(out))
     else:
@@ -233,6 +236,7 @@ def _query(args: argparse.Namespace) -> int:
             print(f"{'frame rate':>22}: {r.fps:.1f} of {target:g} fps ({1e3 * r.frame_time_s:.1f} ms a "
                   "frame)")
         print(f"{'priority':>22}: {options.PRIORITY_LABELS[r.priority]}")
+        print(f"{'figures':>22}: {store.figures.label()}")
         if r.meets_fps is False:
             why = ("the budget comes first: no setting within it keeps up with" if r.priority == "budget"
                    else "no setting of this view keeps up with")

@@ -63,6 +63,9 @@ class VerifyReport:
     frames: list[FrameCheck]
     store_figures_resolution: tuple[int, int] | None  # where the store says its figures were measured
     priority: str = "frame_rate"  # the lookup's (service.options.QUERY_PRIORITY)
+    #: how they were measured (service.store.FiguresSize.kind): "display" figures hold for that display,
+    #: "preview" ones are the search's small renders (power scaled by the pixel count)
+    store_figures_kind: str = "unknown"
 
     def summary(self) -> dict[str, Any]:
         """Share within budget, prediction errors and the worst frames (by how far over budget)."""
@@ -96,6 +99,7 @@ class VerifyReport:
                 "priority": self.priority,
                 "store_figures_resolution": (list(self.store_figures_resolution)
                                              if self.store_figures_resolution else None),
+                "store_figures_kind": self.store_figures_kind,
                 "summary": self.summary(), "frames": [asdict(f) for f in self.frames]}
 
     def table(self) -> str:
@@ -109,7 +113,9 @@ def markdown(doc: dict[str, Any]) -> str:
     w, h = doc["resolution"]
     figures = doc.get("store_figures_resolution")
     size = "x".join(str(v) for v in figures) if figures else "an unstated size"
-    lines = [f"verified at {w}x{h} (store figures for {size}), {doc['budget_mode']} "
+    preview = doc.get("store_figures_kind") == "preview" and figures
+    whose = f"the store's preview figures, from {size} renders" if preview else f"store figures for {size}"
+    lines = [f"verified at {w}x{h} ({whose}), {doc['budget_mode']} "
              f"budget {doc['budget_value']:g}, profile {doc['profile']} at {doc['fps']:g} fps"
              + (", budget first (the frame rate gives way where nothing within the budget keeps up)"
                 if doc.get("priority") == "budget" else ""), "",
@@ -132,7 +138,7 @@ def markdown(doc: dict[str, Any]) -> str:
               f"measured / predicted power: median {s['median_power_ratio']:.3f}, "
               f"{100 * s['share_power_within_10pct']:.0f} % of frames within 10 %",
               f"worst frames: {', '.join(str(i) for i in s['worst_frames'])}"]
-    if figures and tuple(figures) != (w, h):
+    if figures and not preview and tuple(figures) != (w, h):
         # a stated display size checked at another (the path's own, say): the errors check the picks
         # there, but power and frame time grow with the pixels and are not what the store predicts
         lines.append(f"note: the store's figures are for a {size} display, not {w}x{h}: the errors check its "
@@ -197,6 +203,6 @@ def verify_store(scene: Any, store: ParetoStore, path: CameraPath, *, error_budg
                                  bool(r.infeasible), bool(r.clamped), r.meets_fps))
         if progress is not None:
             progress(done + 1, len(numbers))
-    figures = store.meta.get("figures_resolution")
-    return VerifyReport(mode, value, size or (0, 0), store.profile, rate, checks,
-                        tuple(int(v) for v in figures) if figures else None, query["priority"])
+    figures = store.figures
+    return VerifyReport(mode, value, size or (0, 0), store.profile, rate, checks, figures.resolution,
+                        query["priority"], figures.kind)

@@ -434,11 +434,34 @@ def test_hud_text_flags_a_broken_budget(scene, tmp_path) -> None:
     scene.frame_set(2)
     lines = hud.hud_lines(scene)
     assert "W" in lines[0][0] and lines[0][1] == (1.0, 1.0, 1.0, 1.0)
+    assert lines[0][0].endswith("[size unknown]")  # a store that does not say where it was priced
     assert props.active_settings in lines[1][0]
     props.power_budget = 0.5  # below every frontier point: infeasible, shown in red
     scene.frame_set(3)
     lines = hud.hud_lines(scene)
     assert lines[0][1][1] < 0.5 and "budget cannot be met" in lines[-1][0].split("; ")
+
+
+def test_the_hud_and_the_summary_say_which_display_the_figures_hold_for(scene, tmp_path) -> None:
+    """A store priced for a 160x90 display in a scene that renders 320x180: the HUD, the panel's summary
+    and batch playback's CSV name the display beside every predicted figure, and the render size that
+    differs from it."""
+    hud = ext_module("hud")
+    turning_camera(scene, 6)
+    add_cube(scene)
+    bpy.ops.render_budget.record_path_animation()
+    store = synthetic_store()
+    store.meta.update(figures_resolution=[160, 90], display_pricing="tiles:ssim")
+    f = tmp_path / "store.json"
+    f.write_text(store.to_json())
+    assert bpy.ops.render_budget.load_store(filepath=str(f)) == {"FINISHED"}
+    props = scene.render_budget
+    props.budget_mode, props.power_budget = "POWER", 10.0
+    scene.frame_set(2)
+    assert hud.hud_lines(scene)[0][0].endswith("[160x90, not 320x180]")
+    assert props.summary.endswith("figures for a 160x90 display, not this scene's 320x180")
+    scene.render.resolution_x, scene.render.resolution_y = 160, 90
+    assert hud.hud_lines(scene)[0][0].endswith("[160x90]")
 
 
 class _Labels:
@@ -493,8 +516,9 @@ def test_hud_panels_and_engine_flag_a_frame_in_one_wording(scene, tmp_path) -> N
     hud_flags = hud.hud_lines(scene)[-1][0].split("; ")
     assert hud_flags == [FRAME_FLAGS["infeasible"][0], FRAME_FLAGS["clamped"][0]], hud_flags
     sidebar = _Labels()
-    panels._draw_results(sidebar, props)
+    panels._draw_results(sidebar, props, "size unknown")
     assert sidebar.flags() == long, sidebar.lines
+    assert any(text.endswith("(size unknown)") for text, _ in sidebar.lines), sidebar.lines
     budget_panel = _Labels()
     ext_module("engine.panels").RENDER_PT_render_budget_budget.draw(
         SimpleNamespace(split_layout=lambda: budget_panel), SimpleNamespace(scene=scene))

@@ -391,7 +391,31 @@ def test_playback_and_summary_carry_the_frame_rate() -> None:
                           (64, 36)) for i in range(10)]
     s = predicted_path_summary(store, frames, "POWER", 3.0)
     assert s["mean_fps"] == 24.0 and s["slow_frames"] == 0 and s["fps_target"] == 24.0
-    assert summary_text(s).endswith("24.0 of 24 fps")
+    assert summary_text(s).endswith("24.0 of 24 fps; figures of a size the store does not record")
+
+
+def test_the_summary_says_which_display_its_figures_hold_for() -> None:
+    """The panel's (and batch's) summary names the display the store's figures were priced for, and
+    the scene's render size when it is another; preview figures are called so, never a display's."""
+    from dataclasses import replace
+
+    from service.camera_path import CameraFrame
+
+    frames = [CameraFrame(i / 24, _look((math.cos(i / 5), math.sin(i / 5), 0), (i * 0.1, 0, 0)), 0.69,
+                          (1280, 720)) for i in range(6)]
+    store = synthetic_store(timed=True)
+    display = replace(store, meta={**store.meta, "figures_resolution": [640, 360],
+                                   "display_pricing": "tiles:ssim"})
+    text = summary_text(predicted_path_summary(display, frames, "POWER", 3.0))
+    assert text.endswith("24.0 of 24 fps; figures for a 640x360 display, not this scene's 1280x720")
+    same = [replace(f, resolution=(640, 360)) for f in frames]
+    assert summary_text(predicted_path_summary(display, same, "POWER", 3.0)).endswith(
+        "figures for a 640x360 display")
+    preview = replace(store, meta={**store.meta, "figures_resolution": [64, 36],
+                                   "display_pricing": "preview"})
+    text = summary_text(predicted_path_summary(preview, frames, "POWER", 3.0))
+    assert text.endswith("figures from 64x36 preview renders, power scaled by the pixel count")
+    assert "display" not in text.split("; ")[-1]
 
 
 def test_a_missed_frame_rate_is_worded_once_per_priority() -> None:

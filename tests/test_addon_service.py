@@ -241,8 +241,12 @@ def test_batch_evaluate_and_playback_write_reports(optimized, service, tmp_path)
     assert all(float(r["predicted_fps"]) > 0.0 for r in played)  # a job's store knows frame times
     # the .blend's query options (not changed by evaluate, which does not save): its own rate, frame first
     assert {(r["priority"], r["meets_fps"] in ("0", "1")) for r in played} == {("frame_rate", True)}
-    assert {float(r["fps_target"]) for r in played} == {ParetoStore.from_json(
-        (out / "store.json").read_text()).fps}
+    job_store = ParetoStore.from_json((out / "store.json").read_text())
+    assert {float(r["fps_target"]) for r in played} == {job_store.fps}
+    # every predicted figure names the display it holds for: the job priced at the scene's own size
+    size = "{}x{}".format(*job_store.figures.resolution)
+    assert job_store.figures.kind == "display" and {r["predicted_for"] for r in played} == {size}
+    assert f"(for {size})" in proc.stdout
     proc = _batch(["--blend", str(optimized), "playback", "--out", str(csv_out), "--priority", "budget",
                    "--fps", "12"], tmp_path)
     assert proc.returncode == 0, proc.stderr

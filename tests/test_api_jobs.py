@@ -131,6 +131,9 @@ def test_job_end_to_end_events_store_and_query(client: httpx.Client, finished: d
     assert (rich["frame_time_s"], rich["fps"], rich["meets_fps"]) == (direct.frame_time_s, direct.fps,
                                                                       direct.meets_fps)
     assert rich["frame_time_s"] > 0 and rich["fps"] <= store.fps
+    # which display every figure holds for: the job priced its store at the path's own 64x48
+    for answer in (cheap, rich):
+        assert answer["figures_resolution"] == [64, 48] and answer["figures_kind"] == "display"
     # the prediction for this camera (interpolated between the frontier's pricing cameras), never above
     # the stored worst figures the budget was checked against
     assert (rich["expected_error"], rich["expected_power_w"]) == (direct.expected_error,
@@ -177,6 +180,7 @@ def test_job_end_to_end_events_store_and_query(client: httpx.Client, finished: d
     late = client.post(f"/stores/{job['store_id']}/query",
                        json={**query, "power_budget_w": 1e4, "previous": {**prev, "elapsed_s": 5.0}}).json()
     assert late["indices"] == rich["indices"] and late["filtered"] is False
+    assert (mid["figures_resolution"], mid["figures_kind"]) == ([64, 48], "display")  # filtered answers too
     bad = client.post(f"/stores/{job['store_id']}/query",
                       json={**query, "power_budget_w": 1.0, "previous": {**prev, "indices": [0]}})
     assert bad.status_code == 422
@@ -481,6 +485,7 @@ def test_verify_a_store_over_rest(client: httpx.Client, finished: dict[str, Any]
     doc = r.json()
     assert doc["budget_mode"] == "error" and doc["resolution"] == [64, 48] and len(doc["frames"]) == 2
     assert doc["store_figures_resolution"] == [64, 48]  # the job's store was priced at the path's size
+    assert doc["store_figures_kind"] == "display"
     store = ParetoStore.from_json(client.get(f"/stores/{job['store_id']}").text)
     best = store.settings_of([p.max_quality for p in store.parameters])
     for f in doc["frames"]:

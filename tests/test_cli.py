@@ -54,7 +54,17 @@ def test_query_reports_the_frame_rate(tmp_path, capsys) -> None:
     # no per-camera figures in this store: the prediction for the camera is the stored figure
     assert (out["expected_error"], out["expected_power_w"]) == (out["error"], out["power_w"])
     assert cli.main(args) == 0
-    assert "30.0 of 30 fps (20.0 ms a frame)" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert "30.0 of 30 fps (20.0 ms a frame)" in text
+    assert "figures: of a size the store does not record" in text  # this store does not say
+    store = ParetoStore.from_json(f.read_text())
+    store.meta.update(figures_resolution=[640, 360], display_pricing="tiles:ssim")
+    f.write_text(store.to_json())
+    assert cli.main(args) == 0
+    assert "figures: for a 640x360 display" in capsys.readouterr().out
+    assert cli.main([*args, "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert (out["figures_resolution"], out["figures_kind"]) == ([640, 360], "display")
     (tmp_path / "old").mkdir()
     f = _store_file(tmp_path / "old")
     assert cli.main(["query", str(f), *args[2:]]) == 0

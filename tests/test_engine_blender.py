@@ -269,7 +269,9 @@ def test_an_animation_follows_the_store_under_the_budget(scene, tmp_path) -> Non
 
     sc = scene
     orbit_camera(sc, frames=8)
-    load_store(tmp_path)
+    store = synthetic_store()
+    store.meta.update(figures_resolution=[32, 18], display_pricing="tiles:ssim")  # priced for 32x18
+    load_store(tmp_path, store)
     props = sc.render_budget
     props.budget_mode, props.power_budget, props.filter_period = "POWER", 3.3, 0.1
     sc.render_budget_engine.measure_error = True
@@ -305,6 +307,9 @@ def test_an_animation_follows_the_store_under_the_budget(scene, tmp_path) -> Non
         assert info["render_budget.source"] == "store"
         assert float(info["render_budget.predicted_power_w"]) == pytest.approx(frame.predicted_power_w,
                                                                               rel=1e-5)
+        # the predictions hold for the store's 32x18 display, the simulated figures for this 64x36 render
+        assert (row["predicted_for"], row["image_resolution"]) == ("32x18", "64x36")
+        assert info["render_budget.predicted_for"] == "32x18"
     assert len({(r["max_depth"], r["resolution_scale"], r["shadow_samples"]) for r in rows}) > 1
     assert any(float(r["measured_error"]) > 0.0 for r in rows)
     # simulated power follows the settings: frames traced at a larger resolution scale cost more
@@ -358,3 +363,20 @@ def test_store_frames_are_priced_at_the_frame_rate_the_lookup_used(scene, tmp_pa
     sc.frame_set(2)  # the playback handler applies the store's settings; the viewport shows those
     settings, _store = render.viewport_settings(sc)
     assert settings.fps_target == pytest.approx(12.0) and settings.pricing_fps(30.0) == pytest.approx(12.0)
+
+
+def test_the_viewport_status_names_the_display_the_store_predicts_for(ext) -> None:
+    """The status line puts the simulated power of the image shown beside the store's prediction, and
+    says which display that prediction holds for."""
+    from dataclasses import replace
+    from types import SimpleNamespace
+
+    from addon.core.viewport import ViewInfo
+
+    render = ext_module("engine.render")
+    info = ViewInfo("settings", "store", 1.0, 2.0, 2.5, 0.0123, (32, 18), 0.01, 30.0, 30.0, "640x360")
+    frame = SimpleNamespace(info=info, final=True, level=0, levels=1)
+    text = render._viewport_status(frame, None, (64, 36))
+    assert "(store, 640x360: 2.500 W, error 0.0123)" in text
+    unknown = SimpleNamespace(info=replace(info, predicted_for=""), final=True, level=0, levels=1)
+    assert "(store, size unknown: 2.500 W" in render._viewport_status(unknown, None, (64, 36))

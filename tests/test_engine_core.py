@@ -93,6 +93,7 @@ def orbit(n: int, radius: float = 6.0) -> list[list[list[float]]]:
 
 def test_store_chooser_steps_like_playback_and_manual_without_a_store() -> None:
     store = synthetic_store()
+    store.meta.update(figures_resolution=[640, 360], display_pricing="tiles:ssim")
     budget = Budget("POWER", 3.3)
     chooser = SettingsChooser(CHEAP, store, budget, period_s=0.5)
     reference = PlaybackDriver(synthetic_store(), 0.5)
@@ -105,10 +106,12 @@ def test_store_chooser_steps_like_playback_and_manual_without_a_store() -> None:
         assert got.indices == engine_settings.space().indices_of(want.active_settings)
         assert got.predicted_power_w == want.predicted_power_w and got.predicted_error == want.predicted_error
         assert got.in_transition == want.in_transition
+        assert got.predicted_for == "640x360"  # the display the store's predictions hold for
         seen.add(got.indices)
     assert len(seen) > 1  # the store's choice changes around the orbit
     manual = SettingsChooser(CHEAP).choose(orbit(1)[0], 0.69, 16 / 9, 0.0)
     assert manual.source == "manual" and manual.indices == CHEAP and manual.predicted_power_w is None
+    assert manual.predicted_for == ""
     assert SettingsChooser(CHEAP, store, None).choose(orbit(1)[0], 0.69, 1.5, 0.0).source == "manual"
     with pytest.raises(ValueError, match="power budget"):
         Budget("POWER", 0.0)
@@ -614,13 +617,14 @@ def test_viewport_playback_follows_the_store() -> None:
         for k, m in enumerate(orbit(12)):
             frame = playback.step(m, 0.69, 16 / 9, k / 24.0, "POWER", 3.3)
             fs = FrameSettings("store", engine_settings.space().indices_of(frame.active_settings),
-                               frame.predicted_power_w, frame.predicted_error)
+                               frame.predicted_power_w, frame.predicted_error, predicted_for="640x360")
             vp.show(m, region_projection(32, 18, 0.69), 32, 18, fs, profile="mobile", fps=24)
             assert vp.driver.wait_idle(60)  # as if playback waited for each frame
             shown.append(fs)
         assert len(frames) == 12
         for f, fs in zip(frames, shown, strict=True):
             assert f.info.settings_text == fs.text() and f.info.predicted_power_w == fs.predicted_power_w
+            assert f.info.predicted_for == "640x360"
         assert len({f.info.settings_text for f in frames}) > 1
     finally:
         vp.close()

@@ -586,3 +586,43 @@ def test_stores_before_frame_times_still_load() -> None:
     with pytest.raises(ValueError, match="fps"):
         ParetoStore(s.parameters, s.root_min, s.root_size, 0, s.children, s.corner_coords, s.corner_views,
                     s.frontiers, fps=0.0)
+
+
+def test_the_store_says_which_display_its_figures_hold_for() -> None:
+    """Display-priced figures name their display (and a render of another size beside it); preview
+    figures, and stores from before display pricing (all preview), are never called a display's."""
+    from dataclasses import replace
+
+    from service.store import FiguresSize
+
+    base = _store()
+    display = replace(base, meta={"figures_resolution": [640, 360], "display_pricing": "tiles:ssim"})
+    assert display.figures == FiguresSize("display", (640, 360)) and display.figures.display == (640, 360)
+    assert display.figures.label() == "for a 640x360 display"
+    assert display.figures.label((1280, 720)) == "for a 640x360 display, not this scene's 1280x720"
+    assert display.figures.short((1280, 720)) == "640x360, not 1280x720"
+    assert display.figures.short((640, 360)) == display.figures.short() == "640x360"
+    for meta in ({"figures_resolution": [64, 36], "display_pricing": "preview"},
+                 {"figures_resolution": [64, 36]}, {"eval_resolution": [64, 36]}):
+        fig = replace(base, meta=meta).figures
+        assert fig == FiguresSize("preview", (64, 36)) and fig.display is None
+        assert "display" not in fig.label((1280, 720)) and fig.short((1280, 720)) == "preview 64x36"
+    unknown = replace(base, meta={}).figures
+    assert unknown.kind == "unknown" and unknown.resolution is None and unknown.short() == "size unknown"
+    # round trip through the store document
+    assert ParetoStore.from_json(display.to_json()).figures == display.figures
+
+
+@pytest.mark.parametrize("bad", [[0, 360], [640], "640x360", [True, 360], [640.5, 360], [math.inf, 360],
+                                 [math.nan, 360], [640, 1], None])
+def test_a_store_with_a_bad_figures_size_is_refused_on_reading(bad) -> None:
+    from dataclasses import replace
+
+    base = _store()
+    meta = {"figures_resolution": bad} if bad is not None else {"eval_resolution": [64, -1]}
+    with pytest.raises(ValueError, match="resolution"):
+        replace(base, meta=meta)
+    doc = json.loads(base.to_json())
+    doc["meta"] = meta
+    with pytest.raises(ValueError, match="resolution"):
+        ParetoStore.from_json(json.dumps(doc))

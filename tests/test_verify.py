@@ -63,8 +63,7 @@ def test_sample_frames_spread_over_the_path() -> None:
         sample_frames(5, 0)
 
 
-@pytest.mark.slow
-def _report(resolution: list[int], figures: list[int] | None) -> str:
+def _report(resolution: list[int], figures: list[int] | None, kind: str | None = None) -> str:
     frame = {"frame": 7, "time": 0.25, "predicted_error": 0.01, "measured_error": 0.012,
              "predicted_power_w": 40.0, "measured_power_w": 58.0, "within_budget": True, "infeasible": False}
     summary = {"within_budget": 1, "frames": 1, "share_within_budget": 1.0,
@@ -72,7 +71,7 @@ def _report(resolution: list[int], figures: list[int] | None) -> str:
                "median_power_ratio": 1.45, "share_power_within_10pct": 0.0, "worst_frames": [7]}
     return markdown({"resolution": resolution, "store_figures_resolution": figures, "budget_mode": "error",
                      "budget_value": 0.02, "profile": "desktop_gtx980", "fps": 30.0, "frames": [frame],
-                     "summary": summary})
+                     "summary": summary, **({"store_figures_kind": kind} if kind else {})})
 
 
 def test_the_report_says_when_a_store_for_another_display_size_is_checked() -> None:
@@ -85,14 +84,21 @@ def test_the_report_says_when_a_store_for_another_display_size_is_checked() -> N
     assert "not how well they predict" in other
     assert "note:" not in _report([640, 360], [640, 360])
     assert "note:" not in _report([640, 360], None)
+    assert _report([1280, 720], [640, 360], "display") == other
+    # a store with the search's preview figures: called so, and never a display's
+    preview = _report([1280, 720], [64, 36], "preview")
+    assert "verified at 1280x720 (the store's preview figures, from 64x36 renders)" in preview
+    assert "note:" not in preview and "display" not in preview
 
 
+@pytest.mark.slow
 def test_verify_measures_independent_renders_of_the_stores_choices(setup) -> None:
     _, scene, _, store, _, path, _ = setup
     budget = 0.02
     report = verify_store(scene, store, path, error_budget=budget, frames=4)
     assert [f.frame for f in report.frames] == sample_frames(len(path), 4)
     assert report.resolution == (96, 72) and report.store_figures_resolution == (96, 72)
+    assert report.store_figures_kind == "display"
     space = default_space()
     mq = space.to_settings(space.max_quality_indices())
     for f in report.frames:

@@ -41,6 +41,7 @@ from service import options as option_schema
 from service.camera_path import CameraPath
 from service.options import JOB_STALL_TIMEOUT_S, positive_number
 from service.params import add_space_argument, space_from_arguments
+from service.store import FiguresSize
 from service.verify import markdown
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
@@ -276,7 +277,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 def verify(client: Any, store_id: str, path_doc: dict[str, Any], meta: dict[str, Any],
            args: argparse.Namespace, out: Path, clock: campaign.Clock) -> None:
     """The store's promises under the error budget, measured at the resolution its figures are for."""
-    size = meta.get("figures_resolution") or path_doc["frames"][0]["resolution"]
+    size = FiguresSize.from_meta(meta).resolution or path_doc["frames"][0]["resolution"]
     say(f"== verify the store: {args.verify_frames} path frames at {size[0]}x{size[1]} "
         f"(POST /stores/{{id}}/verify, error budget {args.error_budget})")
     t = clock.start()

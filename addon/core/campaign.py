@@ -297,11 +297,9 @@ def measurement_sizes(store_text: str, eval_resolution: tuple[int, int],
     measured there, renders and power at that size, so Table 3 checks the figures the store promises; a
     store with preview figures is measured as it was searched (``eval_resolution``), power scaled to the
     path's size."""
-    meta = ParetoStore.from_json(store_text).meta
-    figures = meta.get("figures_resolution")
-    if meta.get("display_pricing", "preview") != "preview" and figures:
-        size = (int(figures[0]), int(figures[1]))
-        return size, size
+    display = ParetoStore.from_json(store_text).figures.display
+    if display is not None:
+        return display, display
     return eval_resolution, tuple(int(v) for v in path.frames[0].resolution)
 
 

@@ -140,6 +140,8 @@ class FrameOutput:
             meta["predicted_power_w"] = f"{s.predicted_power_w:.6g}"
         if s.predicted_error is not None:
             meta["predicted_error"] = f"{s.predicted_error:.6g}"
+        if s.predicted_for:  # the display the predictions hold for (the simulated figures: this render's)
+            meta["predicted_for"] = s.predicted_for
         if self.measured_error is not None:
             meta["measured_error"] = f"{self.measured_error:.6g}"
         if s.priority:  # looked up in a store: under which frame-rate target and priority
@@ -293,7 +295,7 @@ CSV_COLUMNS_BEFORE = ("frame", "time_s", "source")
 CSV_COLUMNS_AFTER = ("predicted_power_w", "simulated_power_w", "predicted_error", "measured_error",
                      "frame_time_ms", "achieved_fps",
                      "deadline_met", "in_transition", "clamped", "infeasible", "render_s",
-                     "fps_target", "meets_fps", "priority")
+                     "fps_target", "meets_fps", "priority", "image_resolution", "predicted_for")
 
 
 class AnimationLog:
@@ -331,6 +333,10 @@ class AnimationLog:
             "fps_target": "" if s.fps_target is None else f"{s.fps_target:g}",
             "meets_fps": "" if s.meets_fps is None else int(s.meets_fps),
             "priority": s.priority,
+            # the image simulated_power_w was priced for (traced at its resolution scale), and the display
+            # the predictions hold for
+            "image_resolution": f"{out.combined.shape[1]}x{out.combined.shape[0]}",
+            "predicted_for": s.predicted_for,
         })
         self._writer.writerow(row)
         self._fh.flush()

@@ -122,6 +122,9 @@ class FrameSettings:
     fps_target: float | None = None  # the frame rate the store was looked up for (None: manual)
     meets_fps: bool | None = None  # the store says these settings keep up with it (None: unknown)
     priority: str = ""  # the lookup's (service.options.QUERY_PRIORITY); empty: manual settings
+    #: the display the predictions hold for (service.store.FiguresSize.short: "640x360", "preview 64x36");
+    #: empty: manual settings. Beside a render at another size, the simulated power is not comparable.
+    predicted_for: str = ""
 
     @property
     def in_transition(self) -> bool:
@@ -202,4 +205,4 @@ class SettingsChooser:
         return FrameSettings("store", self.space.indices_of(frame.active_settings),
                              frame.predicted_power_w, frame.predicted_error, target, frame.clamped,
                              frame.infeasible, "; ".join(flags), frame.fps_target, frame.meets_fps,
-                             frame.priority)
+                             frame.priority, store.figures.short())

@@ -223,7 +223,23 @@ def predicted_path_summary(store: pareto_store.ParetoStore, frames: Sequence[Any
         "priority": priority,
         "mean_fps": sum(rates) / len(rates) if rates else None,  # None: the store predates frame times
         "slow_frames": slow,  # frames whose settings miss fps_target (priority "budget": also by choice)
+        # which display the figures hold for, and the size the path renders at (None: not known)
+        "figures_kind": store.figures.kind,
+        "figures_resolution": store.figures.resolution,
+        "render_resolution": _render_size(frames),
     }
+
+
+def _render_size(frames: Sequence[Any]) -> tuple[int, int] | None:
+    size = getattr(frames[0], "resolution", None) if len(frames) else None
+    return None if size is None else (int(size[0]), int(size[1]))
+
+
+def figures_label(summary: dict[str, Any]) -> str:
+    """Which display the summary's figures hold for, against the size the path renders at."""
+    figures = pareto_store.FiguresSize(summary.get("figures_kind", "unknown"),
+                                       summary.get("figures_resolution"))
+    return "figures " + figures.label(summary.get("render_resolution"))
 
 
 def budget_shortfall(summary: dict[str, Any]) -> str | None:
@@ -251,8 +267,9 @@ def summary_text(summary: dict[str, Any]) -> str:
     store = (f"{summary['views']} views, {summary['corners']} corners, depth {summary['depth']}, "
              f"{summary['size_bytes'] / 1024:.1f} KB")
     shortfall = budget_shortfall(summary)
+    where = figures_label(summary)
     if shortfall:
-        return f"{store}; {shortfall}; {rate}"
+        return f"{store}; {shortfall}; {rate}; {where}"
     return (f"{store}; predicted {summary['mean_power_w']:.3f} W vs "
             f"{summary['mean_max_quality_power_w']:.3f} W at the most accurate setting "
-            f"({100 * summary['predicted_saving']:.1f} % saved), {rate}")
+            f"({100 * summary['predicted_saving']:.1f} % saved), {rate}; {where}")

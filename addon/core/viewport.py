@@ -69,6 +69,7 @@ class ViewInfo:
     frame_time_s: float  # at the size rendered
     fps: float  # the frame rate asked for
     achieved_fps: float  # the frame rate reached at the size rendered
+    predicted_for: str = ""  # the display the predictions hold for (FrameSettings.predicted_for)
 
     def power_at(self, pixels: int) -> tuple[float, float]:
         """(power W, frame rate reached) scaled to ``pixels`` (dynamic energy and frame time grow with the
@@ -140,5 +141,5 @@ class ViewportRenderer:
         s = payload.settings
         info = ViewInfo(s.text(), s.source, out.power_w - out.dynamic_power_w, out.dynamic_power_w,
                         s.predicted_power_w, s.predicted_error, (width, height), out.frame_time_s, out.fps,
-                        out.achieved_fps)
+                        out.achieved_fps, s.predicted_for)
         return out.combined, info

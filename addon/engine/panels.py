@@ -10,7 +10,7 @@ from __future__ import annotations
 import bpy
 
 from ..core.engine_settings import quality_properties
-from ..playback import flags_of
+from ..playback import figures_of, flags_of
 from . import render
 
 # EEVEE panels that show what the engine translates (Principled BSDF surfaces, light and world
@@ -82,7 +82,8 @@ class RENDER_PT_render_budget_budget(_EnginePanel, bpy.types.Panel):
         layout.prop(props, "store_text")
         if props.store_text is not None and props.active_settings:
             box = layout.box()
-            box.label(text=f"This frame: {props.predicted_power:.3f} W, error {props.predicted_error:.4f}")
+            box.label(text=f"This frame: {props.predicted_power:.3f} W, error {props.predicted_error:.4f} "
+                           f"({figures_of(context.scene)})")
             for flag in flags_of(props, transition=False):  # the HUD's and the frame notes' words
                 box.label(text=flag, icon="ERROR")
 
@@ -135,7 +136,8 @@ class RENDER_PT_render_budget_last(_EnginePanel, bpy.types.Panel):
                        f"on {out.profile} at {out.achieved_fps:.3g} of {out.fps:g} fps")
         s = out.settings
         if s.predicted_power_w is not None:
-            col.label(text=f"Store predicted {s.predicted_power_w:.3f} W, error {s.predicted_error:.4f}")
+            col.label(text=f"Store predicted {s.predicted_power_w:.3f} W, error {s.predicted_error:.4f} "
+                           f"({s.predicted_for or 'size unknown'})")
         if out.measured_error is not None:
             col.label(text=f"Measured error {out.measured_error:.4f} (against maximum quality)")
         col.label(text=f"Frame time {1e3 * out.frame_time_s:.2f} ms "

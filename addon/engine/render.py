@@ -127,7 +127,8 @@ def viewport_settings(scene: bpy.types.Scene) -> tuple[FrameSettings, Any]:
         return FrameSettings("store", active, props.predicted_power, props.predicted_error, target,
                              props.clamped, props.infeasible, fps_target=props.target_fps or None,
                              meets_fps=None if props.predicted_fps <= 0 else not props.slower_than_fps,
-                             priority=props.priority if props.target_fps > 0 else ""), store
+                             priority=props.priority if props.target_fps > 0 else "",
+                             predicted_for=store.figures.short()), store
     if cam is None or cam.type != "CAMERA" or cam.data.type != "PERSP":
         return chooser.manual_settings(), store
     w, h = render_resolution(scene)
@@ -384,7 +385,8 @@ def _viewport_status(frame: Any, error: str | None, render_size: tuple[int, int]
     power, rate = info.power_at(render_size[0] * render_size[1])
     text = f"{ENGINE_LABEL} | {info.source}: {info.settings_text} | {power:.3f} W at {rate:.3g} fps"
     if info.predicted_power_w is not None:
-        text += f" (store: {info.predicted_power_w:.3f} W, error {info.predicted_error:.4f})"
+        text += (f" (store, {info.predicted_for or 'size unknown'}: {info.predicted_power_w:.3f} W, "
+                 f"error {info.predicted_error:.4f})")
     if not frame.final:
         text += f" | refining {frame.level + 1}/{frame.levels}"
     return text

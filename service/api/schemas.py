@@ -398,6 +398,14 @@ class QueryResult(BaseModel):
                                   "the cameras the view's frontier was priced at, interpolated here (power_w "
                                   "is the worst of those, what the budget was checked against)")
     expected_error: float | None = Field(default=None, description="predicted error at this camera, likewise")
+    figures_resolution: list[int] | None = Field(
+        default=None, description="[width, height] the store's error, power and frame-time figures were "
+                                  "measured at (null: the store does not say): with figures_kind display "
+                                  "they hold for a display of that size, not for a larger render")
+    figures_kind: Literal["display", "preview", "unknown"] = Field(
+        default="unknown", description="display: priced at that display size; preview: the search's small "
+                                       "renders, power scaled by the pixel count (not a display figure); "
+                                       "unknown: the store does not say")
 
 
 # -- render and evaluate -----------------------------------------------------------------------------
@@ -496,6 +504,10 @@ class VerifyResult(BaseModel):
     priority: str = Field(default="frame_rate", description="the lookup's priority")
     store_figures_resolution: list[int] | None = Field(
         description="where the store says its figures were measured (its meta)")
+    store_figures_kind: Literal["display", "preview", "unknown"] = Field(
+        default="unknown", description="display: the figures hold for a display of that size; preview: the "
+                                       "search's renders at that size, power scaled by the pixel count; "
+                                       "unknown: the store does not say")
     summary: dict[str, Any]
     frames: list[dict[str, Any]]
 

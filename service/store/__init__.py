@@ -9,6 +9,7 @@
 - :mod:`.camera`: camera maths shared by every part of the project (rotations, view-cube faces,
   frustum face choice, field of view);
 - :mod:`.lookup`: camera pose + budget -> settings;
+- :mod:`.figures`: where the store's figures were measured (display or preview size), for their labels;
 - :mod:`.pareto`: :class:`ParetoStore`, the store itself;
 - :mod:`.temporal`: the temporal filter (Eq. 8) applied during playback.
 """
@@ -17,6 +18,7 @@ from __future__ import annotations
 
 from .camera import VIEW_FORWARD, VIEW_NAMES, VIEW_UP, camera_rotation, face_of, view_up
 from .codec import quantise_directions, quantise_eyes
+from .figures import FiguresSize
 from .format import FORMAT_NAME, FORMAT_VERSION, READABLE_VERSIONS
 from .frame_rate import frame_rate_reached, meets_frame_rate
 from .frontier import Frontier, frontier_tiers, split_by_rate
@@ -36,7 +38,7 @@ from .temporal import TemporalFilter
 
 __all__ = [
     "BITS_PER_PARAM", "FORMAT_NAME", "FORMAT_VERSION", "MAX_PARAMS", "MAX_VALUES_PER_PARAM",
-    "READABLE_VERSIONS", "VIEW_FORWARD", "VIEW_NAMES", "VIEW_UP", "Frontier", "LookupResult",
+    "READABLE_VERSIONS", "VIEW_FORWARD", "VIEW_NAMES", "VIEW_UP", "FiguresSize", "Frontier", "LookupResult",
     "ParetoStore", "StoredParameter", "TemporalFilter", "camera_rotation", "face_of", "frame_rate_reached",
     "frontier_tiers",
     "meets_frame_rate", "pack_array", "pack_indices", "quantise_directions", "quantise_eyes", "split_by_rate",

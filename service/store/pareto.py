@@ -16,6 +16,7 @@ import numpy as np
 from ..options import QUERY_FPS, QUERY_PRIORITY
 from . import camera, codec, format
 from .camera import VIEW_FORWARD, VIEW_UP, view_up
+from .figures import FiguresSize
 from .frame_rate import power_at_rate
 from .frontier import Frontier
 from .lookup import FrontierPoint, LookupIndex, LookupResult
@@ -77,6 +78,7 @@ class ParetoStore:
         for prm in self.parameters:
             if len(prm.values) > MAX_VALUES_PER_PARAM:
                 raise ValueError(f"parameter {prm.name!r} has more than 16 values")
+        FiguresSize.from_meta(self.meta)  # (a bad size is refused on reading, not at the first label)
         self._index = LookupIndex(self.root_min, self.root_size, self.lattice_depth, self.children,
                                   self.corner_coords, self.corner_views, self.parameters)
 
@@ -215,6 +217,12 @@ class ParetoStore:
         asp = self.aspect if aspect is None else float(aspect)
         _, corner, view, _ = self._index.locate(position, rot, vf, asp)
         return corner, view
+
+    @property
+    def figures(self) -> FiguresSize:
+        """Where the store's error, power and frame-time figures were measured (the display size they hold
+        for, or the search's preview size): what every shown figure is labelled with."""
+        return FiguresSize.from_meta(self.meta)
 
     @property
     def static_power_w(self) -> float | None:

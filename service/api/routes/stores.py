@@ -97,6 +97,9 @@ def answer_query(store: Any, body: StoreQuery) -> QueryResult:
         raise ApiError(422, f"camera pose cannot be looked up: {type(exc).__name__}: {exc}") from exc
     target = tuple(hit.indices)
     shown = target
+    figures = store.figures  # which display the figures hold for, with every answer
+    where = {"figures_resolution": list(figures.resolution) if figures.resolution else None,
+             "figures_kind": figures.kind}
     if body.previous is not None:
         prev = tuple(body.previous.indices)
         if len(prev) != len(target):
@@ -118,7 +121,7 @@ def answer_query(store: Any, body: StoreQuery) -> QueryResult:
             error=hit.error, clamped=hit.clamped, infeasible=hit.infeasible, filtered=False,
             target_indices=list(target), frame_time_s=hit.frame_time_s, fps=hit.fps,
             fps_target=hit.fps_target, meets_fps=hit.meets_fps, priority=hit.priority,
-            expected_power_w=hit.expected_power_w, expected_error=hit.expected_error)
+            expected_power_w=hit.expected_power_w, expected_error=hit.expected_error, **where)
     pt = points[shown]
     expected_error, expected_power = store.expected(hit, pt)
     return QueryResult(
@@ -126,7 +129,7 @@ def answer_query(store: Any, body: StoreQuery) -> QueryResult:
         error=pt.error, clamped=hit.clamped, infeasible=hit.infeasible, filtered=True,
         target_indices=list(target), frame_time_s=pt.frame_time_s, fps=pt.fps, fps_target=hit.fps_target,
         meets_fps=pt.meets_fps, priority=hit.priority, expected_power_w=expected_power,
-        expected_error=expected_error)
+        expected_error=expected_error, **where)
 
 
 async def query_store(store_id: str, body: StoreQuery, request: Request) -> QueryResult:
@@ -136,7 +139,8 @@ async def query_store(store_id: str, body: StoreQuery, request: Request) -> Quer
     frame rate than the store's (power repriced for it); ``priority`` says what gives way when no setting
     keeps both the budget and that rate: ``frame_rate`` (default: the budget) or ``budget`` (the frame
     rate; ``meets_fps`` false), echoed as ``priority``. ``power_w``, ``error``, ``frame_time_s``, ``fps``
-    and ``meets_fps`` are the predictions for the returned settings."""
+    and ``meets_fps`` are the predictions for the returned settings, for the display size
+    ``figures_resolution`` (``figures_kind`` display; preview: the search's small renders)."""
     return answer_query(request.app.state.render_budget.stores.get(store_id), body)
 
 
