@@ -22,6 +22,7 @@ from service.camera_path import CameraPath
 from service.evaluation import CameraSpec, evaluate
 from service.options import check_query
 from service.params import stored_space
+from service.stats import share_interval, share_text
 from service.store import ParetoStore
 
 #: A prediction holds when the measured power is within this share of it (the issue's 10 % target).
@@ -76,6 +77,9 @@ class VerifyReport:
             "frames": len(fr),
             "within_budget": int(sum(f.within_budget for f in fr)),
             "share_within_budget": float(np.mean([f.within_budget for f in fr])) if fr else math.nan,
+            # how sure that share is, from this many frames (Wilson, 95 %)
+            "share_within_budget_interval": (list(share_interval(sum(f.within_budget for f in fr), len(fr)))
+                                             if fr else None),
             "mean_abs_error_difference": float(np.mean(np.abs(de))) if fr else math.nan,
             "max_abs_error_difference": float(np.max(np.abs(de))) if fr else math.nan,
             "mean_error_measured": float(np.mean([f.measured_error for f in fr])) if fr else math.nan,
@@ -131,8 +135,9 @@ def markdown(doc: dict[str, Any]) -> str:
                      f"{f['measured_power_w']:.3f} | {ratio:.2f} | "
                      f"{'yes' if f['within_budget'] else 'NO'}{note} |")
     s = doc["summary"]
-    share = 100 * s["share_within_budget"]
-    lines += ["", f"within budget: {s['within_budget']}/{s['frames']} ({share:.0f} %)",
+    within = (share_text(s["within_budget"], s["frames"]) if s["frames"] else
+              f"{s['within_budget']}/{s['frames']}")
+    lines += ["", f"within budget: {within}",
               f"mean |measured - predicted| error: {s['mean_abs_error_difference']:.4f} "
               f"(max {s['max_abs_error_difference']:.4f})",
               f"measured / predicted power: median {s['median_power_ratio']:.3f}, "

@@ -93,6 +93,10 @@ def test_targets_follow_the_measured_summaries() -> None:
     lines = campaign_targets.target_lines(targets, 50 * 1024)
     assert len(lines) == 4 and lines[2].endswith("MISSED") and lines[3].endswith("MISSED")
     assert "60.0 % power saved" in lines[0] and lines[0].endswith("met")
+    # each share with its frames and how sure it is (Wilson 95 %, tests/test_stats.py)
+    assert targets["power_budget_kept_frames"] == [3, 4] and targets["error_budget_kept_frames"] == [4, 4]
+    assert lines[2].startswith("- budget kept: power 3/4 (75 %; 95 % interval 30-95 %), "
+                               "error 4/4 (100 %; 95 % interval 51-100 %) of frames")
 
 
 def test_report_takes_sections_and_is_written_once(tmp_path: Path) -> None:

@@ -17,6 +17,7 @@ from service.executors import InProcessExecutor
 from service.metrics import ssim
 from service.optimize import OptimizeConfig, optimize_path
 from service.params import default_space
+from service.stats import share_interval
 from service.verify import markdown, sample_frames, verify_store
 from tests.api_support import teapot_scene_file
 
@@ -82,6 +83,7 @@ def test_the_report_says_when_a_store_for_another_display_size_is_checked() -> N
     assert "verified at 1280x720 (store figures for 640x360)" in other
     assert "note: the store's figures are for a 640x360 display, not 1280x720" in other
     assert "not how well they predict" in other
+    assert "within budget: 1/1 (100 %; 95 % interval 21-100 %)" in other  # one frame says little
     assert "note:" not in _report([640, 360], [640, 360])
     assert "note:" not in _report([640, 360], None)
     assert _report([1280, 720], [640, 360], "display") == other
@@ -119,6 +121,7 @@ def test_verify_measures_independent_renders_of_the_stores_choices(setup) -> Non
         assert f.within_budget == (f.measured_error <= budget)
     s = report.summary()
     assert s["frames"] == 4 and s["within_budget"] == sum(f.within_budget for f in report.frames)
+    assert s["share_within_budget_interval"] == list(share_interval(s["within_budget"], 4))
     de = [abs(f.measured_error - f.predicted_error) for f in report.frames]
     assert s["mean_abs_error_difference"] == pytest.approx(float(np.mean(de)))
     # the store was priced at this very resolution with guard frames: its promises hold closely here

@@ -75,6 +75,7 @@ class ModeSummary:
     mean_fps: float | None = None  # mean frame rate reached (None: not measured)
     min_fps: float | None = None
     real_time_fraction: float | None = None  # share of frames that keep up with the path's frame rate
+    budget_kept_counts: tuple[int, int] | None = None  # (frames that kept the budget, frames checked)
 
     @property
     def real_time(self) -> bool | None:
@@ -117,7 +118,8 @@ def summarise(rows: Iterable[FrameRow]) -> list[ModeSummary]:
         met = [r.deadline_met for r in rs if r.deadline_met is not None]
         out.append(ModeSummary(mode, len(rs), p, e, saving, (sum(kept) / len(kept)) if kept else None,
                                sum(fps) / len(fps) if fps else None, min(fps) if fps else None,
-                               sum(met) / len(met) if met else None))
+                               sum(met) / len(met) if met else None,
+                               (sum(kept), len(kept)) if kept else None))
     order = list(MODE_LABELS)
     out.sort(key=lambda s: order.index(s.mode) if s.mode in order else len(order))
     return out
