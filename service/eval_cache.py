@@ -123,6 +123,20 @@ class EvalCache:
             self.misses += len(wanted) - len(out)
         return out
 
+    def count_missing(self, key: CacheKey, packed: Sequence[int]) -> int:
+        """How many of ``packed`` (distinct) the cache does not hold, without reading them (no hit or
+        miss counted, nothing marked used): what a job's time left needs to know before it renders."""
+        wanted = list(dict.fromkeys(int(p) for p in packed))
+        key_args = (key.scene, key.camera, key.metric, key.profile, key.width, key.height, float(key.fps))
+        held = 0
+        with self._lock:
+            for start in range(0, len(wanted), 500):
+                chunk = wanted[start:start + 500]
+                q = (f"SELECT COUNT(*) FROM evaluations WHERE {_KEY_WHERE} AND packed IN "
+                     f"({','.join('?' * len(chunk))})")
+                held += int(self._db.execute(q, (*key_args, *chunk)).fetchone()[0])
+        return len(wanted) - held
+
     def put_many(self, key: CacheKey, items: Iterable[tuple[int, Evaluation]]) -> None:
         """Store evaluations in one transaction (existing entries are kept)."""
         now = time.time()

@@ -182,13 +182,14 @@ def test_the_builder_prices_a_bridge_and_the_error_budget_picks_it_over_max() ->
 
 
 def _clocked_bridging(monkeypatch, *, search_evaluations: int, first_round_cached: bool,
-                      cameras: int = 1, cached_bridging_batches: int = 0):
+                      cameras: int = 1, cached_bridging_batches: int = 0, knows_cache: bool = False):
     """A one-frontier build with bridging on a stand-in clock: each setting the pricer renders takes 1 s;
     with ``first_round_cached`` the first pricing round is answered from the evaluation cache (no time,
     nothing rendered), and so are the bridging's first ``cached_bridging_batches`` batches.
     ``search_evaluations``: what the search rendered of its own; ``cameras``: the frontier's pricing
-    cameras (copies of its one). Returns the builder, its progress reports and the seconds each phase's
-    pricing took."""
+    cameras (copies of its one); ``knows_cache``: the pricer says before each round how many settings it
+    will render (as DisplayPricer.uncached does from the evaluation cache). Returns the builder, its
+    progress reports and the seconds each phase's pricing took."""
     import time as time_module
 
     import service.octree.builder as builder_module
@@ -207,6 +208,15 @@ def _clocked_bridging(monkeypatch, *, search_evaluations: int, first_round_cache
         evaluations = 0
 
         bridging_batches = 0
+        rounds = 0
+
+        def count(self, requests):
+            # what price() will render of this round's requests (batches of 8 cameras, the builder's)
+            self.rounds += 1
+            n = sum(len(xs) for _, xs in requests)
+            if self.rounds == 1:
+                return 0 if first_round_cached else n
+            return n - sum(len(xs) for _, xs in requests[:8 * cached_bridging_batches])
 
         def price(self, requests, on_progress=None):
             n = sum(len(xs) for _, xs in requests)
@@ -237,7 +247,10 @@ def _clocked_bridging(monkeypatch, *, search_evaluations: int, first_round_cache
     one_camera = ViewCubeSampling.pricing_cameras
     monkeypatch.setattr(ViewCubeSampling, "pricing_cameras",
                         lambda self: {fid: cams * cameras for fid, cams in one_camera(self).items()})
-    b = _run_one_frontier_builder(searched, Pricer(), progress, display_points=8, bridge_points=4)
+    pricer = Pricer()
+    if knows_cache:
+        pricer.uncached = pricer.count
+    b = _run_one_frontier_builder(searched, pricer, progress, display_points=8, bridge_points=4)
     assert b.bridged_points > 0
     return b, reports, priced_at
 
@@ -291,6 +304,20 @@ def test_cached_pricing_batches_do_not_promise_no_time_left(monkeypatch) -> None
     assert after_cached.estimate_s is None or after_cached.estimate_s >= took / 2
     after_rendered = bridging[2]  # after the second batch, which rendered: its own pace, 4 cameras left
     assert after_rendered.estimate_s is not None and 0 < after_rendered.estimate_s <= took
+
+
+def test_a_pricer_that_knows_its_cache_gives_the_exact_renders_left(monkeypatch) -> None:
+    """The same rerun, with the pricer counting the settings its cache does not hold before each round:
+    after the second batch (8 cameras rendered, 4 left) the time left is their pace times exactly the
+    4 cameras' renders, where the share of the round's requests rendered so far (the cached first batch
+    counted in) made it half that."""
+    _, reports, priced_at = _clocked_bridging(monkeypatch, search_evaluations=0, first_round_cached=True,
+                                              cameras=20, cached_bridging_batches=1, knows_cache=True)
+    bridging = [r for r in reports if r.phase == "price between the priced points"]
+    took = priced_at["price between the priced points"]  # 12 cameras rendered, 1 s a setting
+    after_rendered = bridging[2]
+    assert after_rendered.estimate_s == pytest.approx(took * 4 / 12)
+    assert bridging[-1].estimate_s == 0.0
 
 
 def test_a_cancel_stops_a_pricing_batch_between_its_cameras(monkeypatch) -> None:

@@ -207,8 +207,12 @@ def test_a_cancelled_pricing_batch_keeps_its_finished_cameras(scene, tmp_path) -
         assert first.cameras == 1 and first.evaluations == len(sets)
     with EvalCache(path) as cache:
         rerun = pricer(cache)
+        # the rerun knows its work before it starts: the settings of the cameras not priced yet
+        assert rerun.uncached(requests) == (len(cams) - 1) * len(sets)
+        assert rerun.uncached(requests + requests[1:]) == (len(cams) - 1) * len(sets)  # (each once)
         got = rerun.price(requests)
         assert rerun.cameras == len(cams) - 1 and rerun.ev.cache_hits == len(sets)
+        assert rerun.uncached(requests) == 0
     whole = pricer(EvalCache()).price(requests)
     assert [[(e.error, e.power_w, e.frame_time_s) for e in row] for row in got] == \
         [[(e.error, e.power_w, e.frame_time_s) for e in row] for row in whole]

@@ -29,6 +29,12 @@ def test_persists_and_counts(tmp_path) -> None:
         # existing entries are kept, not overwritten
         c.put_many(_key(), [(1, Evaluation(0.9, 9.0, 0.9))])
         assert c.get_many(_key(), [1])[1].error == 0.1
+        # what is missing, counted without reading (no hit or miss counted), each setting once
+        hits = (c.hits, c.misses)
+        assert c.count_missing(_key(), [1, 7, 9, 1, 9]) == 1 and c.count_missing(_key(), []) == 0
+        assert c.count_missing(_key(camera="cam1"), [1, 7]) == 2
+        assert c.count_missing(_key(), list(range(1200))) == 1198  # (beyond one query's 500)
+        assert (c.hits, c.misses) == hits
 
 
 @pytest.mark.parametrize("field,value", [

@@ -61,6 +61,17 @@ class DisplayPricer:
         return CacheKey(self.ev.scene.content_hash, camera.key(), self.metric_key, self.ev.profile_key,
                         camera.width, camera.height, self.ctx.fps)
 
+    def uncached(self, requests: Sequence[tuple[CameraSpec, Sequence[Indices]]]) -> int:
+        """How many settings :meth:`price` would render for ``requests`` now: those the evaluation cache
+        does not hold, each camera's counted once (a rerun or resumed job knows its work before it
+        starts, where a pace taken over cached batches would promise minutes for an hour)."""
+        space = self.ev.space
+        wanted: dict[str, tuple[CameraSpec, set[int]]] = {}
+        for cam, xs in requests:
+            wanted.setdefault(cam.key(), (cam, set()))[1].update(space.pack(x) for x in xs)
+        return sum(self.ev.cache.count_missing(self._key(cam), sorted(packs))
+                   for cam, packs in wanted.values())
+
     def price(self, requests: Sequence[tuple[CameraSpec, Sequence[Indices]]],
               on_progress: Callable[[int, int], None] | None = None) -> list[list[Evaluation]]:
         """Evaluations of every request's settings, in order; cached ones are not priced again.

@@ -528,8 +528,14 @@ class OctreeBuilder:
         # done): the last batch of a round is not the job's end (the hall's first round at 640x360 read
         # 87 s left for an hour of bridging after it)
         after = 0 if last else self._bridge_reserve
-        guess_s = (pace_s * self._pricing_renders(0, points + after) if bridging and pace_s is not None
-                   else self.pricing_time(search.state, len(requests), points + after))
+        # the settings of this round the evaluation cache does not hold, where the pricer can tell: a
+        # rerun or a resumed job renders only those (its first batches, cached, took no time and made a
+        # pace over them promise minutes for an hour's work), and the rounds after it as many in share
+        count = getattr(self.pricer, "uncached", None)
+        to_come = count(requests) if count is not None else None
+        ahead = points + after if to_come is None else to_come + (to_come / points if points else 1.0) * after
+        guess_s = (pace_s * self._pricing_renders(0, ahead) if bridging and pace_s is not None
+                   else self.pricing_time(search.state, len(requests), ahead))
         search.report(phase, remaining_s=guess_s)
         # cameras per batch: several per worker, so that a batch's last camera (whose cost varies with
         # its points) leaves the other workers idle for a small share of the batch only
@@ -551,7 +557,7 @@ class OctreeBuilder:
             # resolution, which pricing_time guesses from the search's pace and pixel counts only: from the
             # first render on, the time left is this round's own pace
             left_s = self._round_time_left(time.perf_counter() - started, requests, end, rendered_before,
-                                           rendered, to_render, after=after)
+                                           rendered, to_render, after=after, to_come=to_come)
             if left_s is None and rendered is None and end >= len(requests):
                 # the round is done with no pace of its own (the evaluation cache answered it): the rounds
                 # after it, by the pace before it or the search's guess
@@ -582,14 +588,17 @@ class OctreeBuilder:
 
     def _round_time_left(self, spent_s: float, requests: list[tuple[CameraSpec, list[Indices]]], end: int,
                          rendered_before: int | None, rendered: int | None = None,
-                         to_render: int = 0, after: int = 0) -> float | None:
+                         to_render: int = 0, after: int = 0, to_come: int | None = None) -> float | None:
         """Seconds left for a pricing round's ``requests`` after ``spent_s``, in the batch that ends at
         ``requests[end]``: ``rendered`` of its ``to_render`` uncached settings so far, or all of it done
         (None), and for ``after`` settings the rounds after it may price; None while nothing was
         rendered. Settings the evaluation cache answered take no time: the pace is per setting rendered,
         and the requests after the batch, and those ``after`` it, are expected to need rendering in the
         share the round's requests up to ``end`` did (a rerun from a copied data folder whose first
-        bridging batch was cached reported ~0 s left for an hour of renders)."""
+        bridging batch was cached reported ~0 s left for an hour of renders). ``to_come``: the settings of
+        the round the cache did not hold when it started (:meth:`DisplayPricer.uncached`), where known: then
+        the renders left are exactly those not rendered yet, and the rounds after it are expected to need
+        rendering in that share."""
         if rendered is None and end >= len(requests) and after <= 0:  # the last round is done
             return 0.0
         if rendered_before is None:  # (a pricer that does not count its renders)
@@ -602,6 +611,12 @@ class OctreeBuilder:
         if rendered is None:  # the batch is done, and the pricer has counted its renders
             rendered = to_render = 0
         counted = self.pricer.evaluations - rendered_before  # type: ignore[union-attr]  # (batches done)
+        if to_come is not None:
+            done = counted + rendered
+            points = sum(len(xs) for _, xs in requests)
+            if done <= 0:
+                return None
+            return spent_s / done * (max(to_come - done, 0) + (to_come / points if points else 1.0) * after)
         asked = sum(len(xs) for _, xs in requests[:end])
         if counted + rendered <= 0 or asked <= 0:
             return None
