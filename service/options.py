@@ -129,11 +129,11 @@ OPTIONS: tuple[Option, ...] = (
            "path cameras: also price each frontier at this many more path cameras (and at one camera of "
            "as many other passes of the path through it), keeping the worst error and power",
            minimum=0, maximum=8, metavar="N", group=_SAMPLES, modes=("path",)),
-    Option("guard_radius", float, 0.05, "Guard radius",
+    Option("guard_radius", float, 0.01, "Guard radius",
            "path cameras with guard frames: then price each frontier at the frame of its group least like "
            "its pricing cameras while that frame is more than this camera dissimilarity from all of them "
            "(squared eye offset over the viewing distance squared plus squared view-direction difference; "
-           "0.05 is about 13 degrees), at most guard frames more (0: off)",
+           "0.01 is about 6 degrees, 0.05 about 13), at most guard frames more (0: off)",
            minimum=0.0, maximum=4.0, metavar="D", group=_SAMPLES, modes=("path",), soft_max=0.5,
            precision=3),
     Option("threshold_power_w", float, 0.05, "Power threshold (W)",

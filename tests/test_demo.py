@@ -92,6 +92,9 @@ def test_demo_prices_the_slow_tier_only_when_its_lookups_read_it() -> None:
     guards = [demo.job_request(demo.parser().parse_args(argv)).options["guard_frames"]
               for argv in ([], ["--guard-frames", "2"])]
     assert guards == [demo.DEMO_GUARD_FRAMES, 2]
+    radii = [demo.job_request(demo.parser().parse_args(argv)).options["guard_radius"]
+             for argv in ([], ["--guard-radius", "0.01"])]
+    assert radii == [demo.DEMO_GUARD_RADIUS, 0.01] and demo.DEMO_GUARD_RADIUS == 0.05
     bridges = [demo.job_request(demo.parser().parse_args(argv)).options["bridge_points"]
                for argv in ([], ["--bridge-points", "8"])]
     assert bridges == [demo.DEMO_BRIDGE_POINTS, 8] and demo.DEMO_BRIDGE_POINTS == 0

@@ -50,7 +50,7 @@ class OctreeConfig:
     guard_frames: int = 2  # "path" sampling: extra path cameras of each sample its frontier is priced at
     # "path" sampling with guard frames: then the frames farther than this from every pricing camera too,
     # at most guard_frames more (0: none)
-    guard_radius: float = 0.05
+    guard_radius: float = 0.01
     path_stride: int = 4  # "path" sampling: a full search at every path_stride-th sample along the path
     warm_generations: int = 5  # "path" sampling: generations of the warm-started searches in between
     # the path's resolution, where every recorded point is priced again (None: the search's figures)
