@@ -253,6 +253,12 @@ def time_left(spent_s: float, done: int, total: int) -> float | None:
     return spent_s / done * max(total - done, 0)
 
 
+def _render_share(to_come: int, points: int) -> float:
+    """The share of a pricing round's settings it renders (the rest the evaluation cache holds): what the
+    rounds after it are expected to render of theirs."""
+    return to_come / points if points > 0 else 1.0
+
+
 #: What pricing one setting at display resolution costs, in the search's wall time per evaluation
 #: rendered times the pixel ratio of the display to the evaluation size (:meth:`OctreeBuilder.pricing_time`).
 #: Above 1 because the settings priced are frontier points, many of them near Max, and each camera's
@@ -533,7 +539,7 @@ class OctreeBuilder:
         # pace over them promise minutes for an hour's work), and the rounds after it as many in share
         count = getattr(self.pricer, "uncached", None)
         to_come = count(requests) if count is not None else None
-        ahead = points + after if to_come is None else to_come + (to_come / points if points else 1.0) * after
+        ahead = points + after if to_come is None else to_come + _render_share(to_come, points) * after
         guess_s = (pace_s * self._pricing_renders(0, ahead) if bridging and pace_s is not None
                    else self.pricing_time(search.state, len(requests), ahead))
         search.report(phase, remaining_s=guess_s)
@@ -616,7 +622,7 @@ class OctreeBuilder:
             points = sum(len(xs) for _, xs in requests)
             if done <= 0:
                 return None
-            return spent_s / done * (max(to_come - done, 0) + (to_come / points if points else 1.0) * after)
+            return spent_s / done * (max(to_come - done, 0) + _render_share(to_come, points) * after)
         asked = sum(len(xs) for _, xs in requests[:end])
         if counted + rendered <= 0 or asked <= 0:
             return None
