@@ -220,9 +220,7 @@ def _query(args: argparse.Namespace) -> int:
            "view": r.view, "frame_time_s": r.frame_time_s, "fps": r.fps, "fps_target": target,
            "meets_fps": r.meets_fps, "priority": r.priority, "expected_power_w": r.expected_power_w,
            "expected_error": r.expected_error,
-           # which display the figures hold for (as the REST answer says it)
-           "figures_resolution": list(store.figures.resolution) if store.figures.resolution else None,
-           "figures_kind": store.figures.kind}
+           **store.figures.fields()}  # which display the figures hold for (as the REST answer says it)
     if args.json:
         print(json.dumps(out))
     else:

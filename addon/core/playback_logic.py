@@ -224,8 +224,7 @@ def predicted_path_summary(store: pareto_store.ParetoStore, frames: Sequence[Any
         "mean_fps": sum(rates) / len(rates) if rates else None,  # None: the store predates frame times
         "slow_frames": slow,  # frames whose settings miss fps_target (priority "budget": also by choice)
         # which display the figures hold for, and the size the path renders at (None: not known)
-        "figures_kind": store.figures.kind,
-        "figures_resolution": store.figures.resolution,
+        "figures": store.figures,
         "render_resolution": _render_size(frames),
     }
 
@@ -237,8 +236,7 @@ def _render_size(frames: Sequence[Any]) -> tuple[int, int] | None:
 
 def figures_label(summary: dict[str, Any]) -> str:
     """Which display the summary's figures hold for, against the size the path renders at."""
-    figures = pareto_store.FiguresSize(summary.get("figures_kind", "unknown"),
-                                       summary.get("figures_resolution"))
+    figures = summary.get("figures") or pareto_store.FiguresSize("unknown", None)
     return "figures " + figures.label(summary.get("render_resolution"))
 
 

@@ -71,11 +71,18 @@ class ModeSummary:
     mean_power_w: float
     mean_error: float
     saving_vs_max: float | None  # fraction of the max preset's mean power saved
-    budget_kept_fraction: float | None
+    budget_kept_counts: tuple[int, int] | None  # (frames that kept the budget, frames checked); None: none
     mean_fps: float | None = None  # mean frame rate reached (None: not measured)
     min_fps: float | None = None
     real_time_fraction: float | None = None  # share of frames that keep up with the path's frame rate
-    budget_kept_counts: tuple[int, int] | None = None  # (frames that kept the budget, frames checked)
+
+    @property
+    def budget_kept_fraction(self) -> float | None:
+        """Share of the frames checked that kept the budget (None: a mode without a budget)."""
+        if self.budget_kept_counts is None:
+            return None
+        kept, checked = self.budget_kept_counts
+        return kept / checked
 
     @property
     def real_time(self) -> bool | None:
@@ -116,10 +123,9 @@ def summarise(rows: Iterable[FrameRow]) -> list[ModeSummary]:
         kept = [r.budget_kept for r in rs if r.budget_kept is not None]
         fps = [r.fps for r in rs if r.fps is not None]
         met = [r.deadline_met for r in rs if r.deadline_met is not None]
-        out.append(ModeSummary(mode, len(rs), p, e, saving, (sum(kept) / len(kept)) if kept else None,
+        out.append(ModeSummary(mode, len(rs), p, e, saving, (sum(kept), len(kept)) if kept else None,
                                sum(fps) / len(fps) if fps else None, min(fps) if fps else None,
-                               sum(met) / len(met) if met else None,
-                               (sum(kept), len(kept)) if kept else None))
+                               sum(met) / len(met) if met else None))
     order = list(MODE_LABELS)
     out.sort(key=lambda s: order.index(s.mode) if s.mode in order else len(order))
     return out

@@ -41,6 +41,12 @@ class FiguresSize:
             return cls("preview", _size(meta["eval_resolution"], "eval_resolution"))
         return cls("unknown", None)
 
+    def fields(self) -> dict[str, Any]:
+        """``figures_resolution`` ([w, h] or None) and ``figures_kind``: how answers (REST, the CLI's JSON)
+        carry it."""
+        return {"figures_resolution": list(self.resolution) if self.resolution else None,
+                "figures_kind": self.kind}
+
     @property
     def display(self) -> Size | None:
         """The display size the figures hold for (None: preview or unknown figures)."""

@@ -97,9 +97,7 @@ def answer_query(store: Any, body: StoreQuery) -> QueryResult:
         raise ApiError(422, f"camera pose cannot be looked up: {type(exc).__name__}: {exc}") from exc
     target = tuple(hit.indices)
     shown = target
-    figures = store.figures  # which display the figures hold for, with every answer
-    where = {"figures_resolution": list(figures.resolution) if figures.resolution else None,
-             "figures_kind": figures.kind}
+    where = store.figures.fields()  # which display the figures hold for, with every answer
     if body.previous is not None:
         prev = tuple(body.previous.indices)
         if len(prev) != len(target):
