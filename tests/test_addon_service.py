@@ -170,7 +170,10 @@ def test_gui_path_worker_thread_and_queue(ext) -> None:
 def test_cancel_from_the_gui_path(ext, service) -> None:
     sc = build_scene()
     sc.render_budget.seed = 12345  # a job the cache has not seen
-    sc.render_budget.max_depth = 2
+    # and a search no machine finishes before the first poll's Cancel (not the small job's exhaustive
+    # enumeration)
+    sc.render_budget.max_depth, sc.render_budget.population, sc.render_budget.generations = 2, 64, 500
+    sc.render_budget.exhaustive_limit = 0
     ops, job = start_gui_job(bpy)
     deadline = time.monotonic() + 60
     while job.messages.qsize() < 2 and time.monotonic() < deadline:  # uploaded, submitted, first poll
