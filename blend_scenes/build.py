@@ -189,10 +189,21 @@ def build_scene(name: str, out_dir: Path) -> dict[str, Any]:
     return stats
 
 
+_BLENDER_USER: list[tempfile.TemporaryDirectory] = []
+
+
+def private_blender_user_folder() -> None:
+    """Keep Blender's user config out of the home directory: a folder of this process's own, removed when
+    it ends (before bpy is imported; a folder already chosen is kept)."""
+    if "BLENDER_USER_RESOURCES" not in os.environ:
+        _BLENDER_USER.append(tempfile.TemporaryDirectory(prefix="blend-scenes-"))
+        os.environ["BLENDER_USER_RESOURCES"] = _BLENDER_USER[-1].name
+
+
 def build(names: list[str] | None = None, out_dir: Path = DEFAULT_OUT, force: bool = False) -> list[dict]:
     """Build (or reuse) the named scenes, all by default; returns their statistics."""
-    if "bpy" not in sys.modules:  # keep Blender's user config out of the home directory
-        os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp(prefix="blend-scenes-"))
+    if "bpy" not in sys.modules:
+        private_blender_user_folder()
     results = []
     for name in names or list(SCENES):
         if name not in SCENES:

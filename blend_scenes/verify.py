@@ -9,9 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +17,7 @@ from sim_core.loaders import load_gltf
 
 import sim_core
 
-from .build import DEFAULT_OUT
+from .build import DEFAULT_OUT, private_blender_user_folder
 
 
 def pixel_agreement(scene_dir: Path, frame_indices: list[int] | None = None, width: int = 48,
@@ -65,7 +63,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--scene", action="append", help="scene to check (repeatable); default: all built")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="build folder (default: %(default)s)")
     args = parser.parse_args(argv)
-    os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp(prefix="blend-scenes-"))
+    private_blender_user_folder()
     names = args.scene or sorted(p.parent.name for p in args.out.glob("*/stats.json"))
     worst = 1.0
     for name in names:

@@ -1,7 +1,7 @@
 """One optimisation job in a child process of Blender: the add-on's local path, with no server.
 
     python -m service.local_job --request job.json --scene scene.glb --store store.json \\
-        --cache eval_cache.sqlite3 [--workers N] [--parent-pid PID]
+        --cache eval_cache.sqlite3 [--workers N] [--parent-pid PID] [--scratch DIR]
 
 The request is the body of ``POST /jobs`` (``scene_id`` is ignored: the scene is the file given), so a
 local job and a service job run the same optimiser inputs through :func:`service.jobs.run_optimisation`.
@@ -96,6 +96,10 @@ def parser() -> argparse.ArgumentParser:
     ap.add_argument("--workers", type=int, default=1, help="evaluation processes (1: in this process)")
     ap.add_argument("--parent-pid", type=int, default=None,
                     help="exit at once if this is no longer the parent (it died before we started)")
+    ap.add_argument("--scratch", type=Path, default=None,
+                    help="folder for the build's camera references while it runs (MBs each at 1280x720; "
+                         "default: the system's temporary folder). A killed job cannot remove them, so "
+                         "the parent gives a folder of its own and removes it when the job has ended")
     return ap
 
 
@@ -112,6 +116,8 @@ def run(args: argparse.Namespace) -> int:
         if args.workers < 1:
             raise ValueError(f"workers must be >= 1, got {args.workers}")
         handle = load_scene(args.scene)
+        if args.scratch is not None:
+            args.scratch.mkdir(parents=True, exist_ok=True)
     except Exception as exc:  # bad input: say what, exit
         emit("failed", error=f"{type(exc).__name__}: {exc}")
         return EXIT_FAILED
@@ -130,7 +136,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         with EvalCache(args.cache) as cache:
             store = run_optimisation(spec, scene=handle, cache=cache, executor=executor, progress=on_progress,
-                                     should_cancel=cancel.is_set, threads=threads)
+                                     should_cancel=cancel.is_set, threads=threads, scratch_dir=args.scratch)
     except Cancelled:
         emit("cancelled")
         return EXIT_CANCELLED

@@ -12,7 +12,8 @@ from typing import Any
 import pytest
 
 # Must happen before any test module imports bpy (Blender reads it at import time).
-os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp(prefix="render-budget-blender-"))
+_BLENDER_USER = tempfile.TemporaryDirectory(prefix="render-budget-blender-")  # removed when the run ends
+os.environ.setdefault("BLENDER_USER_RESOURCES", _BLENDER_USER.name)
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 MODELS_DIR = REPO_ROOT / "assets" / "models"

@@ -152,17 +152,16 @@ def cycles_render(sc: Any) -> np.ndarray:
     import bpy
     import OpenEXR
 
-    path = os.path.join(tempfile.mkdtemp(prefix="cycles-reference-"), "render.exr")
-    sc.render.image_settings.file_format = "OPEN_EXR"
-    sc.render.image_settings.color_depth = "32"
-    sc.render.filepath = path
-    bpy.ops.render.render(write_still=True)
-    with OpenEXR.File(path) as f:
-        channels = f.channels()
-        key = "RGBA" if "RGBA" in channels else "RGB"
-        image = np.asarray(channels[key].pixels, dtype=np.float64)[..., :3]
-    os.remove(path)
-    return image
+    with tempfile.TemporaryDirectory(prefix="cycles-reference-") as folder:
+        path = os.path.join(folder, "render.exr")
+        sc.render.image_settings.file_format = "OPEN_EXR"
+        sc.render.image_settings.color_depth = "32"
+        sc.render.filepath = path
+        bpy.ops.render.render(write_still=True)
+        with OpenEXR.File(path) as f:
+            channels = f.channels()
+            key = "RGBA" if "RGBA" in channels else "RGB"
+            return np.asarray(channels[key].pixels, dtype=np.float64)[..., :3]
 
 
 def _camera(sc: Any, matrix: np.ndarray, angle: float) -> None:

@@ -126,6 +126,11 @@ def test_cancel_from_the_gui_path_stops_the_job_process(ext) -> None:
         time.sleep(0.02)
     running = job_processes()
     assert running  # the job runs in a child process of this one
+    # its camera references go to its own folder in the data folder, not the system's temporary one
+    jobs = Path(m("preferences").get().data_dir) / "jobs"
+    while not list(jobs.glob("*/scratch/render-budget-references-*")) and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert list(jobs.glob("*/scratch/render-budget-references-*"))
     time.sleep(0.5)
     rt = cancel_gui_job(bpy, ops, job)
     assert "cancelled" in rt.job_status and props.store_text is None
@@ -133,6 +138,11 @@ def test_cancel_from_the_gui_path_stops_the_job_process(ext) -> None:
     while job_processes() and time.monotonic() < deadline:
         time.sleep(0.05)
     assert job_processes() == []
+    # and a cancelled job leaves none of them behind, however it ended
+    deadline = time.monotonic() + 10
+    while list(jobs.glob("*/scratch")) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert list(jobs.glob("*/scratch")) == []
 
 
 def test_preview_renders_full_hd_here_in_bands(ext) -> None:

@@ -25,7 +25,8 @@ from importlib import import_module
 from pathlib import Path
 import bpy, numpy as np
 for name in sys.argv[1:]:
-    import_module("blend_scenes.scenes." + name).build(Path(tempfile.mkdtemp()))
+    with tempfile.TemporaryDirectory() as out:
+        import_module("blend_scenes.scenes." + name).build(Path(out))
     h = hashlib.sha256()
     for m in sorted(bpy.data.meshes, key=lambda m: m.name):
         m.calc_loop_triangles()

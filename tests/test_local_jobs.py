@@ -153,6 +153,26 @@ def test_cancel_stops_the_job_and_keeps_its_evaluations(tmp_path: Path) -> None:
     assert cache.is_file() and cache.stat().st_size > 0
 
 
+def test_a_killed_job_leaves_no_camera_references_behind(tmp_path: Path) -> None:
+    """Closing the client (the add-on disabled, Blender quitting) kills a running job at once, before its
+    own clean-up runs; its camera references were in its own folder, which the client removes."""
+    glb = tmp_path / "teapot.glb"
+    glb.write_bytes(teapot_scene_glb())
+    client = LocalClient(tmp_path / "data")
+    spec = tiny_job(client.upload_scene(glb)["id"], resolution=(48, 36), depth_values=(0, 1, 2))
+    spec["options"].update(max_depth=2, population=64, generations=500, exhaustive_limit=0,
+                           view_sampling="aimed")
+    job = client.submit_job(spec)
+    jobs = tmp_path / "data" / "jobs"
+    deadline = time.monotonic() + 120
+    while not list(jobs.glob("*/scratch/render-budget-references-*")):
+        assert time.monotonic() < deadline and client.job(job["id"])["state"] in ("queued", "running")
+        time.sleep(0.02)
+    client.close()
+    assert client.job(job["id"])["state"] == "cancelled" and not client.job_pids()
+    assert list(jobs.glob("*/scratch")) == [] and (jobs / job["id"]).is_dir()  # the log stays
+
+
 def test_a_failing_job_says_why(glb: Path, tmp_path: Path) -> None:
     client = LocalClient(tmp_path / "data")
     scene_id = client.upload_scene(glb)["id"]

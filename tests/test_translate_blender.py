@@ -114,9 +114,9 @@ def _tmp_png():
     import tempfile
     from pathlib import Path
 
-    if not _TMP:
-        _TMP.append(Path(tempfile.mkdtemp(prefix="translate-test-")) / "cycles.png")
-    return _TMP[0]
+    if not _TMP:  # removed when the test process ends
+        _TMP.append(tempfile.TemporaryDirectory(prefix="translate-test-"))
+    return Path(_TMP[0].name) / "cycles.png"
 
 
 def column_of(x: float, sc) -> int:

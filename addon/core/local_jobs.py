@@ -45,6 +45,8 @@ from .client import RenderedImage, ServiceError
 TERMINAL = ("done", "failed", "cancelled")
 SCENES_KEPT = 8
 JOB_MODULE = "service.local_job"
+#: a job's folder for its build's camera references (``--scratch``), removed once the job has ended
+SCRATCH_DIR = "scratch"
 
 
 def module_paths() -> list[str]:
@@ -76,6 +78,8 @@ class LocalJobProcess:
         self.work_dir = work_dir
         self.store_path = work_dir / "store.json"
         self.log_path = work_dir / "job.log"
+        self.scratch_dir = work_dir / SCRATCH_DIR
+        self._stopped = False
         self._lock = threading.Lock()
         self._state: dict[str, Any] = {"id": job_id, "state": "queued", "progress": None, "error": None,
                                        "store_id": None}
@@ -121,7 +125,11 @@ class LocalJobProcess:
             elif event == "failed":
                 self._set(state="failed", error=str(msg.get("error") or "no message"))
         code = self.process.wait()
+        # what a killed job could not remove (its camera references: MBs each at 1280x720)
+        shutil.rmtree(self.scratch_dir, ignore_errors=True)
         with self._lock:
+            if self._state["state"] not in TERMINAL and self._stopped:  # ended by stop(), not by itself
+                self._state["state"] = "cancelled"
             if self._state["state"] not in TERMINAL:
                 self._state.update(state="failed", error=f"the local job process exited with status {code}"
                                    f" before finishing; log: {self.log_path}\n{self.log_tail()}")
@@ -154,6 +162,7 @@ class LocalJobProcess:
         """End the job now: closing its lifeline makes it kill itself and its workers; if it does not,
         its whole process group is killed (only while it runs: a reaped group id could be reused)."""
         if self.running():
+            self._stopped = True
             self._close_stdin()
             try:
                 self.process.wait(timeout=timeout_s)
@@ -325,7 +334,7 @@ class LocalClient:
         (work / "request.json").write_text(json.dumps(payload, allow_nan=False), encoding="utf-8")
         (self.data_dir / "cache").mkdir(parents=True, exist_ok=True)
         args = ["--request", str(work / "request.json"), "--scene", str(scene_file),
-                "--store", str(work / "store.json"),
+                "--store", str(work / "store.json"), "--scratch", str(work / SCRATCH_DIR),
                 "--cache", str(self.data_dir / "cache" / "eval_cache.sqlite3"),
                 "--workers", str(self.workers), "--parent-pid", str(os.getpid())]
         job = LocalJobProcess(job_id, job_command(self.python, args), work)
