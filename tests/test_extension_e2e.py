@@ -302,7 +302,9 @@ def test_killing_blender_mid_job_leaves_no_process(extension_zip: Path, tmp_path
     (work / "watcher.py").write_text(WATCHER, encoding="utf-8")
     blender = subprocess.Popen([str(bpy_venv.python()), "script.py", str(extension_zip), "--killed-mid-job"],
                                cwd=work, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
-                               env=bpy_venv.clean_env(BLENDER_USER_RESOURCES=str(tmp_path / "user")))
+                               # what a killed Blender cannot remove (its scene export) stays in here
+                               env=bpy_venv.clean_env(BLENDER_USER_RESOURCES=str(tmp_path / "user"),
+                                                      TMPDIR=str(work)))
     try:
         line = ""
         while not line.startswith("RUNNING "):
