@@ -151,6 +151,11 @@ def test_cancel_stops_the_job_and_keeps_its_evaluations(tmp_path: Path) -> None:
     assert client.wait_idle(30)
     cache = tmp_path / "data" / "cache" / "eval_cache.sqlite3"
     assert cache.is_file() and cache.stat().st_size > 0
+    jobs = tmp_path / "data" / "jobs"  # and nothing of the cancelled job is left in the data folder
+    deadline = time.monotonic() + 10
+    while list(jobs.iterdir()) and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert list(jobs.iterdir()) == []
 
 
 def test_a_killed_job_leaves_no_camera_references_behind(tmp_path: Path) -> None:
@@ -170,7 +175,7 @@ def test_a_killed_job_leaves_no_camera_references_behind(tmp_path: Path) -> None
         time.sleep(0.02)
     client.close()
     assert client.job(job["id"])["state"] == "cancelled" and not client.job_pids()
-    assert list(jobs.glob("*/scratch")) == [] and (jobs / job["id"]).is_dir()  # the log stays
+    assert list(jobs.glob("*/scratch")) == [] and not (jobs / job["id"]).exists()  # nor its folder
 
 
 def test_a_failing_job_says_why(glb: Path, tmp_path: Path) -> None:

@@ -133,7 +133,10 @@ class LocalJobProcess:
             if self._state["state"] not in TERMINAL:
                 self._state.update(state="failed", error=f"the local job process exited with status {code}"
                                    f" before finishing; log: {self.log_path}\n{self.log_tail()}")
+            cancelled = self._state["state"] == "cancelled"
         self._close_stdin()
+        if cancelled:  # nothing in it is wanted any more (a failed job keeps its log, which its error names)
+            shutil.rmtree(self.work_dir, ignore_errors=True)
 
     def snapshot(self) -> dict[str, Any]:
         with self._lock:
