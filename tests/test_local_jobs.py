@@ -5,6 +5,7 @@ cancel stops the job and keeps its evaluations; the job and its workers die with
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 import textwrap
@@ -16,7 +17,7 @@ import pytest
 
 from addon.core.client import ServiceClient, ServiceError
 from addon.core.job_runner import JobCancelled, JobFailed, JobRequest, run_job
-from addon.core.local_jobs import LocalClient, job_command
+from addon.core.local_jobs import STALE_AFTER_S, LocalClient, job_command, prune_stale
 from tests.addon_support import descendants, kill_and_check_nothing_left
 from tests.api_support import (
     box_scene_glb,
@@ -49,6 +50,42 @@ def test_upload_answers_what_the_service_answers(glb: Path, tmp_path: Path) -> N
         client.upload_scene(bad)
     with pytest.raises(ServiceError, match="not found"):
         client.submit_job(tiny_job("0" * 64))
+
+
+
+def test_a_client_removes_what_no_one_touched_for_a_week(glb: Path, tmp_path: Path) -> None:
+    """Failed jobs' folders, stores Blender quit before collecting and scenes of earlier sessions go when a
+    client starts; anything touched within the week stays (another Blender may be using it)."""
+    data = tmp_path / "data"
+    old = time.time() - STALE_AFTER_S - 3600
+    recent = time.time() - STALE_AFTER_S + 3600
+
+    def made(path: Path, when: float, text: str = "x") -> Path:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text)
+        os.utime(path, (when, when))
+        os.utime(path.parent, (when, when))
+        return path
+
+    made(data / "jobs" / "failed" / "job.log", old)
+    made(data / "jobs" / "uncollected" / "store.json", old)
+    made(data / "jobs" / "busy" / "request.json", old)
+    made(data / "jobs" / "busy" / "scratch" / "reference.exr", recent)  # still writing: stays
+    made(data / "scenes" / "gone.rbscene", old)
+    made(data / "scenes" / "half.tmp", old)
+    made(data / "scenes" / "fresh.rbscene", recent)
+    client = LocalClient(data)
+    assert sorted(p.name for p in (data / "jobs").iterdir()) == ["busy"]
+    assert sorted(p.name for p in (data / "scenes").iterdir()) == ["fresh.rbscene"]
+    # a scene uploaded again counts as used: its kept copy is not stale a week after the first upload
+    info = client.upload_scene(glb)
+    kept = data / "scenes" / f"{info['id']}.glb"
+    os.utime(kept, (old, old))
+    assert client.upload_scene(glb) == info and prune_stale(data) == [] and kept.is_file()
+    kept.unlink()  # removed by another Blender's client: uploading again puts it back
+    assert client.upload_scene(glb) == info and kept.is_file()
+    assert prune_stale(data, now=time.time() + STALE_AFTER_S + 60) != []  # a week on, everything goes
+    assert list((data / "scenes").iterdir()) == [] and list((data / "jobs").iterdir()) == []
 
 
 @pytest.mark.service

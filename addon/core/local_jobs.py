@@ -47,6 +47,42 @@ SCENES_KEPT = 8
 JOB_MODULE = "service.local_job"
 #: a job's folder for its build's camera references (``--scratch``), removed once the job has ended
 SCRATCH_DIR = "scratch"
+#: job folders and kept scenes untouched this long go when a client starts: failed jobs' logs, stores never
+#: collected (Blender quit first), scenes of earlier sessions. Far beyond any local job's length (a running
+#: job of another Blender sharing the folder writes its log and references), short enough to read a log.
+STALE_AFTER_S = 7 * 24 * 3600.0
+
+
+def _newest_mtime(path: Path) -> float:
+    """The latest change to a file, or to a folder or anything in it (0 if it vanished meanwhile)."""
+    newest = 0.0
+    for item in (path, *path.rglob("*")) if path.is_dir() else (path,):
+        try:
+            newest = max(newest, item.stat().st_mtime)
+        except OSError:
+            continue
+    return newest
+
+
+def prune_stale(data_dir: str | Path, max_age_s: float = STALE_AFTER_S,
+                now: float | None = None) -> list[Path]:
+    """Remove job folders and kept scenes (and half-written copies) no one has touched for `max_age_s`;
+    returns what went. The folder may be shared by several Blenders, so age is the only safe sign."""
+    data_dir = Path(data_dir)
+    cutoff = (time.time() if now is None else now) - max_age_s
+    removed: list[Path] = []
+    for folder in (data_dir / "jobs", data_dir / "scenes"):
+        if not folder.is_dir():
+            continue
+        for item in sorted(folder.iterdir()):
+            if _newest_mtime(item) >= cutoff:
+                continue
+            if item.is_dir():
+                shutil.rmtree(item, ignore_errors=True)
+            else:
+                item.unlink(missing_ok=True)
+            removed.append(item)
+    return removed
 
 
 def module_paths() -> list[str]:
@@ -202,6 +238,7 @@ class LocalClient:
         self._scenes: OrderedDict[str, dict[str, Any]] = OrderedDict()
         self._loaded: OrderedDict[str, Any] = OrderedDict()  # scene id -> sim_core.Scene (evaluate, render)
         self._lock = threading.Lock()
+        prune_stale(self.data_dir)
 
     # -- what ServiceClient offers ---------------------------------------------------------------------
     def health(self, timeout_s: float | None = None) -> dict[str, Any]:
@@ -220,14 +257,16 @@ class LocalClient:
         if data[:4] != b"glTF" and not is_scene_file(data[:64]):
             raise ValueError(f"{scene_path} is neither a render-budget scene file nor a binary glTF (.glb)")
         scene_id = hashlib.sha256(data).hexdigest()
+        folder = self.data_dir / "scenes"
+        kept = self._scene_file(scene_id, glb=data[:4] == b"glTF")
+        if kept.is_file():
+            os.utime(kept)  # used again: not stale (prune_stale)
         with self._lock:
             known = self._scenes.get(scene_id)
-            if known is not None:
+            if known is not None and kept.is_file():  # (another Blender's prune_stale may have removed it)
                 self._scenes.move_to_end(scene_id)
                 return dict(known)
-        folder = self.data_dir / "scenes"
         folder.mkdir(parents=True, exist_ok=True)
-        kept = self._scene_file(scene_id, glb=data[:4] == b"glTF")
         if not kept.is_file():
             tmp = kept.with_suffix(".tmp")
             tmp.write_bytes(data)
