@@ -52,7 +52,6 @@ def test_upload_answers_what_the_service_answers(glb: Path, tmp_path: Path) -> N
         client.submit_job(tiny_job("0" * 64))
 
 
-
 def test_a_client_removes_what_no_one_touched_for_a_week(glb: Path, tmp_path: Path) -> None:
     """Failed jobs' folders, stores Blender quit before collecting and scenes of earlier sessions go when a
     client starts; anything touched within the week stays (another Blender may be using it)."""

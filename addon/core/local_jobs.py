@@ -259,15 +259,16 @@ class LocalClient:
         scene_id = hashlib.sha256(data).hexdigest()
         folder = self.data_dir / "scenes"
         kept = self._scene_file(scene_id, glb=data[:4] == b"glTF")
-        if kept.is_file():
+        present = kept.is_file()  # (another Blender's prune_stale may have removed it)
+        if present:
             os.utime(kept)  # used again: not stale (prune_stale)
         with self._lock:
             known = self._scenes.get(scene_id)
-            if known is not None and kept.is_file():  # (another Blender's prune_stale may have removed it)
+            if known is not None and present:
                 self._scenes.move_to_end(scene_id)
                 return dict(known)
         folder.mkdir(parents=True, exist_ok=True)
-        if not kept.is_file():
+        if not present:
             tmp = kept.with_suffix(".tmp")
             tmp.write_bytes(data)
             tmp.replace(kept)
