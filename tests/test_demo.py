@@ -10,6 +10,7 @@ import os
 import re
 import signal
 import socket
+import sqlite3
 import subprocess
 import sys
 import time
@@ -219,3 +220,47 @@ def test_demo_stops_the_service_on_sigterm(tmp_path: Path) -> None:
     assert proc.returncode == 130, err
     assert "service stopped" in rest
     assert _port_closed(url)
+
+
+@pytest.mark.slow
+@pytest.mark.service
+def test_a_rerun_after_a_hard_kill_follows_the_job_its_service_took_up_again(tmp_path: Path) -> None:
+    """The demo and its service killed outright (a crash, a lost session: no cancel reaches the service)
+    leave the job running in the data folder, and the next start of the service takes it up again. The
+    same command again follows that job instead of submitting a second one that would run beside it."""
+    command = [sys.executable, "-m", "tools.demo", *TINY, "--generations", "50", "--out",
+               str(tmp_path / "out"), "--data-dir", str(tmp_path / "var")]
+    proc = subprocess.Popen(command, cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                            text=True, start_new_session=True)
+    job_id = None
+    log = tmp_path / "var" / "service.log"
+    try:
+        deadline = time.monotonic() + 120
+        for line in proc.stdout:
+            m = re.search(r"job (\w+) queued", line)
+            if m or time.monotonic() > deadline:
+                job_id = m.group(1) if m else None
+                break
+        assert job_id is not None
+        time.sleep(1.0)
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)  # the demo
+        proc.wait()
+        # and its service with the service's workers (a session of its own, so Ctrl-C reaches the demo only)
+        for pid in re.findall(r"Started server process \[(\d+)\]", log.read_text() if log.exists() else ""):
+            try:
+                os.killpg(int(pid), signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        time.sleep(0.5)
+    with sqlite3.connect(tmp_path / "var" / "service.sqlite3") as db:
+        assert db.execute("SELECT id, state FROM jobs").fetchall() in ([(job_id, "queued")],
+                                                                       [(job_id, "running")])
+
+    again = subprocess.run(command, cwd=REPO_ROOT, capture_output=True, text=True, timeout=300, check=False)
+    assert again.returncode == 0, again.stdout[-3000:] + again.stderr[-3000:]
+    assert f"job {job_id} resumed" in again.stdout and " queued\n" not in again.stdout
+    with sqlite3.connect(tmp_path / "var" / "service.sqlite3") as db:
+        assert db.execute("SELECT id, state FROM jobs").fetchall() == [(job_id, "done")]
+    assert (tmp_path / "out" / "store.json").is_file()
+

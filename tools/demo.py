@@ -24,6 +24,7 @@ imports bpy: the scene build runs in a child process.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import os
 import signal
@@ -35,6 +36,7 @@ from typing import Any
 
 import sim_core
 from addon.core import campaign, campaign_targets, report
+from addon.core.client import ServiceError
 from addon.core.job_runner import JobRequest, follow_job
 from addon.core.local_service import LocalService, free_port
 from service import options as option_schema
@@ -46,6 +48,12 @@ from service.verify import markdown
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 SCENES_DIR = REPO_ROOT / "blend_scenes" / "build"
+#: The data folder's record of the jobs its demo runs submitted, by request. A demo killed outright (a
+#: crash, a lost session: no cancel reaches its service) leaves its job running in the data folder, and
+#: the next start of the service takes it up again; a rerun that submitted the same request anew had both
+#: run at once on the same workers, each rendering what the other did (the village at 1280x720: half an
+#: hour of both cores spent twice before one was cancelled by hand).
+JOBS_RECORD = "demo-jobs.json"
 
 
 def say(text: str = "") -> None:
@@ -240,8 +248,12 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         say(f"== optimise the path ({len(path)} frames, {campaign_targets.path_duration(path):.1f} s) at "
             f"{resolution[0]}x{resolution[1]} through the service")
         t = clock.start()
-        job = client.submit_job(request.payload(info["id"], path_doc))
-        say(f"  job {job['id']} queued")
+        job, resumed = submit_or_resume(client, request.payload(info["id"], path_doc), args.data_dir)
+        if resumed:
+            say(f"  job {job['id']} resumed ({job['state']}: submitted by an earlier run that was killed; "
+                "its finished renders are cached; the times below are this run's)")
+        else:
+            say(f"  job {job['id']} queued")
         last = [""]
 
         def show(update: Any) -> None:
@@ -279,6 +291,35 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     finally:
         service.stop()
         say("service stopped")
+
+
+def submit_or_resume(client: Any, payload: dict[str, Any], data_dir: Path) -> tuple[dict[str, Any], bool]:
+    """The job for ``payload``: the one an earlier run submitted when the service still has it queued or
+    running (True), else a new one, recorded in the data folder's :data:`JOBS_RECORD` (False)."""
+    digest = hashlib.sha256(json.dumps(payload, sort_keys=True).encode("utf-8")).hexdigest()
+    record = Path(data_dir) / JOBS_RECORD
+    try:
+        known = json.loads(record.read_text(encoding="utf-8"))
+    except (OSError, ValueError):  # none yet, or cut short: submit anew
+        known = {}
+    if not isinstance(known, dict):
+        known = {}
+    job_id = known.get(digest)
+    if isinstance(job_id, str):
+        try:
+            job = client.job(job_id)
+        except ServiceError as exc:
+            if exc.status != 404:  # (404: a job the data folder no longer holds)
+                raise
+        else:
+            if job["state"] in ("queued", "running"):
+                return job, True
+    job = client.submit_job(payload)
+    known[digest] = job["id"]
+    tmp = record.with_name(f".{record.name}.{os.getpid()}")
+    tmp.write_text(json.dumps(known, indent=1), encoding="utf-8")
+    os.replace(tmp, record)
+    return job, False
 
 
 def verify(client: Any, store_id: str, path_doc: dict[str, Any], meta: dict[str, Any],
