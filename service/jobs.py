@@ -153,6 +153,7 @@ class JobManager:
         return f"process-pool:{self.eval_workers}" if self.eval_workers > 1 else "in-process"
 
     def start(self) -> None:
+        requeued = []
         for job in self.storage.list_jobs(states=("queued", "running")):
             if job.cancel_requested:
                 self._finish(job.id, "cancelled", error=None)
@@ -162,7 +163,9 @@ class JobManager:
                     job_id=job.id, state="queued",
                     event=("resumed", {"state": "queued", "attempts": job.attempts}),
                 )
+            requeued.append(job.id)
             self._queue.put(job.id)
+        self.storage.prune_references(keep=requeued)
         for i in range(self.workers):
             t = threading.Thread(target=self._worker, name=f"render-budget-job-{i}", daemon=True)
             t.start()
@@ -267,6 +270,7 @@ class JobManager:
             data["store_id"] = store_id
         self.storage.update_job(job_id=job_id, state=state, error=error, store_id=store_id,
                                 finished=time.time(), elapsed_s=elapsed_s, event=(state, data))
+        self.storage.drop_job_references(job_id)
         self._bump()
 
     def _run(self, job_id: str) -> None:
@@ -305,7 +309,7 @@ class JobManager:
             store = run_optimisation(
                 job.spec, scene=handle, cache=self.eval_cache(), executor=self.executor(),
                 progress=on_progress, should_cancel=should_cancel, threads=self.render_threads,
-                scratch_dir=self.storage.tmp_dir,
+                references_dir=self.storage.job_references(job.id),
             )
             if should_cancel():
                 raise JobCancelled
@@ -379,11 +383,12 @@ def validate_job_spec(spec: dict[str, Any]) -> None:
 def run_optimisation(
     spec: dict[str, Any], *, scene: Any, cache: Any, executor: Any,
     progress: Callable[[Any], None], should_cancel: Callable[[], bool], threads: int | None = None,
-    scratch_dir: Path | None = None,
+    references_dir: Path | None = None,
 ) -> Any:
     """Turn a stored job request into the optimiser's inputs and run it; returns a ParetoStore.
+    ``references_dir``: the job's own folder for its camera references, kept across its attempts.
     Raises ``service.optimize.Cancelled`` when ``should_cancel`` turns true."""
     path = CameraPath.from_dict(spec["camera_path"])
     config = OptimizeConfig(**spec_options(spec), profile=spec["profile"], fps=path.fps, threads=threads)
     return optimize_path(scene, path, build_space(spec), config, cache=cache, executor=executor,
-                         progress=progress, should_cancel=should_cancel, scratch_dir=scratch_dir)
+                         progress=progress, should_cancel=should_cancel, references_dir=references_dir)

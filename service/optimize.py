@@ -120,12 +120,13 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, config: O
                   cache: EvalCache, executor: Executor,
                   progress: Callable[[Progress], None] | None = None,
                   should_cancel: Callable[[], bool] | None = None,
-                  scratch_dir: Path | None = None) -> ParetoStore:
+                  scratch_dir: Path | None = None, references_dir: Path | None = None) -> ParetoStore:
     """Pareto store for ``path`` in ``scene`` (a ``sim_core.Scene`` or a :class:`SceneHandle`).
 
-    ``scratch_dir`` holds the build's camera references while it runs (MBs each at 1280x720): the
-    service passes its data directory's tmp/, on the data disk and emptied when it starts after a crash;
-    None means the system's temporary directory.
+    The build's camera references (MBs each at 1280x720) go to ``references_dir`` when given, a folder
+    the caller keeps across attempts and removes (the service's job folder: a resumed job reads them
+    instead of rendering each camera's Max again), else to a temporary folder in ``scratch_dir`` (None:
+    the system's temporary directory) removed at the end.
 
     Raises :class:`Cancelled` when ``should_cancel`` returns true; everything evaluated so far stays in
     ``cache``, so calling again with the same arguments resumes without re-rendering."""
@@ -163,8 +164,12 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, config: O
     if config.display_estimator != "preview":
         pricing = store_pricing(config, display)
         # each pricing camera's reference, rendered in its first round, read by the later ones
-        references = tempfile.TemporaryDirectory(prefix="render-budget-references-", dir=scratch_dir)
-        pricer = DisplayPricer(evaluator, pricing, references.name)
+        if references_dir is not None:
+            Path(references_dir).mkdir(parents=True, exist_ok=True)
+            pricer = DisplayPricer(evaluator, pricing, str(references_dir))
+        else:
+            references = tempfile.TemporaryDirectory(prefix="render-budget-references-", dir=scratch_dir)
+            pricer = DisplayPricer(evaluator, pricing, references.name)
     forwards = targets = None
     if config.view_sampling in ("aimed", "path"):
         forwards, targets = path_targets(handle.get(), path)
@@ -174,7 +179,7 @@ def optimize_path(scene: Any, path: CameraPath, space: ParameterSpace, config: O
     builder = OctreeBuilder(evaluator, space, frames_in, cfg, progress, should_cancel, pricer)
     try:
         builder.run()
-    finally:  # a build's references are its own (a resumed job renders them again)
+    finally:  # a temporary folder's references are this build's own (a caller's folder stays)
         if references is not None:
             references.cleanup()
     meta = {

@@ -262,17 +262,42 @@ def test_active_scene_hashes_name_what_eviction_must_keep(storage: Storage) -> N
     assert storage.active_scene_hashes() == ["d"]
 
 
-def test_a_job_keeps_its_camera_references_in_the_data_directory(storage: Storage, monkeypatch) -> None:
-    """The optimiser gets the data directory's tmp/ (on the data disk, emptied at start after a crash)
-    for the references its pricing rounds share, not the system's temporary directory."""
+def test_a_job_keeps_its_camera_references_in_its_own_folder_until_it_ends(storage: Storage,
+                                                                           monkeypatch) -> None:
+    """The optimiser gets the job's own folder in the data directory for the references its pricing
+    rounds share: an interrupted attempt (the service stopping) leaves it for the resumed one, a start
+    keeps only the re-queued jobs' folders, and the job's end removes it."""
     from service.optimize import Cancelled
 
     job = storage.create_job(scene_id=SCENE, spec={})
-    seen: dict[str, object] = {}
+    seen: list[object] = []
 
-    def attempt(spec, *, scratch_dir, **_kw):
-        seen["scratch_dir"] = scratch_dir
-        raise Cancelled("stopped")
+    def interrupted(spec, *, references_dir, **_kw):
+        seen.append(references_dir)
+        references_dir.mkdir(parents=True)  # (as optimize_path does)
+        (references_dir / "frame-x.npz").write_bytes(b"a reference")
+        raise Cancelled("stopped")  # no cancel was asked for: the service is stopping
 
-    _run_with(storage, monkeypatch, job.id, attempt)
-    assert seen["scratch_dir"] == storage.tmp_dir and storage.tmp_dir.is_dir()
+    _run_with(storage, monkeypatch, job.id, interrupted)
+    folder = storage.references_dir / job.id
+    assert seen == [folder] and (folder / "frame-x.npz").is_file()
+    assert storage.get_job(job_id=job.id).state == "queued"
+
+    stray = storage.references_dir / ("ab" * 16)  # a job that ended while no service ran
+    stray.mkdir()
+    (stray / "frame-y.npz").write_bytes(b"another")
+    manager = JobManager(storage, SceneCache(storage), workers=0)
+    manager.start()
+    assert (folder / "frame-x.npz").is_file() and not stray.exists()
+    manager.stop()
+
+    def resumed(spec, *, references_dir, **_kw):
+        seen.append(references_dir)
+        assert (references_dir / "frame-x.npz").read_bytes() == b"a reference"
+        raise RuntimeError("broken")
+
+    _run_with(storage, monkeypatch, job.id, resumed)
+    assert seen == [folder, folder] and storage.get_job(job_id=job.id).state == "failed"
+    assert not folder.exists()
+    with pytest.raises(ValueError):
+        storage.job_references("../scenes")

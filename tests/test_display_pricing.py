@@ -570,6 +570,43 @@ def test_the_later_pricing_rounds_read_the_references_the_first_saved(scene, tmp
     assert {d.parent for d, _ in reads} == {tmp_path / "tmp"} and not any((tmp_path / "tmp").iterdir())
 
 
+def test_a_build_given_a_references_folder_leaves_them_for_a_resumed_one(scene, tmp_path,
+                                                                         monkeypatch) -> None:
+    """A caller's references folder (the service's job folder) keeps the tile estimator's designs after
+    the build, and a second build with it (a resumed job in a new process: here with an empty evaluation
+    cache, so every camera is priced again) reads every camera's design instead of rendering its Max
+    again, and writes the same store."""
+    reads: list[bool] = []
+    original = ReferenceStore.load_design
+
+    def load_design(self, key):
+        design = original(self, key)
+        reads.append(design is not None)
+        return design
+    monkeypatch.setattr(ReferenceStore, "load_design", load_design)
+    folder = tmp_path / "references" / "job"
+    path = _orbit_path(6, (128, 96))
+    opts = _options(display_estimator="tiles", display_fraction=0.3, display_points=3,
+                    display_tiles_min_pixels=0, bridge_points=0)
+    _DESIGNS.clear()
+    first = optimize_path(scene, path, SUBSPACE, opts, cache=EvalCache(), executor=InProcessExecutor(),
+                          references_dir=folder)
+    saved = sorted(p.name for p in folder.iterdir())
+    cameras = first.meta["display_cameras"]
+    assert first.meta["display_pricing"].startswith("tiles")
+    assert len(saved) == cameras and reads == [False] * cameras
+    reads.clear()
+    _DESIGNS.clear()  # (a new process)
+    again = optimize_path(scene, path, SUBSPACE, opts, cache=EvalCache(), executor=InProcessExecutor(),
+                          references_dir=folder)
+    assert reads == [True] * cameras and sorted(p.name for p in folder.iterdir()) == saved
+    docs = [store.to_dict() for store in (first, again)]
+    run_counts = ("elapsed_s", "evaluations", "cache_hits")
+    for d in docs:  # (the run's own statistics apart)
+        d["meta"] = {k: v for k, v in d["meta"].items() if k not in run_counts}
+    assert docs[0] == docs[1]
+
+
 @pytest.mark.slow
 def test_store_figures_are_whole_frames_at_the_paths_resolution(scene) -> None:
     """With whole-frame pricing and no guard frames, every point of every stored frontier is what an

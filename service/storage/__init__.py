@@ -8,7 +8,10 @@ Everything lives under one data directory so a restart (or a SIGKILL) loses noth
   as server-sent events) and ``stores`` (Pareto stores, keyed by the hash of their JSON);
 - ``eval_cache.sqlite3``: the optimiser's evaluation cache (its own file, so its writes never wait on
   the job tables' and vice versa);
-- ``tmp/``: uploads and previews in flight (emptied at start).
+- ``tmp/``: uploads and previews in flight (emptied at start);
+- ``references/<job id>/``: a queued or running job's camera references at display resolution, kept
+  across its attempts so a resumed job reads them (removed when it ends, and at start for every job
+  not re-queued).
 
 Lifecycle: scenes, jobs and stores are listed newest first, a page at a time (:class:`Page`), and
 deleted on request, never while something still needs them (a scene with queued or running jobs, a
