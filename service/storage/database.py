@@ -264,8 +264,8 @@ class Storage:
 
     def job_references(self, job_id: str) -> Path:
         """The folder of a job's camera references at display resolution: kept across its attempts (a
-        job resumed after a restart reads them instead of rendering each camera's Max again, about 20 min
-        of both cores on the village at 1280x720), removed when it ends (:meth:`drop_job_references`)."""
+        job resumed after a restart reads them instead of rendering each camera's Max again, the costliest
+        render of its pricing), removed when it ends (:meth:`drop_job_references`)."""
         if not is_hex_id(job_id, 32):
             raise ValueError(f"not a job id: {job_id!r}")
         return self.references_dir / job_id
