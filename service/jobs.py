@@ -383,12 +383,14 @@ def validate_job_spec(spec: dict[str, Any]) -> None:
 def run_optimisation(
     spec: dict[str, Any], *, scene: Any, cache: Any, executor: Any,
     progress: Callable[[Any], None], should_cancel: Callable[[], bool], threads: int | None = None,
-    references_dir: Path | None = None,
+    scratch_dir: Path | None = None, references_dir: Path | None = None,
 ) -> Any:
     """Turn a stored job request into the optimiser's inputs and run it; returns a ParetoStore.
-    ``references_dir``: the job's own folder for its camera references, kept across its attempts.
+    ``references_dir``: the job's own folder for its camera references, kept across its attempts (a
+    service job); else ``scratch_dir`` holds them while it runs (a local job's folder).
     Raises ``service.optimize.Cancelled`` when ``should_cancel`` turns true."""
     path = CameraPath.from_dict(spec["camera_path"])
     config = OptimizeConfig(**spec_options(spec), profile=spec["profile"], fps=path.fps, threads=threads)
     return optimize_path(scene, path, build_space(spec), config, cache=cache, executor=executor,
-                         progress=progress, should_cancel=should_cancel, references_dir=references_dir)
+                         progress=progress, should_cancel=should_cancel, scratch_dir=scratch_dir,
+                         references_dir=references_dir)
