@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from addon.core.campaign import parse_size
 from addon.core.evaluate_path import preset_settings
 from blend_scenes.build import DEFAULT_OUT
 from service.camera_path import CameraPath
@@ -40,18 +41,13 @@ def swap(text: str) -> tuple[str, dict[str, object]]:
     return label, values
 
 
-def size(text: str) -> tuple[int, int]:
-    w, _, h = text.partition("x")
-    return int(w), int(h)
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("store", type=Path)
     ap.add_argument("--scene", required=True, help="a blend_scenes scene, already built")
     ap.add_argument("--preset", default="mid_min", choices=("max_mid", "mid_min", "min"))
     ap.add_argument("--frames", type=int, nargs="+", default=[0])
-    ap.add_argument("--sizes", type=size, nargs="+", default=[(640, 360), (1280, 720)])
+    ap.add_argument("--sizes", type=parse_size, nargs="+", default=[(640, 360), (1280, 720)])
     ap.add_argument("--swap", type=swap, action="append", default=[], metavar="LABEL:NAME=VALUE,...")
     ap.add_argument("--threads", type=int, default=1)
     args = ap.parse_args()
