@@ -200,11 +200,6 @@ def _optimize(args: argparse.Namespace) -> int:
     return 0
 
 
-def query_arguments(args: argparse.Namespace) -> dict[str, Any]:
-    """The query options given on a command line (``--fps``, ``--priority``) as lookup keywords."""
-    return options.check_query({o.name: getattr(args, o.name) for o in options.QUERY_OPTIONS})
-
-
 def _query(args: argparse.Namespace) -> int:
     store = ParetoStore.from_json(args.store.read_bytes())
     matrix = None
@@ -213,13 +208,13 @@ def _query(args: argparse.Namespace) -> int:
     fov = math.radians(args.fov) if args.fov is not None else None
     r = store.lookup(args.position, direction=args.direction, matrix=matrix, fov=fov,
                      power_budget=args.power_budget, error_budget=args.error_budget,
-                     **query_arguments(args))
+                     **options.query_from_arguments(args))
     target = r.fps_target
     out = {"settings": r.settings, "indices": list(r.indices), "packed": r.packed, "power_w": r.power_w,
            "error": r.error, "clamped": r.clamped, "infeasible": r.infeasible, "corner": r.corner,
            "view": r.view, "frame_time_s": r.frame_time_s, "fps": r.fps, "fps_target": target,
-           "meets_fps": r.meets_fps, "priority": r.priority, "expected_power_w": r.expected_power_w,
-           "expected_error": r.expected_error,
+           "meets_fps": r.meets_fps, "priority": r.priority, "error_margin": r.error_margin,
+           "expected_power_w": r.expected_power_w, "expected_error": r.expected_error,
            **store.figures.fields()}  # which display the figures hold for (as the REST answer says it)
     if args.json:
         print(json.dumps(out))
@@ -234,6 +229,9 @@ def _query(args: argparse.Namespace) -> int:
             print(f"{'frame rate':>22}: {r.fps:.1f} of {target:g} fps ({1e3 * r.frame_time_s:.1f} ms a "
                   "frame)")
         print(f"{'priority':>22}: {options.PRIORITY_LABELS[r.priority]}")
+        if r.error_margin:
+            print(f"{'error margin':>22}: {r.error_margin:g} (settings searched under "
+                  f"{r.searched_budget:g})")
         print(f"{'figures':>22}: {store.figures.label()}")
         if r.meets_fps is False:
             why = ("the budget comes first: no setting within it keeps up with" if r.priority == "budget"
@@ -242,7 +240,8 @@ def _query(args: argparse.Namespace) -> int:
         if r.clamped:
             print(f"{'note':>22}: clamped: camera outside the optimised region")
         if r.infeasible:
-            print(f"{'note':>22}: infeasible: nothing meets the budget, nearest returned")
+            within = "the budget less its margin" if r.error_margin else "the budget"
+            print(f"{'note':>22}: infeasible: nothing meets {within}, nearest returned")
     return 0
 
 
@@ -256,7 +255,7 @@ def _verify(args: argparse.Namespace) -> int:
 
     report = verify_store(scene, store, path, error_budget=args.error_budget, power_budget=args.power_budget,
                           frames=args.frames, resolution=args.resolution, threads=args.threads,
-                          progress=progress, **query_arguments(args))
+                          progress=progress, **options.query_from_arguments(args))
     print(report.table())
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)

@@ -246,10 +246,21 @@ QUERY_PRIORITY = Option("priority", str, "frame_rate", "Priority",
                         choices=PRIORITIES, choice_labels=("Frame rate first", "Budget first"),
                         group="Playback")
 
+#: How far under an error budget a lookup keeps the store's error (a query option, declared here for the
+#: same reason as :data:`QUERY_FPS`): room for what the prediction itself gets wrong (the frames between
+#: pricing cameras, the tile estimator's sampling), which ``render-budget verify`` measures. Error budgets
+#: only; a budget is still kept or broken against its own value.
+QUERY_ERROR_MARGIN = Option("error_margin", float, 0.0, "Error margin",
+                            "error budgets: choose among the settings predicted at least this far under the "
+                            "budget (1 - SSIM; room for the prediction's own error, which verify measures); "
+                            "when none is, the most accurate setting of the tier, as when none keeps the "
+                            "budget", minimum=0.0, maximum=0.5, metavar="E", group="Playback", soft_max=0.01,
+                            precision=4)
+
 #: The store lookup's query options (not the optimiser's): every layer that looks a store up (CLI query
 #: and verify, REST query and verify, the add-on's playback, engine and Evaluate Path, the main job)
 #: offers these, built from these declarations as the optimiser's options are from :data:`OPTIONS`.
-QUERY_OPTIONS: tuple[Option, ...] = (QUERY_FPS, QUERY_PRIORITY)
+QUERY_OPTIONS: tuple[Option, ...] = (QUERY_FPS, QUERY_PRIORITY, QUERY_ERROR_MARGIN)
 QUERY_BY_NAME: dict[str, Option] = {o.name: o for o in QUERY_OPTIONS}
 #: How each priority reads in a report or a command's output ("Frame rate first", "Budget first").
 PRIORITY_LABELS: dict[str, str] = dict(zip(PRIORITIES, QUERY_PRIORITY.choice_labels, strict=True))
@@ -276,6 +287,12 @@ def check_query(values: Mapping[str, Any]) -> dict[str, Any]:
     if unknown:
         raise ValueError(f"unknown query options {unknown}; known: {sorted(QUERY_BY_NAME)}")
     return {name: o.check(values.get(name, o.default)) for name, o in QUERY_BY_NAME.items()}
+
+
+def query_from_arguments(args: argparse.Namespace) -> dict[str, Any]:
+    """The query options of a command line built with :func:`add_argument` for each of
+    :data:`QUERY_OPTIONS` (``--fps``, ``--priority``, ``--error-margin``), checked, as lookup keywords."""
+    return check_query({o.name: getattr(args, o.name) for o in QUERY_OPTIONS})
 
 
 def only_query_overrides(values: Mapping[str, Any]) -> dict[str, Any]:

@@ -67,6 +67,7 @@ class VerifyReport:
     #: how they were measured (service.store.FiguresSize.kind): "display" figures hold for that display,
     #: "preview" ones are the search's small renders (power scaled by the pixel count)
     store_figures_kind: str = "unknown"
+    error_margin: float = 0.0  # the lookup's (service.options.QUERY_ERROR_MARGIN)
 
     def summary(self) -> dict[str, Any]:
         """Share within budget, prediction errors and the worst frames (by how far over budget)."""
@@ -100,7 +101,7 @@ class VerifyReport:
     def to_dict(self) -> dict[str, Any]:
         return {"budget_mode": self.budget_mode, "budget_value": self.budget_value,
                 "resolution": list(self.resolution), "profile": self.profile, "fps": self.fps,
-                "priority": self.priority,
+                "priority": self.priority, "error_margin": self.error_margin,
                 "store_figures_resolution": (list(self.store_figures_resolution)
                                              if self.store_figures_resolution else None),
                 "store_figures_kind": self.store_figures_kind,
@@ -122,7 +123,9 @@ def markdown(doc: dict[str, Any]) -> str:
     lines = [f"verified at {w}x{h} ({whose}), {doc['budget_mode']} "
              f"budget {doc['budget_value']:g}, profile {doc['profile']} at {doc['fps']:g} fps"
              + (", budget first (the frame rate gives way where nothing within the budget keeps up)"
-                if doc.get("priority") == "budget" else ""), "",
+                if doc.get("priority") == "budget" else "")
+             + (f", looked up with a {doc['error_margin']:g} error margin"
+                if doc.get("error_margin") and doc["budget_mode"] == "error" else ""), "",
              "| frame | time s | error predicted | error measured | power predicted W | power measured W "
              "| measured / predicted | within budget |",
              "|---|---|---|---|---|---|---|---|"]
@@ -167,12 +170,13 @@ def verify_store(scene: Any, store: ParetoStore, path: CameraPath, *, error_budg
                  power_budget: float | None = None, frames: int = 8,
                  resolution: tuple[int, int] | None = None, threads: int | None = None,
                  progress: Callable[[int, int], None] | None = None, fps: float | None = None,
-                 priority: str = "frame_rate") -> VerifyReport:
+                 priority: str = "frame_rate", error_margin: float = 0.0) -> VerifyReport:
     """Render a sample of ``path``'s frames at ``resolution`` (default: each frame's own) with the
     settings ``store`` picks under the budget, the frame-rate target ``fps`` (default: the store's) and
-    ``priority`` (the lookup's query options, ``service.options.QUERY_OPTIONS``), and measure them at
-    that frame rate; ``scene`` is the store's scene."""
-    query = check_query({"fps": fps, "priority": priority})
+    ``priority``, with an error budget's ``error_margin`` (the lookup's query options,
+    ``service.options.QUERY_OPTIONS``), and measure them at that frame rate against the budget itself;
+    ``scene`` is the store's scene."""
+    query = check_query({"fps": fps, "priority": priority, "error_margin": error_margin})
     rate = store.check_fps(query["fps"])  # refused before anything is rendered
     if (error_budget is None) == (power_budget is None):
         raise ValueError("give exactly one of error_budget or power_budget")
@@ -210,4 +214,5 @@ def verify_store(scene: Any, store: ParetoStore, path: CameraPath, *, error_budg
             progress(done + 1, len(numbers))
     figures = store.figures
     return VerifyReport(mode, value, size or (0, 0), store.profile, rate, checks, figures.resolution,
-                        query["priority"], figures.kind)
+                        query["priority"], figures.kind,
+                        query["error_margin"] if mode == "error" else 0.0)

@@ -586,3 +586,44 @@ def test_query_and_verify_take_the_lookup_priority(client: httpx.Client, finishe
     bad = client.post(f"/stores/{job['store_id']}/verify", json={"camera_path": path, "error_budget": 0.05,
                                                                   "priority": "speed"})
     assert bad.status_code == 422 and "priority" in bad.text
+
+
+def test_query_and_verify_take_an_error_margin(client: httpx.Client, finished: dict[str, Any]) -> None:
+    """POST /stores/{id}/query and /verify: ``error_margin`` searches the error budget that much lower (the
+    store's own answer under it, echoed), verify still judges the frames against the budget itself, and
+    a margin out of bounds is a 422 naming the field."""
+    job = finished["job"]
+    store = ParetoStore.from_json(client.get(f"/stores/{job['store_id']}").text)
+    path = camera_path(3)
+    frame = path["frames"][1]
+    m = np.asarray(frame["matrix_world"])
+    look = {"matrix": m, "fov": frame["vfov"], "aspect": frame["resolution"][0] / frame["resolution"][1]}
+    plain = store.lookup(m[:3, 3], **look, error_budget=0.05)
+    assert plain.error > 0  # searched under half its error, the answer must change
+    margin = 0.05 - plain.error / 2
+    query = {"position": m[:3, 3].tolist(), "matrix": frame["matrix_world"], "fov": frame["vfov"],
+             "aspect": look["aspect"], "error_budget": 0.05}
+    url = f"/stores/{job['store_id']}/query"
+    got = client.post(url, json={**query, "error_margin": margin}).json()
+    hit = store.lookup(m[:3, 3], **look, error_budget=0.05, error_margin=margin)
+    lowered = store.lookup(m[:3, 3], **look, error_budget=0.05 - margin)
+    assert got["error_margin"] == margin and (got["indices"], got["infeasible"]) == (
+        list(hit.indices), hit.infeasible) == (list(lowered.indices), lowered.infeasible)
+    assert (list(plain.indices), plain.infeasible) != (got["indices"], got["infeasible"])
+    assert client.post(url, json=query).json()["error_margin"] == 0.0
+    for bad in (-0.01, 0.9, "x"):
+        r = client.post(url, json={**query, "error_margin": bad})
+        assert r.status_code == 422 and "error_margin" in r.text, (bad, r.text)
+    v = client.post(f"/stores/{job['store_id']}/verify", json={
+        "camera_path": path, "error_budget": 0.05, "frames": 1, "resolution": [32, 24],
+        "error_margin": margin})
+    assert v.status_code == 200, v.text
+    doc = v.json()
+    f = doc["frames"][0]
+    pf = path["frames"][f["frame"]]
+    pm = np.asarray(pf["matrix_world"])
+    aspect = pf["resolution"][0] / pf["resolution"][1]
+    want = store.lookup(pm[:3, 3], matrix=pm, fov=pf["vfov"], aspect=aspect, error_budget=0.05,
+                        error_margin=margin)
+    assert doc["error_margin"] == margin and f["settings"] == want.settings
+    assert f["within_budget"] == (f["measured_error"] <= 0.05)  # judged against the budget itself

@@ -92,7 +92,7 @@ def parser() -> argparse.ArgumentParser:
                     help="hardware profile the store is searched and priced for, and the evaluation "
                          "measured on (default: mobile)")
     lookup = ap.add_argument_group("the store lookup's query options (both budget modes and verify)")
-    for opt in option_schema.QUERY_OPTIONS:  # --fps (default: the store's own) and --priority
+    for opt in option_schema.QUERY_OPTIONS:  # --fps (default: the store's own), --priority, --error-margin
         option_schema.add_argument(lookup, opt)
     ap.add_argument("--verify-frames", type=int, default=6,
                     help="path frames the store is verified on at its figures' resolution (0: skip)")
@@ -273,7 +273,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             error_budget=args.error_budget, power_budget=args.power_budget,
             power_budget_from=args.power_budget_from, power_fraction=args.power_fraction,
             samples=args.samples, sample_resolution=args.sample_resolution, concurrency=args.concurrency,
-            fps=args.fps, priority=args.priority)
+            **option_schema.query_from_arguments(args))
         marks: set[int] = set()
 
         def progress(label: str, done: int, total: int) -> None:
@@ -331,7 +331,7 @@ def verify(client: Any, store_id: str, path_doc: dict[str, Any], meta: dict[str,
     t = clock.start()
     body = {"camera_path": path_doc, "error_budget": args.error_budget, "frames": args.verify_frames,
             "resolution": [int(v) for v in size],
-            **option_schema.only_query_overrides({"fps": args.fps, "priority": args.priority})}
+            **option_schema.only_query_overrides(option_schema.query_from_arguments(args))}
     doc = client.verify(store_id, body, timeout_s=3600.0)
     spent = clock.stop("verify", t)
     text = markdown(doc)

@@ -35,12 +35,18 @@ class EvalSpec:
     #: way the optimiser predicts it. None keeps the figure for the evaluation image.
     power_resolution: tuple[int, int] | None = None
     #: The store lookup's query options (``service.options.QUERY_OPTIONS``): the frame-rate target (None:
-    #: the store's own; every mode is then measured at the path's rate, else at this one) and the priority.
+    #: the store's own; every mode is then measured at the path's rate, else at this one), the priority
+    #: and the error budget's margin.
     fps: float | None = None
     priority: str = "frame_rate"
+    error_margin: float = 0.0
 
     def __post_init__(self) -> None:
-        check_query({"fps": self.fps, "priority": self.priority})
+        check_query(self.query)
+
+    @property
+    def query(self) -> dict[str, Any]:
+        return {"fps": self.fps, "priority": self.priority, "error_margin": self.error_margin}
 
 
 def measurement_fps(query_fps: float | None, path: camera_path.CameraPath) -> float:
@@ -71,7 +77,8 @@ def filtered_frames(store: pareto_store.ParetoStore, path: camera_path.CameraPat
                     budget_mode: str, budget_value: float, period_s: float,
                     query: Mapping[str, Any] | None = None) -> dict[int, PlaybackFrame]:
     """What playback shows at the path frames ``numbers`` under a budget and the lookup's query options
-    ``query`` (``fps``, ``priority``; default: the store's frame rate, frame rate first): the playback
+    ``query`` (``fps``, ``priority``, ``error_margin``; default: the store's frame rate, frame rate first,
+    no margin): the playback
     driver stepped
     over *every* path frame up to the last of them, as during playback, so the temporal filter moves at
     its real pace between sampled frames (stepping it over the sampled frames alone would restart a
@@ -102,7 +109,7 @@ def evaluate_path(client: ServiceClient, store: pareto_store.ParetoStore, path: 
     presets = preset_settings(store)
     numbers = range(0, len(path), max(1, spec.frame_step))
     shown = filtered_frames(store, path, numbers, spec.budget_mode, spec.budget_value, spec.filter_period_s,
-                            {"fps": spec.fps, "priority": spec.priority}) if "ours" in spec.modes else {}
+                            spec.query) if "ours" in spec.modes else {}
     Job = tuple[int, camera_path.CameraFrame, str, dict[str, Any], tuple[float, float, float | None] | None]
     jobs: list[Job] = []
     for number in numbers:

@@ -343,7 +343,8 @@ class LocalClient:
                               error_budget=payload.get("error_budget"),
                               power_budget=payload.get("power_budget_w"),
                               frames=int(payload.get("frames", 8)), resolution=payload.get("resolution"),
-                              fps=payload.get("fps"), priority=payload.get("priority", "frame_rate"))
+                              fps=payload.get("fps"), priority=payload.get("priority", "frame_rate"),
+                              error_margin=payload.get("error_margin", 0.0))
         return report.to_dict()
 
     def render(self, payload: dict[str, Any], timeout_s: float | None = None) -> RenderedImage:

@@ -121,19 +121,20 @@ class PlaybackDriver:
 
     def step(self, matrix_world: Sequence[Sequence[float]], vfov: float, aspect: float, now_s: float,
              budget_mode: str, budget_value: float, fps: float | None = None,
-             priority: str = "frame_rate") -> PlaybackFrame:
+             priority: str = "frame_rate", error_margin: float = 0.0) -> PlaybackFrame:
         """The settings of one frame under the lookup's query options (``service.options.QUERY_OPTIONS``):
-        ``fps``, the frame-rate target (default: the store's), and ``priority``, what gives way when no
-        setting keeps both the budget and that rate."""
+        ``fps``, the frame-rate target (default: the store's), ``priority``, what gives way when no
+        setting keeps both the budget and that rate, and ``error_margin``, how far under an error budget
+        the store's error is kept."""
         budget = validate_budget(budget_mode, budget_value)
         rows = tuple(tuple(float(v) for v in matrix_world[r]) for r in range(3))
-        key = (rows, float(vfov), float(aspect), budget_mode, budget, fps, priority)
+        key = (rows, float(vfov), float(aspect), budget_mode, budget, fps, priority, error_margin)
         memo = self._memo.get(key)
         if memo is None:
             kwargs = {"power_budget": budget} if budget_mode == "POWER" else {"error_budget": budget}
             m = (*rows, (0.0, 0.0, 0.0, 1.0))
             hit = self.store.lookup((rows[0][3], rows[1][3], rows[2][3]), matrix=m, fov=vfov, aspect=aspect,
-                                    fps=fps, priority=priority, **kwargs)
+                                    fps=fps, priority=priority, error_margin=error_margin, **kwargs)
             points = {p.indices: p for p in self.store.budget_points(hit)}
             memo = (hit, points, {k: p.error for k, p in points.items()})
             if len(self._memo) >= self.MEMO_LIMIT:
@@ -173,11 +174,12 @@ class StoreCache:
 
 def predicted_path_summary(store: pareto_store.ParetoStore, frames: Sequence[Any], budget_mode: str,
                            budget_value: float, fps: float | None = None,
-                           priority: str = "frame_rate") -> dict[str, Any]:
+                           priority: str = "frame_rate", error_margin: float = 0.0) -> dict[str, Any]:
     """Store size and the power (and frame rate) the store predicts along a path under a budget, against
     the least-error point of the same frontiers (the most accurate setting that keeps up with the
-    frame-rate target, where frame times are known): what the panel's summary shows. ``fps`` and
-    ``priority``: the lookup's query options (default: the store's frame rate, frame rate first).
+    frame-rate target, where frame times are known): what the panel's summary shows. ``fps``,
+    ``priority`` and ``error_margin``: the lookup's query options (default: the store's frame rate, frame
+    rate first, no margin).
 
     Frames where nothing meets the budget are counted, with what the nearest setting costs there: under a
     power budget the cheapest setting's power, under an error budget the most accurate setting's error.
@@ -193,7 +195,7 @@ def predicted_path_summary(store: pareto_store.ParetoStore, frames: Sequence[Any
     for f in frames:
         pos = f.matrix_world[:3, 3]
         hit = store.lookup(pos, matrix=f.matrix_world, fov=f.vfov, aspect=f.aspect, fps=rate,
-                           priority=priority, **kwargs)
+                           priority=priority, error_margin=error_margin, **kwargs)
         top = store.lookup(pos, matrix=f.matrix_world, fov=f.vfov, aspect=f.aspect, fps=rate,
                            error_budget=0.0)
         chosen += hit.expected_power_w  # predicted for this camera (the stored figures are the worst

@@ -330,9 +330,9 @@ class PreviousSettings(StrictModel):
     period_s: Annotated[float, Field(strict=True, gt=0.0, le=3600.0)] = 2.0
 
 
-#: The store lookup's query options (``service.options.QUERY_OPTIONS``: the frame-rate target ``fps`` and
-#: the ``priority``), one field each with the schema's default, bounds and help: the query and verify
-#: requests take them; old requests without them get the defaults.
+#: The store lookup's query options (``service.options.QUERY_OPTIONS``: the frame-rate target ``fps``,
+#: the ``priority`` and the ``error_margin``), one field each with the schema's default, bounds and help:
+#: the query and verify requests take them; old requests without them get the defaults.
 QueryOptionsIn = create_model("QueryOptionsIn", __base__=StrictModel,
                               __doc__="The lookup's query options (service.options.QUERY_OPTIONS).",
                               **{o.name: _option_field(o) for o in options.QUERY_OPTIONS})
@@ -393,6 +393,10 @@ class QueryResult(BaseModel):
                                   "only when no setting of this view does, or (priority budget) none within "
                                   "the budget does (null: unknown)")
     priority: str = Field(default="frame_rate", description="the query's priority, as the lookup applied it")
+    error_margin: float = Field(default=0.0, description="how far under an error budget the lookup kept the "
+                                                         "stored error (the query's; 0 for a power budget): "
+                                                         "infeasible then says nothing lies under budget "
+                                                         "less margin")
     expected_power_w: float | None = Field(
         default=None, description="predicted power of the returned settings at this camera: their figures at "
                                   "the cameras the view's frontier was priced at, interpolated here (power_w "
@@ -502,6 +506,8 @@ class VerifyResult(BaseModel):
     fps: float = Field(description="the frame rate the settings were looked up and measured for (the "
                                    "request's fps, else the store's)")
     priority: str = Field(default="frame_rate", description="the lookup's priority")
+    error_margin: float = Field(default=0.0, description="the lookup's error margin (error budgets; frames "
+                                                         "are within budget against the budget itself)")
     store_figures_resolution: list[int] | None = Field(
         description="where the store says its figures were measured (its meta)")
     store_figures_kind: Literal["display", "preview", "unknown"] = Field(

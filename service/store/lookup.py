@@ -79,9 +79,11 @@ class LookupResult:
     setting of the frontier does or, under the ``"budget"`` ``priority``, when only settings that miss
     it keep the budget (under ``"frame_rate"`` a missing one is never picked otherwise); None when the
     store does not know frame times (format before 4), as are ``frame_time_s`` and ``fps`` (the frame
-    rate reached). Where the store keeps per-camera frame times, these three are the prediction for
-    this camera, and ``meeting`` names this frame's tiers (bit ``j``: the stored frontier's point ``j``
-    is predicted to meet ``fps_target`` here; -1: the tiers of the stored frame times). ``frontier``,
+    rate reached). An error budget is searched less the query's ``error_margin`` (``searched_budget``:
+    ``infeasible`` then says no setting lies under that). Where the store keeps per-camera frame times,
+    these three are the prediction for this camera, and ``meeting`` names this frame's tiers (bit ``j``:
+    the stored frontier's point ``j`` is predicted to meet ``fps_target`` here; -1: the tiers of the
+    stored frame times). ``frontier``,
     ``rank`` (the point's place in the tier it came from), ``budget_mode``, ``budget``, ``priority`` and
     ``meeting`` say where it came from (:meth:`LookupIndex.budget_points`).
 
@@ -114,6 +116,12 @@ class LookupResult:
     expected_power_w: float = math.nan
     weights: tuple[float, ...] = ()
     meeting: int = -1
+    error_margin: float = 0.0  # the query's (service.options.QUERY_ERROR_MARGIN); error budgets only
+
+    @property
+    def searched_budget(self) -> float:
+        """The budget the stored figures were searched under: an error budget less the query's margin."""
+        return self.budget - self.error_margin if self.budget_mode == "error" else self.budget
 
 
 @dataclass(frozen=True)
@@ -485,7 +493,7 @@ class LookupIndex:
         are drawn per frame, each point's frame time, frame rate and ``meets_fps`` are its prediction
         at ``hit``'s camera (``hit.weights``)."""
         lists = self.lists_of(hit)
-        ranks = [hit.rank] if hit.infeasible else lists.within(hit.budget_mode, hit.budget)
+        ranks = [hit.rank] if hit.infeasible else lists.within(hit.budget_mode, hit.searched_budget)
         if hit.meeting >= 0:  # each point's prediction at the hit's camera
             plan = self._frame_tiers[(hit.frontier, hit.fps_target)]  # type: ignore[index]
             return [FrontierPoint(self.decoded(pk)[0], pk, lists.power[k], lists.error[k],

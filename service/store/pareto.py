@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from ..options import QUERY_FPS, QUERY_PRIORITY
+from ..options import QUERY_ERROR_MARGIN, QUERY_FPS, QUERY_PRIORITY
 from . import camera, codec, format
 from .camera import VIEW_FORWARD, VIEW_UP, view_up
 from .figures import FiguresSize
@@ -251,7 +251,7 @@ class ParetoStore:
     def lookup(self, position: Any, direction: Any = None, matrix: Any = None, fov: float | None = None,
                power_budget: float | None = None, error_budget: float | None = None,
                aspect: float | None = None, up: Any = None, fps: float | None = None,
-               priority: str = "frame_rate") -> LookupResult:
+               priority: str = "frame_rate", error_margin: float = 0.0) -> LookupResult:
         """Settings for a camera at ``position`` looking along ``direction`` (or oriented by ``matrix``,
         Blender's 4x4 camera world matrix) with vertical field of view ``fov`` in radians, under exactly
         one of ``power_budget`` (W) or ``error_budget`` (1 - SSIM), for the frame-rate target ``fps``
@@ -259,7 +259,9 @@ class ParetoStore:
         (:data:`service.options.QUERY_PRIORITY`): ``"frame_rate"`` chooses among the settings that keep
         up with the target when the store knows frame times and any does; ``"budget"`` chooses among
         them while one of them keeps the budget, else among the stored settings that miss the target
-        but keep the budget (``LookupResult.meets_fps`` False; :mod:`service.store.lookup`)."""
+        but keep the budget (``LookupResult.meets_fps`` False; :mod:`service.store.lookup`).
+        ``error_margin`` (:data:`service.options.QUERY_ERROR_MARGIN`): an error budget is searched that much
+        lower (``LookupResult.searched_budget``; ``infeasible`` says nothing lies under it)."""
         if (power_budget is None) == (error_budget is None):
             raise ValueError("give exactly one of power_budget or error_budget")
         budget = float(power_budget if power_budget is not None else error_budget)  # type: ignore[arg-type]
@@ -267,6 +269,8 @@ class ParetoStore:
             raise ValueError("budget must be finite")
         if priority != "frame_rate":
             QUERY_PRIORITY.check(priority)
+        margin = float(QUERY_ERROR_MARGIN.check(error_margin)) if error_margin else 0.0
+        searched = budget - margin if error_budget is not None else budget
         rate = self.check_fps(fps)
         index = self._index
         rot = camera.rotation_floats(direction, matrix, up)
@@ -291,12 +295,12 @@ class ParetoStore:
             fr = index.frontier_lists_at(fid, self.frontiers[fid], self.fps, rate,
                                          self.static_power_w)  # type: ignore[arg-type]
         if power_budget is not None:
-            i, infeasible = fr.under_power(budget)
+            i, infeasible = fr.under_power(searched)
         else:
-            i, infeasible = fr.under_error(budget)
+            i, infeasible = fr.under_error(searched)
         if infeasible and fr.slow is not None and priority == "budget":
             slow = fr.slow
-            j, missed = slow.under_power(budget) if power_budget is not None else slow.under_error(budget)
+            j, missed = slow.under_power(searched) if power_budget is not None else slow.under_error(searched)
             if not missed:  # only settings that miss the frame rate keep the budget
                 fr, i, infeasible = slow, j, False
         packed = fr.packed[i]
@@ -310,7 +314,7 @@ class ParetoStore:
         return LookupResult(indices, packed, settings, fr.power[i], fr.error[i], clamped, infeasible,
                             corner, view, leaf, frame_time, reached, meets, rate,
                             fid, i, "power" if power_budget is not None else "error", budget, priority,
-                            error, power, weights, meeting)
+                            error, power, weights, meeting, margin if error_budget is not None else 0.0)
 
     def _expected(self, figures: PricedFigures, weights: Sequence[float], packed: int, error: float,
                   power: float, frame_time_s: float | None, rate: float) -> tuple[float, float]:
