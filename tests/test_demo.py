@@ -267,4 +267,14 @@ def test_a_rerun_after_a_hard_kill_follows_the_job_its_service_took_up_again(tmp
     with sqlite3.connect(tmp_path / "var" / "service.sqlite3") as db:
         assert db.execute("SELECT id, state FROM jobs").fetchall() == [(job_id, "done")]
     assert (tmp_path / "out" / "store.json").is_file()
+    from tools.demo import JOBS_RECORD
+
+    record = tmp_path / "var" / JOBS_RECORD
+    assert list(json.loads(record.read_text()).values()) == [job_id]
+    # another request submits its own job, and the record forgets the ended one
+    other = subprocess.run([*command, "--generations", "3", "--verify-frames", "0"], cwd=REPO_ROOT,
+                           capture_output=True, text=True, timeout=300, check=False)
+    assert other.returncode == 0, other.stdout[-3000:] + other.stderr[-3000:]
+    new_id = re.search(r"job (\w+) queued", other.stdout).group(1)
+    assert new_id != job_id and list(json.loads(record.read_text()).values()) == [new_id]
 

@@ -293,9 +293,23 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         say("service stopped")
 
 
+def _unfinished(client: Any, job_id: Any) -> dict[str, Any] | None:
+    """The service's job ``job_id`` while it is queued or running, else None (ended, or not held)."""
+    if not isinstance(job_id, str):
+        return None
+    try:
+        job = client.job(job_id)
+    except ServiceError as exc:
+        if exc.status != 404:  # (404: a job the data folder no longer holds)
+            raise
+        return None
+    return job if job["state"] in ("queued", "running") else None
+
+
 def submit_or_resume(client: Any, payload: dict[str, Any], data_dir: Path) -> tuple[dict[str, Any], bool]:
     """The job for ``payload``: the one an earlier run submitted when the service still has it queued or
-    running (True), else a new one, recorded in the data folder's :data:`JOBS_RECORD` (False)."""
+    running (True), else a new one, recorded in the data folder's :data:`JOBS_RECORD` (False), which then
+    keeps only the jobs still unfinished (an ended job is never followed again)."""
     digest = hashlib.sha256(json.dumps(payload, sort_keys=True).encode("utf-8")).hexdigest()
     record = Path(data_dir) / JOBS_RECORD
     try:
@@ -304,17 +318,11 @@ def submit_or_resume(client: Any, payload: dict[str, Any], data_dir: Path) -> tu
         known = {}
     if not isinstance(known, dict):
         known = {}
-    job_id = known.get(digest)
-    if isinstance(job_id, str):
-        try:
-            job = client.job(job_id)
-        except ServiceError as exc:
-            if exc.status != 404:  # (404: a job the data folder no longer holds)
-                raise
-        else:
-            if job["state"] in ("queued", "running"):
-                return job, True
+    job = _unfinished(client, known.get(digest))
+    if job is not None:
+        return job, True
     job = client.submit_job(payload)
+    known = {d: j for d, j in known.items() if d != digest and _unfinished(client, j) is not None}
     known[digest] = job["id"]
     tmp = record.with_name(f".{record.name}.{os.getpid()}")
     tmp.write_text(json.dumps(known, indent=1), encoding="utf-8")
