@@ -206,8 +206,7 @@ def measure(client: ServiceClient, store: ParetoStore, path: CameraPath, spec: C
         es = EvalSpec(scene_id=spec.scene_id, profile=spec.profile or store.profile,
                       resolution=spec.resolution, budget_mode=mode, budget_value=value,
                       filter_period_s=spec.filter_period_s, frame_step=spec.frame_step, modes=modes,
-                      power_resolution=spec.power_resolution, fps=spec.fps, priority=spec.priority,
-                      error_margin=spec.error_margin)
+                      power_resolution=spec.power_resolution, **spec.query)
         offset = len(rows)
         tick = None if progress is None else (lambda done, _n: progress(label, offset + done, total))
         part = evaluate_path(client, store, path, es, progress=tick, concurrency=spec.concurrency)
