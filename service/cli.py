@@ -214,6 +214,7 @@ def _query(args: argparse.Namespace) -> int:
            "error": r.error, "clamped": r.clamped, "infeasible": r.infeasible, "corner": r.corner,
            "view": r.view, "frame_time_s": r.frame_time_s, "fps": r.fps, "fps_target": target,
            "meets_fps": r.meets_fps, "priority": r.priority, "error_margin": r.error_margin,
+           "power_margin": r.power_margin,
            "expected_power_w": r.expected_power_w, "expected_error": r.expected_error,
            **store.figures.fields()}  # which display the figures hold for (as the REST answer says it)
     if args.json:
@@ -232,6 +233,9 @@ def _query(args: argparse.Namespace) -> int:
         if r.error_margin:
             print(f"{'error margin':>22}: {r.error_margin:g} (settings searched under "
                   f"{r.searched_budget:g})")
+        if r.power_margin:
+            print(f"{'power margin':>22}: {100 * r.power_margin:g} % of the budget (settings searched under "
+                  f"{r.searched_budget:g} W)")
         print(f"{'figures':>22}: {store.figures.label()}")
         if r.meets_fps is False:
             why = ("the budget comes first: no setting within it keeps up with" if r.priority == "budget"
@@ -240,7 +244,7 @@ def _query(args: argparse.Namespace) -> int:
         if r.clamped:
             print(f"{'note':>22}: clamped: camera outside the optimised region")
         if r.infeasible:
-            within = "the budget less its margin" if r.error_margin else "the budget"
+            within = "the budget less its margin" if r.error_margin or r.power_margin else "the budget"
             print(f"{'note':>22}: infeasible: nothing meets {within}, nearest returned")
     return 0
 

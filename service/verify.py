@@ -68,6 +68,7 @@ class VerifyReport:
     #: "preview" ones are the search's small renders (power scaled by the pixel count)
     store_figures_kind: str = "unknown"
     error_margin: float = 0.0  # the lookup's (service.options.QUERY_ERROR_MARGIN)
+    power_margin: float = 0.0  # the lookup's (service.options.QUERY_POWER_MARGIN)
 
     def summary(self) -> dict[str, Any]:
         """Share within budget, prediction errors and the worst frames (by how far over budget)."""
@@ -102,6 +103,7 @@ class VerifyReport:
         return {"budget_mode": self.budget_mode, "budget_value": self.budget_value,
                 "resolution": list(self.resolution), "profile": self.profile, "fps": self.fps,
                 "priority": self.priority, "error_margin": self.error_margin,
+                "power_margin": self.power_margin,
                 "store_figures_resolution": (list(self.store_figures_resolution)
                                              if self.store_figures_resolution else None),
                 "store_figures_kind": self.store_figures_kind,
@@ -125,7 +127,9 @@ def markdown(doc: dict[str, Any]) -> str:
              + (", budget first (the frame rate gives way where nothing within the budget keeps up)"
                 if doc.get("priority") == "budget" else "")
              + (f", looked up with a {doc['error_margin']:g} error margin"
-                if doc.get("error_margin") and doc["budget_mode"] == "error" else ""), "",
+                if doc.get("error_margin") and doc["budget_mode"] == "error" else "")
+             + (f", looked up with a {100 * doc['power_margin']:g} % power margin"
+                if doc.get("power_margin") and doc["budget_mode"] == "power" else ""), "",
              "| frame | time s | error predicted | error measured | power predicted W | power measured W "
              "| measured / predicted | within budget |",
              "|---|---|---|---|---|---|---|---|"]
@@ -169,14 +173,13 @@ def sample_frames(n: int, count: int) -> list[int]:
 def verify_store(scene: Any, store: ParetoStore, path: CameraPath, *, error_budget: float | None = None,
                  power_budget: float | None = None, frames: int = 8,
                  resolution: tuple[int, int] | None = None, threads: int | None = None,
-                 progress: Callable[[int, int], None] | None = None, fps: float | None = None,
-                 priority: str = "frame_rate", error_margin: float = 0.0) -> VerifyReport:
+                 progress: Callable[[int, int], None] | None = None, **query: Any) -> VerifyReport:
     """Render a sample of ``path``'s frames at ``resolution`` (default: each frame's own) with the
-    settings ``store`` picks under the budget, the frame-rate target ``fps`` (default: the store's) and
-    ``priority``, with an error budget's ``error_margin`` (the lookup's query options,
-    ``service.options.QUERY_OPTIONS``), and measure them at that frame rate against the budget itself;
+    settings ``store`` picks under the budget and the lookup's ``query`` options
+    (``service.options.QUERY_OPTIONS``: the frame-rate target ``fps``, default the store's, the
+    ``priority``, the budget's margin), and measure them at that frame rate against the budget itself;
     ``scene`` is the store's scene."""
-    query = check_query({"fps": fps, "priority": priority, "error_margin": error_margin})
+    query = check_query(query)
     rate = store.check_fps(query["fps"])  # refused before anything is rendered
     if (error_budget is None) == (power_budget is None):
         raise ValueError("give exactly one of error_budget or power_budget")
@@ -215,4 +218,5 @@ def verify_store(scene: Any, store: ParetoStore, path: CameraPath, *, error_budg
     figures = store.figures
     return VerifyReport(mode, value, size or (0, 0), store.profile, rate, checks, figures.resolution,
                         query["priority"], figures.kind,
-                        query["error_margin"] if mode == "error" else 0.0)
+                        query["error_margin"] if mode == "error" else 0.0,
+                        query["power_margin"] if mode == "power" else 0.0)

@@ -582,18 +582,20 @@ def test_playback_hud_and_engine_look_up_under_the_scene_query_options(scene, tm
     store = load(timed=True)
     scene.frame_set(2)
     assert props.target_fps == pytest.approx(24.0) and "budget first" not in hud.hud_lines(scene)[0][0]
-    props.fps, props.priority, props.error_margin = 12.0, "budget", 0.001
+    props.fps, props.priority, props.error_margin, props.power_margin = 12.0, "budget", 0.001, 0.05
     bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "query.blend"))
     scene.frame_set(3)
     vfov = ext_module("camera_path").camera_vfov(cam, scene)
     want = PlaybackDriver(store, 0.0).step(np.array(cam.matrix_world), vfov, 320 / 180, 2 / 24, "POWER", 10.0,
-                                           fps=12.0, priority="budget", error_margin=0.001)
+                                           fps=12.0, priority="budget", error_margin=0.001,
+                                           power_margin=0.05)
     assert want.priority == "budget" and props.target_fps == pytest.approx(12.0)
     assert props.active_indices == " ".join(map(str, want.active_indices))
     assert props.predicted_power == pytest.approx(want.predicted_power_w, rel=1e-6)
     assert "budget first" in hud.hud_lines(scene)[0][0]
     assert render.chooser_for(scene).query == pytest.approx({"fps": 12.0, "priority": "budget",
-                                                             "error_margin": 0.001})
+                                                             "error_margin": 0.001,
+                                                             "power_margin": 0.05})
     load(timed=True)  # loading a store summarises it under the scene's query options
     assert "budget first" in props.summary and "of 12 fps" in props.summary
     props.fps = 0.0  # the store's own 24 fps, which no setting of a slow store keeps up with
@@ -617,6 +619,7 @@ def test_playback_hud_and_engine_look_up_under_the_scene_query_options(scene, tm
     bpy.ops.wm.open_mainfile(filepath=str(tmp_path / "query.blend"))
     again = bpy.context.scene.render_budget
     assert (again.fps, again.priority) == (12.0, "budget") and again.error_margin == pytest.approx(0.001)
+    assert again.power_margin == pytest.approx(0.05)
 
 
 def _load_store_at_24fps(scene, tmp_path):

@@ -213,7 +213,7 @@ def test_batch_evaluate_and_playback_write_reports(optimized, service, tmp_path)
     out = tmp_path / "report"
     proc = _batch(["--blend", str(optimized), "--url", service.url, "evaluate", "--out", str(out),
                    "--frame-step", "4", "--budget-mode", "error", "--budget", "0.05", "--fps", "12",
-                   "--priority", "budget", "--error-margin", "0.001"], tmp_path)
+                   "--priority", "budget", "--error-margin", "0.001", "--power-margin", "0.05"], tmp_path)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "evaluate [" in proc.stdout and "Avg. Power (W)" in proc.stdout
     # the same report folder as `make demo` (one campaign module): both budget modes, summary, PNG + EXR
@@ -229,9 +229,11 @@ def test_batch_evaluate_and_playback_write_reports(optimized, service, tmp_path)
     assert summary["error_budget"] == pytest.approx(0.05) and summary["frames_evaluated"] == 4
     assert summary["power_budget_w"] == pytest.approx(2.0)  # the scene's power budget (given)
     # the query options reached both budget modes' lookups, and every mode was measured at that rate
-    assert summary["lookup"] == {"fps": 12.0, "fps_given": 12.0, "priority": "budget", "error_margin": 0.001}
+    assert summary["lookup"] == {"fps": 12.0, "fps_given": 12.0, "priority": "budget", "error_margin": 0.001,
+                                 "power_margin": 0.05}
     assert summary["fps_target"] == 12.0 and all(0.0 < float(r["fps"]) <= 12.0 for r in rows)
-    assert ("looked up for 12 fps (asked for), budget first, the error budget with a 0.001 margin"
+    assert ("looked up for 12 fps (asked for), budget first, the error budget with a 0.001 margin, the power "
+            "budget with a 5 % margin"
             in (out / "report.md").read_text())
     samples = sorted(p.name for p in (out / "frames").iterdir())
     assert samples[:2] == ["frame00000_max.exr", "frame00000_max.png"]

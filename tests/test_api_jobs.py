@@ -588,21 +588,46 @@ def test_query_and_verify_take_the_lookup_priority(client: httpx.Client, finishe
     assert bad.status_code == 422 and "priority" in bad.text
 
 
-def test_query_and_verify_take_an_error_margin(client: httpx.Client, finished: dict[str, Any]) -> None:
-    """POST /stores/{id}/query and /verify: ``error_margin`` searches the error budget that much lower (the
-    store's own answer under it, echoed), verify still judges the frames against the budget itself, and
-    a margin out of bounds is a 422 naming the field."""
-    job = finished["job"]
+def _store_and_a_frame(client: httpx.Client, job: dict[str, Any]) -> tuple:
+    """A finished job's store, a 3-frame path, its middle frame's camera as lookup keywords and as the
+    start of a REST query (without a budget)."""
     store = ParetoStore.from_json(client.get(f"/stores/{job['store_id']}").text)
     path = camera_path(3)
     frame = path["frames"][1]
     m = np.asarray(frame["matrix_world"])
     look = {"matrix": m, "fov": frame["vfov"], "aspect": frame["resolution"][0] / frame["resolution"][1]}
+    query = {"position": m[:3, 3].tolist(), "matrix": frame["matrix_world"], "fov": frame["vfov"],
+             "aspect": look["aspect"]}
+    return store, path, m, look, query
+
+
+def _verify_one_frame(client: httpx.Client, job: dict[str, Any], store: ParetoStore, path: dict[str, Any],
+                      budget: dict[str, float], margin: dict[str, float]) -> tuple:
+    """POST /stores/{id}/verify for one frame at 32x24 under ``budget`` (its REST field) and ``margin``:
+    the answer, its frame, and the store's own lookup at that frame under the same budget and margin."""
+    v = client.post(f"/stores/{job['store_id']}/verify", json={
+        "camera_path": path, "frames": 1, "resolution": [32, 24], **budget, **margin})
+    assert v.status_code == 200, v.text
+    doc = v.json()
+    f = doc["frames"][0]
+    pf = path["frames"][f["frame"]]
+    pm = np.asarray(pf["matrix_world"])
+    keywords = {"power_budget" if k == "power_budget_w" else k: value for k, value in budget.items()}
+    aspect = pf["resolution"][0] / pf["resolution"][1]
+    want = store.lookup(pm[:3, 3], matrix=pm, fov=pf["vfov"], aspect=aspect, **keywords, **margin)
+    return doc, f, want
+
+
+def test_query_and_verify_take_an_error_margin(client: httpx.Client, finished: dict[str, Any]) -> None:
+    """POST /stores/{id}/query and /verify: ``error_margin`` searches the error budget that much lower (the
+    store's own answer under it, echoed), verify still judges the frames against the budget itself, and
+    a margin out of bounds is a 422 naming the field."""
+    job = finished["job"]
+    store, path, m, look, query = _store_and_a_frame(client, job)
     plain = store.lookup(m[:3, 3], **look, error_budget=0.05)
     assert plain.error > 0  # searched under half its error, the answer must change
     margin = 0.05 - plain.error / 2
-    query = {"position": m[:3, 3].tolist(), "matrix": frame["matrix_world"], "fov": frame["vfov"],
-             "aspect": look["aspect"], "error_budget": 0.05}
+    query["error_budget"] = 0.05
     url = f"/stores/{job['store_id']}/query"
     got = client.post(url, json={**query, "error_margin": margin}).json()
     hit = store.lookup(m[:3, 3], **look, error_budget=0.05, error_margin=margin)
@@ -614,16 +639,34 @@ def test_query_and_verify_take_an_error_margin(client: httpx.Client, finished: d
     for bad in (-0.01, 0.9, "x"):
         r = client.post(url, json={**query, "error_margin": bad})
         assert r.status_code == 422 and "error_margin" in r.text, (bad, r.text)
-    v = client.post(f"/stores/{job['store_id']}/verify", json={
-        "camera_path": path, "error_budget": 0.05, "frames": 1, "resolution": [32, 24],
-        "error_margin": margin})
-    assert v.status_code == 200, v.text
-    doc = v.json()
-    f = doc["frames"][0]
-    pf = path["frames"][f["frame"]]
-    pm = np.asarray(pf["matrix_world"])
-    aspect = pf["resolution"][0] / pf["resolution"][1]
-    want = store.lookup(pm[:3, 3], matrix=pm, fov=pf["vfov"], aspect=aspect, error_budget=0.05,
-                        error_margin=margin)
+    doc, f, want = _verify_one_frame(client, job, store, path, {"error_budget": 0.05},
+                                     {"error_margin": margin})
     assert doc["error_margin"] == margin and f["settings"] == want.settings
     assert f["within_budget"] == (f["measured_error"] <= 0.05)  # judged against the budget itself
+
+
+def test_query_and_verify_take_a_power_margin(client: httpx.Client, finished: dict[str, Any]) -> None:
+    """POST /stores/{id}/query and /verify: ``power_margin`` searches a power budget that share lower (the
+    store's own answer under it, echoed), verify still judges the frames against the budget itself, and
+    a margin out of bounds is a 422 naming the field."""
+    job = finished["job"]
+    store, path, m, look, query = _store_and_a_frame(client, job)
+    best = store.lookup(m[:3, 3], **look, error_budget=0.0)  # the most accurate setting ...
+    watts = best.power_w * 1.001  # ... just keeps this budget: 20 % under it, it does not
+    plain = store.lookup(m[:3, 3], **look, power_budget=watts)
+    assert plain.indices == best.indices
+    query["power_budget_w"] = watts
+    url = f"/stores/{job['store_id']}/query"
+    got = client.post(url, json={**query, "power_margin": 0.2}).json()
+    lowered = store.lookup(m[:3, 3], **look, power_budget=watts * 0.8)
+    assert got["power_margin"] == 0.2 and got["error_margin"] == 0.0
+    assert (got["indices"], got["infeasible"]) == (list(lowered.indices), lowered.infeasible)
+    assert got["indices"] != list(plain.indices)
+    assert client.post(url, json=query).json()["power_margin"] == 0.0
+    for bad in (-0.01, 0.6, "x"):
+        r = client.post(url, json={**query, "power_margin": bad})
+        assert r.status_code == 422 and "power_margin" in r.text, (bad, r.text)
+    doc, f, want = _verify_one_frame(client, job, store, path, {"power_budget_w": watts},
+                                     {"power_margin": 0.2})
+    assert doc["power_margin"] == 0.2 and doc["error_margin"] == 0.0 and f["settings"] == want.settings
+    assert f["within_budget"] == (f["measured_power_w"] <= watts)  # judged against the budget itself

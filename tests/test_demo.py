@@ -105,10 +105,10 @@ def test_demo_prices_the_slow_tier_only_when_its_lookups_read_it() -> None:
 @pytest.mark.service
 def test_demo_end_to_end_tiny(tmp_path: Path) -> None:
     """The whole main job, its budget modes and verify looked up budget first (--priority) with an error
-    margin (--error-margin)."""
+    margin (--error-margin) and a power margin (--power-margin)."""
     out = tmp_path / "out"
     proc = subprocess.run([sys.executable, "-m", "tools.demo", *TINY, "--priority", "budget",
-                           "--error-margin", "0.001", "--out",
+                           "--error-margin", "0.001", "--power-margin", "0.02", "--out",
                            str(out), "--data-dir", str(tmp_path / "var")], cwd=REPO_ROOT, capture_output=True,
                           text=True, timeout=300, check=False)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
@@ -189,13 +189,15 @@ def test_demo_end_to_end_tiny(tmp_path: Path) -> None:
     assert verify["summary"]["within_budget"] == sum(f["measured_error"] <= eb for f in verify["frames"])
     assert "verified at 64x36 (store figures for 64x36)" in (out / "verify.md").read_text()
     assert "within budget:" in proc.stdout
-    # --priority and --error-margin reached both budget modes' lookups and verify's, and the report says it
+    # --priority and the margins reached both budget modes' lookups and verify's, and the report says it
     assert summary["lookup"] == {"fps": store.fps, "fps_given": None, "priority": "budget",
-                                 "error_margin": 0.001}
+                                 "error_margin": 0.001, "power_margin": 0.02}
     assert verify["priority"] == "budget" and "budget first" in (out / "verify.md").read_text()
     assert verify["error_margin"] == 0.001 and "0.001 error margin" in (out / "verify.md").read_text()
     assert (f"### Table 3: budget modes looked up for {store.fps:g} fps (the store's own), budget first, "
-            "the error budget with a 0.001 margin" in report_md)
+            "the error budget with a 0.001 margin, the power budget with a 2 % margin" in report_md)
+    assert "Power margin 2 %: the power-budget mode chose among the settings predicted to draw at most 98 %" \
+        in report_md
     assert "Priority: budget first." in report_md and "budget first)" in proc.stdout
 
 

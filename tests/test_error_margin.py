@@ -1,8 +1,8 @@
 """The lookup's error margin (``service.options.QUERY_ERROR_MARGIN``): an error budget searched that much
 lower, for the prediction's own error near the budget, while a budget is still kept or broken against its
-own value. Property tests over random stores (those of ``test_store_lookup``), the two-tier store of
-``test_lookup_priority`` (a margin that moves budget first to a slow setting), playback's memo, the main
-job's spec and report note, and the command line."""
+own value. The two-tier store of ``test_lookup_priority`` (a margin that moves budget first to a slow
+setting), playback's memo, the main job's spec and report note, and the command line; the property test
+over random stores is ``test_power_margin``'s, for both margins."""
 
 from __future__ import annotations
 
@@ -10,47 +10,10 @@ import dataclasses
 import json
 
 import pytest
-from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
 
 from tests.test_lookup_priority import _two_tier_store
-from tests.test_store_lookup import budgets, orientations, positions, stores
 
 WHERE, LOOK = (5.0, 5.0, 5.0), (1.0, 0.0, 0.0)
-
-
-def _without_query(hit) -> dict:
-    """A lookup result's choice, without the fields that only echo the query."""
-    return {k: v for k, v in dataclasses.asdict(hit).items() if k not in ("budget", "error_margin")}
-
-
-@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(data=st.data())
-def test_a_margin_answers_as_the_budget_less_the_margin_and_leaves_power_budgets_alone(
-        data: st.DataObject) -> None:
-    store = data.draw(stores())
-    margin = data.draw(st.sampled_from([0.0, 0.002, 0.01, 0.3, 0.5]))
-    priority = data.draw(st.sampled_from(["frame_rate", "budget"]))
-    for _ in range(6):
-        pose = data.draw(orientations())
-        where = data.draw(positions(store))
-        budget = data.draw(budgets(store))
-        try:
-            plain = store.lookup(where, **pose, **budget, priority=priority)
-        except ValueError:  # a degenerate pose (test_store_lookup checks the message)
-            continue
-        hit = store.lookup(where, **pose, **budget, priority=priority, error_margin=margin)
-        if "power_budget" in budget:  # a margin is for error budgets only
-            assert hit == plain and hit.error_margin == 0.0
-            continue
-        lowered = store.lookup(where, **pose, error_budget=budget["error_budget"] - margin, priority=priority)
-        assert _without_query(hit) == _without_query(lowered)
-        assert hit.budget == budget["error_budget"] and hit.error_margin == margin
-        assert hit.searched_budget == budget["error_budget"] - margin
-        points = store.budget_points(hit)
-        assert [p.packed for p in points] == [p.packed for p in store.budget_points(lowered)]
-        if not hit.infeasible:  # every point the filter may show lies under the budget less the margin
-            assert all(p.error <= budget["error_budget"] - margin for p in points)
 
 
 def test_a_margin_moves_budget_first_to_a_slow_setting_and_frame_rate_first_to_its_most_accurate() -> None:
@@ -99,7 +62,7 @@ def test_the_main_jobs_spec_and_report_say_the_margin() -> None:
 
     s = _two_tier_store()
     spec = CampaignSpec(scene_id="s", resolution=(64, 36), error_budget=0.02, error_margin=0.002)
-    assert spec.query == {"fps": None, "priority": "frame_rate", "error_margin": 0.002}
+    assert spec.query == {"fps": None, "priority": "frame_rate", "error_margin": 0.002, "power_margin": 0.0}
     assert "0.002 margin" in lookup_heading(spec, s)
     note = lookup_note(spec, s)
     assert "within 0.018" in note and "against 0.02" in note

@@ -263,11 +263,14 @@ def test_rest_query_and_verify_requests_take_each_query_option(opt: options.Opti
 
 
 def test_query_options_are_checked_together_and_sent_only_when_changed() -> None:
-    assert options.check_query({}) == {"fps": None, "priority": "frame_rate", "error_margin": 0.0}
-    assert options.check_query({"priority": "budget", "fps": 12}) == {"fps": 12.0, "priority": "budget",
-                                                                      "error_margin": 0.0}
+    assert options.check_query({}) == {"fps": None, "priority": "frame_rate", "error_margin": 0.0,
+                                       "power_margin": 0.0}
+    assert options.check_query({"priority": "budget", "fps": 12}) == {
+        "fps": 12.0, "priority": "budget", "error_margin": 0.0, "power_margin": 0.0}
     with pytest.raises(ValueError, match="error_margin must be in"):
         options.check_query({"error_margin": -0.001})
+    with pytest.raises(ValueError, match="power_margin must be in"):
+        options.check_query({"power_margin": 0.6})
     with pytest.raises(ValueError, match="priority must be one of frame_rate, budget"):
         options.check_query({"priority": "speed"})
     with pytest.raises(ValueError, match="unknown query options"):
@@ -275,6 +278,7 @@ def test_query_options_are_checked_together_and_sent_only_when_changed() -> None
     assert options.only_query_overrides({"priority": "frame_rate", "fps": None}) == {}
     assert options.only_query_overrides({"priority": "budget"}) == {"priority": "budget"}
     assert options.only_query_overrides({"error_margin": 0.002}) == {"error_margin": 0.002}
+    assert options.only_query_overrides({"power_margin": 0.05, "error_margin": 0.0}) == {"power_margin": 0.05}
     assert set(options.PRIORITY_LABELS) == set(options.PRIORITIES)
 
 
@@ -290,7 +294,7 @@ def test_addon_query_properties_have_the_schema_default_and_bounds(scene_props) 
     properties = importlib.import_module(f"{EXT_MODULE}.properties")
     rna = scene_props.bl_rna.properties
     assert properties.option_values(scene_props, QUERY) == {o.name: o.default for o in QUERY}
-    unset = {"fps": None, "priority": "frame_rate", "error_margin": 0.0}
+    unset = {"fps": None, "priority": "frame_rate", "error_margin": 0.0, "power_margin": 0.0}
     assert properties.query_values(scene_props) == unset
     for opt in QUERY:
         prop = rna[opt.name]
@@ -306,13 +310,14 @@ def test_addon_query_properties_have_the_schema_default_and_bounds(scene_props) 
     properties.set_option(scene_props, "fps", 12.5)
     properties.set_option(scene_props, "priority", "budget")
     properties.set_option(scene_props, "error_margin", 0.002)
-    assert properties.query_values(scene_props) == pytest.approx({"fps": 12.5, "priority": "budget",
-                                                                  "error_margin": 0.002})
+    properties.set_option(scene_props, "power_margin", 0.05)
+    assert properties.query_values(scene_props) == pytest.approx({
+        "fps": 12.5, "priority": "budget", "error_margin": 0.002, "power_margin": 0.05})
     properties.set_option(scene_props, "fps", None)
     assert scene_props.fps == 0 and properties.query_values(scene_props)["fps"] is None
     scene_props.property_unset("priority")  # as a .blend saved before the option existed reads it
     scene_props.property_unset("error_margin")
-    unset = {"fps": None, "priority": "frame_rate", "error_margin": 0.0}
+    scene_props.property_unset("power_margin")
     assert properties.query_values(scene_props) == unset
     panels = importlib.import_module(f"{EXT_MODULE}.panels")
     assert "option_schema.QUERY_OPTIONS" in inspect.getsource(panels._draw_budget)
@@ -334,9 +339,10 @@ def test_batch_sets_a_saved_frame_rate_back_to_the_stores_own(scene_props) -> No
         return properties.query_values(scene_props)
 
     properties.set_option(scene_props, "fps", 12.0)
-    assert apply() == {"fps": 12.0, "priority": "frame_rate", "error_margin": 0.0}  # left out: it stays
+    assert apply() == {"fps": 12.0, "priority": "frame_rate", "error_margin": 0.0,
+                       "power_margin": 0.0}  # left out: it stays
     assert apply("--fps", "store", "--priority", "budget") == {"fps": None, "priority": "budget",
-                                                               "error_margin": 0.0}
+                                                               "error_margin": 0.0, "power_margin": 0.0}
     assert scene_props.fps == 0.0
     assert apply("--fps", "50")["fps"] == 50.0
     assert apply("--fps", "store")["fps"] is None

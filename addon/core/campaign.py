@@ -49,7 +49,14 @@ from .campaign_targets import (
     target_lines,
 )
 from .client import ServiceClient
-from .evaluate_path import EvalSpec, camera_payload, evaluate_path, measurement_fps, preset_settings
+from .evaluate_path import (
+    EvalSpec,
+    LookupQuery,
+    camera_payload,
+    evaluate_path,
+    measurement_fps,
+    preset_settings,
+)
 from .playback_logic import PlaybackDriver, validate_budget
 
 try:  # CPU time of finished child processes too (Unix)
@@ -135,7 +142,7 @@ class Clock:
 
 # -- the campaign's inputs and measurements ------------------------------------------------------------
 @dataclass(frozen=True)
-class CampaignSpec:
+class CampaignSpec(LookupQuery):
     """How to evaluate: the service's scene, sizes, frames, budgets and sample frames."""
 
     scene_id: str
@@ -152,15 +159,10 @@ class CampaignSpec:
     samples: int = 3
     sample_resolution: tuple[int, int] | None = None  # None: SAMPLE_HEIGHT tall, the path's aspect
     concurrency: int = 2
-    #: The store lookup's query options (``service.options.QUERY_OPTIONS``) both budget modes run under:
-    #: the frame-rate target (None: the store's own; every mode is then measured at the path's frame
-    #: rate, else at this one), the priority ("frame_rate" or "budget") and the error budget's margin.
-    fps: float | None = None
-    priority: str = "frame_rate"
-    error_margin: float = 0.0
+    # (the lookup's query options both budget modes run under come from LookupQuery, keyword-only)
 
     def __post_init__(self) -> None:
-        options.check_query(self.query)
+        super().__post_init__()
         validate_budget("ERROR", self.error_budget)
         if self.power_budget is not None:
             validate_budget("POWER", self.power_budget)
@@ -170,11 +172,6 @@ class CampaignSpec:
             raise ValueError(f"power fraction must be in [0, 1], got {self.power_fraction}")
         if self.frame_step < 1 or self.samples < 0 or self.concurrency < 1:
             raise ValueError("frame_step and concurrency must be >= 1, samples >= 0")
-
-    @property
-    def query(self) -> dict[str, Any]:
-        """The lookup's query options (``service.options.check_query``'s keyword arguments)."""
-        return {"fps": self.fps, "priority": self.priority, "error_margin": self.error_margin}
 
 
 @dataclass
@@ -329,17 +326,23 @@ def lookup_heading(spec: CampaignSpec, store: ParetoStore) -> str:
     rate = store.check_fps(spec.fps)
     whose = "the store's own" if spec.fps is None else "asked for"
     margin = f", the error budget with a {spec.error_margin:g} margin" if spec.error_margin else ""
+    if spec.power_margin:
+        margin += f", the power budget with a {100 * spec.power_margin:g} % margin"
     return (f"Table 3: budget modes looked up for {rate:g} fps ({whose}), "
             f"{options.PRIORITY_LABELS[spec.priority].lower()}{margin}")
 
 
 def lookup_note(spec: CampaignSpec, store: ParetoStore) -> str:
-    """What the priority and the error margin mean for the budget modes' figures (a note under Table 3)."""
+    """What the priority and the margins mean for the budget modes' figures (a note under Table 3)."""
     margin = ""
     if spec.error_margin:
         margin = (f" Error margin {spec.error_margin:g}: the error-budget mode chose among the settings "
                   f"predicted within {spec.error_budget - spec.error_margin:g}; 'budget kept' is measured "
                   f"against {spec.error_budget:g}.")
+    if spec.power_margin:
+        margin += (f" Power margin {100 * spec.power_margin:g} %: the power-budget mode chose among the "
+                   f"settings predicted to draw at most {100 * (1.0 - spec.power_margin):g} % of its budget; "
+                   "'budget kept' is measured against the budget itself.")
     return _priority_note(spec, store) + margin
 
 
@@ -470,8 +473,7 @@ def run(client: ServiceClient, store_text: str, path: CameraPath, spec: Campaign
         "power_budget_w": measured.power_budget, "error_budget": measured.error_budget,
         "budget_choice": measured.power_reason, "store": {**store.stats(), "meta": dict(store.meta)},
         "profile": profile, "fps_target": fps,
-        "lookup": {"fps": store.check_fps(spec.fps), "fps_given": spec.fps, "priority": spec.priority,
-                   "error_margin": spec.error_margin},
+        "lookup": {**spec.query, "fps": store.check_fps(spec.fps), "fps_given": spec.fps},
         "real_time_presets": [s.mode for s in summaries if s.mode in report.PRESET_LEVELS and s.real_time],
         "real_time_notes": real_time,
         "summaries": [dataclasses.asdict(s) for s in summaries], "targets": targets,

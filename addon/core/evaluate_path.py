@@ -12,15 +12,36 @@ import numpy as np
 
 from service import camera_path
 from service import store as pareto_store
-from service.options import check_query
+from service.options import QUERY_BY_NAME, check_query
 
 from .client import ServiceClient
 from .playback_logic import PlaybackDriver, PlaybackFrame, validate_budget
 from .report import PRESET_LEVELS, FrameRow, preset_indices
 
 
+@dataclass(frozen=True, kw_only=True)
+class LookupQuery:
+    """The store lookup's query options (``service.options.QUERY_OPTIONS``) a path evaluation runs its
+    budget modes under: the frame-rate target (None: the store's own; every mode is then measured at the
+    path's rate, else at this one), the priority and the budgets' margins. Keyword-only, so a spec that
+    adds it keeps its own positional fields."""
+
+    fps: float | None = None
+    priority: str = "frame_rate"
+    error_margin: float = 0.0
+    power_margin: float = 0.0
+
+    def __post_init__(self) -> None:
+        check_query(self.query)
+
+    @property
+    def query(self) -> dict[str, Any]:
+        """The options as ``ParetoStore.lookup`` keywords (``service.options.check_query``'s)."""
+        return {name: getattr(self, name) for name in QUERY_BY_NAME}
+
+
 @dataclass(frozen=True)
-class EvalSpec:
+class EvalSpec(LookupQuery):
     scene_id: str
     profile: str
     resolution: tuple[int, int]
@@ -34,19 +55,6 @@ class EvalSpec:
     #: every difference between settings. The service scales it (POST /evaluate power_resolution), the
     #: way the optimiser predicts it. None keeps the figure for the evaluation image.
     power_resolution: tuple[int, int] | None = None
-    #: The store lookup's query options (``service.options.QUERY_OPTIONS``): the frame-rate target (None:
-    #: the store's own; every mode is then measured at the path's rate, else at this one), the priority
-    #: and the error budget's margin.
-    fps: float | None = None
-    priority: str = "frame_rate"
-    error_margin: float = 0.0
-
-    def __post_init__(self) -> None:
-        check_query(self.query)
-
-    @property
-    def query(self) -> dict[str, Any]:
-        return {"fps": self.fps, "priority": self.priority, "error_margin": self.error_margin}
 
 
 def measurement_fps(query_fps: float | None, path: camera_path.CameraPath) -> float:
@@ -77,8 +85,8 @@ def filtered_frames(store: pareto_store.ParetoStore, path: camera_path.CameraPat
                     budget_mode: str, budget_value: float, period_s: float,
                     query: Mapping[str, Any] | None = None) -> dict[int, PlaybackFrame]:
     """What playback shows at the path frames ``numbers`` under a budget and the lookup's query options
-    ``query`` (``fps``, ``priority``, ``error_margin``; default: the store's frame rate, frame rate first,
-    no margin): the playback
+    ``query`` (``service.options.QUERY_OPTIONS``; default: the store's frame rate, frame rate first, no
+    margin): the playback
     driver stepped
     over *every* path frame up to the last of them, as during playback, so the temporal filter moves at
     its real pace between sampled frames (stepping it over the sampled frames alone would restart a

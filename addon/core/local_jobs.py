@@ -33,6 +33,7 @@ import numpy as np
 
 import service
 from service.camera_path import CameraPath
+from service.options import query_fields
 from service.store import ParetoStore, camera
 
 from . import preview
@@ -343,8 +344,7 @@ class LocalClient:
                               error_budget=payload.get("error_budget"),
                               power_budget=payload.get("power_budget_w"),
                               frames=int(payload.get("frames", 8)), resolution=payload.get("resolution"),
-                              fps=payload.get("fps"), priority=payload.get("priority", "frame_rate"),
-                              error_margin=payload.get("error_margin", 0.0))
+                              **query_fields(payload))
         return report.to_dict()
 
     def render(self, payload: dict[str, Any], timeout_s: float | None = None) -> RenderedImage:

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from service import store as pareto_store
+from service.options import check_query
 
 BUDGET_MODES = ("POWER", "ERROR")
 
@@ -120,21 +121,21 @@ class PlaybackDriver:
             self.filter = pareto_store.TemporalFilter(period_s)
 
     def step(self, matrix_world: Sequence[Sequence[float]], vfov: float, aspect: float, now_s: float,
-             budget_mode: str, budget_value: float, fps: float | None = None,
-             priority: str = "frame_rate", error_margin: float = 0.0) -> PlaybackFrame:
-        """The settings of one frame under the lookup's query options (``service.options.QUERY_OPTIONS``):
-        ``fps``, the frame-rate target (default: the store's), ``priority``, what gives way when no
-        setting keeps both the budget and that rate, and ``error_margin``, how far under an error budget
-        the store's error is kept."""
+             budget_mode: str, budget_value: float, **query: Any) -> PlaybackFrame:
+        """The settings of one frame under the lookup's ``query`` options
+        (``service.options.QUERY_OPTIONS``: ``fps``, the frame-rate target, default the store's;
+        ``priority``, what gives way when no setting keeps both the budget and that rate; the margins,
+        how far under its budget the store's figures are kept)."""
         budget = validate_budget(budget_mode, budget_value)
+        query = check_query(query)
         rows = tuple(tuple(float(v) for v in matrix_world[r]) for r in range(3))
-        key = (rows, float(vfov), float(aspect), budget_mode, budget, fps, priority, error_margin)
+        key = (rows, float(vfov), float(aspect), budget_mode, budget, *query.values())
         memo = self._memo.get(key)
         if memo is None:
             kwargs = {"power_budget": budget} if budget_mode == "POWER" else {"error_budget": budget}
             m = (*rows, (0.0, 0.0, 0.0, 1.0))
             hit = self.store.lookup((rows[0][3], rows[1][3], rows[2][3]), matrix=m, fov=vfov, aspect=aspect,
-                                    fps=fps, priority=priority, error_margin=error_margin, **kwargs)
+                                    **query, **kwargs)
             points = {p.indices: p for p in self.store.budget_points(hit)}
             memo = (hit, points, {k: p.error for k, p in points.items()})
             if len(self._memo) >= self.MEMO_LIMIT:
@@ -173,13 +174,11 @@ class StoreCache:
 
 
 def predicted_path_summary(store: pareto_store.ParetoStore, frames: Sequence[Any], budget_mode: str,
-                           budget_value: float, fps: float | None = None,
-                           priority: str = "frame_rate", error_margin: float = 0.0) -> dict[str, Any]:
+                           budget_value: float, **query: Any) -> dict[str, Any]:
     """Store size and the power (and frame rate) the store predicts along a path under a budget, against
     the least-error point of the same frontiers (the most accurate setting that keeps up with the
-    frame-rate target, where frame times are known): what the panel's summary shows. ``fps``,
-    ``priority`` and ``error_margin``: the lookup's query options (default: the store's frame rate, frame
-    rate first, no margin).
+    frame-rate target, where frame times are known): what the panel's summary shows. ``query``: the
+    lookup's query options (default: the store's frame rate, frame rate first, no margin).
 
     Frames where nothing meets the budget are counted, with what the nearest setting costs there: under a
     power budget the cheapest setting's power, under an error budget the most accurate setting's error.
@@ -187,15 +186,16 @@ def predicted_path_summary(store: pareto_store.ParetoStore, frames: Sequence[Any
     """
     validate_budget(budget_mode, budget_value)
     kwargs = {"power_budget": budget_value} if budget_mode == "POWER" else {"error_budget": budget_value}
-    rate = store.check_fps(fps)
+    query = check_query(query)
+    rate = store.check_fps(query["fps"])
+    query["fps"] = rate
     chosen = best = 0.0
     slow = 0
     rates: list[float] = []
     nearest: list[float] = []
     for f in frames:
         pos = f.matrix_world[:3, 3]
-        hit = store.lookup(pos, matrix=f.matrix_world, fov=f.vfov, aspect=f.aspect, fps=rate,
-                           priority=priority, error_margin=error_margin, **kwargs)
+        hit = store.lookup(pos, matrix=f.matrix_world, fov=f.vfov, aspect=f.aspect, **query, **kwargs)
         top = store.lookup(pos, matrix=f.matrix_world, fov=f.vfov, aspect=f.aspect, fps=rate,
                            error_budget=0.0)
         chosen += hit.expected_power_w  # predicted for this camera (the stored figures are the worst
@@ -222,7 +222,7 @@ def predicted_path_summary(store: pareto_store.ParetoStore, frames: Sequence[Any
         "nearest_max": max(nearest) if nearest else None,
         "frames": len(frames),
         "fps_target": rate,
-        "priority": priority,
+        "priority": query["priority"],
         "mean_fps": sum(rates) / len(rates) if rates else None,  # None: the store predates frame times
         "slow_frames": slow,  # frames whose settings miss fps_target (priority "budget": also by choice)
         # which display the figures hold for, and the size the path renders at (None: not known)

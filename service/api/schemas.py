@@ -331,8 +331,9 @@ class PreviousSettings(StrictModel):
 
 
 #: The store lookup's query options (``service.options.QUERY_OPTIONS``: the frame-rate target ``fps``,
-#: the ``priority`` and the ``error_margin``), one field each with the schema's default, bounds and help:
-#: the query and verify requests take them; old requests without them get the defaults.
+#: the ``priority``, the ``error_margin`` and the ``power_margin``), one field each with the schema's
+#: default, bounds and help: the query and verify requests take them; old requests without them get the
+#: defaults.
 QueryOptionsIn = create_model("QueryOptionsIn", __base__=StrictModel,
                               __doc__="The lookup's query options (service.options.QUERY_OPTIONS).",
                               **{o.name: _option_field(o) for o in options.QUERY_OPTIONS})
@@ -397,6 +398,10 @@ class QueryResult(BaseModel):
                                                          "stored error (the query's; 0 for a power budget): "
                                                          "infeasible then says nothing lies under budget "
                                                          "less margin")
+    power_margin: float = Field(default=0.0, description="what share of a power budget the lookup kept the "
+                                                         "stored power under (the query's; 0 for an error "
+                                                         "budget): infeasible then says nothing lies under "
+                                                         "budget less that share")
     expected_power_w: float | None = Field(
         default=None, description="predicted power of the returned settings at this camera: their figures at "
                                   "the cameras the view's frontier was priced at, interpolated here (power_w "
@@ -507,6 +512,8 @@ class VerifyResult(BaseModel):
                                    "request's fps, else the store's)")
     priority: str = Field(default="frame_rate", description="the lookup's priority")
     error_margin: float = Field(default=0.0, description="the lookup's error margin (error budgets; frames "
+                                                         "are within budget against the budget itself)")
+    power_margin: float = Field(default=0.0, description="the lookup's power margin (power budgets; frames "
                                                          "are within budget against the budget itself)")
     store_figures_resolution: list[int] | None = Field(
         description="where the store says its figures were measured (its meta)")

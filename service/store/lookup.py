@@ -71,6 +71,12 @@ if TYPE_CHECKING:
     from .priced import PricedFigures
 
 
+def lowered_budget(budget: float, error_margin: float = 0.0, power_margin: float = 0.0) -> float:
+    """The budget a lookup searches: an error budget less its margin (absolute, 1 - SSIM), a power budget
+    less its margin's share of it (a lookup passes the margin of its budget's kind only)."""
+    return (budget - error_margin) * (1.0 - power_margin)
+
+
 @dataclass(frozen=True)
 class LookupResult:
     """Settings chosen for one camera and budget, with their predicted error, power (at the frame rate
@@ -79,9 +85,10 @@ class LookupResult:
     setting of the frontier does or, under the ``"budget"`` ``priority``, when only settings that miss
     it keep the budget (under ``"frame_rate"`` a missing one is never picked otherwise); None when the
     store does not know frame times (format before 4), as are ``frame_time_s`` and ``fps`` (the frame
-    rate reached). An error budget is searched less the query's ``error_margin`` (``searched_budget``:
-    ``infeasible`` then says no setting lies under that). Where the store keeps per-camera frame times,
-    these three are the prediction for this camera, and ``meeting`` names this frame's tiers (bit ``j``:
+    rate reached). An error budget is searched less the query's ``error_margin``, a power budget less its
+    ``power_margin`` share (``searched_budget``: ``infeasible`` then says no setting lies under that).
+    Where the store keeps per-camera frame times, these three are the prediction for this camera, and
+    ``meeting`` names this frame's tiers (bit ``j``:
     the stored frontier's point ``j`` is predicted to meet ``fps_target`` here; -1: the tiers of the
     stored frame times). ``frontier``,
     ``rank`` (the point's place in the tier it came from), ``budget_mode``, ``budget``, ``priority`` and
@@ -117,11 +124,12 @@ class LookupResult:
     weights: tuple[float, ...] = ()
     meeting: int = -1
     error_margin: float = 0.0  # the query's (service.options.QUERY_ERROR_MARGIN); error budgets only
+    power_margin: float = 0.0  # the query's (service.options.QUERY_POWER_MARGIN); power budgets only
 
     @property
     def searched_budget(self) -> float:
-        """The budget the stored figures were searched under: an error budget less the query's margin."""
-        return self.budget - self.error_margin if self.budget_mode == "error" else self.budget
+        """The budget the stored figures were searched under: the budget less the query's margin."""
+        return lowered_budget(self.budget, self.error_margin, self.power_margin)
 
 
 @dataclass(frozen=True)

@@ -13,13 +13,13 @@ from typing import Any
 
 import numpy as np
 
-from ..options import QUERY_ERROR_MARGIN, QUERY_FPS, QUERY_PRIORITY
+from ..options import QUERY_ERROR_MARGIN, QUERY_FPS, QUERY_POWER_MARGIN, QUERY_PRIORITY
 from . import camera, codec, format
 from .camera import VIEW_FORWARD, VIEW_UP, view_up
 from .figures import FiguresSize
 from .frame_rate import power_at_rate
 from .frontier import Frontier
-from .lookup import FrontierPoint, LookupIndex, LookupResult
+from .lookup import FrontierPoint, LookupIndex, LookupResult, lowered_budget
 from .packing import MAX_PARAMS, MAX_VALUES_PER_PARAM, StoredParameter, settings_of
 from .priced import PricedFigures
 
@@ -251,7 +251,8 @@ class ParetoStore:
     def lookup(self, position: Any, direction: Any = None, matrix: Any = None, fov: float | None = None,
                power_budget: float | None = None, error_budget: float | None = None,
                aspect: float | None = None, up: Any = None, fps: float | None = None,
-               priority: str = "frame_rate", error_margin: float = 0.0) -> LookupResult:
+               priority: str = "frame_rate", error_margin: float = 0.0,
+               power_margin: float = 0.0) -> LookupResult:
         """Settings for a camera at ``position`` looking along ``direction`` (or oriented by ``matrix``,
         Blender's 4x4 camera world matrix) with vertical field of view ``fov`` in radians, under exactly
         one of ``power_budget`` (W) or ``error_budget`` (1 - SSIM), for the frame-rate target ``fps``
@@ -261,7 +262,9 @@ class ParetoStore:
         them while one of them keeps the budget, else among the stored settings that miss the target
         but keep the budget (``LookupResult.meets_fps`` False; :mod:`service.store.lookup`).
         ``error_margin`` (:data:`service.options.QUERY_ERROR_MARGIN`): an error budget is searched that much
-        lower (``LookupResult.searched_budget``; ``infeasible`` says nothing lies under it)."""
+        lower (``LookupResult.searched_budget``; ``infeasible`` says nothing lies under it);
+        ``power_margin`` (:data:`service.options.QUERY_POWER_MARGIN`): a power budget is searched that
+        fraction lower, likewise."""
         if (power_budget is None) == (error_budget is None):
             raise ValueError("give exactly one of power_budget or error_budget")
         budget = float(power_budget if power_budget is not None else error_budget)  # type: ignore[arg-type]
@@ -269,8 +272,13 @@ class ParetoStore:
             raise ValueError("budget must be finite")
         if priority != "frame_rate":
             QUERY_PRIORITY.check(priority)
-        margin = float(QUERY_ERROR_MARGIN.check(error_margin)) if error_margin else 0.0
-        searched = budget - margin if error_budget is not None else budget
+        e_margin = float(QUERY_ERROR_MARGIN.check(error_margin)) if error_margin else 0.0
+        p_margin = float(QUERY_POWER_MARGIN.check(power_margin)) if power_margin else 0.0
+        if error_budget is None:
+            e_margin = 0.0
+        else:
+            p_margin = 0.0
+        searched = lowered_budget(budget, e_margin, p_margin)
         rate = self.check_fps(fps)
         index = self._index
         rot = camera.rotation_floats(direction, matrix, up)
@@ -314,7 +322,7 @@ class ParetoStore:
         return LookupResult(indices, packed, settings, fr.power[i], fr.error[i], clamped, infeasible,
                             corner, view, leaf, frame_time, reached, meets, rate,
                             fid, i, "power" if power_budget is not None else "error", budget, priority,
-                            error, power, weights, meeting, margin if error_budget is not None else 0.0)
+                            error, power, weights, meeting, e_margin, p_margin)
 
     def _expected(self, figures: PricedFigures, weights: Sequence[float], packed: int, error: float,
                   power: float, frame_time_s: float | None, rate: float) -> tuple[float, float]:

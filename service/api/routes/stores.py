@@ -8,6 +8,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Query, Request, Response, status
 
 from service.camera_path import CameraPath
+from service.options import query_fields
 from service.storage import StoreRecord
 from service.store import TemporalFilter
 from service.verify import verify_store
@@ -61,10 +62,10 @@ def delete_store(store_id: str, storage: StorageDep, stores: StoresDep) -> Respo
 def verify(body: VerifyRequest, record: StoreRecordDep, storage: StorageDep, scenes: ScenesDep,
            stores: StoresDep, settings: SettingsDep) -> VerifyResult:
     """Render ``frames`` path frames, spread evenly, at the path's resolution (or ``resolution``) with the
-    settings the store picks under the budget (and the query options ``fps``, ``priority`` and
-    ``error_margin``, as a query takes them; measured at that frame rate), and set the measured error and
-    power against the store's predictions: per frame, the share within budget, the worst frames. Runs
-    while the request waits (about two full-size renders a frame)."""
+    settings the store picks under the budget (and the query options ``fps``, ``priority``,
+    ``error_margin`` and ``power_margin``, as a query takes them; measured at that frame rate), and set
+    the measured error and power against the store's predictions: per frame, the share within budget,
+    the worst frames. Runs while the request waits (about two full-size renders a frame)."""
     try:
         path = CameraPath.from_dict(body.camera_path.model_dump())
     except ValueError as exc:
@@ -78,8 +79,8 @@ def verify(body: VerifyRequest, record: StoreRecordDep, storage: StorageDep, sce
     try:
         report = verify_store(scene, stores.get(record.id), path, error_budget=body.error_budget,
                               power_budget=body.power_budget_w, frames=body.frames,
-                              resolution=body.resolution, threads=settings.render_threads, fps=body.fps,
-                              priority=body.priority, error_margin=body.error_margin)
+                              resolution=body.resolution, threads=settings.render_threads,
+                              **query_fields(body))
     except ValueError as exc:
         raise ApiError(422, f"verify: {exc}") from exc
     return VerifyResult(**report.to_dict())
@@ -90,8 +91,7 @@ def answer_query(store: Any, body: StoreQuery) -> QueryResult:
     try:  # the lookup's camera maths is scale-free: huge or tiny but finite orientations are fine
         hit = store.lookup(body.position, direction=body.direction, matrix=body.matrix, fov=body.fov,
                            power_budget=body.power_budget_w, error_budget=body.error_budget,
-                           aspect=body.aspect, fps=body.fps, priority=body.priority,
-                           error_margin=body.error_margin)
+                           aspect=body.aspect, **query_fields(body))
     except ValueError as exc:
         raise ApiError(422, str(exc)) from exc
     except ArithmeticError as exc:  # extreme but finite numbers the lookup could not handle
@@ -120,8 +120,8 @@ def answer_query(store: Any, body: StoreQuery) -> QueryResult:
             error=hit.error, clamped=hit.clamped, infeasible=hit.infeasible, filtered=False,
             target_indices=list(target), frame_time_s=hit.frame_time_s, fps=hit.fps,
             fps_target=hit.fps_target, meets_fps=hit.meets_fps, priority=hit.priority,
-            error_margin=hit.error_margin, expected_power_w=hit.expected_power_w,
-            expected_error=hit.expected_error, **where)
+            error_margin=hit.error_margin, power_margin=hit.power_margin,
+            expected_power_w=hit.expected_power_w, expected_error=hit.expected_error, **where)
     pt = points[shown]
     expected_error, expected_power = store.expected(hit, pt)
     return QueryResult(
@@ -129,7 +129,7 @@ def answer_query(store: Any, body: StoreQuery) -> QueryResult:
         error=pt.error, clamped=hit.clamped, infeasible=hit.infeasible, filtered=True,
         target_indices=list(target), frame_time_s=pt.frame_time_s, fps=pt.fps, fps_target=hit.fps_target,
         meets_fps=pt.meets_fps, priority=hit.priority, error_margin=hit.error_margin,
-        expected_power_w=expected_power,
+        power_margin=hit.power_margin, expected_power_w=expected_power,
         expected_error=expected_error, **where)
 
 
