@@ -199,11 +199,13 @@ def verify_store(scene: Any, store: ParetoStore, path: CameraPath, *, error_budg
     numbers = sample_frames(len(path), frames)
     checks: list[FrameCheck] = []
     size = None
+    margins = (0.0, 0.0)  # the lookups' own: a margin applies only to its kind of budget
     for done, number in enumerate(numbers):
         f = path.frames[number]
         m = np.asarray(f.matrix_world, dtype=np.float64)
         r = store.lookup(f.position, matrix=m, fov=f.vfov, aspect=f.aspect, error_budget=error_budget,
                          power_budget=power_budget, **query)
+        margins = (r.error_margin, r.power_margin)
         size = (rw, rh) if resolution is not None else tuple(f.resolution)
         cam = CameraSpec.from_matrix(m, f.vfov, *size)
         ev = evaluate(scene, cam, space.indices_of(r.settings), space, profile=store.profile, fps=rate,
@@ -217,6 +219,4 @@ def verify_store(scene: Any, store: ParetoStore, path: CameraPath, *, error_budg
             progress(done + 1, len(numbers))
     figures = store.figures
     return VerifyReport(mode, value, size or (0, 0), store.profile, rate, checks, figures.resolution,
-                        query["priority"], figures.kind,
-                        query["error_margin"] if mode == "error" else 0.0,
-                        query["power_margin"] if mode == "power" else 0.0)
+                        query["priority"], figures.kind, *margins)

@@ -184,3 +184,18 @@ def test_verify_looks_up_and_measures_under_the_query_options(setup, capsys) -> 
     with pytest.raises(SystemExit):
         cli.main(["verify", str(store_file), "--scene", str(scene_file), "--path", str(path_file),
                   "--error-budget", "0.02", "--priority", "speed"])
+
+
+@pytest.mark.slow
+def test_the_report_keeps_the_margin_of_its_budgets_kind_only(setup) -> None:
+    """Both margins given: an error budget's report says the error margin and no power margin, a power
+    budget's the power margin and no error margin, as the lookups searched."""
+    _, scene, _, store, _, path, _ = setup
+    margins = {"error_margin": 0.004, "power_margin": 0.05}
+    small = {"frames": 1, "resolution": (16, 12)}
+    by_error = verify_store(scene, store, path, error_budget=0.02, **small, **margins)
+    by_power = verify_store(scene, store, path, power_budget=1.0, **small, **margins)
+    assert (by_error.error_margin, by_error.power_margin) == (0.004, 0.0)
+    assert (by_power.error_margin, by_power.power_margin) == (0.0, 0.05)
+    assert by_error.to_dict()["power_margin"] == 0.0 and by_power.to_dict()["error_margin"] == 0.0
+
