@@ -404,10 +404,14 @@ DISPLAY_META = ("figures_resolution", "display_resolution", "display_pricing", "
 # The axis store's digests were seen to depend on the machine: with the code unchanged since a passing
 # run, an AMD EPYC without AVX-512 writes 3f56a70d... (unprobed 5b37a66c..., meeting tiers a53c7310...)
 # where the machines before wrote the first digest of each set; the path store's are the same on both.
-# NumPy's AVX2/FMA3 dispatch is not the cause (disabling it changes nothing); the floating-point path that
-# is was not pinned down. Each digest a machine was seen to write is accepted, and the same seed must give
-# the same store twice on the machine at hand. These jobs leave the search's descent out (descent_steps=0,
-# the default before it was measured), so the digests still pin the search itself.
+# NumPy's AVX2/FMA3 dispatch is not the cause (disabling it changes nothing); its AVX-512 dispatch is: on a
+# machine with AVX-512 that writes 89eea2c3..., NPY_DISABLE_CPU_FEATURES="AVX512F AVX512CD AVX512_SKX
+# AVX512_CLX AVX512_CNL AVX512_ICL" makes it write 3f56a70d... (disabling only the SKX-and-later groups
+# does not; nor does the SSIM's Gaussian kernel taken from math.exp instead of np.exp). Which AVX-512F loop
+# it is (a reduction's summation order is the likely one) was not pinned down. So one digest per dispatch
+# level is accepted, and the same seed must give the same store twice on the machine at hand. These jobs
+# leave the search's descent out (descent_steps=0, the default before it was measured), so the digests
+# still pin the search itself.
 RECORDED = {
     "axis_d1_min1": {"89eea2c3c3a7d7cdd0ec38834c969db6658b4471725816775ded93c4ea3471e2",
                      "3f56a70d307928b80f4120b4d7c9f040341984ec10bef5a275138c9259f0c6fd"},
