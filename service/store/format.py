@@ -63,8 +63,10 @@ to, and ``to_dict(store, 5)`` still writes version 5 byte for byte as before, fo
   (``priced_frame_time_worst``, ``priced_frame_time_below``). A frontier priced at one camera has its
   own codes there.
 
-Each of these is written only where the store allows it; otherwise the field is written as version 5
-wrote it (``children``, ``corners``, ``priced_error`` / ``priced_power``) and read as before.
+Each of these is written only where the store allows it (the per-camera split also only where it is
+shorter: in a store of a few points its second field can cost more than it saves); otherwise the field
+is written as version 5 wrote it (``children``, ``corners``, ``priced_error`` / ``priced_power`` /
+``priced_frame_time``) and read as before.
 
 Adding a field: write it in :func:`to_dict` (optional fields only when set, so older readers and
 byte-identical stores are unaffected), read it in :func:`fields_from_dict` (absent -> the old
@@ -289,12 +291,20 @@ def _priced_fields(store: Any, power_scale: float, eq: np.ndarray, pq: np.ndarra
         figures.append(("frame_time", codec.frame_time_codes(np.concatenate(ft), store.fps, tq[1])[0]
                         .astype(np.int64), tq[0].astype(np.int64)))
     for name, codes, worst in figures:
+        fields = {f"priced_{name}": codec.encode(codes, "<u2")}
         split = _below_worst(codes, worst, counts, sizes) if compact else None
-        if split is None:
-            out[f"priced_{name}"] = codec.encode(codes, "<u2")
-        else:
-            out[f"priced_{name}_worst"], out[f"priced_{name}_below"] = (codec.encode_bits(a) for a in split)
+        if split is not None:
+            at_worst, below = split
+            pair = {f"priced_{name}_worst": codec.encode_bits(at_worst),
+                    f"priced_{name}_below": codec.encode_bits(below)}
+            if _json_size(pair) < _json_size(fields):  # (at a few points the second field costs more)
+                fields = pair
+        out.update(fields)
     return out
+
+
+def _json_size(fields: dict[str, Any]) -> int:
+    return len(json.dumps(fields, separators=(",", ":")))
 
 
 def _below_worst(codes: np.ndarray, worst: np.ndarray, counts: list[int], sizes: list[int]
