@@ -96,6 +96,7 @@ FORMAT_VERSION = 6
 READABLE_VERSIONS = (1, 2, 3, 4, 5, 6)
 #: Versions :func:`to_dict` writes (5: the layout before the compact encodings, for readers of 1-5).
 WRITABLE_VERSIONS = (5, 6)
+_SEPARATORS = (",", ":")  # documents are written without spaces
 
 
 def to_dict(store: Any, version: int = FORMAT_VERSION) -> dict[str, Any]:
@@ -304,7 +305,8 @@ def _priced_fields(store: Any, power_scale: float, eq: np.ndarray, pq: np.ndarra
 
 
 def _json_size(fields: dict[str, Any]) -> int:
-    return len(json.dumps(fields, separators=(",", ":")))
+    """The bytes ``fields`` take in a document as :func:`to_json` writes it."""
+    return len(json.dumps(fields, separators=_SEPARATORS))
 
 
 def _below_worst(codes: np.ndarray, worst: np.ndarray, counts: list[int], sizes: list[int]
@@ -371,7 +373,7 @@ def _priced_codes(d: dict[str, Any], name: str, counts: np.ndarray, sizes: np.nd
 
 
 def to_json(store: Any, version: int = FORMAT_VERSION) -> str:
-    return json.dumps(to_dict(store, version), separators=(",", ":"), allow_nan=False)
+    return json.dumps(to_dict(store, version), separators=_SEPARATORS, allow_nan=False)
 
 
 def _frontiers(d: dict[str, Any]) -> list[Frontier]:
